@@ -1,0 +1,7 @@
+//! Perception: the camera model, part models (mesh, keypoints, stable poses), keypoint voting, PnP,
+//! planar refinement with stable poses, and pose metrics.
+//!
+//! This crate depends on no other crate of the workspace: the simulator renders through its camera
+//! model and the orchestrator consumes its poses, so conventions cannot diverge.
+
+pub mod part;

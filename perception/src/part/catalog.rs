@@ -1,0 +1,268 @@
+//! The part catalog: one TOML file per part set, with each part's mesh, material, symmetries,
+//! grasps, and the keypoints, mass properties and stable poses that `cell parts prepare` computes.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::{LengthUnit, PartError, StablePose, TriMesh, load_mesh};
+
+/// A part set: the parts of one product, read from a catalog file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Catalog {
+    /// Name of the part set, e.g. "usbc".
+    pub name: String,
+    /// One line for people.
+    #[serde(default)]
+    pub description: String,
+    /// The parts.
+    #[serde(rename = "part")]
+    pub parts: Vec<PartSpec>,
+    /// Folder the catalog was read from; mesh paths are relative to it.
+    #[serde(skip)]
+    pub dir: PathBuf,
+}
+
+/// The role a part plays in the assembly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PartRole {
+    /// The part that goes into the fixture first (the main shell).
+    Main,
+    /// The part inserted into the main part (the insert mold).
+    Inserted,
+    /// The part that closes the assembly from above (the top shell).
+    Top,
+    /// Not assembled: a fixture, board or other cell object.
+    Fixture,
+}
+
+/// Surface class, which decides how the part looks to the camera.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Material {
+    /// Reflective sheet metal (shells).
+    Metal,
+    /// Dark moulded plastic (insert bodies).
+    DarkPlastic,
+    /// Gold-plated contacts.
+    Gold,
+    /// Anodised aluminium board printed with black and white tags.
+    TagBoard,
+    /// Machined aluminium (fixtures).
+    Aluminium,
+}
+
+impl Material {
+    /// Default density in kg/m³ for mass properties when the catalog gives none.
+    pub fn density(self) -> f64 {
+        match self {
+            Material::Metal => 8_500.0,
+            Material::DarkPlastic => 1_400.0,
+            Material::Gold => 19_300.0,
+            Material::TagBoard | Material::Aluminium => 2_700.0,
+        }
+    }
+}
+
+/// A rotational symmetry of the part about an axis through its origin.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Symmetry {
+    /// Axis in the part frame (need not be unit length).
+    pub axis: [f64; 3],
+    /// Order n: the part maps onto itself after turning 360°/n.
+    pub order: u32,
+    /// False for a near-symmetry (features break it only slightly): a pose ambiguity for vision,
+    /// but not an equivalence for assembly.
+    #[serde(default = "yes")]
+    pub exact: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// A top-down grasp of a part resting in one stable pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Grasp {
+    /// Name of the stable pose (e.g. "+z") this grasp applies to.
+    pub stable_pose: String,
+    /// Finger closing direction in the part frame; must be horizontal in that stable pose.
+    pub closing_axis: [f64; 3],
+    /// Height of the fingertip centre above the table, metres.
+    pub grip_height: f64,
+}
+
+/// One part of a catalog.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PartSpec {
+    /// Unique name, e.g. "main_shell".
+    pub name: String,
+    /// Its role in the assembly.
+    pub role: PartRole,
+    /// Mesh file, relative to the catalog file.
+    pub mesh: PathBuf,
+    /// Unit of the mesh file's numbers.
+    pub unit: LengthUnit,
+    /// Surface class.
+    pub material: Material,
+    /// Density in kg/m³; the material's default when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub density: Option<f64>,
+    /// Declared rotational symmetries (exact and near).
+    #[serde(default)]
+    pub symmetries: Vec<Symmetry>,
+    /// Top-down grasps, each for one stable pose; poses without one are not pickable.
+    #[serde(default, rename = "grasp")]
+    pub grasps: Vec<Grasp>,
+    /// Mass in kg (computed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mass: Option<f64>,
+    /// Centre of mass in the part frame, metres (computed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub center_of_mass: Option<[f64; 3]>,
+    /// 8 farthest-point-sampled surface keypoints then the bounding-box centre, metres (computed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub keypoints: Vec<[f64; 3]>,
+    /// Resting classes on a flat table, most probable first (computed).
+    #[serde(default, rename = "stable_pose", skip_serializing_if = "Vec::is_empty")]
+    pub stable_poses: Vec<StablePose>,
+}
+
+impl PartSpec {
+    /// Density used for mass properties.
+    pub fn density(&self) -> f64 {
+        self.density.unwrap_or_else(|| self.material.density())
+    }
+
+    /// The keypoints as points.
+    pub fn keypoint_points(&self) -> Vec<Point3<f64>> {
+        self.keypoints.iter().map(|k| Point3::from(*k)).collect()
+    }
+
+    /// The stable pose with this name.
+    pub fn stable_pose(&self, name: &str) -> Option<&StablePose> {
+        self.stable_poses.iter().find(|s| s.name == name)
+    }
+
+    /// The grasp for a stable pose, if the part is pickable in it.
+    pub fn grasp_for(&self, stable_pose: &str) -> Option<&Grasp> {
+        self.grasps.iter().find(|g| g.stable_pose == stable_pose)
+    }
+
+    /// Whether `prepare` has filled in keypoints, mass and stable poses.
+    pub fn is_prepared(&self) -> bool {
+        self.mass.is_some() && self.keypoints.len() == 9 && !self.stable_poses.is_empty()
+    }
+
+    /// Centre of mass as a point (the origin when not computed yet).
+    pub fn center_of_mass_point(&self) -> Point3<f64> {
+        self.center_of_mass
+            .map(Point3::from)
+            .unwrap_or_else(Point3::origin)
+    }
+
+    /// The symmetry axes that are exact, as unit vectors with their orders.
+    pub fn exact_symmetries(&self) -> Vec<(Vector3<f64>, u32)> {
+        self.symmetries
+            .iter()
+            .filter(|s| s.exact && s.order > 1)
+            .filter_map(|s| {
+                Vector3::from(s.axis)
+                    .try_normalize(1e-12)
+                    .map(|a| (a, s.order))
+            })
+            .collect()
+    }
+}
+
+impl Catalog {
+    /// Reads and validates a catalog file; errors name the file, line and column.
+    pub fn load(path: &Path) -> Result<Self, PartError> {
+        let text = std::fs::read_to_string(path).map_err(|source| PartError::Io {
+            path: path.into(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses catalog text read from `path` (used for error locations and relative mesh paths).
+    pub fn parse(text: &str, path: &Path) -> Result<Self, PartError> {
+        let mut catalog: Catalog = toml::from_str(text).map_err(|e| {
+            let (line, column) = e
+                .span()
+                .map(|s| line_column(text, s.start))
+                .unwrap_or((1, 1));
+            PartError::Catalog {
+                path: path.into(),
+                line,
+                column,
+                message: e.message().trim().to_string(),
+            }
+        })?;
+        catalog.dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Ok(catalog)
+    }
+
+    /// The part with this name.
+    pub fn part(&self, name: &str) -> Option<&PartSpec> {
+        self.parts.iter().find(|p| p.name == name)
+    }
+
+    /// The part playing this role.
+    pub fn by_role(&self, role: PartRole) -> Option<&PartSpec> {
+        self.parts.iter().find(|p| p.role == role)
+    }
+
+    /// Absolute path of a part's mesh file.
+    pub fn mesh_path(&self, part: &PartSpec) -> PathBuf {
+        self.dir.join(&part.mesh)
+    }
+
+    /// Loads a part's mesh in metres, in the part frame.
+    pub fn load_mesh(&self, part: &PartSpec) -> Result<TriMesh, PartError> {
+        load_mesh(&self.mesh_path(part), part.unit)
+    }
+}
+
+/// 1-based line and column of a byte offset in `text` (columns count characters).
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_key_is_located() {
+        let text = "name = \"x\"\n[[part]]\nname = \"a\"\nrole = \"main\"\nmesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\ncolour = 3\n";
+        match Catalog::parse(text, Path::new("c.toml")) {
+            Err(PartError::Catalog {
+                line,
+                column,
+                message,
+                ..
+            }) => {
+                assert_eq!((line, column), (8, 1), "{message}");
+                assert!(message.contains("colour"), "{message}");
+            }
+            other => panic!("expected a located error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn line_column_counts_from_one() {
+        assert_eq!(line_column("ab\ncd", 0), (1, 1));
+        assert_eq!(line_column("ab\ncd", 4), (2, 2));
+        assert_eq!(line_column("ab", 99), (1, 3));
+    }
+}

@@ -1,0 +1,267 @@
+//! Triangle meshes in the part frame, in metres.
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+
+/// A triangle mesh in metres, counter-clockwise triangles seen from outside.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TriMesh {
+    /// Vertex positions in metres.
+    pub vertices: Vec<Point3<f64>>,
+    /// Triangles as indices into `vertices`, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Why a mesh is not a closed, consistently oriented surface.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshDefect {
+    /// A triangle index points past the vertex list.
+    #[error("triangle {triangle} uses vertex {index} but there are {count} vertices")]
+    IndexOutOfRange {
+        /// Triangle number.
+        triangle: usize,
+        /// The offending index.
+        index: u32,
+        /// Number of vertices.
+        count: usize,
+    },
+    /// An edge is used a different number of times in each direction: a hole or a flipped triangle.
+    #[error(
+        "edge between ({:.5}, {:.5}, {:.5}) and ({:.5}, {:.5}, {:.5}) m is open or inconsistently \
+         oriented ({forward} uses one way, {backward} the other)",
+        a.x, a.y, a.z, b.x, b.y, b.z
+    )]
+    OpenEdge {
+        /// One end of the edge.
+        a: Point3<f64>,
+        /// The other end.
+        b: Point3<f64>,
+        /// Triangles using it from a to b.
+        forward: usize,
+        /// Triangles using it from b to a.
+        backward: usize,
+    },
+    /// A vertex coordinate is NaN or infinite.
+    #[error("vertex {0} has a non-finite coordinate")]
+    NonFinite(usize),
+}
+
+impl TriMesh {
+    /// A mesh from vertices and triangles, merging vertices at bit-identical positions.
+    pub fn new(vertices: Vec<Point3<f64>>, triangles: Vec<[u32; 3]>) -> Self {
+        let mut mesh = Self {
+            vertices,
+            triangles,
+        };
+        mesh.weld();
+        mesh
+    }
+
+    /// Merges vertices with bit-identical coordinates (STL stores every triangle's corners apart).
+    fn weld(&mut self) {
+        let mut first: HashMap<[u64; 3], u32> = HashMap::new();
+        let mut remap = Vec::with_capacity(self.vertices.len());
+        let mut kept = Vec::new();
+        for p in &self.vertices {
+            let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+            let id = *first.entry(key).or_insert_with(|| {
+                kept.push(*p);
+                (kept.len() - 1) as u32
+            });
+            remap.push(id);
+        }
+        for t in &mut self.triangles {
+            for i in t.iter_mut() {
+                if let Some(&r) = remap.get(*i as usize) {
+                    *i = r;
+                }
+            }
+        }
+        self.vertices = kept;
+    }
+
+    /// Checks that the surface is closed: every edge is used equally often in both directions.
+    ///
+    /// Solids built from touching closed pieces (a shell on a plate) pass; holes and flipped
+    /// triangles do not.
+    pub fn check_closed(&self) -> Result<(), MeshDefect> {
+        if let Some(i) = self
+            .vertices
+            .iter()
+            .position(|p| !p.coords.iter().all(|c| c.is_finite()))
+        {
+            return Err(MeshDefect::NonFinite(i));
+        }
+        let mut count: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
+        for (ti, t) in self.triangles.iter().enumerate() {
+            for &index in t {
+                if index as usize >= self.vertices.len() {
+                    return Err(MeshDefect::IndexOutOfRange {
+                        triangle: ti,
+                        index,
+                        count: self.vertices.len(),
+                    });
+                }
+            }
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if a < b {
+                    count.entry((a, b)).or_default().0 += 1;
+                } else {
+                    count.entry((b, a)).or_default().1 += 1;
+                }
+            }
+        }
+        let mut open: Vec<_> = count.into_iter().filter(|(_, (f, b))| f != b).collect();
+        open.sort_unstable();
+        match open.first() {
+            None => Ok(()),
+            Some(&((a, b), (forward, backward))) => Err(MeshDefect::OpenEdge {
+                a: self.vertices[a as usize],
+                b: self.vertices[b as usize],
+                forward,
+                backward,
+            }),
+        }
+    }
+
+    /// Axis-aligned bounding box as (min, max) corners.
+    pub fn aabb(&self) -> (Point3<f64>, Point3<f64>) {
+        let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
+        let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
+        for p in &self.vertices {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        (lo, hi)
+    }
+
+    /// Size of the bounding box along x, y and z.
+    pub fn extents(&self) -> Vector3<f64> {
+        let (lo, hi) = self.aabb();
+        hi - lo
+    }
+
+    /// The three corners of triangle `i`.
+    pub fn triangle(&self, i: usize) -> [Point3<f64>; 3] {
+        let t = self.triangles[i];
+        [
+            self.vertices[t[0] as usize],
+            self.vertices[t[1] as usize],
+            self.vertices[t[2] as usize],
+        ]
+    }
+
+    /// Total surface area in square metres.
+    pub fn area(&self) -> f64 {
+        (0..self.triangles.len())
+            .map(|i| {
+                let [a, b, c] = self.triangle(i);
+                0.5 * (b - a).cross(&(c - a)).norm()
+            })
+            .sum()
+    }
+
+    /// Enclosed volume in cubic metres (positive for outward-facing triangles).
+    pub fn volume(&self) -> f64 {
+        (0..self.triangles.len())
+            .map(|i| {
+                let [a, b, c] = self.triangle(i);
+                a.coords.dot(&b.coords.cross(&c.coords)) / 6.0
+            })
+            .sum()
+    }
+
+    /// The mesh with every vertex mapped through `pose`.
+    pub fn transformed(&self, pose: &Isometry3<f64>) -> Self {
+        Self {
+            vertices: self.vertices.iter().map(|p| pose * p).collect(),
+            triangles: self.triangles.clone(),
+        }
+    }
+
+    /// The mesh with every vertex multiplied by `factor` (a unit conversion).
+    pub fn scaled(&self, factor: f64) -> Self {
+        Self {
+            vertices: self.vertices.iter().map(|p| p * factor).collect(),
+            triangles: self.triangles.clone(),
+        }
+    }
+
+    /// Appends another mesh's triangles (a separate closed piece) to this one.
+    pub fn append(&mut self, other: &TriMesh) {
+        let offset = self.vertices.len() as u32;
+        self.vertices.extend_from_slice(&other.vertices);
+        self.triangles.extend(
+            other
+                .triangles
+                .iter()
+                .map(|t| [t[0] + offset, t[1] + offset, t[2] + offset]),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unit cube, outward triangles.
+    pub(crate) fn cube(side: f64) -> TriMesh {
+        let h = side / 2.0;
+        let v: Vec<Point3<f64>> = (0..8)
+            .map(|i| {
+                Point3::new(
+                    if i & 1 == 0 { -h } else { h },
+                    if i & 2 == 0 { -h } else { h },
+                    if i & 4 == 0 { -h } else { h },
+                )
+            })
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let t = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        TriMesh::new(v, t)
+    }
+
+    #[test]
+    fn cube_is_closed_with_exact_volume_and_area() {
+        let c = cube(0.01);
+        c.check_closed().unwrap();
+        assert!((c.volume() - 1e-6).abs() < 1e-18);
+        assert!((c.area() - 6e-4).abs() < 1e-15);
+    }
+
+    #[test]
+    fn removing_a_triangle_opens_the_mesh() {
+        let mut c = cube(0.01);
+        c.triangles.pop();
+        assert!(matches!(c.check_closed(), Err(MeshDefect::OpenEdge { .. })));
+    }
+
+    #[test]
+    fn flipping_a_triangle_is_an_orientation_defect() {
+        let mut c = cube(0.01);
+        c.triangles[0].swap(1, 2);
+        assert!(c.check_closed().is_err());
+    }
+
+    #[test]
+    fn bad_index_is_reported_not_panicked() {
+        let mut c = cube(0.01);
+        c.triangles[0][0] = 99;
+        assert!(matches!(
+            c.check_closed(),
+            Err(MeshDefect::IndexOutOfRange { .. })
+        ));
+    }
+}

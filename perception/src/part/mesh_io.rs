@@ -1,0 +1,252 @@
+//! Loading meshes from OBJ, STL and PLY files, with a plausibility check of the declared unit.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+
+use super::{PartError, TriMesh};
+
+/// The length unit a mesh file's numbers are in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LengthUnit {
+    /// Metres.
+    M,
+    /// Millimetres (the usual CAD export unit).
+    Mm,
+}
+
+impl LengthUnit {
+    /// Metres per file unit.
+    pub fn to_metres(self) -> f64 {
+        match self {
+            LengthUnit::M => 1.0,
+            LengthUnit::Mm => 1e-3,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            LengthUnit::M => "m",
+            LengthUnit::Mm => "mm",
+        }
+    }
+}
+
+/// Smallest and largest plausible object size in metres: parts, fixtures and boards in a cell.
+const PLAUSIBLE_SIZE_M: (f64, f64) = (0.5e-3, 1.5);
+
+/// Loads a closed mesh from an `.obj`, `.stl` or `.ply` file, converting `unit` to metres.
+///
+/// Fails with the file named when it is missing, unparsable, empty, not closed, or when its size
+/// is implausible for the unit (a 9 mm part read as 9 m).
+pub fn load_mesh(path: &Path, unit: LengthUnit) -> Result<TriMesh, PartError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    let raw = match ext.as_str() {
+        "obj" => read_obj(path)?,
+        "stl" => read_stl(path)?,
+        "ply" => read_ply(path)?,
+        _ => return Err(PartError::UnknownFormat { path: path.into() }),
+    };
+    if raw.triangles.is_empty() {
+        return Err(PartError::Empty { path: path.into() });
+    }
+    let mesh = raw.scaled(unit.to_metres());
+    check_size(path, &mesh, unit)?;
+    mesh.check_closed().map_err(|defect| PartError::NotClosed {
+        path: path.into(),
+        defect,
+    })?;
+    Ok(mesh)
+}
+
+fn check_size(path: &Path, mesh: &TriMesh, unit: LengthUnit) -> Result<(), PartError> {
+    let size = mesh.extents().max();
+    let (lo, hi) = PLAUSIBLE_SIZE_M;
+    if (lo..=hi).contains(&size) {
+        return Ok(());
+    }
+    let hint = if size > hi && (lo..=hi).contains(&(size * 1e-3)) {
+        "the numbers look like millimetres: set unit = \"mm\" in the catalog".to_string()
+    } else if size < lo && (lo..=hi).contains(&(size * 1e3)) {
+        "the numbers look like metres: set unit = \"m\" in the catalog".to_string()
+    } else {
+        format!("expected an object between {lo} and {hi} m: check the export scale")
+    };
+    Err(PartError::ImplausibleSize {
+        path: path.into(),
+        size_m: size,
+        unit: unit.name().into(),
+        hint,
+    })
+}
+
+fn open(path: &Path) -> Result<BufReader<File>, PartError> {
+    File::open(path)
+        .map(BufReader::new)
+        .map_err(|source| PartError::Io {
+            path: path.into(),
+            source,
+        })
+}
+
+fn parse_error(path: &Path, format: &'static str, message: impl ToString) -> PartError {
+    PartError::Parse {
+        path: path.into(),
+        format,
+        message: message.to_string(),
+    }
+}
+
+fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ..Default::default()
+    };
+    let mut reader = open(path)?;
+    let (models, _) = tobj::load_obj_buf(&mut reader, &options, |_| {
+        Ok((Vec::new(), Default::default()))
+    })
+    .map_err(|e| parse_error(path, "OBJ", e))?;
+    let mut mesh = TriMesh {
+        vertices: Vec::new(),
+        triangles: Vec::new(),
+    };
+    for model in models {
+        let m = model.mesh;
+        let part = TriMesh {
+            vertices: m
+                .positions
+                .chunks_exact(3)
+                .map(|c| Point3::new(c[0] as f64, c[1] as f64, c[2] as f64))
+                .collect(),
+            triangles: m
+                .indices
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
+        };
+        mesh.append(&part);
+    }
+    Ok(TriMesh::new(mesh.vertices, mesh.triangles))
+}
+
+fn read_stl(path: &Path) -> Result<TriMesh, PartError> {
+    let mut reader = open(path)?;
+    let stl = stl_io::read_stl(&mut reader).map_err(|e| parse_error(path, "STL", e))?;
+    let vertices = stl
+        .vertices
+        .iter()
+        .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+        .collect();
+    let triangles = stl
+        .faces
+        .iter()
+        .map(|f| f.vertices.map(|i| i as u32))
+        .collect();
+    Ok(TriMesh::new(vertices, triangles))
+}
+
+fn read_ply(path: &Path) -> Result<TriMesh, PartError> {
+    use ply_rs::ply::Property;
+    let mut reader = open(path)?;
+    let parser = ply_rs::parser::Parser::<ply_rs::ply::DefaultElement>::new();
+    let ply = parser
+        .read_ply(&mut reader)
+        .map_err(|e| parse_error(path, "PLY", e))?;
+    let scalar = |p: Option<&Property>| -> Option<f64> {
+        match p? {
+            Property::Float(v) => Some(*v as f64),
+            Property::Double(v) => Some(*v),
+            Property::Int(v) => Some(*v as f64),
+            Property::UInt(v) => Some(*v as f64),
+            Property::Short(v) => Some(*v as f64),
+            Property::UShort(v) => Some(*v as f64),
+            Property::Char(v) => Some(*v as f64),
+            Property::UChar(v) => Some(*v as f64),
+            _ => None,
+        }
+    };
+    let mut vertices = Vec::new();
+    for (i, v) in ply
+        .payload
+        .get("vertex")
+        .map(Vec::as_slice)
+        .unwrap_or_default()
+        .iter()
+        .enumerate()
+    {
+        let xyz = ["x", "y", "z"].map(|k| scalar(v.get(k)));
+        match xyz {
+            [Some(x), Some(y), Some(z)] => vertices.push(Point3::new(x, y, z)),
+            _ => {
+                return Err(parse_error(
+                    path,
+                    "PLY",
+                    format!("vertex {i} lacks numeric x, y, z"),
+                ));
+            }
+        }
+    }
+    let mut triangles = Vec::new();
+    for (i, f) in ply
+        .payload
+        .get("face")
+        .map(Vec::as_slice)
+        .unwrap_or_default()
+        .iter()
+        .enumerate()
+    {
+        let idx: Vec<u32> = match f.get("vertex_indices").or_else(|| f.get("vertex_index")) {
+            Some(Property::ListInt(l)) => l.iter().map(|&x| x as u32).collect(),
+            Some(Property::ListUInt(l)) => l.clone(),
+            Some(Property::ListUChar(l)) => l.iter().map(|&x| x as u32).collect(),
+            Some(Property::ListShort(l)) => l.iter().map(|&x| x as u32).collect(),
+            Some(Property::ListUShort(l)) => l.iter().map(|&x| x as u32).collect(),
+            _ => {
+                return Err(parse_error(
+                    path,
+                    "PLY",
+                    format!("face {i} lacks vertex_indices"),
+                ));
+            }
+        };
+        if idx.len() < 3 {
+            return Err(parse_error(
+                path,
+                "PLY",
+                format!("face {i} has fewer than 3 vertices"),
+            ));
+        }
+        for k in 1..idx.len() - 1 {
+            triangles.push([idx[0], idx[k], idx[k + 1]]);
+        }
+    }
+    Ok(TriMesh::new(vertices, triangles))
+}
+
+/// Writes a mesh as a text OBJ file in `unit`, with fixed precision so output is reproducible.
+pub fn write_obj(mesh: &TriMesh, unit: LengthUnit, header: &str) -> String {
+    use std::fmt::Write;
+    let scale = 1.0 / unit.to_metres();
+    let mut s = String::new();
+    for line in header.lines() {
+        let _ = writeln!(s, "# {line}");
+    }
+    for p in &mesh.vertices {
+        let q = p * scale;
+        let _ = writeln!(s, "v {:.6} {:.6} {:.6}", q.x + 0.0, q.y + 0.0, q.z + 0.0);
+    }
+    for t in &mesh.triangles {
+        let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    s
+}

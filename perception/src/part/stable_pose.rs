@@ -1,0 +1,81 @@
+//! Stable poses: the ways a part comes to rest on a flat table.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// One class of resting orientations: the face a part lies on, with yaw about the table normal free.
+///
+/// The pose of a part resting in this class is `table_T_part = Rz(yaw) · rotation`, translated to
+/// (x, y, `rest_height`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StablePose {
+    /// Name derived from the resting face, e.g. "+z" (part z axis up) or "-z"; grasps refer to it.
+    pub name: String,
+    /// Fraction of physics drops that came to rest in this class.
+    pub probability: f64,
+    /// The table's up direction expressed in the part frame (unit vector): what defines the class.
+    pub up_in_part: [f64; 3],
+    /// Canonical rest rotation `table_R_part` at yaw 0, as a rotation vector in radians.
+    pub rotation: [f64; 3],
+    /// Height of the part origin above the table in metres, from the mesh geometry.
+    pub rest_height: f64,
+}
+
+impl StablePose {
+    /// The canonical rest rotation `table_R_part` at yaw 0.
+    pub fn rest_rotation(&self) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_scaled_axis(Vector3::from(self.rotation))
+    }
+
+    /// `table_T_part` for a part resting in this class at (x, y) with the given yaw.
+    #[allow(non_snake_case)]
+    pub fn table_T_part(&self, x: f64, y: f64, yaw: f64) -> Isometry3<f64> {
+        let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw) * self.rest_rotation();
+        Isometry3::from_parts(Translation3::new(x, y, self.rest_height), r)
+    }
+
+    /// The shortest-arc rotation that turns `up_in_part` onto the table's +z: the canonical
+    /// rest rotation for a class (yaw 0).
+    pub fn canonical_rotation(up_in_part: &Vector3<f64>) -> UnitQuaternion<f64> {
+        UnitQuaternion::rotation_between(up_in_part, &Vector3::z()).unwrap_or_else(|| {
+            // Antiparallel: up is the part's -z; turn half a revolution about x (the seed's roll 180°).
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        })
+    }
+
+    /// A short name for the resting direction: "+x" … "-z" when it is within 1° of a part axis.
+    pub fn name_for(up_in_part: &Vector3<f64>, index: usize) -> String {
+        let axes = [("x", 0), ("y", 1), ("z", 2)];
+        for (axis, i) in axes {
+            let c = up_in_part[i];
+            if c.abs() > 1f64.to_radians().cos() {
+                return format!("{}{axis}", if c > 0.0 { '+' } else { '-' });
+            }
+        }
+        format!("oblique{index}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn canonical_rotation_maps_up_to_table_z() {
+        for up in [
+            Vector3::z(),
+            -Vector3::z(),
+            Vector3::x(),
+            Vector3::new(0.3, -0.5, 0.8).normalize(),
+        ] {
+            let r = StablePose::canonical_rotation(&up);
+            assert!((r * up - Vector3::z()).norm() < 1e-12);
+        }
+        assert_eq!(StablePose::name_for(&-Vector3::z(), 0), "-z");
+        assert_eq!(
+            StablePose::name_for(&Vector3::new(0.5, 0.0, 0.8).normalize(), 3),
+            "oblique3"
+        );
+    }
+}

@@ -1,0 +1,1 @@
+//! UR5e description and kinematics, RTDE, the Robot trait and the virtual UR controller.

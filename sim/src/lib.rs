@@ -1,0 +1,1 @@
+//! Physics, stable poses, part CAD authoring, rendering, datasets and the simulated cell.
