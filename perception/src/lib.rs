@@ -4,4 +4,7 @@
 //! This crate depends on no other crate of the workspace: the simulator renders through its camera
 //! model and the orchestrator consumes its poses, so conventions cannot diverge.
 
+pub mod camera;
 pub mod part;
+
+pub use camera::{Camera, CameraError, Distortion};

@@ -203,7 +203,7 @@ impl TriMesh {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A unit cube, outward triangles.
