@@ -1,1 +1,2 @@
 //! UR5e description and kinematics, RTDE, the Robot trait and the virtual UR controller.
+pub mod rtde;
