@@ -8,3 +8,4 @@ pub mod camera;
 pub mod part;
 
 pub use camera::{Camera, CameraError, Distortion};
+pub mod pnp;
