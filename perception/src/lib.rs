@@ -9,3 +9,4 @@ pub mod part;
 
 pub use camera::{Camera, CameraError, Distortion};
 pub mod pnp;
+pub mod voting;
