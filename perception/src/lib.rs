@@ -8,5 +8,8 @@ pub mod camera;
 pub mod part;
 
 pub use camera::{Camera, CameraError, Distortion};
+pub mod metrics;
+pub mod planar;
 pub mod pnp;
+pub mod symmetry;
 pub mod voting;
