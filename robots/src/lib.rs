@@ -1,3 +1,4 @@
 //! UR5e description and kinematics, RTDE, the Robot trait and the virtual UR controller.
+pub mod description;
 pub mod kinematics;
 pub mod rtde;
