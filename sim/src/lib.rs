@@ -1,1 +1,6 @@
 //! Physics, stable poses, part CAD authoring, rendering, datasets and the simulated cell.
+
+pub mod cad;
+pub mod convert;
+pub mod fsutil;
+pub mod stable_poses;

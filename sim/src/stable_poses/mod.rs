@@ -1,0 +1,72 @@
+//! Stable poses from physics, as in the seed's Figure 3: drop a part many times from random
+//! orientations onto a plane, let it rest, and group the rest orientations by resting face.
+
+mod cluster;
+mod drop;
+
+pub use cluster::{CLASS_ANGLE_RAD, PoseClass, cluster};
+pub use drop::{DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch};
+
+use indicatif::ProgressBar;
+use perception::part::TriMesh;
+use rayon::prelude::*;
+
+/// The result of dropping one part: its classes and how the drops went.
+#[derive(Debug, Clone)]
+pub struct StablePoseReport {
+    /// Classes, most probable first.
+    pub classes: Vec<PoseClass>,
+    /// Drops simulated.
+    pub drops: usize,
+    /// Drops that did not come to rest within the time limit.
+    pub unsettled: usize,
+    /// Settled drops in classes too rare to keep.
+    pub rare: usize,
+    /// Mass in kg, from the mesh and density.
+    pub mass: f64,
+    /// Centre of mass in the part frame, metres.
+    pub center_of_mass: nalgebra::Point3<f64>,
+    /// Mean simulated time to rest, seconds.
+    pub mean_rest_time: f64,
+}
+
+/// Drops `mesh` `settings.drops` times in parallel batches and clusters the rests.
+///
+/// Deterministic for a given seed whatever the thread count: drop i's orientation depends only
+/// on (seed, i), and batches are fixed slices of the sequence.
+pub fn stable_poses(
+    mesh: &TriMesh,
+    density: f64,
+    settings: &DropSettings,
+    progress: Option<&ProgressBar>,
+) -> StablePoseReport {
+    let body = DropBody::new(mesh, density);
+    let batch = settings.batch.max(1);
+    let starts: Vec<usize> = (0..settings.drops).step_by(batch).collect();
+    let outcomes: Vec<DropOutcome> = starts
+        .par_iter()
+        .flat_map_iter(|&first| {
+            let count = batch.min(settings.drops - first);
+            let out = simulate_batch(&body, settings, first, count);
+            if let Some(p) = progress {
+                p.inc(count as u64);
+            }
+            out
+        })
+        .collect();
+    let min_count = (settings.drops / 1000).max(2);
+    let classes = cluster(&outcomes, mesh, min_count);
+    let settled = outcomes.iter().filter(|o| o.settled).count();
+    let classified: usize = classes.iter().map(|c| c.count).sum();
+    let (mass, center_of_mass) = body.mass_and_com();
+    StablePoseReport {
+        classes,
+        drops: outcomes.len(),
+        unsettled: outcomes.len() - settled,
+        rare: settled - classified,
+        mass,
+        center_of_mass,
+        mean_rest_time: outcomes.iter().filter(|o| o.settled).map(|o| o.time).sum::<f64>()
+            / settled.max(1) as f64,
+    }
+}
