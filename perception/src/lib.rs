@@ -8,6 +8,7 @@ pub mod camera;
 pub mod part;
 
 pub use camera::{Camera, CameraError, Distortion};
+pub mod ablation;
 pub mod metrics;
 pub mod planar;
 pub mod pnp;
