@@ -1,4 +1,6 @@
 //! UR5e description and kinematics, RTDE, the Robot trait and the virtual UR controller.
 pub mod description;
 pub mod kinematics;
+pub mod limits;
+pub mod robot;
 pub mod rtde;

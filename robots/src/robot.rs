@@ -1,0 +1,347 @@
+//! The one seam between the orchestrator and an arm: the [`Robot`] trait, its status and errors.
+//!
+//! # Why boxed futures
+//! The methods return [`RobotFuture`], a pinned, boxed, `Send` future, instead of being
+//! `async fn`. An `async fn` (or `-> impl Future`) in a trait makes it not dyn-compatible, and the
+//! orchestrator picks the implementation at run time (`--robot sim` or `--robot ur://HOST`), so it
+//! needs `Box<dyn Robot>` / `&mut dyn Robot`. Boxing costs one allocation per command, nothing
+//! next to a motion that lasts seconds. Generic code (`R: Robot`) works as well, and `Send`
+//! futures run on tokio's multi-threaded runtime. Implementations write
+//! `Box::pin(async move { ... })`.
+//!
+//! Every implementation checks each target with [`Limits`] before sending it and fails with
+//! [`RobotError::LimitViolation`] instead of moving.
+
+use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+use std::future::Future;
+use std::pin::Pin;
+use std::time::Duration;
+use thiserror::Error;
+
+use crate::kinematics::{IkError, Joints};
+use crate::limits::{LimitViolation, Limits};
+
+/// The future every [`Robot`] method returns.
+pub type RobotFuture<'a, T> = Pin<Box<dyn Future<Output = Result<T, RobotError>> + Send + 'a>>;
+
+/// Speed and acceleration of a joint-space move (the leading joint's, like URScript `movej`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointMotion {
+    /// Joint speed (rad/s).
+    pub speed: f64,
+    /// Joint acceleration (rad/s²).
+    pub acceleration: f64,
+}
+
+/// Speed and acceleration of a straight-line TCP move (like URScript `movel`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LinearMotion {
+    /// TCP speed (m/s).
+    pub speed: f64,
+    /// TCP acceleration (m/s²).
+    pub acceleration: f64,
+}
+
+/// The arm's power and control state (UR `robot_mode`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RobotMode {
+    /// No controller is running.
+    NoController,
+    /// The controller is not connected to the arm.
+    Disconnected,
+    /// Safety configuration awaits confirmation.
+    ConfirmSafety,
+    /// The arm is booting.
+    Booting,
+    /// The arm is powered off.
+    PowerOff,
+    /// The arm is powered on, brakes engaged.
+    PowerOn,
+    /// Powered, brakes released, not running a program.
+    Idle,
+    /// Backdrive mode (brakes released by hand).
+    Backdrive,
+    /// Running: ready to move.
+    Running,
+    /// Updating firmware.
+    UpdatingFirmware,
+}
+
+impl RobotMode {
+    /// The mode for a UR `robot_mode` code (−1 … 8), if known.
+    pub fn from_ur_code(code: i32) -> Option<Self> {
+        use RobotMode::*;
+        Some(match code {
+            -1 => NoController,
+            0 => Disconnected,
+            1 => ConfirmSafety,
+            2 => Booting,
+            3 => PowerOff,
+            4 => PowerOn,
+            5 => Idle,
+            6 => Backdrive,
+            7 => Running,
+            8 => UpdatingFirmware,
+            _ => return None,
+        })
+    }
+
+    /// The UR `robot_mode` code of this mode.
+    pub fn ur_code(self) -> i32 {
+        use RobotMode::*;
+        match self {
+            NoController => -1,
+            Disconnected => 0,
+            ConfirmSafety => 1,
+            Booting => 2,
+            PowerOff => 3,
+            PowerOn => 4,
+            Idle => 5,
+            Backdrive => 6,
+            Running => 7,
+            UpdatingFirmware => 8,
+        }
+    }
+}
+
+/// The arm's safety state (UR `safety_mode`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SafetyStatus {
+    /// Normal operation.
+    Normal,
+    /// Reduced mode: tighter safety limits, still moving.
+    Reduced,
+    /// Protective stop: the arm stopped itself (collision, limit); must be unlocked.
+    ProtectiveStop,
+    /// Recovery mode: the arm is outside its safety limits and may only move back in.
+    Recovery,
+    /// Safeguard stop from a safety input (light curtain, door).
+    SafeguardStop,
+    /// Emergency stop from the system (cell) e-stop input.
+    SystemEmergencyStop,
+    /// Emergency stop from the teach pendant or arm e-stop button.
+    RobotEmergencyStop,
+    /// Safety system violation.
+    Violation,
+    /// Safety system fault.
+    Fault,
+}
+
+impl SafetyStatus {
+    /// The status for a UR `safety_mode` code (1 … 9), if known.
+    pub fn from_ur_code(code: i32) -> Option<Self> {
+        use SafetyStatus::*;
+        Some(match code {
+            1 => Normal,
+            2 => Reduced,
+            3 => ProtectiveStop,
+            4 => Recovery,
+            5 => SafeguardStop,
+            6 => SystemEmergencyStop,
+            7 => RobotEmergencyStop,
+            8 => Violation,
+            9 => Fault,
+            _ => return None,
+        })
+    }
+
+    /// The UR `safety_mode` code of this status.
+    pub fn ur_code(self) -> i32 {
+        use SafetyStatus::*;
+        match self {
+            Normal => 1,
+            Reduced => 2,
+            ProtectiveStop => 3,
+            Recovery => 4,
+            SafeguardStop => 5,
+            SystemEmergencyStop => 6,
+            RobotEmergencyStop => 7,
+            Violation => 8,
+            Fault => 9,
+        }
+    }
+
+    /// True for either emergency stop.
+    pub fn is_emergency_stop(self) -> bool {
+        matches!(self, Self::SystemEmergencyStop | Self::RobotEmergencyStop)
+    }
+
+    /// True when the safety system lets the arm execute motions.
+    pub fn allows_motion(self) -> bool {
+        matches!(self, Self::Normal | Self::Reduced)
+    }
+
+    /// The error a motion fails with in this state, if it cannot run.
+    pub fn motion_error(self) -> Option<RobotError> {
+        match self {
+            Self::Normal | Self::Reduced => None,
+            Self::ProtectiveStop => Some(RobotError::ProtectiveStop),
+            s if s.is_emergency_stop() => Some(RobotError::EmergencyStop { safety: s }),
+            s => Some(RobotError::SafetyStop { safety: s }),
+        }
+    }
+}
+
+/// A snapshot of the arm's state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RobotStatus {
+    /// Power and control state.
+    pub mode: RobotMode,
+    /// Safety state.
+    pub safety: SafetyStatus,
+    /// Whether the controller program that executes our commands is running.
+    pub program_running: bool,
+}
+
+impl RobotStatus {
+    /// True when the arm can execute a motion now.
+    pub fn ready(&self) -> bool {
+        self.mode == RobotMode::Running && self.safety.allows_motion() && self.program_running
+    }
+}
+
+/// Why a robot command failed.
+#[derive(Debug, Error)]
+pub enum RobotError {
+    /// The arm is in (or went into) a protective stop.
+    #[error("robot is in a protective stop")]
+    ProtectiveStop,
+    /// An emergency stop is active.
+    #[error("emergency stop active ({safety:?})")]
+    EmergencyStop {
+        /// Which emergency stop.
+        safety: SafetyStatus,
+    },
+    /// Another safety state forbids motion (safeguard stop, recovery, violation, fault).
+    #[error("safety system forbids motion ({safety:?})")]
+    SafetyStop {
+        /// The safety state.
+        safety: SafetyStatus,
+    },
+    /// The arm is not ready to move (powered off, idle, program not running).
+    #[error("robot not ready: mode {mode:?}, program running: {program_running}")]
+    NotReady {
+        /// Its mode.
+        mode: RobotMode,
+        /// Whether our program runs.
+        program_running: bool,
+    },
+    /// The connection to the controller was lost or broke.
+    #[error("connection to the robot lost: {detail}")]
+    ConnectionLost {
+        /// What happened.
+        detail: String,
+    },
+    /// An operation did not finish in time.
+    #[error("{operation} timed out after {after:?}")]
+    Timeout {
+        /// What timed out.
+        operation: String,
+        /// The time allowed.
+        after: Duration,
+    },
+    /// The target or motion violates the cell's limits; nothing was sent.
+    #[error("limit violation: {0}")]
+    LimitViolation(#[from] LimitViolation),
+    /// The target pose has no joint solution.
+    #[error("target unreachable: {0}")]
+    Unreachable(#[from] IkError),
+    /// The controller refused or failed the command for another reason.
+    #[error("robot rejected the command: {detail}")]
+    Rejected {
+        /// The controller's reason.
+        detail: String,
+    },
+}
+
+/// An arm the orchestrator commands: a UR over RTDE, or the in-process simulated cell.
+///
+/// Motions complete (or fail) before their future resolves. All poses are in the robot's base
+/// frame; `tcp` is the tool centre point the implementation was configured with.
+pub trait Robot: Send {
+    /// The limits every target is checked against before it is sent.
+    fn limits(&self) -> &Limits;
+
+    /// Current measured joint angles (rad).
+    fn joints(&mut self) -> RobotFuture<'_, Joints>;
+
+    /// Current measured TCP pose, `base_T_tcp`.
+    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>>;
+
+    /// Moves in joint space to `target`.
+    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()>;
+
+    /// Moves the TCP in a straight line to `base_T_tcp`.
+    #[allow(non_snake_case)]
+    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()>;
+
+    /// Opens the gripper and waits until it is open.
+    fn open_gripper(&mut self) -> RobotFuture<'_, ()>;
+
+    /// Closes the gripper and waits until it stops (on the part or fully closed).
+    fn close_gripper(&mut self) -> RobotFuture<'_, ()>;
+
+    /// Stops any motion (decelerating within the limits) and waits until the arm is still.
+    fn stop(&mut self) -> RobotFuture<'_, ()>;
+
+    /// Mode, safety state and whether our program runs.
+    fn status(&mut self) -> RobotFuture<'_, RobotStatus>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    // The trait must stay dyn-compatible and its futures Send.
+    const _: fn(&mut dyn Robot) = |_| {};
+    const _: fn(Box<dyn Robot>) = |_| {};
+    fn _futures_are_send(robot: &mut dyn Robot) -> impl Send + '_ {
+        robot.status()
+    }
+
+    #[test]
+    fn ur_codes_round_trip() {
+        for code in -1..=8 {
+            assert_eq!(RobotMode::from_ur_code(code).unwrap().ur_code(), code);
+        }
+        assert_eq!(RobotMode::from_ur_code(9), None);
+        for code in 1..=9 {
+            assert_eq!(SafetyStatus::from_ur_code(code).unwrap().ur_code(), code);
+        }
+        assert_eq!(SafetyStatus::from_ur_code(0), None);
+    }
+
+    #[test]
+    fn safety_states_map_to_typed_errors() {
+        assert!(SafetyStatus::Normal.motion_error().is_none());
+        assert!(SafetyStatus::Reduced.motion_error().is_none());
+        assert!(matches!(
+            SafetyStatus::ProtectiveStop.motion_error(),
+            Some(RobotError::ProtectiveStop)
+        ));
+        assert!(matches!(
+            SafetyStatus::RobotEmergencyStop.motion_error(),
+            Some(RobotError::EmergencyStop { .. })
+        ));
+        assert!(matches!(
+            SafetyStatus::SafeguardStop.motion_error(),
+            Some(RobotError::SafetyStop { .. })
+        ));
+        let status = RobotStatus {
+            mode: RobotMode::Running,
+            safety: SafetyStatus::Normal,
+            program_running: true,
+        };
+        assert!(status.ready());
+        assert!(
+            !RobotStatus {
+                program_running: false,
+                ..status
+            }
+            .ready()
+        );
+    }
+}
