@@ -3,4 +3,7 @@ pub mod description;
 pub mod kinematics;
 pub mod limits;
 pub mod robot;
+pub mod dashboard;
+pub mod program;
 pub mod rtde;
+pub mod virtual_ur;

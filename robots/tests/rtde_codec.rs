@@ -28,7 +28,9 @@ fn roundtrip_reply(r: &Reply, p: Protocol) -> Reply {
 #[test]
 fn protocol_version_request_matches_the_wire_bytes() {
     let mut buf = Vec::new();
-    Request::ProtocolVersion(2).encode(Protocol::V2, &mut buf).unwrap();
+    Request::ProtocolVersion(2)
+        .encode(Protocol::V2, &mut buf)
+        .unwrap();
     assert_eq!(buf, [0, 5, b'V', 0, 2]);
 }
 
@@ -132,8 +134,7 @@ fn name_lists_over_2048_bytes_are_refused() {
     );
     let ok = "a".repeat(MAX_NAMES_LEN);
     assert!(Request::decode(b'I', ok.as_bytes(), Protocol::V2).is_ok());
-    let names = vec!["x".repeat(MAX_NAMES_LEN)];
-    let too_many = [names[0].clone(), "y".into()].to_vec();
+    let too_many = vec!["x".repeat(MAX_NAMES_LEN), "y".into()];
     assert!(matches!(
         Request::SetupInputs { names: too_many }.encode(Protocol::V2, &mut Vec::new()),
         Err(CodecError::NamesTooLong(_))

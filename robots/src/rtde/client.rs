@@ -508,9 +508,8 @@ async fn run_link(
         let mut attempt = 0u32;
         session = loop {
             if config.backoff.max_attempts.is_some_and(|m| attempt >= m) {
-                status_tx.send_replace(LinkStatus::Failed(
-                    ClientError::GaveUp(attempt).to_string(),
-                ));
+                status_tx
+                    .send_replace(LinkStatus::Failed(ClientError::GaveUp(attempt).to_string()));
                 return;
             }
             tokio::time::sleep(config.backoff.delay(attempt)).await;

@@ -212,9 +212,12 @@ pub enum Reply {
     Text(TextMessage),
 }
 
+/// A complete frame found at the front of a buffer: type byte, payload, bytes consumed.
+pub type Frame<'a> = (u8, &'a [u8], usize);
+
 /// Splits the first complete package off `buf`: `Ok(None)` when more bytes are needed,
 /// otherwise the type byte, the payload and the total length consumed.
-pub fn split_frame(buf: &[u8]) -> Result<Option<(u8, &[u8], usize)>, CodecError> {
+pub fn split_frame(buf: &[u8]) -> Result<Option<Frame<'_>>, CodecError> {
     if buf.len() < HEADER_LEN {
         return Ok(None);
     }
@@ -272,7 +275,11 @@ fn parse_slots(ty: u8, bytes: &[u8]) -> Result<Vec<Slot>, CodecError> {
 }
 
 fn join_names<S: AsRef<str>>(names: &[S]) -> Result<String, CodecError> {
-    let joined = names.iter().map(AsRef::as_ref).collect::<Vec<_>>().join(",");
+    let joined = names
+        .iter()
+        .map(AsRef::as_ref)
+        .collect::<Vec<_>>()
+        .join(",");
     if joined.len() > MAX_NAMES_LEN {
         return Err(CodecError::NamesTooLong(joined.len()));
     }
@@ -424,7 +431,9 @@ impl Request {
             }
             Request::SetupInputs { names } => {
                 let joined = join_names(names)?;
-                frame(TYPE_SETUP_INPUTS, out, |o| o.extend_from_slice(joined.as_bytes()))
+                frame(TYPE_SETUP_INPUTS, out, |o| {
+                    o.extend_from_slice(joined.as_bytes())
+                })
             }
             Request::Start => frame(TYPE_START, out, |_| {}),
             Request::Pause => frame(TYPE_PAUSE, out, |_| {}),

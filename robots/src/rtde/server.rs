@@ -7,8 +7,8 @@
 
 use super::frame_io::FrameReader;
 use super::package::{
-    CodecError, ControllerVersion, Protocol, Reply, Request, TYPE_DATA,
-    TYPE_SETUP_INPUTS, TYPE_SETUP_OUTPUTS, TextMessage, check_frequency,
+    CodecError, ControllerVersion, Protocol, Reply, Request, TYPE_DATA, TYPE_SETUP_INPUTS,
+    TYPE_SETUP_OUTPUTS, TextMessage, check_frequency,
 };
 use super::recipe::Recipe;
 use super::types::{DataType, Slot, Value};
@@ -231,7 +231,7 @@ impl<C: Controller> Connection<C> {
                     }
                     let snapshot = snapshots.borrow_and_update().clone();
                     let Some(output) = &self.output else { continue };
-                    if self.controller.cycle(&snapshot) % output.decimation != 0 {
+                    if !self.controller.cycle(&snapshot).is_multiple_of(output.decimation) {
                         continue;
                     }
                     let Some(delay) = self.faults.next_package() else { continue };
@@ -348,7 +348,10 @@ impl<C: Controller> Connection<C> {
             .collect();
         let valid_frequency = check_frequency(frequency).is_ok() && frequency <= max + 1e-9;
         let all_found = slots.iter().all(|s| matches!(s, Slot::Type(_)));
-        if let Some(bad) = names.iter().find(|n| self.controller.resolve_output(n).is_none()) {
+        if let Some(bad) = names
+            .iter()
+            .find(|n| self.controller.resolve_output(n).is_none())
+        {
             tracing::warn!(conn = self.id, name = %bad, "output variable not found");
         }
         if all_found && valid_frequency {
@@ -366,7 +369,10 @@ impl<C: Controller> Connection<C> {
             self.output = None;
             self.streaming = false;
             if !valid_frequency {
-                self.text(1, &format!("output frequency {frequency} Hz is outside (0, {max}]"))?;
+                self.text(
+                    1,
+                    &format!("output frequency {frequency} Hz is outside (0, {max}]"),
+                )?;
             }
         }
         let recipe_id = u8::from(self.output.is_some());
@@ -409,7 +415,10 @@ impl<C: Controller> Connection<C> {
             .and_then(|i| self.inputs.get(i))
             .and_then(Option::as_ref);
         let Some(setup) = setup else {
-            return self.text(1, &format!("data package for unknown input recipe {recipe_id}"));
+            return self.text(
+                1,
+                &format!("data package for unknown input recipe {recipe_id}"),
+            );
         };
         match setup.recipe.decode_into(payload, &mut self.values) {
             Ok(()) => {
@@ -421,4 +430,3 @@ impl<C: Controller> Connection<C> {
         }
     }
 }
-

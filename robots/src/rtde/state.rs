@@ -242,7 +242,9 @@ pub struct OutputState {
 impl OutputState {
     /// A variable's value by name.
     pub fn get(&self, name: &str) -> Option<Value> {
-        self.recipe.index_of(name).and_then(|i| self.values.get(i).copied())
+        self.recipe
+            .index_of(name)
+            .and_then(|i| self.values.get(i).copied())
     }
 
     /// A scalar variable as f64.
@@ -262,16 +264,19 @@ impl OutputState {
 
     /// `robot_mode`, when in the recipe.
     pub fn robot_mode(&self) -> Option<RobotMode> {
-        self.i64("robot_mode").map(|v| RobotMode::from_i32(v as i32))
+        self.i64("robot_mode")
+            .map(|v| RobotMode::from_i32(v as i32))
     }
 
     /// `safety_mode`, when in the recipe.
     pub fn safety_mode(&self) -> Option<SafetyMode> {
-        self.i64("safety_mode").map(|v| SafetyMode::from_i32(v as i32))
+        self.i64("safety_mode")
+            .map(|v| SafetyMode::from_i32(v as i32))
     }
 
     /// `runtime_state`, when in the recipe.
     pub fn runtime_state(&self) -> Option<RuntimeState> {
-        self.i64("runtime_state").map(|v| RuntimeState::from_u32(v as u32))
+        self.i64("runtime_state")
+            .map(|v| RuntimeState::from_u32(v as u32))
     }
 }

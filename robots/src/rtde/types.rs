@@ -149,14 +149,18 @@ impl Value {
             Value::Int32(v) => out.extend_from_slice(&v.to_be_bytes()),
             Value::Uint64(v) => out.extend_from_slice(&v.to_be_bytes()),
             Value::Double(v) => out.extend_from_slice(&v.to_be_bytes()),
-            Value::Vector3d(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_be_bytes())),
-            Value::Vector6d(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_be_bytes())),
-            Value::Vector6Int32(v) => {
-                v.iter().for_each(|x| out.extend_from_slice(&x.to_be_bytes()))
-            }
-            Value::Vector6Uint32(v) => {
-                v.iter().for_each(|x| out.extend_from_slice(&x.to_be_bytes()))
-            }
+            Value::Vector3d(v) => v
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_be_bytes())),
+            Value::Vector6d(v) => v
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_be_bytes())),
+            Value::Vector6Int32(v) => v
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_be_bytes())),
+            Value::Vector6Uint32(v) => v
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_be_bytes())),
         }
     }
 
@@ -164,8 +168,10 @@ impl Value {
     /// A BOOL byte other than 0 reads as true.
     pub fn decode(ty: DataType, bytes: &[u8]) -> Option<Value> {
         let b = bytes.get(..ty.size())?;
-        let f64_at = |i: usize| f64::from_be_bytes(b[8 * i..8 * i + 8].try_into().unwrap_or([0; 8]));
-        let u32_at = |i: usize| u32::from_be_bytes(b[4 * i..4 * i + 4].try_into().unwrap_or([0; 4]));
+        let f64_at =
+            |i: usize| f64::from_be_bytes(b[8 * i..8 * i + 8].try_into().unwrap_or([0; 8]));
+        let u32_at =
+            |i: usize| u32::from_be_bytes(b[4 * i..4 * i + 4].try_into().unwrap_or([0; 4]));
         Some(match ty {
             DataType::Bool => Value::Bool(b[0] != 0),
             DataType::Uint8 => Value::Uint8(b[0]),
@@ -175,7 +181,9 @@ impl Value {
             DataType::Double => Value::Double(f64_at(0)),
             DataType::Vector3d => Value::Vector3d(std::array::from_fn(f64_at)),
             DataType::Vector6d => Value::Vector6d(std::array::from_fn(f64_at)),
-            DataType::Vector6Int32 => Value::Vector6Int32(std::array::from_fn(|i| u32_at(i) as i32)),
+            DataType::Vector6Int32 => {
+                Value::Vector6Int32(std::array::from_fn(|i| u32_at(i) as i32))
+            }
             DataType::Vector6Uint32 => Value::Vector6Uint32(std::array::from_fn(u32_at)),
         })
     }

@@ -1,0 +1,449 @@
+//! The simulated arm behind the virtual controller: a trait so a physics simulator can plug in,
+//! and a kinematic joint-space model with velocity and acceleration limits stepped at 500 Hz.
+
+use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
+use nalgebra::Isometry3;
+use thiserror::Error;
+
+/// Joint and TCP state of the arm (SI units; poses as UR pose vectors in the base frame).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ArmState {
+    /// Measured joint positions (rad).
+    pub q: Joints,
+    /// Measured joint velocities (rad/s).
+    pub qd: Joints,
+    /// Commanded joint positions.
+    pub target_q: Joints,
+    /// Commanded joint velocities.
+    pub target_qd: Joints,
+    /// Commanded joint accelerations.
+    pub target_qdd: Joints,
+    /// Measured TCP pose (x, y, z, rx, ry, rz).
+    pub tcp_pose: [f64; 6],
+    /// Commanded TCP pose.
+    pub target_tcp_pose: [f64; 6],
+    /// Measured TCP speed (linear m/s, angular rad/s).
+    pub tcp_speed: [f64; 6],
+}
+
+/// A motion request to the arm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ArmCommand {
+    /// Joint-space move, synchronised joints; `speed`/`accel` of the leading joint (rad/s, rad/s²).
+    MoveJ {
+        /// Target joints.
+        q: Joints,
+        /// Leading-joint speed.
+        speed: f64,
+        /// Leading-joint acceleration.
+        accel: f64,
+    },
+    /// Straight-line TCP move to a pose (m/s, m/s²).
+    MoveL {
+        /// Target TCP pose (UR pose vector).
+        pose: [f64; 6],
+        /// Tool speed.
+        speed: f64,
+        /// Tool acceleration.
+        accel: f64,
+    },
+    /// Joint velocity control, reached with `accel`.
+    SpeedJ {
+        /// Target joint velocities.
+        qd: Joints,
+        /// Acceleration.
+        accel: f64,
+    },
+    /// Servo towards `q`, arriving in `time` seconds (within the limits).
+    ServoJ {
+        /// Servo target.
+        q: Joints,
+        /// Time to reach it.
+        time: f64,
+    },
+    /// Decelerate to rest at `decel` (rad/s² of the fastest joint).
+    Stop {
+        /// Deceleration.
+        decel: f64,
+    },
+    /// Safety stop: halt at once.
+    Halt,
+}
+
+/// Why the arm refused or aborted a motion.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ArmError {
+    /// A target or parameter is not finite or not positive.
+    #[error("invalid motion parameter: {0}")]
+    InvalidParameter(&'static str),
+    /// No inverse kinematics solution for a Cartesian target.
+    #[error("target pose unreachable: {0}")]
+    Unreachable(String),
+    /// A straight-line move would need joint speeds over the limit (singularity).
+    #[error("straight-line move passes a singularity (joint {joint} would need {speed:.2} rad/s)")]
+    Singularity {
+        /// Joint index.
+        joint: usize,
+        /// Needed speed.
+        speed: f64,
+    },
+}
+
+/// An arm the virtual controller can drive. Implementations step at the control period.
+pub trait ArmModel: Send + 'static {
+    /// Starts a motion (replacing the current one).
+    fn command(&mut self, cmd: ArmCommand) -> Result<(), ArmError>;
+    /// Advances by `dt` seconds; `speed_fraction` (0–1) scales the motion's time like the speed
+    /// slider. Returns an error when the running motion had to be aborted.
+    fn step(&mut self, dt: f64, speed_fraction: f64) -> Result<(), ArmError>;
+    /// Current state.
+    fn state(&self) -> ArmState;
+    /// Whether a motion is in progress.
+    fn is_moving(&self) -> bool;
+    /// Forward kinematics to the TCP as a UR pose vector.
+    fn forward(&self, q: &Joints) -> [f64; 6];
+    /// Inverse kinematics nearest `near`.
+    fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError>;
+}
+
+/// Trapezoidal (or triangular) velocity profile over a path of length `length`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Trapezoid {
+    length: f64,
+    accel: f64,
+    v_peak: f64,
+    t_accel: f64,
+    t_cruise: f64,
+}
+
+impl Trapezoid {
+    fn new(length: f64, speed: f64, accel: f64) -> Trapezoid {
+        let t_full = speed / accel;
+        let d_accel = 0.5 * accel * t_full * t_full;
+        if 2.0 * d_accel >= length {
+            let t_accel = (length / accel).sqrt();
+            Trapezoid {
+                length,
+                accel,
+                v_peak: accel * t_accel,
+                t_accel,
+                t_cruise: 0.0,
+            }
+        } else {
+            Trapezoid {
+                length,
+                accel,
+                v_peak: speed,
+                t_accel: t_full,
+                t_cruise: (length - 2.0 * d_accel) / speed,
+            }
+        }
+    }
+
+    fn duration(&self) -> f64 {
+        2.0 * self.t_accel + self.t_cruise
+    }
+
+    /// Distance, speed and acceleration along the path at time `t`.
+    fn at(&self, t: f64) -> (f64, f64, f64) {
+        let (a, ta, tc) = (self.accel, self.t_accel, self.t_cruise);
+        if t <= 0.0 {
+            (0.0, 0.0, 0.0)
+        } else if t < ta {
+            (0.5 * a * t * t, a * t, a)
+        } else if t < ta + tc {
+            let d = 0.5 * a * ta * ta;
+            (d + self.v_peak * (t - ta), self.v_peak, 0.0)
+        } else if t < self.duration() {
+            let rem = self.duration() - t;
+            (self.length - 0.5 * a * rem * rem, a * rem, -a)
+        } else {
+            (self.length, 0.0, 0.0)
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+enum Motion {
+    Idle,
+    Joint {
+        start: Joints,
+        delta: Joints,
+        profile: Trapezoid,
+        t: f64,
+    },
+    Linear {
+        start: Isometry3<f64>,
+        end: Isometry3<f64>,
+        profile: Trapezoid,
+        t: f64,
+    },
+    Speed {
+        qd: Joints,
+        accel: f64,
+    },
+    Stopping {
+        decel: f64,
+    },
+}
+
+/// Kinematic UR5e: perfect tracking of joint-space and straight-line trajectories, joint speeds
+/// capped at π rad/s and accelerations at `max_joint_accel`.
+#[derive(Debug, Clone)]
+pub struct KinematicArm {
+    kinematics: UrKinematics,
+    q: Joints,
+    qd: Joints,
+    qdd: Joints,
+    motion: Motion,
+    /// Joint speed limit (rad/s).
+    pub max_joint_speed: f64,
+    /// Joint acceleration limit (rad/s²).
+    pub max_joint_accel: f64,
+    /// Tool speed limit (m/s).
+    pub max_tool_speed: f64,
+    /// Tool acceleration limit (m/s²).
+    pub max_tool_accel: f64,
+}
+
+impl KinematicArm {
+    /// A UR5e at joints `q`.
+    pub fn ur5e(q: Joints) -> KinematicArm {
+        KinematicArm {
+            kinematics: UrKinematics::ur5e(),
+            q,
+            qd: [0.0; 6],
+            qdd: [0.0; 6],
+            motion: Motion::Idle,
+            max_joint_speed: std::f64::consts::PI,
+            max_joint_accel: 40.0,
+            max_tool_speed: 3.0,
+            max_tool_accel: 15.0,
+        }
+    }
+
+    fn set_q(&mut self, q: Joints, dt: f64) {
+        let qd: Joints = std::array::from_fn(|i| (q[i] - self.q[i]) / dt);
+        self.qdd = std::array::from_fn(|i| (qd[i] - self.qd[i]) / dt);
+        self.qd = qd;
+        self.q = q;
+    }
+}
+
+fn finite(values: &[f64]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+fn positive(v: f64, what: &'static str) -> Result<f64, ArmError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(ArmError::InvalidParameter(what))
+    }
+}
+
+impl ArmModel for KinematicArm {
+    fn command(&mut self, cmd: ArmCommand) -> Result<(), ArmError> {
+        self.motion = match cmd {
+            ArmCommand::MoveJ { q, speed, accel } => {
+                if !finite(&q) {
+                    return Err(ArmError::InvalidParameter("joint target"));
+                }
+                let speed = positive(speed, "speed")?.min(self.max_joint_speed);
+                let accel = positive(accel, "acceleration")?.min(self.max_joint_accel);
+                let delta: Joints = std::array::from_fn(|i| q[i] - self.q[i]);
+                let length = delta.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+                if length < 1e-12 {
+                    Motion::Idle
+                } else {
+                    Motion::Joint {
+                        start: self.q,
+                        delta,
+                        profile: Trapezoid::new(length, speed, accel),
+                        t: 0.0,
+                    }
+                }
+            }
+            ArmCommand::MoveL { pose, speed, accel } => {
+                if !finite(&pose) {
+                    return Err(ArmError::InvalidParameter("pose target"));
+                }
+                let speed = positive(speed, "speed")?.min(self.max_tool_speed);
+                let accel = positive(accel, "acceleration")?.min(self.max_tool_accel);
+                let end = from_ur_pose(&pose);
+                self.inverse(&pose, &self.q)?;
+                let start = self.kinematics.forward_tcp(&self.q);
+                let distance = (end.translation.vector - start.translation.vector).norm();
+                let angle = start.rotation.angle_to(&end.rotation);
+                // Translation leads; a pure reorientation uses the speed as rad/s.
+                let length = distance.max(angle * 0.1);
+                if length < 1e-9 {
+                    Motion::Idle
+                } else {
+                    Motion::Linear {
+                        start,
+                        end,
+                        profile: Trapezoid::new(length, speed, accel),
+                        t: 0.0,
+                    }
+                }
+            }
+            ArmCommand::SpeedJ { qd, accel } => {
+                if !finite(&qd) {
+                    return Err(ArmError::InvalidParameter("joint speed"));
+                }
+                let accel = positive(accel, "acceleration")?.min(self.max_joint_accel);
+                let qd = qd.map(|v| v.clamp(-self.max_joint_speed, self.max_joint_speed));
+                Motion::Speed { qd, accel }
+            }
+            ArmCommand::ServoJ { q, time } => {
+                if !finite(&q) {
+                    return Err(ArmError::InvalidParameter("servo target"));
+                }
+                let time = positive(time, "servo time")?;
+                let qd = std::array::from_fn(|i| {
+                    ((q[i] - self.q[i]) / time).clamp(-self.max_joint_speed, self.max_joint_speed)
+                });
+                Motion::Speed {
+                    qd,
+                    accel: self.max_joint_accel,
+                }
+            }
+            ArmCommand::Stop { decel } => Motion::Stopping {
+                decel: positive(decel, "deceleration")?.min(self.max_joint_accel * 2.0),
+            },
+            ArmCommand::Halt => {
+                self.qd = [0.0; 6];
+                self.qdd = [0.0; 6];
+                Motion::Idle
+            }
+        };
+        Ok(())
+    }
+
+    fn step(&mut self, dt: f64, speed_fraction: f64) -> Result<(), ArmError> {
+        let scaled = dt * speed_fraction.clamp(0.0, 1.0);
+        match &mut self.motion {
+            Motion::Idle => {
+                self.qd = [0.0; 6];
+                self.qdd = [0.0; 6];
+            }
+            Motion::Joint {
+                start,
+                delta,
+                profile,
+                t,
+            } => {
+                *t += scaled;
+                let (s, _, _) = profile.at(*t);
+                let f = s / profile.length;
+                let q = std::array::from_fn(|i| start[i] + delta[i] * f);
+                let done = *t >= profile.duration();
+                self.set_q(q, dt);
+                if done {
+                    self.motion = Motion::Idle;
+                    self.qd = [0.0; 6];
+                }
+            }
+            Motion::Linear {
+                start,
+                end,
+                profile,
+                t,
+            } => {
+                *t += scaled;
+                let (s, _, _) = profile.at(*t);
+                let f = s / profile.length;
+                let pose = start.lerp_slerp(end, f);
+                let done = *t >= profile.duration();
+                let q = match self.kinematics.inverse_nearest(&pose, &self.q) {
+                    Ok(sol) => sol.joints,
+                    Err(e) => {
+                        self.motion = Motion::Idle;
+                        self.qd = [0.0; 6];
+                        return Err(ArmError::Unreachable(e.to_string()));
+                    }
+                };
+                for (i, (a, b)) in q.iter().zip(&self.q).enumerate() {
+                    let speed = (a - b).abs() / dt;
+                    if speed > self.max_joint_speed * 1.5 {
+                        self.motion = Motion::Idle;
+                        self.qd = [0.0; 6];
+                        return Err(ArmError::Singularity { joint: i, speed });
+                    }
+                }
+                self.set_q(q, dt);
+                if done {
+                    self.motion = Motion::Idle;
+                    self.qd = [0.0; 6];
+                }
+            }
+            Motion::Speed { qd, accel } => {
+                let (qd, accel) = (*qd, *accel);
+                let next: Joints = std::array::from_fn(|i| {
+                    let dv = (qd[i] * speed_fraction - self.qd[i]).clamp(-accel * dt, accel * dt);
+                    self.qd[i] + dv
+                });
+                let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
+                self.set_q(q, dt);
+            }
+            Motion::Stopping { decel } => {
+                let peak = self.qd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                if peak <= *decel * dt {
+                    self.motion = Motion::Idle;
+                    self.qd = [0.0; 6];
+                } else {
+                    let k = (peak - *decel * dt) / peak;
+                    let next: Joints = self.qd.map(|v| v * k);
+                    let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
+                    self.set_q(q, dt);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn state(&self) -> ArmState {
+        let pose = self.forward(&self.q);
+        let ahead: Joints = std::array::from_fn(|i| self.q[i] + self.qd[i] * 1e-3);
+        let pose_ahead = self.forward(&ahead);
+        let tcp_speed = std::array::from_fn(|i| {
+            if i < 3 {
+                (pose_ahead[i] - pose[i]) / 1e-3
+            } else {
+                let a = from_ur_pose(&pose).rotation;
+                let b = from_ur_pose(&pose_ahead).rotation;
+                (b * a.inverse()).scaled_axis()[i - 3] / 1e-3
+            }
+        });
+        ArmState {
+            q: self.q,
+            qd: self.qd,
+            target_q: self.q,
+            target_qd: self.qd,
+            target_qdd: self.qdd,
+            tcp_pose: pose,
+            target_tcp_pose: pose,
+            tcp_speed,
+        }
+    }
+
+    fn is_moving(&self) -> bool {
+        match self.motion {
+            Motion::Idle => false,
+            Motion::Speed { .. } => true,
+            _ => true,
+        }
+    }
+
+    fn forward(&self, q: &Joints) -> [f64; 6] {
+        to_ur_pose(&self.kinematics.forward_tcp(q))
+    }
+
+    fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError> {
+        self.kinematics
+            .inverse_nearest(&from_ur_pose(pose), near)
+            .map(|s| s.joints)
+            .map_err(|e| ArmError::Unreachable(e.to_string()))
+    }
+}

@@ -1,0 +1,748 @@
+//! The virtual controller's state: arm, safety, program, registers, I/O; its 500 Hz control
+//! loop; and the RTDE variable mapping (it implements [`crate::rtde::server::Controller`]).
+
+use super::arm::{ArmCommand, ArmModel, ArmState};
+use super::programs::{CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram};
+use super::registers::{Registers, StandardIo};
+use crate::program::{PROGRAM_NAME, UR_RTDE_PROGRAM_NAME, program_name};
+use crate::rtde::ControllerVersion;
+use crate::rtde::server::{ConnId, Controller, InputField, OutputField};
+use crate::rtde::state::{
+    ROBOT_BIT_PROGRAM_RUNNING, RobotMode, RuntimeState, SAFETY_BIT_EMERGENCY_STOPPED,
+    SAFETY_BIT_PROTECTIVE_STOPPED, SafetyMode,
+};
+use crate::rtde::types::{DataType, Slot, Value};
+use crate::rtde::variables::{self, Register};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use tokio::sync::watch;
+
+/// Why a program upload or a dashboard action was refused.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum ControllerError {
+    /// The uploaded script is not a program this controller can run.
+    #[error("program {0:?} is not one the virtual controller executes")]
+    UnknownProgram(String),
+    /// The text has no `def name():` line.
+    #[error("script has no def line")]
+    NotAProgram,
+    /// Program uploads are refused (fault injection).
+    #[error("program refused (fault injection)")]
+    Refused,
+    /// The robot is not in RUNNING mode, or a safety stop is active.
+    #[error("robot not ready: mode {mode:?}, safety {safety:?}")]
+    NotReady {
+        /// Robot mode.
+        mode: RobotMode,
+        /// Safety mode.
+        safety: SafetyMode,
+    },
+}
+
+/// One control cycle's state, as streamed to RTDE clients.
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    /// Control cycle number.
+    pub cycle: u64,
+    /// Seconds since controller start.
+    pub timestamp: f64,
+    /// Arm state.
+    pub arm: ArmState,
+    /// Robot mode.
+    pub robot_mode: RobotMode,
+    /// Safety mode.
+    pub safety_mode: SafetyMode,
+    /// Program state.
+    pub runtime_state: RuntimeState,
+    /// Registers.
+    pub regs: Registers,
+    /// Digital I/O and speed slider.
+    pub io: StandardIo,
+}
+
+impl Snapshot {
+    /// `robot_status_bits`.
+    pub fn robot_status_bits(&self) -> u32 {
+        let power = !matches!(
+            self.robot_mode,
+            RobotMode::PowerOff | RobotMode::Disconnected | RobotMode::NoController
+        );
+        u32::from(power)
+            | if self.runtime_state == RuntimeState::Playing {
+                ROBOT_BIT_PROGRAM_RUNNING
+            } else {
+                0
+            }
+    }
+
+    /// `safety_status_bits`.
+    pub fn safety_status_bits(&self) -> u32 {
+        match self.safety_mode {
+            SafetyMode::Normal => 1,
+            SafetyMode::Reduced => 1 << 1,
+            SafetyMode::ProtectiveStop => SAFETY_BIT_PROTECTIVE_STOPPED | (1 << 10),
+            SafetyMode::Recovery => 1 << 3,
+            SafetyMode::SafeguardStop => (1 << 4) | (1 << 10),
+            SafetyMode::SystemEmergencyStop => (1 << 5) | SAFETY_BIT_EMERGENCY_STOPPED | (1 << 10),
+            SafetyMode::RobotEmergencyStop => (1 << 6) | SAFETY_BIT_EMERGENCY_STOPPED | (1 << 10),
+            SafetyMode::Violation => (1 << 8) | (1 << 10),
+            SafetyMode::Fault => (1 << 9) | (1 << 10),
+            SafetyMode::Unknown(_) => 1 << 10,
+        }
+    }
+}
+
+/// Simulated quantities with their own output key (kind 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Quantity {
+    Timestamp,
+    TargetQ,
+    TargetQd,
+    TargetQdd,
+    ActualQ,
+    ActualQd,
+    ActualTcpPose,
+    TargetTcpPose,
+    ActualTcpSpeed,
+    TargetTcpSpeed,
+    RobotMode,
+    SafetyMode,
+    RuntimeState,
+    RobotStatusBits,
+    SafetyStatusBits,
+    SpeedScaling,
+    TargetSpeedFraction,
+    DigitalOutputBits,
+    StandardDo,
+    ToolDo,
+    ConfigurableDo,
+    JointMode,
+    InputBitsLow,
+    InputBitsHigh,
+    OutputBitsLow,
+    OutputBitsHigh,
+}
+
+const QUANTITIES: &[(&str, Quantity)] = &[
+    ("timestamp", Quantity::Timestamp),
+    ("target_q", Quantity::TargetQ),
+    ("target_qd", Quantity::TargetQd),
+    ("target_qdd", Quantity::TargetQdd),
+    ("actual_q", Quantity::ActualQ),
+    ("actual_qd", Quantity::ActualQd),
+    ("actual_TCP_pose", Quantity::ActualTcpPose),
+    ("target_TCP_pose", Quantity::TargetTcpPose),
+    ("actual_TCP_speed", Quantity::ActualTcpSpeed),
+    ("target_TCP_speed", Quantity::TargetTcpSpeed),
+    ("robot_mode", Quantity::RobotMode),
+    ("safety_mode", Quantity::SafetyMode),
+    ("safety_status", Quantity::SafetyMode),
+    ("runtime_state", Quantity::RuntimeState),
+    ("robot_status_bits", Quantity::RobotStatusBits),
+    ("safety_status_bits", Quantity::SafetyStatusBits),
+    ("speed_scaling", Quantity::SpeedScaling),
+    ("target_speed_fraction", Quantity::TargetSpeedFraction),
+    ("speed_slider_fraction", Quantity::TargetSpeedFraction),
+    ("actual_digital_output_bits", Quantity::DigitalOutputBits),
+    ("standard_digital_output", Quantity::StandardDo),
+    ("tool_digital_output", Quantity::ToolDo),
+    ("configurable_digital_output", Quantity::ConfigurableDo),
+    ("joint_mode", Quantity::JointMode),
+    ("input_bit_registers0_to_31", Quantity::InputBitsLow),
+    ("input_bit_registers32_to_63", Quantity::InputBitsHigh),
+    ("output_bit_registers0_to_31", Quantity::OutputBitsLow),
+    ("output_bit_registers32_to_63", Quantity::OutputBitsHigh),
+];
+
+// Output key kinds (high 16 bits) and input key kinds.
+const K_QUANTITY: u32 = 0;
+const K_OUT_INT: u32 = 1;
+const K_OUT_DOUBLE: u32 = 2;
+const K_OUT_BIT: u32 = 3;
+const K_IN_INT: u32 = 4;
+const K_IN_DOUBLE: u32 = 5;
+const K_IN_BIT: u32 = 6;
+const K_CONSTANT: u32 = 7;
+const K_NAMED_INPUT: u32 = 8;
+
+fn key(kind: u32, index: usize) -> u32 {
+    (kind << 16) | (index as u32 & 0xffff)
+}
+
+/// A plausible constant for table variables the model does not simulate.
+fn constant_value(name: &str, ty: DataType) -> Value {
+    match name {
+        "actual_main_voltage" | "actual_robot_voltage" => Value::Double(48.0),
+        "actual_robot_current" => Value::Double(0.4),
+        "joint_temperatures" => Value::Vector6d([32.0; 6]),
+        "actual_joint_voltage" => Value::Vector6d([47.5; 6]),
+        "actual_tool_accelerometer" => Value::Vector3d([0.0, 0.0, 9.81]),
+        "tool_output_voltage" => Value::Int32(24),
+        "actual_execution_time" => Value::Double(0.3),
+        "tool_temperature" => Value::Double(30.0),
+        "io_current" => Value::Double(0.05),
+        "tool_mode" => Value::Uint32(255),
+        _ => ty.zero(),
+    }
+}
+
+/// Mutable controller state, behind one mutex.
+pub(crate) struct Core {
+    pub arm: Box<dyn ArmModel>,
+    pub cycle: u64,
+    pub time: f64,
+    pub robot_mode: RobotMode,
+    pub safety_mode: SafetyMode,
+    pub runtime_state: RuntimeState,
+    pub regs: Registers,
+    pub io: StandardIo,
+    pub owners: HashMap<u32, ConnId>,
+    pub program: Option<Box<dyn Program>>,
+    /// Name and text of the newest accepted program, for dashboard `play`.
+    pub loaded: Option<String>,
+    pub protective_stop_at: Option<Instant>,
+    pub text_log: Vec<String>,
+}
+
+/// The virtual UR controller.
+pub struct VirtualController {
+    core: Mutex<Core>,
+    snapshots: watch::Sender<Arc<Snapshot>>,
+    version: ControllerVersion,
+    /// Control period (2 ms at 500 Hz).
+    pub period: Duration,
+    /// How long after a protective stop the dashboard may unlock it (5 s on a real UR).
+    pub unlock_delay: Duration,
+    refuse_programs: AtomicBool,
+}
+
+impl VirtualController {
+    /// A controller around `arm`, powered on, brakes released, no program running.
+    pub fn new(
+        arm: Box<dyn ArmModel>,
+        version: ControllerVersion,
+        period: Duration,
+        unlock_delay: Duration,
+    ) -> VirtualController {
+        let core = Core {
+            arm,
+            cycle: 0,
+            time: 0.0,
+            robot_mode: RobotMode::Running,
+            safety_mode: SafetyMode::Normal,
+            runtime_state: RuntimeState::Stopped,
+            regs: Registers::default(),
+            io: StandardIo::default(),
+            owners: HashMap::new(),
+            program: None,
+            loaded: None,
+            protective_stop_at: None,
+            text_log: Vec::new(),
+        };
+        let snapshot = Arc::new(Self::snapshot_of(&core));
+        VirtualController {
+            core: Mutex::new(core),
+            snapshots: watch::channel(snapshot).0,
+            version,
+            period,
+            unlock_delay,
+            refuse_programs: AtomicBool::new(false),
+        }
+    }
+
+    pub(crate) fn lock(&self) -> MutexGuard<'_, Core> {
+        self.core.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn snapshot_of(core: &Core) -> Snapshot {
+        Snapshot {
+            cycle: core.cycle,
+            timestamp: core.time,
+            arm: core.arm.state(),
+            robot_mode: core.robot_mode,
+            safety_mode: core.safety_mode,
+            runtime_state: core.runtime_state,
+            regs: core.regs.clone(),
+            io: core.io,
+        }
+    }
+
+    /// The newest snapshot.
+    pub fn snapshot(&self) -> Arc<Snapshot> {
+        self.snapshots.borrow().clone()
+    }
+
+    /// One control cycle: step the arm and the program, publish a snapshot.
+    pub fn tick(&self) {
+        let dt = self.period.as_secs_f64();
+        let snapshot = {
+            let mut guard = self.lock();
+            let core = &mut *guard;
+            let can_move = core.robot_mode == RobotMode::Running && !core.safety_mode.is_stopped();
+            let arm_error = if can_move {
+                core.arm.step(dt, core.io.speed_slider).err()
+            } else {
+                None
+            };
+            if let Some(e) = &arm_error {
+                tracing::warn!(error = %e, "virtual arm aborted a motion");
+            }
+            let mut protective_stop = false;
+            if core.runtime_state == RuntimeState::Playing
+                && let Some(program) = core.program.as_mut()
+            {
+                let mut io = ProgramIo {
+                    regs: &mut core.regs,
+                    io: &mut core.io,
+                    arm: core.arm.as_mut(),
+                    dt,
+                    arm_error,
+                    protective_stop: false,
+                };
+                let step = program.step(&mut io);
+                protective_stop = io.protective_stop;
+                if step == ProgramStep::Exit {
+                    tracing::info!(name = program.name(), "program finished");
+                    core.program = None;
+                    core.runtime_state = RuntimeState::Stopped;
+                }
+            }
+            if protective_stop {
+                Self::enter_protective_stop(core);
+            }
+            core.cycle += 1;
+            core.time += dt;
+            Self::snapshot_of(core)
+        };
+        self.snapshots.send_replace(Arc::new(snapshot));
+    }
+
+    fn enter_protective_stop(core: &mut Core) {
+        core.safety_mode = SafetyMode::ProtectiveStop;
+        core.protective_stop_at = Some(Instant::now());
+        let _ = core.arm.command(ArmCommand::Halt);
+        if let Some(program) = core.program.as_mut() {
+            let mut io = ProgramIo {
+                regs: &mut core.regs,
+                io: &mut core.io,
+                arm: core.arm.as_mut(),
+                dt: 0.0,
+                arm_error: None,
+                protective_stop: false,
+            };
+            program.interrupted(&mut io);
+            core.runtime_state = RuntimeState::Paused;
+        }
+    }
+
+    /// Fault: a protective stop (arm halts, program pauses).
+    pub fn protective_stop(&self) {
+        Self::enter_protective_stop(&mut self.lock());
+    }
+
+    /// Fault: an emergency stop (arm halts, program stops, power is cut).
+    pub fn emergency_stop(&self) {
+        let mut core = self.lock();
+        core.safety_mode = SafetyMode::RobotEmergencyStop;
+        let _ = core.arm.command(ArmCommand::Halt);
+        Self::stop_program(&mut core);
+        core.robot_mode = RobotMode::PowerOff;
+    }
+
+    /// Releases the emergency stop button: safety returns to normal, power stays off.
+    pub fn release_emergency_stop(&self) {
+        let mut core = self.lock();
+        if matches!(
+            core.safety_mode,
+            SafetyMode::RobotEmergencyStop | SafetyMode::SystemEmergencyStop
+        ) {
+            core.safety_mode = SafetyMode::Normal;
+        }
+    }
+
+    /// Fault: refuse (or accept again) uploaded programs.
+    pub fn refuse_programs(&self, refuse: bool) {
+        self.refuse_programs.store(refuse, Ordering::Relaxed);
+    }
+
+    fn stop_program(core: &mut Core) {
+        if let Some(program) = core.program.as_mut() {
+            let mut io = ProgramIo {
+                regs: &mut core.regs,
+                io: &mut core.io,
+                arm: core.arm.as_mut(),
+                dt: 0.0,
+                arm_error: None,
+                protective_stop: false,
+            };
+            program.interrupted(&mut io);
+        }
+        core.program = None;
+        core.runtime_state = RuntimeState::Stopped;
+        if core.arm.is_moving() {
+            let _ = core.arm.command(ArmCommand::Stop { decel: 3.0 });
+        }
+    }
+
+    fn start_program(core: &mut Core, name: &str) -> Result<(), ControllerError> {
+        if core.robot_mode != RobotMode::Running || core.safety_mode.is_stopped() {
+            return Err(ControllerError::NotReady {
+                mode: core.robot_mode,
+                safety: core.safety_mode,
+            });
+        }
+        let mut program: Box<dyn Program> = match name {
+            PROGRAM_NAME => Box::new(CellProgram::new()),
+            UR_RTDE_PROGRAM_NAME => Box::new(UrRtdeProgram::new()),
+            other => return Err(ControllerError::UnknownProgram(other.to_owned())),
+        };
+        Self::stop_program(core);
+        let mut io = ProgramIo {
+            regs: &mut core.regs,
+            io: &mut core.io,
+            arm: core.arm.as_mut(),
+            dt: 0.0,
+            arm_error: None,
+            protective_stop: false,
+        };
+        program.start(&mut io);
+        core.program = Some(program);
+        core.runtime_state = RuntimeState::Playing;
+        core.loaded = Some(name.to_owned());
+        tracing::info!(name, "program started");
+        Ok(())
+    }
+
+    /// A script arrived on the script port: recognise it and run it (replacing the program).
+    pub fn upload_script(&self, script: &str) -> Result<(), ControllerError> {
+        let name = program_name(script).ok_or(ControllerError::NotAProgram)?;
+        if self.refuse_programs.load(Ordering::Relaxed) {
+            return Err(ControllerError::Refused);
+        }
+        let mut core = self.lock();
+        let result = Self::start_program(&mut core, name);
+        if let Err(e) = &result {
+            core.text_log.push(e.to_string());
+        }
+        result
+    }
+
+    /// Answers one dashboard command line.
+    pub fn dashboard(&self, line: &str) -> String {
+        let line = line.trim();
+        let mut core = self.lock();
+        let lower = line.to_ascii_lowercase();
+        match lower.as_str() {
+            "polyscopeversion" => format!(
+                "URSoftware {}.{}.{}.{} (virtual-ur)",
+                self.version.major, self.version.minor, self.version.bugfix, self.version.build
+            ),
+            "get serial number" => "20235500001".into(),
+            "get robot model" => "UR5".into(),
+            "is in remote control" => "true".into(),
+            "robotmode" => format!("Robotmode: {}", core.robot_mode.dashboard_name()),
+            "safetystatus" => format!("Safetystatus: {}", core.safety_mode.dashboard_name()),
+            "safetymode" => format!("Safetymode: {}", core.safety_mode.dashboard_name()),
+            "programstate" => match (&core.loaded, core.runtime_state) {
+                (Some(name), RuntimeState::Playing) => format!("PLAYING {name}"),
+                (Some(name), RuntimeState::Paused) => format!("PAUSED {name}"),
+                (Some(name), _) => format!("STOPPED {name}"),
+                (None, _) => "STOPPED <unnamed>".into(),
+            },
+            "running" => format!(
+                "Program running: {}",
+                core.runtime_state == RuntimeState::Playing
+            ),
+            "get loaded program" => match &core.loaded {
+                Some(name) => format!("Loaded program: {name}"),
+                None => "No program loaded".into(),
+            },
+            "power on" => {
+                if core.safety_mode.is_stopped() {
+                    "Failed to execute: power on".into()
+                } else {
+                    if core.robot_mode == RobotMode::PowerOff {
+                        core.robot_mode = RobotMode::Idle;
+                    }
+                    "Powering on".into()
+                }
+            }
+            "power off" => {
+                Self::stop_program(&mut core);
+                let _ = core.arm.command(ArmCommand::Halt);
+                core.robot_mode = RobotMode::PowerOff;
+                "Powering off".into()
+            }
+            "brake release" => {
+                if matches!(core.robot_mode, RobotMode::Idle | RobotMode::Running) {
+                    core.robot_mode = RobotMode::Running;
+                    "Brake releasing".into()
+                } else {
+                    "Failed to execute: brake release".into()
+                }
+            }
+            "play" => {
+                if core.runtime_state == RuntimeState::Paused && core.program.is_some() {
+                    if core.safety_mode.is_stopped() {
+                        return "Failed to execute: Play".into();
+                    }
+                    let core = &mut *core;
+                    if let Some(p) = core.program.as_mut() {
+                        let mut io = ProgramIo {
+                            regs: &mut core.regs,
+                            io: &mut core.io,
+                            arm: core.arm.as_mut(),
+                            dt: 0.0,
+                            arm_error: None,
+                            protective_stop: false,
+                        };
+                        p.start(&mut io);
+                    }
+                    core.runtime_state = RuntimeState::Playing;
+                    return "Starting program".into();
+                }
+                let Some(name) = core.loaded.clone() else {
+                    return "Failed to execute: Play".into();
+                };
+                match Self::start_program(&mut core, &name) {
+                    Ok(()) => "Starting program".into(),
+                    Err(_) => "Failed to execute: Play".into(),
+                }
+            }
+            "stop" => {
+                if core.program.is_some() {
+                    Self::stop_program(&mut core);
+                    "Stopped".into()
+                } else {
+                    "Failed to execute: Stop".into()
+                }
+            }
+            "pause" => {
+                if core.runtime_state == RuntimeState::Playing {
+                    core.runtime_state = RuntimeState::Paused;
+                    let _ = core.arm.command(ArmCommand::Stop { decel: 3.0 });
+                    "Pausing program".into()
+                } else {
+                    "Failed to execute: Pause".into()
+                }
+            }
+            "unlock protective stop" => {
+                if core.safety_mode != SafetyMode::ProtectiveStop {
+                    return "Cannot unlock protective stop: robot is not protective stopped".into();
+                }
+                let waited = core
+                    .protective_stop_at
+                    .map_or(Duration::MAX, |t| t.elapsed());
+                if waited < self.unlock_delay {
+                    return "Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective stop before unlocking".into();
+                }
+                core.safety_mode = SafetyMode::Normal;
+                core.protective_stop_at = None;
+                "Protective stop releasing".into()
+            }
+            "close safety popup" => "closing safety popup".into(),
+            "close popup" => "closing popup".into(),
+            "quit" => "Disconnected".into(),
+            "shutdown" => "Shutting down".into(),
+            _ => {
+                if let Some(file) = line.strip_prefix("load ") {
+                    let name = file.trim().trim_end_matches(".urp");
+                    if name == PROGRAM_NAME || name == UR_RTDE_PROGRAM_NAME {
+                        Self::stop_program(&mut core);
+                        core.loaded = Some(name.to_owned());
+                        format!("Loading program: {}", file.trim())
+                    } else {
+                        format!("File not found: {}", file.trim())
+                    }
+                } else {
+                    format!("could not understand: '{line}'")
+                }
+            }
+        }
+    }
+
+    fn resolve_input(name: &str) -> Option<InputField> {
+        let ty = variables::input_type(name)?;
+        let key = match Register::parse(name) {
+            Some(Register::InputInt(i)) => key(K_IN_INT, i),
+            Some(Register::InputDouble(i)) => key(K_IN_DOUBLE, i),
+            Some(Register::InputBit(i)) => key(K_IN_BIT, i),
+            Some(_) => return None,
+            None => key(
+                K_NAMED_INPUT,
+                variables::INPUTS.iter().position(|(n, _)| *n == name)?,
+            ),
+        };
+        Some(InputField { key, ty })
+    }
+}
+
+impl Controller for VirtualController {
+    type Snapshot = Snapshot;
+
+    fn version(&self) -> ControllerVersion {
+        self.version
+    }
+
+    fn control_frequency(&self) -> f64 {
+        1.0 / self.period.as_secs_f64()
+    }
+
+    fn resolve_output(&self, name: &str) -> Option<OutputField> {
+        let ty = variables::output_type(name)?;
+        let key = match Register::parse(name) {
+            Some(Register::OutputInt(i)) => key(K_OUT_INT, i),
+            Some(Register::OutputDouble(i)) => key(K_OUT_DOUBLE, i),
+            Some(Register::OutputBit(i)) => key(K_OUT_BIT, i),
+            Some(Register::InputInt(i)) => key(K_IN_INT, i),
+            Some(Register::InputDouble(i)) => key(K_IN_DOUBLE, i),
+            Some(Register::InputBit(i)) => key(K_IN_BIT, i),
+            None => match QUANTITIES.iter().position(|(n, _)| *n == name) {
+                Some(i) => key(K_QUANTITY, i),
+                None => key(
+                    K_CONSTANT,
+                    variables::OUTPUTS.iter().position(|(n, _)| *n == name)?,
+                ),
+            },
+        };
+        Some(OutputField { key, ty })
+    }
+
+    fn output_value(&self, s: &Snapshot, key: u32) -> Value {
+        let index = (key & 0xffff) as usize;
+        let bit = |bits: u128, i: usize| Value::Bool(bits >> i & 1 == 1);
+        match key >> 16 {
+            K_OUT_INT => Value::Int32(s.regs.output_int[index]),
+            K_OUT_DOUBLE => Value::Double(s.regs.output_double[index]),
+            K_OUT_BIT => bit(s.regs.output_bits, index),
+            K_IN_INT => Value::Int32(s.regs.input_int[index]),
+            K_IN_DOUBLE => Value::Double(s.regs.input_double[index]),
+            K_IN_BIT => bit(s.regs.input_bits, index),
+            K_CONSTANT => {
+                let (name, ty) = variables::OUTPUTS[index];
+                constant_value(name, ty)
+            }
+            _ => {
+                let q = QUANTITIES[index].1;
+                let a = &s.arm;
+                match q {
+                    Quantity::Timestamp => Value::Double(s.timestamp),
+                    Quantity::TargetQ => Value::Vector6d(a.target_q),
+                    Quantity::TargetQd => Value::Vector6d(a.target_qd),
+                    Quantity::TargetQdd => Value::Vector6d(a.target_qdd),
+                    Quantity::ActualQ => Value::Vector6d(a.q),
+                    Quantity::ActualQd => Value::Vector6d(a.qd),
+                    Quantity::ActualTcpPose => Value::Vector6d(a.tcp_pose),
+                    Quantity::TargetTcpPose => Value::Vector6d(a.target_tcp_pose),
+                    Quantity::ActualTcpSpeed | Quantity::TargetTcpSpeed => {
+                        Value::Vector6d(a.tcp_speed)
+                    }
+                    Quantity::RobotMode => Value::Int32(s.robot_mode.to_i32()),
+                    Quantity::SafetyMode => Value::Int32(s.safety_mode.to_i32()),
+                    Quantity::RuntimeState => Value::Uint32(s.runtime_state.to_u32()),
+                    Quantity::RobotStatusBits => Value::Uint32(s.robot_status_bits()),
+                    Quantity::SafetyStatusBits => Value::Uint32(s.safety_status_bits()),
+                    Quantity::SpeedScaling | Quantity::TargetSpeedFraction => {
+                        Value::Double(s.io.speed_slider)
+                    }
+                    Quantity::DigitalOutputBits => Value::Uint64(s.io.digital_output_bits()),
+                    Quantity::StandardDo => Value::Uint8(s.io.standard_do),
+                    Quantity::ToolDo => Value::Uint8(s.io.tool_do),
+                    Quantity::ConfigurableDo => Value::Uint8(s.io.configurable_do),
+                    Quantity::JointMode => {
+                        let running = s.robot_mode == RobotMode::Running;
+                        Value::Vector6Int32([if running { 255 } else { 253 }; 6])
+                    }
+                    Quantity::InputBitsLow => Value::Uint32(s.regs.input_bits as u32),
+                    Quantity::InputBitsHigh => Value::Uint32((s.regs.input_bits >> 32) as u32),
+                    Quantity::OutputBitsLow => Value::Uint32(s.regs.output_bits as u32),
+                    Quantity::OutputBitsHigh => Value::Uint32((s.regs.output_bits >> 32) as u32),
+                }
+            }
+        }
+    }
+
+    fn cycle(&self, snapshot: &Snapshot) -> u64 {
+        snapshot.cycle
+    }
+
+    fn subscribe(&self) -> watch::Receiver<Arc<Snapshot>> {
+        self.snapshots.subscribe()
+    }
+
+    fn claim_input(&self, conn: ConnId, name: &str) -> Result<InputField, Slot> {
+        let field = Self::resolve_input(name).ok_or(Slot::NotFound)?;
+        let mut core = self.lock();
+        match core.owners.get(&field.key) {
+            Some(owner) if *owner != conn => Err(Slot::InUse),
+            _ => {
+                core.owners.insert(field.key, conn);
+                Ok(field)
+            }
+        }
+    }
+
+    fn write_inputs(&self, _conn: ConnId, fields: &[InputField], values: &[Value]) {
+        let mut core = self.lock();
+        let mut named: [Option<Value>; 16] = [None; 16];
+        for (f, v) in fields.iter().zip(values) {
+            let index = (f.key & 0xffff) as usize;
+            match (f.key >> 16, *v) {
+                (K_IN_INT, Value::Int32(x)) => core.regs.input_int[index] = x,
+                (K_IN_DOUBLE, Value::Double(x)) => core.regs.input_double[index] = x,
+                (K_IN_BIT, Value::Bool(b)) => {
+                    core.regs.input_bits =
+                        (core.regs.input_bits & !(1 << index)) | (u128::from(b) << index)
+                }
+                (K_NAMED_INPUT, v) if index < named.len() => named[index] = Some(v),
+                _ => {}
+            }
+        }
+        let get = |name: &str| {
+            variables::INPUTS
+                .iter()
+                .position(|(n, _)| *n == name)
+                .and_then(|i| named.get(i).copied().flatten())
+        };
+        let masked = |old: u8, mask: Option<Value>, value: Option<Value>| match (mask, value) {
+            (Some(Value::Uint8(m)), Some(Value::Uint8(v))) => (old & !m) | (v & m),
+            _ => old,
+        };
+        let io = &mut core.io;
+        io.standard_do = masked(
+            io.standard_do,
+            get("standard_digital_output_mask"),
+            get("standard_digital_output"),
+        );
+        io.configurable_do = masked(
+            io.configurable_do,
+            get("configurable_digital_output_mask"),
+            get("configurable_digital_output"),
+        );
+        io.tool_do = masked(
+            io.tool_do,
+            get("tool_digital_output_mask"),
+            get("tool_digital_output"),
+        ) & 0b11;
+        if let (Some(Value::Uint32(1)), Some(Value::Double(f))) =
+            (get("speed_slider_mask"), get("speed_slider_fraction"))
+            && f.is_finite()
+        {
+            io.speed_slider = f.clamp(0.0, 1.0);
+        }
+        if let Some(Value::Uint32(bits)) = get("input_bit_registers0_to_31") {
+            core.regs.input_bits = (core.regs.input_bits & !0xffff_ffff) | u128::from(bits);
+        }
+        if let Some(Value::Uint32(bits)) = get("input_bit_registers32_to_63") {
+            core.regs.input_bits =
+                (core.regs.input_bits & !(0xffff_ffff << 32)) | (u128::from(bits) << 32);
+        }
+    }
+
+    fn disconnected(&self, conn: ConnId) {
+        self.lock().owners.retain(|_, owner| *owner != conn);
+    }
+}

@@ -1,0 +1,82 @@
+//! The controller's general-purpose registers and standard I/O.
+
+use crate::rtde::variables::REGISTER_COUNT;
+
+/// Input and output registers (integers, doubles, bits) of the controller.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Registers {
+    /// input_int_register_0..47.
+    pub input_int: [i32; REGISTER_COUNT],
+    /// input_double_register_0..47.
+    pub input_double: [f64; REGISTER_COUNT],
+    /// input bit registers 0..127 (bit i = register i).
+    pub input_bits: u128,
+    /// output_int_register_0..47.
+    pub output_int: [i32; REGISTER_COUNT],
+    /// output_double_register_0..47.
+    pub output_double: [f64; REGISTER_COUNT],
+    /// output bit registers 0..127.
+    pub output_bits: u128,
+}
+
+impl Default for Registers {
+    fn default() -> Self {
+        Registers {
+            input_int: [0; REGISTER_COUNT],
+            input_double: [0.0; REGISTER_COUNT],
+            input_bits: 0,
+            output_int: [0; REGISTER_COUNT],
+            output_double: [0.0; REGISTER_COUNT],
+            output_bits: 0,
+        }
+    }
+}
+
+/// Standard, configurable and tool digital outputs and the speed slider.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StandardIo {
+    /// Standard digital outputs 0–7.
+    pub standard_do: u8,
+    /// Configurable digital outputs 0–7.
+    pub configurable_do: u8,
+    /// Tool digital outputs 0–1.
+    pub tool_do: u8,
+    /// Speed slider fraction 0–1.
+    pub speed_slider: f64,
+}
+
+impl Default for StandardIo {
+    fn default() -> Self {
+        StandardIo {
+            standard_do: 0,
+            configurable_do: 0,
+            tool_do: 0,
+            speed_slider: 1.0,
+        }
+    }
+}
+
+impl StandardIo {
+    /// `actual_digital_output_bits`: standard 0–7, configurable 8–15, tool 16–17.
+    pub fn digital_output_bits(&self) -> u64 {
+        u64::from(self.standard_do)
+            | (u64::from(self.configurable_do) << 8)
+            | (u64::from(self.tool_do & 0b11) << 16)
+    }
+
+    /// Sets one standard (0–7), configurable (8–15) or tool (16–17) output; false if no such pin.
+    pub fn set_digital_output(&mut self, pin: i64, level: bool) -> bool {
+        let (reg, bit) = match pin {
+            0..=7 => (&mut self.standard_do, pin),
+            8..=15 => (&mut self.configurable_do, pin - 8),
+            16..=17 => (&mut self.tool_do, pin - 16),
+            _ => return false,
+        };
+        if level {
+            *reg |= 1 << bit;
+        } else {
+            *reg &= !(1 << bit);
+        }
+        true
+    }
+}

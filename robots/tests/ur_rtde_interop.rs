@@ -1,0 +1,154 @@
+//! Interop with an independent RTDE peer: SDU ur_rtde 1.6.5 (PyPI `ur-rtde`) drives the virtual
+//! controller through its receive, control and IO interfaces. ur_rtde 1.6.5 cannot be given
+//! ports, so this runs on the default ports 30004/29999/30003 of 127.0.0.1: it is the only test
+//! in this binary, so nothing else binds them concurrently from this crate.
+
+use robots::kinematics::{UrKinematics, to_ur_pose};
+use robots::rtde::state::RuntimeState;
+use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
+use serde_json::Value as Json;
+use std::path::PathBuf;
+use std::time::Duration;
+
+fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn provision_python() -> PathBuf {
+    let out = std::process::Command::new("bash")
+        .arg(repo_root().join("scripts/ur_rtde/venv.sh"))
+        .output()
+        .expect("run scripts/ur_rtde/venv.sh");
+    assert!(
+        out.status.success(),
+        "provisioning the ur_rtde venv failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
+}
+
+fn f64s(v: &Json) -> Vec<f64> {
+    v.as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect()
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ur_rtde_receive_control_and_io_interfaces_drive_the_virtual_controller() {
+    let python = provision_python();
+    let vur = VirtualUr::start(VirtualUrConfig::default())
+        .await
+        .expect("bind 127.0.0.1:30004/29999/30003");
+    let script = repo_root().join("scripts/ur_rtde/interop.py");
+    let child = tokio::process::Command::new(&python)
+        .arg(&script)
+        .arg("127.0.0.1")
+        .kill_on_drop(true)
+        .output();
+    let out = tokio::time::timeout(Duration::from_secs(60), child)
+        .await
+        .expect("ur_rtde script finished within 60 s")
+        .expect("run python");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "ur_rtde script failed\nstdout:\n{stdout}\nstderr:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let steps: Vec<Json> = stdout
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    let step = |name: &str| {
+        steps
+            .iter()
+            .find(|s| s["step"] == name)
+            .unwrap_or_else(|| panic!("no step {name} in\n{stdout}"))
+            .clone()
+    };
+    let kin = UrKinematics::ur5e();
+
+    // Receive: all default variables decoded with the right types and values.
+    let r = step("receive");
+    assert_eq!(r["connected"], true);
+    let home = VirtualUrConfig::default().initial_q;
+    assert!(max_abs_diff(&f64s(&r["q"]), &home) < 1e-9);
+    let home_pose = to_ur_pose(&kin.forward_tcp(&home));
+    assert!(max_abs_diff(&f64s(&r["tcp"]), &home_pose) < 1e-9);
+    assert_eq!(r["robot_mode"], 7);
+    assert_eq!(r["safety_mode"], 1);
+    assert!((r["speed_scaling"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+    let elapsed = step("stream")["elapsed"].as_f64().unwrap();
+    assert!(
+        (0.15..0.35).contains(&elapsed),
+        "timestamp advanced {elapsed} s in 0.2 s"
+    );
+
+    // Control: the script was recognised and runs; moveJ and moveL reach their targets.
+    let c = step("control_connected");
+    assert_eq!(c["connected"], true);
+    assert_eq!(c["running"], true);
+    let mj = step("moveJ");
+    assert_eq!(mj["ok"], true);
+    assert!(
+        max_abs_diff(&f64s(&mj["q"]), &f64s(&mj["target"])) < 1e-6,
+        "moveJ ended at {:?}, target {:?}",
+        mj["q"],
+        mj["target"]
+    );
+    let ml = step("moveL");
+    assert_eq!(ml["ok"], true);
+    let (tcp, target) = (f64s(&ml["tcp"]), f64s(&ml["target"]));
+    assert!(
+        max_abs_diff(&tcp[..3], &target[..3]) < 1e-6,
+        "moveL ended at {tcp:?}, target {target:?}"
+    );
+
+    // stopL interrupts an asynchronous moveL: the arm stops short of the far target and rests.
+    let s = step("stopL");
+    let (before, after, later, far) = (
+        f64s(&s["before"]),
+        f64s(&s["after"]),
+        f64s(&s["later"]),
+        f64s(&s["far"]),
+    );
+    assert!(before[2] < target[2] - 0.01, "async moveL was moving down");
+    assert!(
+        later[2] > far[2] + 0.05,
+        "stopped well before the far target: z {} vs {}",
+        later[2],
+        far[2]
+    );
+    assert!(max_abs_diff(&after, &later) < 1e-9, "at rest after stopL");
+
+    // stopScript ends the program.
+    assert_eq!(
+        step("stopScript")["runtime_state"].as_i64(),
+        Some(i64::from(RuntimeState::Stopped.to_u32()))
+    );
+
+    // IO: standard digital out 7, tool out 0 and the speed slider.
+    let io = step("io");
+    assert_eq!(io["ok"], serde_json::json!([true, true, true]));
+    assert_eq!(io["do7"], true);
+    assert_eq!(io["do6"], false);
+    assert_eq!(io["tool0"], true);
+    assert!((io["speed_fraction"].as_f64().unwrap() - 0.5).abs() < 1e-12);
+
+    // And the controller's own view agrees.
+    let snap = vur.controller.snapshot();
+    assert_eq!(snap.io.standard_do, 1 << 7);
+    assert_eq!(snap.io.tool_do, 1);
+    assert!((snap.io.speed_slider - 0.5).abs() < 1e-12);
+}
