@@ -6,4 +6,5 @@ pub mod robot;
 pub mod dashboard;
 pub mod program;
 pub mod rtde;
+pub mod ur_robot;
 pub mod virtual_ur;

@@ -1,0 +1,539 @@
+//! `UrRobot`: the [`Robot`] trait over RTDE + dashboard + our URScript program (`cell.script`).
+//!
+//! Every target is checked against the configured [`Limits`] (workspace box, speeds,
+//! accelerations, joint range) before anything is sent. Each command gets a fresh id, is written
+//! to the program's registers in one RTDE package, and is awaited with a timeout; a protective
+//! stop, an emergency stop or the program stopping aborts the wait with a typed error. While a
+//! safety stop is active no command is sent at all.
+
+use crate::dashboard::{DashboardClient, DashboardError};
+use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
+use crate::limits::Limits;
+use crate::program::{self, layout as L};
+use crate::robot::{
+    JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode, RobotStatus, SafetyStatus,
+};
+use crate::rtde::client::{Backoff, ClientConfig, ClientError, LinkStatus, RtdeClient};
+use crate::rtde::state::{
+    OutputState, RuntimeState, SAFETY_BIT_EMERGENCY_STOPPED, SAFETY_BIT_PROTECTIVE_STOPPED,
+};
+use crate::rtde::types::Value;
+use nalgebra::Isometry3;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::io::AsyncWriteExt;
+use tokio::net::TcpStream;
+
+/// Which digital output drives the gripper.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GripperOutput {
+    /// Tool digital output 0 or 1.
+    Tool(u8),
+    /// Standard digital output 0–7.
+    Standard(u8),
+}
+
+/// Configuration of a [`UrRobot`].
+#[derive(Debug, Clone)]
+pub struct UrRobotConfig {
+    /// Controller host, e.g. `127.0.0.1`.
+    pub host: String,
+    /// RTDE port (30004).
+    pub rtde_port: u16,
+    /// Dashboard port (29999).
+    pub dashboard_port: u16,
+    /// Script port (30003).
+    pub script_port: u16,
+    /// Limits every target is checked against.
+    pub limits: Limits,
+    /// Kinematics used for the joint-move path check and reachability.
+    pub kinematics: UrKinematics,
+    /// Longest wait for one command.
+    pub command_timeout: Duration,
+    /// Longest wait for the program to run after upload.
+    pub program_start_timeout: Duration,
+    /// Period of the heartbeat the program's watchdog listens to (well under 0.5 s).
+    pub heartbeat_period: Duration,
+    /// RTDE stall timeout.
+    pub stall_timeout: Duration,
+    /// Gripper output.
+    pub gripper: GripperOutput,
+    /// Output level that closes the gripper.
+    pub gripper_close_level: bool,
+}
+
+impl UrRobotConfig {
+    /// Defaults for a controller at `host` on the standard ports.
+    pub fn new(host: impl Into<String>) -> UrRobotConfig {
+        UrRobotConfig {
+            host: host.into(),
+            rtde_port: crate::rtde::RTDE_PORT,
+            dashboard_port: crate::dashboard::DASHBOARD_PORT,
+            script_port: 30003,
+            limits: Limits::default(),
+            kinematics: UrKinematics::ur5e(),
+            command_timeout: Duration::from_secs(30),
+            program_start_timeout: Duration::from_secs(5),
+            heartbeat_period: Duration::from_millis(50),
+            stall_timeout: Duration::from_millis(200),
+            gripper: GripperOutput::Tool(0),
+            gripper_close_level: true,
+        }
+    }
+}
+
+/// Output variables `UrRobot` reads.
+fn output_names() -> Vec<String> {
+    let mut names: Vec<String> = [
+        "timestamp",
+        "actual_q",
+        "actual_TCP_pose",
+        "robot_mode",
+        "safety_mode",
+        "safety_status_bits",
+        "runtime_state",
+    ]
+    .iter()
+    .map(|s| (*s).to_owned())
+    .collect();
+    names.extend(L::output_registers());
+    names
+}
+
+/// One command of the program protocol.
+#[derive(Debug, Clone, Copy, Default)]
+struct Command {
+    kind: i32,
+    target: [f64; 6],
+    speed: f64,
+    accel: f64,
+    pin: i32,
+    level: bool,
+}
+
+/// A UR arm driven through our program.
+pub struct UrRobot {
+    config: UrRobotConfig,
+    rtde: Arc<RtdeClient>,
+    dashboard: Option<DashboardClient>,
+    next_id: i32,
+    heartbeat: tokio::task::JoinHandle<()>,
+}
+
+impl Drop for UrRobot {
+    fn drop(&mut self) {
+        self.heartbeat.abort();
+    }
+}
+
+fn link_error(e: ClientError) -> RobotError {
+    RobotError::ConnectionLost {
+        detail: e.to_string(),
+    }
+}
+
+fn dashboard_error(e: DashboardError) -> RobotError {
+    match e {
+        DashboardError::Refused { command, reply } => RobotError::Rejected {
+            detail: format!("dashboard {command:?}: {reply}"),
+        },
+        other => RobotError::ConnectionLost {
+            detail: other.to_string(),
+        },
+    }
+}
+
+fn register(state: &OutputState, reg: usize) -> i32 {
+    state
+        .i64(&format!("output_int_register_{reg}"))
+        .unwrap_or(0) as i32
+}
+
+/// The typed error for a state in which the arm must not (or cannot) move, if any.
+fn blocking_error(state: &OutputState) -> Option<RobotError> {
+    let bits = state.i64("safety_status_bits").unwrap_or(0) as u32;
+    let safety = state
+        .i64("safety_mode")
+        .and_then(|c| SafetyStatus::from_ur_code(c as i32));
+    if bits & SAFETY_BIT_EMERGENCY_STOPPED != 0 {
+        return Some(RobotError::EmergencyStop {
+            safety: safety.unwrap_or(SafetyStatus::RobotEmergencyStop),
+        });
+    }
+    if bits & SAFETY_BIT_PROTECTIVE_STOPPED != 0 {
+        return Some(RobotError::ProtectiveStop);
+    }
+    if let Some(err) = safety.and_then(SafetyStatus::motion_error) {
+        return Some(err);
+    }
+    let mode = state
+        .i64("robot_mode")
+        .and_then(|c| RobotMode::from_ur_code(c as i32))
+        .unwrap_or(RobotMode::Disconnected);
+    let running = state.runtime_state() == Some(RuntimeState::Playing);
+    if mode != RobotMode::Running || !running {
+        return Some(RobotError::NotReady {
+            mode,
+            program_running: running,
+        });
+    }
+    None
+}
+
+/// Uploads a URScript program to the script port.
+pub async fn upload_script(address: &str, script: &str, timeout: Duration) -> std::io::Result<()> {
+    let io = async {
+        let mut stream = TcpStream::connect(address).await?;
+        stream.write_all(script.as_bytes()).await?;
+        stream.shutdown().await
+    };
+    tokio::time::timeout(timeout, io)
+        .await
+        .map_err(|_| std::io::Error::new(std::io::ErrorKind::TimedOut, "script upload"))?
+}
+
+impl UrRobot {
+    /// Connects RTDE and the dashboard, uploads our program and waits until it runs.
+    pub async fn connect(config: UrRobotConfig) -> Result<UrRobot, RobotError> {
+        config.limits.validate().map_err(|e| RobotError::Rejected {
+            detail: e.to_string(),
+        })?;
+        let outputs = output_names();
+        let mut rtde_config =
+            ClientConfig::new(format!("{}:{}", config.host, config.rtde_port), &[]);
+        rtde_config.outputs = outputs;
+        rtde_config.inputs = vec![L::command_recipe(), L::heartbeat_recipe()];
+        rtde_config.stall_timeout = config.stall_timeout;
+        rtde_config.backoff = Backoff::default();
+        let rtde = Arc::new(RtdeClient::connect(rtde_config).await.map_err(link_error)?);
+        let dashboard = DashboardClient::connect(
+            &format!("{}:{}", config.host, config.dashboard_port),
+            Duration::from_secs(2),
+        )
+        .await
+        .map_err(dashboard_error)?;
+        let heartbeat = {
+            let rtde = rtde.clone();
+            let period = config.heartbeat_period;
+            tokio::spawn(async move {
+                let mut beat = 0i32;
+                let mut tick = tokio::time::interval(period);
+                loop {
+                    tick.tick().await;
+                    beat = beat.wrapping_add(1);
+                    // While the link is down the beat is simply missed; the watchdog decides.
+                    let _ = rtde.send_inputs(1, &[Value::Int32(beat)]).await;
+                }
+            })
+        };
+        let mut robot = UrRobot {
+            config,
+            rtde,
+            dashboard: Some(dashboard),
+            next_id: 0,
+            heartbeat,
+        };
+        robot.start_program().await?;
+        Ok(robot)
+    }
+
+    /// The newest state, or a connection error when the link is down or no state has arrived.
+    fn state(&self) -> Result<Arc<OutputState>, RobotError> {
+        match self.rtde.status() {
+            LinkStatus::Streaming => {}
+            other => {
+                return Err(RobotError::ConnectionLost {
+                    detail: format!("RTDE link {other:?}"),
+                });
+            }
+        }
+        self.rtde.latest().ok_or(RobotError::ConnectionLost {
+            detail: "no RTDE state received yet".into(),
+        })
+    }
+
+    async fn wait_state(
+        &self,
+        deadline: Instant,
+        operation: &str,
+    ) -> Result<Arc<OutputState>, RobotError> {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(RobotError::Timeout {
+                operation: operation.into(),
+                after: self.config.command_timeout,
+            });
+        }
+        match self.rtde.next_state(left).await {
+            Ok(s) => Ok(s),
+            Err(ClientError::Timeout(_)) => {
+                self.state()?;
+                Err(RobotError::Timeout {
+                    operation: operation.into(),
+                    after: left,
+                })
+            }
+            Err(e) => Err(link_error(e)),
+        }
+    }
+
+    /// Uploads `cell.script` and waits until it runs and its beat advances.
+    pub async fn start_program(&mut self) -> Result<(), RobotError> {
+        let address = format!("{}:{}", self.config.host, self.config.script_port);
+        upload_script(&address, program::CELL_SCRIPT, Duration::from_secs(2))
+            .await
+            .map_err(|e| RobotError::ConnectionLost {
+                detail: format!("script port: {e}"),
+            })?;
+        let deadline = Instant::now() + self.config.program_start_timeout;
+        let mut first_beat = None;
+        loop {
+            let state = match self.wait_state(deadline, "program start").await {
+                Ok(s) => s,
+                Err(RobotError::Timeout { .. }) => {
+                    let state = self.state()?;
+                    return Err(blocking_error(&state).unwrap_or(RobotError::Rejected {
+                        detail: "program did not start".into(),
+                    }));
+                }
+                Err(e) => return Err(e),
+            };
+            if state.runtime_state() != Some(RuntimeState::Playing) {
+                continue;
+            }
+            let beat = register(&state, L::PROGRAM_BEAT_REG);
+            match first_beat {
+                None => first_beat = Some(beat),
+                Some(b) if b != beat => {
+                    self.next_id = self.next_id.max(register(&state, L::ACCEPTED_ID_REG));
+                    return Ok(());
+                }
+                Some(_) => {}
+            }
+        }
+    }
+
+    /// Unlocks a protective stop through the dashboard and resumes the program.
+    pub async fn unlock_protective_stop(&mut self) -> Result<(), RobotError> {
+        let dashboard = self.dashboard.as_mut().ok_or(RobotError::ConnectionLost {
+            detail: "no dashboard connection".into(),
+        })?;
+        dashboard
+            .unlock_protective_stop()
+            .await
+            .map_err(dashboard_error)?;
+        dashboard
+            .close_safety_popup()
+            .await
+            .map_err(dashboard_error)?;
+        let state = self
+            .wait_state(Instant::now() + Duration::from_secs(1), "unlock")
+            .await?;
+        if state.runtime_state() == Some(RuntimeState::Paused) {
+            let dashboard = self.dashboard.as_mut().ok_or(RobotError::ConnectionLost {
+                detail: "no dashboard connection".into(),
+            })?;
+            dashboard.play().await.map_err(dashboard_error)?;
+        }
+        let deadline = Instant::now() + self.config.program_start_timeout;
+        loop {
+            let state = self
+                .wait_state(deadline, "resume after protective stop")
+                .await?;
+            if blocking_error(&state).is_none() {
+                return Ok(());
+            }
+        }
+    }
+
+    /// The dashboard connection, for power on, brake release and the like.
+    pub fn dashboard(&mut self) -> Option<&mut DashboardClient> {
+        self.dashboard.as_mut()
+    }
+
+    /// The RTDE client (newest state, link status).
+    pub fn rtde(&self) -> &RtdeClient {
+        &self.rtde
+    }
+
+    /// Sends one command and waits until the program reports it done.
+    async fn run_command(&mut self, cmd: Command, operation: &str) -> Result<(), RobotError> {
+        let Command {
+            kind,
+            target,
+            speed,
+            accel,
+            pin,
+            level,
+        } = cmd;
+        let state = self.state()?;
+        if let Some(e) = blocking_error(&state) {
+            return Err(e);
+        }
+        self.next_id = self
+            .next_id
+            .max(register(&state, L::ACCEPTED_ID_REG))
+            .wrapping_add(1)
+            .max(1);
+        let id = self.next_id;
+        let mut values = vec![
+            Value::Int32(kind),
+            Value::Int32(pin),
+            Value::Int32(i32::from(level)),
+        ];
+        values.extend(target.iter().map(|v| Value::Double(*v)));
+        values.extend([Value::Double(speed), Value::Double(accel), Value::Int32(id)]);
+        self.rtde
+            .send_inputs(0, &values)
+            .await
+            .map_err(link_error)?;
+        let deadline = Instant::now() + self.config.command_timeout;
+        loop {
+            let state = self.wait_state(deadline, operation).await?;
+            if let Some(e) = blocking_error(&state) {
+                return Err(e);
+            }
+            if register(&state, L::DONE_ID_REG) != id {
+                continue;
+            }
+            let status = register(&state, L::STATUS_REG);
+            if status != L::STATUS_FAILED {
+                return Ok(());
+            }
+            let detail = match register(&state, L::ERROR_REG) {
+                L::ERROR_WATCHDOG => "program watchdog stopped the arm (heartbeat lost)",
+                L::ERROR_UNKNOWN_COMMAND => "program did not understand the command",
+                L::ERROR_STOPPED => "interrupted by a stop",
+                L::ERROR_MOTION => "controller could not execute the motion",
+                _ => "program reported an unknown error",
+            };
+            return Err(RobotError::Rejected {
+                detail: format!("{operation}: {detail}"),
+            });
+        }
+    }
+
+    fn set_gripper(&mut self, close: bool) -> RobotFuture<'_, ()> {
+        let level = close == self.config.gripper_close_level;
+        let (kind, pin) = match self.config.gripper {
+            GripperOutput::Tool(pin) => (L::KIND_SET_TOOL_DO, pin),
+            GripperOutput::Standard(pin) => (L::KIND_SET_STANDARD_DO, pin),
+        };
+        Box::pin(async move {
+            let cmd = Command {
+                kind,
+                pin: i32::from(pin),
+                level,
+                ..Command::default()
+            };
+            self.run_command(cmd, "gripper").await
+        })
+    }
+}
+
+impl Robot for UrRobot {
+    fn limits(&self) -> &Limits {
+        &self.config.limits
+    }
+
+    fn joints(&mut self) -> RobotFuture<'_, Joints> {
+        Box::pin(async move {
+            self.state()?
+                .vector6d("actual_q")
+                .ok_or(RobotError::ConnectionLost {
+                    detail: "actual_q missing".into(),
+                })
+        })
+    }
+
+    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
+        Box::pin(async move {
+            self.state()?
+                .vector6d("actual_TCP_pose")
+                .map(|p| from_ur_pose(&p))
+                .ok_or(RobotError::ConnectionLost {
+                    detail: "actual_TCP_pose missing".into(),
+                })
+        })
+    }
+
+    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            let from = self.joints().await?;
+            self.config.limits.check_move_j(
+                &self.config.kinematics,
+                &from,
+                &target,
+                &motion,
+                32,
+            )?;
+            let cmd = Command {
+                kind: L::KIND_MOVEJ,
+                target,
+                speed: motion.speed,
+                accel: motion.acceleration,
+                ..Command::default()
+            };
+            self.run_command(cmd, "move_j").await
+        })
+    }
+
+    #[allow(non_snake_case)]
+    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            self.config.limits.check_move_l(&base_T_tcp, &motion)?;
+            let from = self.joints().await?;
+            self.config.kinematics.inverse_nearest(&base_T_tcp, &from)?;
+            let cmd = Command {
+                kind: L::KIND_MOVEL,
+                target: to_ur_pose(&base_T_tcp),
+                speed: motion.speed,
+                accel: motion.acceleration,
+                ..Command::default()
+            };
+            self.run_command(cmd, "move_l").await
+        })
+    }
+
+    fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
+        self.set_gripper(false)
+    }
+
+    fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
+        self.set_gripper(true)
+    }
+
+    fn stop(&mut self) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            let state = self.state()?;
+            if blocking_error(&state).is_some() {
+                // A safety stop already halted the arm, or no program moves it.
+                return Ok(());
+            }
+            let cmd = Command {
+                kind: L::KIND_STOP,
+                ..Command::default()
+            };
+            self.run_command(cmd, "stop").await
+        })
+    }
+
+    fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
+        Box::pin(async move {
+            let state = self.state()?;
+            let mode = state
+                .i64("robot_mode")
+                .and_then(|c| RobotMode::from_ur_code(c as i32))
+                .unwrap_or(RobotMode::Disconnected);
+            let safety = state
+                .i64("safety_mode")
+                .and_then(|c| SafetyStatus::from_ur_code(c as i32))
+                .unwrap_or(SafetyStatus::Fault);
+            Ok(RobotStatus {
+                mode,
+                safety,
+                program_running: state.runtime_state() == Some(RuntimeState::Playing),
+            })
+        })
+    }
+}

@@ -1,0 +1,657 @@
+//! Our RTDE client, dashboard client and `UrRobot` against the virtual controller on free
+//! loopback ports: move sequences, every injected fault, and bad input on the wire.
+
+use nalgebra::{Translation3, Vector3};
+use robots::dashboard::DashboardClient;
+use robots::kinematics::UrKinematics;
+use robots::program::{CELL_SCRIPT, layout as L};
+use robots::robot::{JointMotion, LinearMotion, Robot, RobotError};
+use robots::rtde::client::{Backoff, ClientConfig, ClientError, LinkStatus, RtdeClient};
+use robots::rtde::package::{Protocol, Reply, Request, split_frame};
+use robots::rtde::state::{RobotMode, RuntimeState, SafetyMode};
+use robots::rtde::types::{Slot, Value};
+use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
+use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
+use std::f64::consts::FRAC_PI_2;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+const JOINT: JointMotion = JointMotion {
+    speed: 2.0,
+    acceleration: 4.0,
+};
+const LINEAR: LinearMotion = LinearMotion {
+    speed: 0.25,
+    acceleration: 1.2,
+};
+
+async fn virtual_ur() -> VirtualUr {
+    let config = VirtualUrConfig {
+        unlock_delay: Duration::from_millis(300),
+        ..VirtualUrConfig::ephemeral()
+    };
+    VirtualUr::start(config).await.unwrap()
+}
+
+fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
+    UrRobotConfig {
+        rtde_port: vur.rtde_addr().port(),
+        dashboard_port: vur.dashboard_addr().port(),
+        script_port: vur.script_addr().port(),
+        command_timeout: Duration::from_secs(10),
+        ..UrRobotConfig::new("127.0.0.1")
+    }
+}
+
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+fn client_config(vur: &VirtualUr) -> ClientConfig {
+    let mut c = ClientConfig::new(
+        vur.rtde_addr().to_string(),
+        &[
+            "timestamp",
+            "actual_q",
+            "robot_mode",
+            "safety_mode",
+            "runtime_state",
+        ],
+    );
+    c.stall_timeout = Duration::from_millis(100);
+    c.backoff = Backoff {
+        initial: Duration::from_millis(20),
+        max: Duration::from_millis(200),
+        max_attempts: Some(50),
+    };
+    c
+}
+
+async fn wait_status(client: &RtdeClient, want: impl Fn(&LinkStatus) -> bool, within: Duration) {
+    let mut rx = client.subscribe_status();
+    tokio::time::timeout(within, async {
+        while !want(&rx.borrow_and_update()) {
+            rx.changed().await.unwrap();
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("status {:?} after {within:?}", client.status()));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn client_streams_at_500_hz_with_modes_exposed() {
+    let vur = virtual_ur().await;
+    let client = RtdeClient::connect(client_config(&vur)).await.unwrap();
+    assert_eq!(client.controller_version().major, 5);
+    let first = client.next_state(Duration::from_secs(1)).await.unwrap();
+    let mut rx = client.subscribe();
+    let mut count = 0;
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(500) {
+        rx.changed().await.unwrap();
+        count += 1;
+    }
+    let last = client.latest().unwrap();
+    let dt = last.f64("timestamp").unwrap() - first.f64("timestamp").unwrap();
+    // Every package carries a fresh 2 ms cycle; the watch keeps only the newest.
+    assert!(count > 150, "only {count} packages in 0.5 s");
+    assert!(dt > 0.45, "controller time advanced {dt} s");
+    assert_eq!(client.robot_mode(), Some(RobotMode::Running));
+    assert_eq!(client.safety_mode(), Some(SafetyMode::Normal));
+    assert_eq!(client.runtime_state(), Some(RuntimeState::Stopped));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unknown_variables_and_taken_inputs_are_refused_with_typed_errors() {
+    let vur = virtual_ur().await;
+    let mut bad = client_config(&vur);
+    bad.outputs.push("no_such_variable".into());
+    match RtdeClient::connect(bad).await {
+        Err(ClientError::VariableRefused { name, slot }) => {
+            assert_eq!(name, "no_such_variable");
+            assert_eq!(slot, Slot::NotFound);
+        }
+        other => panic!("expected NOT_FOUND, got {other:?}"),
+    }
+    let owner =
+        RtdeClient::connect(client_config(&vur).with_input_recipe(&["input_int_register_30"]))
+            .await
+            .unwrap();
+    match RtdeClient::connect(client_config(&vur).with_input_recipe(&["input_int_register_30"]))
+        .await
+    {
+        Err(ClientError::VariableRefused { slot, .. }) => assert_eq!(slot, Slot::InUse),
+        other => panic!("expected IN_USE, got {other:?}"),
+    }
+    drop(owner);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    // Released when its owner disconnects.
+    RtdeClient::connect(client_config(&vur).with_input_recipe(&["input_int_register_30"]))
+        .await
+        .unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn client_recovers_from_dropped_connections_silence_and_skipped_packages() {
+    let vur = virtual_ur().await;
+    let client = RtdeClient::connect(client_config(&vur)).await.unwrap();
+    client.next_state(Duration::from_secs(1)).await.unwrap();
+
+    vur.drop_rtde_connections();
+    wait_status(
+        &client,
+        |s| matches!(s, LinkStatus::Reconnecting(_)),
+        Duration::from_secs(1),
+    )
+    .await;
+    wait_status(
+        &client,
+        |s| *s == LinkStatus::Streaming,
+        Duration::from_secs(2),
+    )
+    .await;
+    client.next_state(Duration::from_secs(1)).await.unwrap();
+
+    vur.faults.go_silent(Duration::from_millis(400));
+    wait_status(
+        &client,
+        |s| *s == LinkStatus::Stalled,
+        Duration::from_secs(1),
+    )
+    .await;
+    wait_status(
+        &client,
+        |s| *s == LinkStatus::Streaming,
+        Duration::from_secs(3),
+    )
+    .await;
+
+    vur.faults.skip_packages(100); // 200 ms without data at 500 Hz: a stall
+    wait_status(
+        &client,
+        |s| *s != LinkStatus::Streaming,
+        Duration::from_secs(1),
+    )
+    .await;
+    wait_status(
+        &client,
+        |s| *s == LinkStatus::Streaming,
+        Duration::from_secs(3),
+    )
+    .await;
+
+    // Delayed packages still arrive (late, but no stall under 100 ms).
+    vur.faults.set_output_delay(Duration::from_millis(5));
+    let s = client.next_state(Duration::from_secs(1)).await.unwrap();
+    assert!(s.f64("timestamp").is_some());
+    vur.faults.set_output_delay(Duration::ZERO);
+    assert_eq!(client.status(), LinkStatus::Streaming);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn client_gives_up_after_the_configured_attempts() {
+    let vur = virtual_ur().await;
+    let mut config = client_config(&vur);
+    config.backoff.max_attempts = Some(2);
+    let client = RtdeClient::connect(config).await.unwrap();
+    drop(vur);
+    wait_status(
+        &client,
+        |s| matches!(s, LinkStatus::Failed(_)),
+        Duration::from_secs(3),
+    )
+    .await;
+    assert!(matches!(
+        client.send_inputs(0, &[]).await,
+        Err(ClientError::NoSuchInputRecipe(0))
+    ));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ur_robot_runs_a_move_sequence_and_the_gripper() {
+    let vur = virtual_ur().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let status = robot.status().await.unwrap();
+    assert!(status.ready(), "{status:?}");
+
+    let q1 = [0.2, -1.4, 1.5, -1.7, -FRAC_PI_2, 0.3];
+    robot.move_j(q1, JOINT).await.unwrap();
+    assert!(max_diff(&robot.joints().await.unwrap(), &q1) < 1e-6);
+
+    let kin = UrKinematics::ur5e();
+    let start = kin.forward_tcp(&q1);
+    let target = Translation3::from(Vector3::new(0.03, -0.04, -0.05)) * start;
+    robot.move_l(target, LINEAR).await.unwrap();
+    let reached = robot.tcp_pose().await.unwrap();
+    assert!((reached.translation.vector - target.translation.vector).norm() < 1e-6);
+    assert!(reached.rotation.angle_to(&target.rotation) < 1e-6);
+
+    robot.close_gripper().await.unwrap();
+    assert_eq!(vur.controller.snapshot().io.tool_do, 1);
+    robot.open_gripper().await.unwrap();
+    assert_eq!(vur.controller.snapshot().io.tool_do, 0);
+    robot.stop().await.unwrap();
+
+    // Each command ran exactly once: the program's accepted id equals the number sent (5).
+    let snap = vur.controller.snapshot();
+    assert_eq!(snap.regs.output_int[L::ACCEPTED_ID_REG], 5);
+    assert_eq!(snap.regs.output_int[L::DONE_ID_REG], 5);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn targets_outside_the_limits_are_never_sent() {
+    let vur = virtual_ur().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let before = vur.controller.snapshot().regs.input_int[L::CMD_ID_REG];
+    let kin = UrKinematics::ur5e();
+    let q = robot.joints().await.unwrap();
+    let below_table = Translation3::new(0.0, 0.0, -0.6) * kin.forward_tcp(&q);
+    assert!(matches!(
+        robot.move_l(below_table, LINEAR).await,
+        Err(RobotError::LimitViolation(_))
+    ));
+    let fast = LinearMotion {
+        speed: 2.0,
+        acceleration: 1.0,
+    };
+    assert!(matches!(
+        robot.move_l(kin.forward_tcp(&q), fast).await,
+        Err(RobotError::LimitViolation(_))
+    ));
+    let too_fast = JointMotion {
+        speed: 10.0,
+        acceleration: 1.0,
+    };
+    assert!(matches!(
+        robot.move_j(q, too_fast).await,
+        Err(RobotError::LimitViolation(_))
+    ));
+    assert_eq!(
+        vur.controller.snapshot().regs.input_int[L::CMD_ID_REG],
+        before
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn protective_stop_aborts_the_move_and_blocks_motion_until_unlocked() {
+    let vur = virtual_ur().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let home = robot.joints().await.unwrap();
+    let far = [1.5, -1.2, 1.2, -1.5, -FRAC_PI_2, 1.0];
+    let slow = JointMotion {
+        speed: 0.5,
+        acceleration: 1.0,
+    };
+    let moving = robot.move_j(far, slow);
+    let stop = async {
+        tokio::time::sleep(Duration::from_millis(400)).await;
+        vur.protective_stop();
+    };
+    let (result, ()) = tokio::join!(moving, stop);
+    assert!(
+        matches!(result, Err(RobotError::ProtectiveStop)),
+        "{result:?}"
+    );
+    let halted = robot.joints().await.unwrap();
+    assert!(max_diff(&halted, &home) > 0.05, "it had moved");
+    assert!(max_diff(&halted, &far) > 0.3, "it stopped short");
+
+    // While stopped: no command goes out, the arm does not move.
+    let id_before = vur.controller.snapshot().regs.input_int[L::CMD_ID_REG];
+    assert!(matches!(
+        robot.move_j(home, JOINT).await,
+        Err(RobotError::ProtectiveStop)
+    ));
+    assert!(matches!(
+        robot.close_gripper().await,
+        Err(RobotError::ProtectiveStop)
+    ));
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let snap = vur.controller.snapshot();
+    assert_eq!(snap.regs.input_int[L::CMD_ID_REG], id_before);
+    assert!(max_diff(&snap.arm.q, &halted) < 1e-12);
+
+    // A real UR refuses to unlock during the first seconds (here 300 ms).
+    let too_early = robot.unlock_protective_stop().await;
+    assert!(
+        matches!(too_early, Err(RobotError::Rejected { .. })),
+        "{too_early:?}"
+    );
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    robot.unlock_protective_stop().await.unwrap();
+    robot.move_j(home, JOINT).await.unwrap();
+    assert!(max_diff(&robot.joints().await.unwrap(), &home) < 1e-6);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn emergency_stop_and_program_stop_abort_with_typed_errors() {
+    let vur = virtual_ur().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let slow = JointMotion {
+        speed: 0.5,
+        acceleration: 1.0,
+    };
+    let far = [1.0, -1.2, 1.2, -1.5, -FRAC_PI_2, 1.0];
+    let (result, ()) = tokio::join!(robot.move_j(far, slow), async {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        vur.emergency_stop();
+    });
+    assert!(
+        matches!(result, Err(RobotError::EmergencyStop { .. })),
+        "{result:?}"
+    );
+    vur.controller.release_emergency_stop();
+    let dash = robot.dashboard().unwrap();
+    assert_eq!(dash.robot_mode().await.unwrap(), RobotMode::PowerOff);
+    dash.power_on().await.unwrap();
+    dash.brake_release().await.unwrap();
+    assert_eq!(dash.safety_status().await.unwrap(), SafetyMode::Normal);
+    robot.start_program().await.unwrap();
+
+    // The program stopping (dashboard stop from elsewhere) aborts a running move.
+    let address = vur.dashboard_addr().to_string();
+    let (result, ()) = tokio::join!(
+        robot.move_j(
+            [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0],
+            slow
+        ),
+        async {
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            let mut other = DashboardClient::connect(&address, Duration::from_secs(1))
+                .await
+                .unwrap();
+            other.stop().await.unwrap();
+        }
+    );
+    assert!(
+        matches!(
+            result,
+            Err(RobotError::NotReady {
+                program_running: false,
+                ..
+            })
+        ),
+        "{result:?}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refused_program_and_dropped_link_give_typed_errors() {
+    let vur = virtual_ur().await;
+    vur.refuse_programs(true);
+    let mut config = robot_config(&vur);
+    config.program_start_timeout = Duration::from_millis(500);
+    let refused = UrRobot::connect(config.clone()).await;
+    assert!(
+        matches!(
+            refused,
+            Err(RobotError::NotReady {
+                program_running: false,
+                ..
+            })
+        ),
+        "{:?}",
+        refused.err()
+    );
+    vur.refuse_programs(false);
+    let mut robot = UrRobot::connect(config).await.unwrap();
+
+    // A dropped RTDE link is re-established and commands work again.
+    vur.drop_rtde_connections();
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    assert!(matches!(
+        robot.joints().await,
+        Err(RobotError::ConnectionLost { .. })
+    ));
+    let deadline = Instant::now() + Duration::from_secs(3);
+    while robot.rtde().status() != LinkStatus::Streaming {
+        assert!(Instant::now() < deadline, "link not back");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    robot
+        .rtde()
+        .next_state(Duration::from_secs(1))
+        .await
+        .unwrap();
+    let q = [0.1, -1.5, 1.5, -1.5, -FRAC_PI_2, 0.1];
+    robot.move_j(q, JOINT).await.unwrap();
+    assert!(max_diff(&robot.joints().await.unwrap(), &q) < 1e-6);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn program_watchdog_stops_the_arm_when_the_heartbeat_stops() {
+    let vur = virtual_ur().await;
+    // A bare client that sends one move and no heartbeat.
+    let config = client_config(&vur).with_input_recipe(
+        &L::command_recipe()
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    let mut config = config;
+    config.outputs.extend(L::output_registers());
+    let client = RtdeClient::connect(config).await.unwrap();
+    upload_script(
+        &vur.script_addr().to_string(),
+        CELL_SCRIPT,
+        Duration::from_secs(1),
+    )
+    .await
+    .unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    assert_eq!(client.runtime_state(), Some(RuntimeState::Playing));
+    let far = [1.5, -1.2, 1.2, -1.5, -FRAC_PI_2, 1.0];
+    let mut values = vec![
+        Value::Int32(L::KIND_MOVEJ),
+        Value::Int32(0),
+        Value::Int32(0),
+    ];
+    values.extend(far.iter().map(|v| Value::Double(*v)));
+    values.extend([Value::Double(0.3), Value::Double(1.0), Value::Int32(1)]);
+    client.send_inputs(0, &values).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    let s = client.latest().unwrap();
+    assert_eq!(
+        s.i64(&format!("output_int_register_{}", L::DONE_ID_REG)),
+        Some(1)
+    );
+    assert_eq!(
+        s.i64(&format!("output_int_register_{}", L::ERROR_REG)),
+        Some(i64::from(L::ERROR_WATCHDOG))
+    );
+    let q1 = vur.controller.snapshot().arm.q;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let q2 = vur.controller.snapshot().arm.q;
+    assert!(max_diff(&q1, &q2) < 1e-12, "arm at rest after the watchdog");
+    assert!(max_diff(&q2, &far) > 0.5, "stopped long before the target");
+}
+
+/// Sends raw bytes, returns everything the server answers within `wait`.
+async fn raw_exchange(stream: &mut TcpStream, bytes: &[u8], wait: Duration) -> Vec<u8> {
+    stream.write_all(bytes).await.unwrap();
+    let mut out = Vec::new();
+    let mut buf = [0u8; 4096];
+    let deadline = Instant::now() + wait;
+    while let Ok(Ok(n)) = tokio::time::timeout(
+        deadline.saturating_duration_since(Instant::now()),
+        stream.read(&mut buf),
+    )
+    .await
+    {
+        if n == 0 {
+            break;
+        }
+        out.extend_from_slice(&buf[..n]);
+    }
+    out
+}
+
+fn replies(mut bytes: &[u8], p: Protocol) -> Vec<Reply> {
+    let mut out = Vec::new();
+    while let Ok(Some((ty, payload, len))) = split_frame(bytes) {
+        out.push(Reply::decode(ty, payload, p).unwrap());
+        bytes = &bytes[len..];
+    }
+    out
+}
+
+fn encode(r: &Request, p: Protocol) -> Vec<u8> {
+    let mut b = Vec::new();
+    r.encode(p, &mut b).unwrap();
+    b
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_input_gets_protocol_correct_replies() {
+    let vur = virtual_ur().await;
+    let mut s = TcpStream::connect(vur.rtde_addr()).await.unwrap();
+    let w = Duration::from_millis(100);
+    let p = Protocol::V2;
+    assert_eq!(
+        replies(
+            &raw_exchange(&mut s, &encode(&Request::ProtocolVersion(7), p), w).await,
+            p
+        ),
+        [Reply::ProtocolVersion { accepted: false }]
+    );
+    assert_eq!(
+        replies(
+            &raw_exchange(&mut s, &encode(&Request::ProtocolVersion(2), p), w).await,
+            p
+        ),
+        [Reply::ProtocolVersion { accepted: true }]
+    );
+    // Unknown package type: an error text, the connection stays usable.
+    let r = replies(&raw_exchange(&mut s, &[0, 3, b'x'], w).await, p);
+    assert!(matches!(&r[..], [Reply::Text(t)] if t.level == 1), "{r:?}");
+    // Truncated protocol request.
+    let r = replies(&raw_exchange(&mut s, &[0, 4, b'V', 0], w).await, p);
+    assert!(matches!(&r[..], [Reply::Text(_)]), "{r:?}");
+    // Name list over 2048 bytes: error text plus a refusing setup reply.
+    let mut long = vec![0u8, 0, b'I'];
+    long.extend(std::iter::repeat_n(b'a', 3000));
+    let n = long.len() as u16;
+    long[..2].copy_from_slice(&n.to_be_bytes());
+    let r = replies(&raw_exchange(&mut s, &long, w).await, p);
+    assert!(
+        matches!(&r[..], [Reply::Text(_), Reply::SetupInputs { recipe_id: 0, slots }] if slots.is_empty()),
+        "{r:?}"
+    );
+    // Data for a recipe that does not exist, and data of the wrong length.
+    let r = replies(
+        &raw_exchange(
+            &mut s,
+            &encode(
+                &Request::Data {
+                    recipe_id: 9,
+                    payload: vec![1],
+                },
+                p,
+            ),
+            w,
+        )
+        .await,
+        p,
+    );
+    assert!(matches!(&r[..], [Reply::Text(_)]), "{r:?}");
+    let setup = Request::SetupInputs {
+        names: vec!["input_int_register_40".into(), "bogus".into()],
+    };
+    let r = replies(&raw_exchange(&mut s, &encode(&setup, p), w).await, p);
+    assert_eq!(
+        r,
+        [Reply::SetupInputs {
+            recipe_id: 0,
+            slots: vec![Slot::Type(robots::rtde::DataType::Int32), Slot::NotFound]
+        }]
+    );
+    let setup = Request::SetupInputs {
+        names: vec!["input_int_register_40".into()],
+    };
+    let r = replies(&raw_exchange(&mut s, &encode(&setup, p), w).await, p);
+    assert!(
+        matches!(&r[..], [Reply::SetupInputs { recipe_id: 1, .. }]),
+        "{r:?}"
+    );
+    let short = Request::Data {
+        recipe_id: 1,
+        payload: vec![0, 0, 1],
+    };
+    let r = replies(&raw_exchange(&mut s, &encode(&short, p), w).await, p);
+    assert!(matches!(&r[..], [Reply::Text(_)]), "{r:?}");
+    let good = Request::Data {
+        recipe_id: 1,
+        payload: 77i32.to_be_bytes().to_vec(),
+    };
+    raw_exchange(&mut s, &encode(&good, p), w).await;
+    assert_eq!(vur.controller.snapshot().regs.input_int[40], 77);
+    // Start without an output recipe is refused.
+    let r = replies(
+        &raw_exchange(&mut s, &encode(&Request::Start, p), w).await,
+        p,
+    );
+    assert_eq!(r, [Reply::Start { accepted: false }]);
+    // A size field below the header closes the connection (it cannot be resynchronised).
+    let rest = raw_exchange(&mut s, &[0, 1, b'V'], Duration::from_millis(300)).await;
+    assert!(matches!(&replies(&rest, p)[..], [Reply::Text(_)]));
+    let mut buf = [0u8; 8];
+    assert_eq!(s.read(&mut buf).await.unwrap_or(0), 0, "closed");
+
+    // The server still serves others.
+    RtdeClient::connect(client_config(&vur)).await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_v1_client_gets_v1_replies_and_streams() {
+    let vur = virtual_ur().await;
+    let mut s = TcpStream::connect(vur.rtde_addr()).await.unwrap();
+    let p = Protocol::V1;
+    let w = Duration::from_millis(100);
+    assert_eq!(
+        replies(
+            &raw_exchange(&mut s, &encode(&Request::ProtocolVersion(1), p), w).await,
+            p
+        ),
+        [Reply::ProtocolVersion { accepted: true }]
+    );
+    let setup = Request::SetupOutputs {
+        frequency: None,
+        names: vec!["timestamp".into(), "actual_q".into()],
+    };
+    let r = replies(&raw_exchange(&mut s, &encode(&setup, p), w).await, p);
+    assert_eq!(
+        r,
+        [Reply::SetupOutputs {
+            recipe_id: None,
+            slots: vec![
+                Slot::Type(robots::rtde::DataType::Double),
+                Slot::Type(robots::rtde::DataType::Vector6d)
+            ]
+        }]
+    );
+    let bytes = raw_exchange(
+        &mut s,
+        &encode(&Request::Start, p),
+        Duration::from_millis(200),
+    )
+    .await;
+    let r = replies(&bytes, p);
+    assert_eq!(r[0], Reply::Start { accepted: true });
+    let data: Vec<_> = r[1..]
+        .iter()
+        .map(|r| match r {
+            Reply::Data {
+                recipe_id: None,
+                payload,
+            } => payload.len(),
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    // v1 streams at 125 Hz: about 25 packages in 200 ms, each 8 + 48 bytes without a recipe id.
+    assert!((15..=35).contains(&data.len()), "{} packages", data.len());
+    assert!(data.iter().all(|&n| n == 56));
+}
