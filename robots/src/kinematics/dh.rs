@@ -1,6 +1,6 @@
 //! Denavit–Hartenberg description of a UR arm and its forward kinematics.
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 
@@ -20,9 +20,13 @@ pub struct DhRow {
 impl DhRow {
     /// The link transform `frame(i-1)_T_frame(i)` for joint angle `theta`.
     pub fn transform(&self, theta: f64) -> Isometry3<f64> {
-        let (s, c) = theta.sin_cos();
-        let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta)
-            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), self.alpha);
+        // Rz(θ)·Rx(α) as a quaternion product of the half-angle rotations, and cos θ, sin θ
+        // from the half angles: one sin_cos for the joint.
+        let (sh, ch) = (0.5 * theta).sin_cos();
+        let (sa, ca) = (0.5 * self.alpha).sin_cos();
+        let rotation =
+            UnitQuaternion::new_unchecked(Quaternion::new(ch * ca, ch * sa, sh * sa, sh * ca));
+        let (c, s) = (ch * ch - sh * sh, 2.0 * sh * ch);
         Isometry3::from_parts(Translation3::new(self.a * c, self.a * s, self.d), rotation)
     }
 }
@@ -104,5 +108,29 @@ impl UrDh {
     /// in its plane: |a2| + |a3|.
     pub fn planar_reach(&self) -> f64 {
         self.a2.abs() + self.a3.abs()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn row_transform_is_rz_tz_tx_rx() {
+        let row = DhRow {
+            a: -0.425,
+            d: 0.1625,
+            alpha: FRAC_PI_2,
+        };
+        for theta in [-3.0, -1.0, 0.0, 0.4, 2.5] {
+            let expected = Isometry3::rotation(Vector3::z() * theta)
+                * Isometry3::translation(0.0, 0.0, row.d)
+                * Isometry3::translation(row.a, 0.0, 0.0)
+                * Isometry3::rotation(Vector3::x() * row.alpha);
+            let got = row.transform(theta);
+            assert!((got.translation.vector - expected.translation.vector).norm() < 1e-15);
+            assert!(got.rotation.angle_to(&expected.rotation) < 1e-15);
+        }
     }
 }
