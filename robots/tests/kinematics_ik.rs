@@ -418,3 +418,50 @@ fn ur_pose_vectors_round_trip_through_fk() {
         assert!(dp < 1e-12 && dr < 1e-12);
     }
 }
+
+#[test]
+fn jacobian_matches_finite_differences_and_the_singularity_product() {
+    let tool = Isometry3::from_parts(
+        Translation3::new(0.0, 0.01, 0.12),
+        UnitQuaternion::from_euler_angles(0.0, 0.2, 0.0),
+    );
+    let kin = UrKinematics::ur5e().with_tcp(tool);
+    let dh = kin.dh;
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    for _ in 0..200 {
+        let q = random_joints(&mut rng);
+        let jac = kin.jacobian(&q);
+        let h = 1e-6;
+        for j in 0..6 {
+            let (mut plus, mut minus) = (q, q);
+            plus[j] += h;
+            minus[j] -= h;
+            let (p, m) = (kin.forward_tcp(&plus), kin.forward_tcp(&minus));
+            let linear = (p.translation.vector - m.translation.vector) / (2.0 * h);
+            let angular = (p.rotation * m.rotation.inverse()).scaled_axis() / (2.0 * h);
+            for r in 0..3 {
+                assert!((jac[(r, j)] - linear[r]).abs() < 1e-7, "{q:?} col {j}");
+                assert!((jac[(r + 3, j)] - angular[r]).abs() < 1e-7, "{q:?} col {j}");
+            }
+        }
+        let shoulder =
+            dh.a2 * q[1].cos() + dh.a3 * (q[1] + q[2]).cos() + dh.d5 * (q[1] + q[2] + q[3]).sin();
+        let product = (dh.a2 * dh.a3 * q[2].sin() * q[4].sin() * shoulder).abs();
+        let det = robots::kinematics::manipulability(&dh, &q);
+        assert!((det - product).abs() < 1e-12, "{q:?}: {det} vs {product}");
+        // Twist -> joint speeds -> twist.
+        let twist = nalgebra::Vector6::new(0.1, -0.05, 0.02, 0.1, 0.0, -0.2);
+        if let Ok(speeds) = kin.joint_speeds_for_twist(&q, &twist) {
+            let back = jac * nalgebra::Vector6::from_column_slice(&speeds);
+            assert!(
+                (back - twist).norm() < 1e-9 * (1.0 + speeds.iter().map(|s| s.abs()).sum::<f64>())
+            );
+        }
+    }
+    // Exactly singular: refused with the singularity named.
+    let stretched = [0.3, -1.0, 0.0, -1.0, 1.0, 0.0];
+    match kin.joint_speeds_for_twist(&stretched, &nalgebra::Vector6::zeros()) {
+        Err(IkError::Singular { singularities }) => assert!(singularities.elbow),
+        other => panic!("expected Singular, got {other:?}"),
+    }
+}

@@ -12,6 +12,7 @@
 mod angles;
 mod dh;
 mod ik;
+mod jacobian;
 mod joint_limits;
 mod pose;
 mod singularity;
@@ -20,6 +21,7 @@ mod ur;
 pub use angles::{Joints, joint_distance, normalize_angle};
 pub use dh::{DhRow, UrDh};
 pub use ik::{IkError, IkSolution, IkSolutions, MAX_IK_SOLUTIONS};
+pub use jacobian::{jacobian, manipulability};
 pub use joint_limits::JointLimits;
 pub use pose::{from_ur_pose, to_ur_pose};
 pub use singularity::{Singularities, SingularityPolicy, SingularityThresholds};

@@ -68,6 +68,28 @@ impl UrKinematics {
         base_T_tcp * self.flange_T_tcp.inverse()
     }
 
+    /// Geometric Jacobian at the TCP in the base frame (linear rows first, then angular).
+    pub fn jacobian(&self, q: &Joints) -> nalgebra::Matrix6<f64> {
+        super::jacobian::jacobian(&self.dh, q, &self.flange_T_tcp)
+    }
+
+    /// Joint speeds (rad/s) that move the TCP with `twist` (linear m/s, then angular rad/s, base
+    /// frame) at `q`; `IkError::Singular` where the Jacobian cannot be inverted.
+    pub fn joint_speeds_for_twist(
+        &self,
+        q: &Joints,
+        twist: &nalgebra::Vector6<f64>,
+    ) -> Result<Joints, IkError> {
+        let singular = || IkError::Singular {
+            singularities: self.singularities(q),
+        };
+        if super::jacobian::manipulability(&self.dh, q) < 1e-12 {
+            return Err(singular());
+        }
+        let speeds = self.jacobian(q).lu().solve(twist).ok_or_else(singular)?;
+        Ok(std::array::from_fn(|i| speeds[i]))
+    }
+
     /// Singularities of a joint configuration under this model's thresholds.
     pub fn singularities(&self, q: &Joints) -> Singularities {
         let flange = self.dh.forward(q);
