@@ -55,8 +55,8 @@ pub struct SingularityThresholds {
 }
 
 impl Default for SingularityThresholds {
-    /// About 0.6° for the wrist and the elbow, 1 cm for the shoulder: inside these, joint speeds
-    /// for a Cartesian motion exceed roughly 100× the TCP speed's ratio elsewhere.
+    /// |sin q| < 0.01 (about 0.6°) for the wrist and the elbow, 1 cm for the shoulder: inside
+    /// these, a Cartesian motion needs joint speeds about 100× those of a well-conditioned pose.
     fn default() -> Self {
         Self {
             wrist_sin_q5: 0.01,
