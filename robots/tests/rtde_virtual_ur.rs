@@ -655,3 +655,66 @@ async fn a_v1_client_gets_v1_replies_and_streams() {
     assert!((15..=35).contains(&data.len()), "{} packages", data.len());
     assert!(data.iter().all(|&n| n == 56));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_answers_like_a_ur_and_survives_bad_lines() {
+    let vur = virtual_ur().await;
+    let address = vur.dashboard_addr().to_string();
+    let mut d = DashboardClient::connect(&address, Duration::from_secs(1))
+        .await
+        .unwrap();
+    let version = d.polyscope_version().await.unwrap();
+    let numbers: Vec<&str> = version
+        .split_whitespace()
+        .nth(1)
+        .unwrap()
+        .split('.')
+        .collect();
+    assert_eq!(numbers.len(), 4, "{version}");
+    assert!(
+        numbers.iter().all(|n| n.parse::<u32>().is_ok()),
+        "{version}"
+    );
+    let serial = d.command("get serial number").await.unwrap();
+    assert!(!serial.is_empty() && serial.bytes().all(|b| b.is_ascii_digit()));
+    assert_eq!(d.robot_mode().await.unwrap(), RobotMode::Running);
+    assert_eq!(d.safety_status().await.unwrap(), SafetyMode::Normal);
+    assert!(
+        d.command("programState")
+            .await
+            .unwrap()
+            .starts_with("STOPPED")
+    );
+    // Nothing loaded yet: play is refused with a typed error.
+    assert!(matches!(
+        d.play().await,
+        Err(robots::dashboard::DashboardError::Refused { .. })
+    ));
+    assert!(d.load("no_such.urp").await.is_err());
+    assert!(
+        d.command("make coffee")
+            .await
+            .unwrap()
+            .starts_with("could not understand")
+    );
+    let long = "x".repeat(10_000);
+    assert!(
+        d.command(&long)
+            .await
+            .unwrap()
+            .starts_with("could not understand")
+    );
+    // Still in sync after the over-long line.
+    assert_eq!(d.robot_mode().await.unwrap(), RobotMode::Running);
+    d.power_off().await.unwrap();
+    assert_eq!(d.robot_mode().await.unwrap(), RobotMode::PowerOff);
+    assert!(
+        d.brake_release().await.is_err(),
+        "brakes stay on while powered off"
+    );
+    d.power_on().await.unwrap();
+    assert_eq!(d.robot_mode().await.unwrap(), RobotMode::Idle);
+    d.brake_release().await.unwrap();
+    assert_eq!(d.robot_mode().await.unwrap(), RobotMode::Running);
+    d.close_safety_popup().await.unwrap();
+}
