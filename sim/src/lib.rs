@@ -3,4 +3,6 @@
 pub mod cad;
 pub mod convert;
 pub mod fsutil;
+pub mod render;
+pub mod scene;
 pub mod stable_poses;

@@ -1,0 +1,331 @@
+//! The scene the renderer sees: part instances (triangle meshes with a parry BVH each), the tag
+//! board, the table plane and the lights, with the ray queries the renderer needs.
+
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use parry3d_f64::math::Vector as DVec3;
+use parry3d_f64::query::{Ray, RayCast};
+use parry3d_f64::shape::TriMesh as ParryMesh;
+
+use super::{Appearance, TagBoard};
+
+/// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
+#[derive(Clone)]
+pub struct RenderMesh {
+    mesh: ParryMesh,
+    lo: Point3<f64>,
+    hi: Point3<f64>,
+}
+
+impl std::fmt::Debug for RenderMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RenderMesh")
+            .field("triangles", &self.mesh.indices().len())
+            .finish()
+    }
+}
+
+impl RenderMesh {
+    /// Builds the BVH of a part mesh; `None` for a mesh without triangles.
+    pub fn new(mesh: &perception::part::TriMesh) -> Option<Self> {
+        if mesh.triangles.is_empty() {
+            return None;
+        }
+        let vertices = mesh
+            .vertices
+            .iter()
+            .map(|p| DVec3::new(p.x, p.y, p.z))
+            .collect();
+        let parry = ParryMesh::new(vertices, mesh.triangles.clone()).ok()?;
+        let (lo, hi) = mesh.aabb();
+        Some(Self {
+            mesh: parry,
+            lo,
+            hi,
+        })
+    }
+
+    /// Corners of the part-frame bounding box.
+    pub fn aabb(&self) -> (Point3<f64>, Point3<f64>) {
+        (self.lo, self.hi)
+    }
+
+    /// First hit of a part-frame ray: distance and part-frame unit normal.
+    fn cast(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> Option<(f64, Vector3<f64>)> {
+        let ray = Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z));
+        let hit = self
+            .mesh
+            .cast_local_ray_and_get_normal(&ray, max_t, false)?;
+        let n = self
+            .mesh
+            .triangle(hit.subshape)
+            .normal()
+            .unwrap_or(hit.normal);
+        Some((hit.time_of_impact, Vector3::new(n.x, n.y, n.z)))
+    }
+
+    /// Whether a part-frame ray hits the mesh before `max_t`.
+    fn hits(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> bool {
+        let ray = Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z));
+        self.mesh.intersects_local_ray(&ray, max_t)
+    }
+}
+
+/// One part placed in the scene.
+#[derive(Debug, Clone)]
+pub struct Instance {
+    /// The part's mesh.
+    pub mesh: Arc<RenderMesh>,
+    /// Pose of the part in the table (world) frame.
+    #[allow(non_snake_case)]
+    pub table_T_part: Isometry3<f64>,
+    /// How its surface looks.
+    pub appearance: Appearance,
+}
+
+/// The table under the board: an infinite plane at z = `height` in the table frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Table {
+    /// Height of the table surface in the table frame, metres (minus the board thickness).
+    pub height: f64,
+    /// How the table looks.
+    pub appearance: Appearance,
+}
+
+/// A point light in the table frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointLight {
+    /// Position in the table frame, metres.
+    pub position: Point3<f64>,
+    /// Radiant intensity per channel (linear RGB, W/sr-like units: irradiance at 1 m).
+    pub intensity: [f64; 3],
+}
+
+/// What a ray hit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SurfaceKind {
+    /// Part instance number `i` (index into `RenderScene::instances`).
+    Part(usize),
+    /// The tag board.
+    Board,
+    /// The table.
+    Table,
+}
+
+/// A ray hit: distance along the (unit) ray, unit normal facing the ray, what was hit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray, metres.
+    pub t: f64,
+    /// Unit surface normal in the table frame, facing against the ray.
+    pub normal: Vector3<f64>,
+    /// The surface.
+    pub kind: SurfaceKind,
+}
+
+/// Everything the renderer draws, in the table frame (z up, board top at z = 0).
+#[derive(Debug, Clone)]
+pub struct RenderScene {
+    /// The parts.
+    pub instances: Vec<Instance>,
+    /// The tag board, if any.
+    pub board: Option<TagBoard>,
+    /// The table plane, if any.
+    pub table: Option<Table>,
+    /// Point lights (shadows are cast from each).
+    pub lights: Vec<PointLight>,
+    /// Uniform ambient (sky) radiance per channel.
+    pub ambient: [f64; 3],
+    bounds: Vec<(Point3<f64>, Point3<f64>)>,
+}
+
+impl RenderScene {
+    /// A scene from its parts, board, table and lights.
+    pub fn new(
+        instances: Vec<Instance>,
+        board: Option<TagBoard>,
+        table: Option<Table>,
+        lights: Vec<PointLight>,
+        ambient: [f64; 3],
+    ) -> Self {
+        let bounds = instances.iter().map(world_aabb).collect();
+        Self {
+            instances,
+            board,
+            table,
+            lights,
+            ambient,
+            bounds,
+        }
+    }
+
+    /// Table-frame bounding box of instance `i`.
+    pub fn instance_bounds(&self, i: usize) -> (Point3<f64>, Point3<f64>) {
+        self.bounds[i]
+    }
+
+    /// Nearest hit of a unit ray from `o` along `d` before `max_t`.
+    pub fn intersect(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut limit = max_t;
+        for i in 0..self.instances.len() {
+            if let Some(hit) = self.intersect_instance(i, o, d, limit) {
+                limit = hit.t;
+                best = Some(hit);
+            }
+        }
+        if let Some(board) = &self.board
+            && let Some((t, n)) = board_hit(board, o, d, limit)
+        {
+            limit = t;
+            best = Some(Hit {
+                t,
+                normal: n,
+                kind: SurfaceKind::Board,
+            });
+        }
+        if let Some(table) = &self.table
+            && d.z.abs() > 1e-12
+        {
+            let t = (table.height - o.z) / d.z;
+            if t > 0.0 && t < limit {
+                best = Some(Hit {
+                    t,
+                    normal: Vector3::new(0.0, 0.0, -d.z.signum()),
+                    kind: SurfaceKind::Table,
+                });
+            }
+        }
+        best
+    }
+
+    /// Nearest hit of a unit ray with instance `i` alone, before `max_t`.
+    pub fn intersect_instance(
+        &self,
+        i: usize,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> Option<Hit> {
+        let (lo, hi) = self.bounds[i];
+        let entry = slab(&lo, &hi, o, d)?;
+        if entry >= max_t {
+            return None;
+        }
+        let inst = &self.instances[i];
+        let inv = inst.table_T_part.inverse();
+        let (t, n) = inst.mesh.cast(&(inv * o), &(inv * d), max_t)?;
+        let mut normal = inst.table_T_part * n;
+        if normal.dot(d) > 0.0 {
+            normal = -normal;
+        }
+        Some(Hit {
+            t,
+            normal,
+            kind: SurfaceKind::Part(i),
+        })
+    }
+
+    /// Whether anything blocks the unit ray from `o` along `d` before `max_t` (shadow rays).
+    pub fn occluded(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> bool {
+        for (i, inst) in self.instances.iter().enumerate() {
+            let (lo, hi) = self.bounds[i];
+            if slab(&lo, &hi, o, d).is_some_and(|e| e < max_t) {
+                let inv = inst.table_T_part.inverse();
+                if inst.mesh.hits(&(inv * o), &(inv * d), max_t) {
+                    return true;
+                }
+            }
+        }
+        if let Some(board) = &self.board
+            && board_hit(board, o, d, max_t).is_some()
+        {
+            return true;
+        }
+        false
+    }
+}
+
+/// Table-frame bounding box of an instance (the part box's corners, transformed).
+fn world_aabb(inst: &Instance) -> (Point3<f64>, Point3<f64>) {
+    let (lo, hi) = inst.mesh.aabb();
+    let mut wlo = Point3::from(Vector3::repeat(f64::INFINITY));
+    let mut whi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
+    for k in 0..8 {
+        let c = Point3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let w = inst.table_T_part * c;
+        wlo = wlo.inf(&w);
+        whi = whi.sup(&w);
+    }
+    let pad = Vector3::repeat(1e-9);
+    (wlo - pad, whi + pad)
+}
+
+/// Entry distance of a ray into a box (0 when it starts inside); `None` when it misses.
+fn slab(lo: &Point3<f64>, hi: &Point3<f64>, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    let mut t0 = 0.0f64;
+    let mut t1 = f64::INFINITY;
+    for a in 0..3 {
+        let inv = 1.0 / d[a];
+        let (mut near, mut far) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        // NaN (a zero direction component on a slab face) compares false and keeps the bound.
+        if near > t0 {
+            t0 = near;
+        }
+        if far < t1 {
+            t1 = far;
+        }
+        if t0 > t1 {
+            return None;
+        }
+    }
+    Some(t0)
+}
+
+/// Hit of a ray with the board box (top face at z = 0, bottom at −thickness).
+fn board_hit(
+    board: &TagBoard,
+    o: &Point3<f64>,
+    d: &Vector3<f64>,
+    max_t: f64,
+) -> Option<(f64, Vector3<f64>)> {
+    let h = board.half_size();
+    let lo = Point3::new(-h, -h, -board.thickness);
+    let hi = Point3::new(h, h, 0.0);
+    // Exact top-face hit first: the common case, and the one depth must be exact for.
+    if d.z < 0.0 && o.z > 0.0 {
+        let t = -o.z / d.z;
+        let (x, y) = (o.x + t * d.x, o.y + t * d.y);
+        if x.abs() <= h && y.abs() <= h {
+            return (t < max_t).then_some((t, Vector3::z()));
+        }
+    }
+    let t = slab(&lo, &hi, o, d)?;
+    if t <= 0.0 || t >= max_t {
+        return None;
+    }
+    let p = o + t * d;
+    let eps = 1e-9;
+    let n = if (p.x - h).abs() < eps {
+        Vector3::x()
+    } else if (p.x + h).abs() < eps {
+        -Vector3::x()
+    } else if (p.y - h).abs() < eps {
+        Vector3::y()
+    } else if (p.y + h).abs() < eps {
+        -Vector3::y()
+    } else if p.z.abs() < eps {
+        Vector3::z()
+    } else {
+        -Vector3::z()
+    };
+    Some((t, n))
+}

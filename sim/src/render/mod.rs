@@ -1,0 +1,20 @@
+//! The simulated camera: a ray tracer over the scene's triangle meshes (parry BVHs), rendering RGB
+//! with physically based shading and shadows, depth, and per-instance masks through perception's
+//! camera model, for a full frame, a downscaled overview or a crop window.
+
+#![allow(non_snake_case)]
+
+mod appearance;
+mod geometry;
+mod output;
+mod renderer;
+mod sensor;
+mod shading;
+mod tag_board;
+
+pub use appearance::Appearance;
+pub use geometry::{Hit, Instance, PointLight, RenderMesh, RenderScene, SurfaceKind, Table};
+pub use output::{InstanceMask, RenderOutput, Window};
+pub use renderer::{RenderSettings, render};
+pub use sensor::{SensorError, SensorModel};
+pub use tag_board::TagBoard;

@@ -1,0 +1,193 @@
+//! Sampling one randomised scene: parts dropped on the board, lights, materials, camera, sensor.
+
+use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, RngExt};
+
+use super::{DropError, PartModel, PlacedPart, Randomisation, RandomisationError, drop_parts};
+use crate::render::{Appearance, Instance, PointLight, RenderScene, SensorModel, Table, TagBoard};
+
+/// Why a scene could not be sampled.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SceneError {
+    /// A randomisation range is unusable.
+    #[error(transparent)]
+    Randomisation(#[from] RandomisationError),
+    /// The physics drop failed.
+    #[error(transparent)]
+    Drop(#[from] DropError),
+    /// The part counts ask for no parts at all.
+    #[error("the scene has no parts: every part count is zero")]
+    NoParts,
+    /// The counts list does not match the models.
+    #[error("{counts} part counts given for {models} part models")]
+    CountMismatch {
+        /// Counts given.
+        counts: usize,
+        /// Models given.
+        models: usize,
+    },
+}
+
+/// What to drop and where to look.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneRequest {
+    /// Copies of each model to drop.
+    pub counts: Vec<usize>,
+    /// Centre of the drop region on the board, metres.
+    pub drop_centre: (f64, f64),
+    /// Half-size of the square drop region, metres.
+    pub drop_half: f64,
+    /// Aim the camera at this placed part (by index); the board centre when `None`.
+    pub aim_at_part: Option<usize>,
+    /// Nominal camera pose; its x, y are offset and its height replaced by the randomisation.
+    #[allow(non_snake_case)]
+    pub nominal_table_T_camera: Isometry3<f64>,
+}
+
+/// A sampled scene, ready to render.
+#[derive(Debug, Clone)]
+pub struct SampledScene {
+    /// The parts at rest.
+    pub parts: Vec<PlacedPart>,
+    /// The renderer's view of it.
+    pub render: RenderScene,
+    /// Camera pose in the table frame.
+    #[allow(non_snake_case)]
+    pub table_T_camera: Isometry3<f64>,
+    /// Sensor settings.
+    pub sensor: SensorModel,
+}
+
+/// Samples a scene: drops the parts, then draws lights, materials, camera and sensor.
+pub fn sample_scene(
+    models: &[PartModel],
+    request: &SceneRequest,
+    rand: &Randomisation,
+    rng: &mut impl Rng,
+) -> Result<SampledScene, SceneError> {
+    rand.validate()?;
+    if request.counts.len() != models.len() {
+        return Err(SceneError::CountMismatch {
+            counts: request.counts.len(),
+            models: models.len(),
+        });
+    }
+    if request.counts.iter().all(|c| *c == 0) {
+        return Err(SceneError::NoParts);
+    }
+    let parts = drop_parts(
+        models,
+        &request.counts,
+        request.drop_centre,
+        request.drop_half,
+        rng,
+    )?;
+
+    let tints: Vec<Appearance> = models
+        .iter()
+        .map(|m| {
+            let a = m.appearance();
+            let tint = [
+                rand.material_tint.sample(rng),
+                rand.material_tint.sample(rng),
+                rand.material_tint.sample(rng),
+            ];
+            a.tinted(tint, a.roughness * rand.roughness_scale.sample(rng))
+        })
+        .collect();
+    let instances = parts
+        .iter()
+        .map(|p| Instance {
+            mesh: models[p.model].render_mesh.clone(),
+            table_T_part: p.table_T_part,
+            appearance: tints[p.model],
+        })
+        .collect();
+    let mut board = TagBoard::default();
+    let board_tint = rand.material_tint.sample(rng);
+    board.white = board.white.tinted([board_tint; 3], board.white.roughness);
+    let grey = rand.table_albedo.sample(rng);
+    let table = Table {
+        height: -board.thickness,
+        appearance: Appearance {
+            base_color: [grey, grey * 0.95, grey * 0.9],
+            metallic: 0.0,
+            roughness: 0.7,
+            specular: 0.04,
+        },
+    };
+    let n_lights = rand.lights.sample(rng).round().max(0.0) as usize;
+    let lights = (0..n_lights)
+        .map(|_| {
+            let r = rand.light_radius.sample(rng);
+            let phi = rng.random_range(0.0..std::f64::consts::TAU);
+            let h = rand.light_height.sample(rng);
+            let i = rand.light_intensity.sample(rng);
+            PointLight {
+                position: Point3::new(r * phi.cos(), r * phi.sin(), h),
+                intensity: [
+                    i * rand.light_tint.sample(rng),
+                    i * rand.light_tint.sample(rng),
+                    i * rand.light_tint.sample(rng),
+                ],
+            }
+        })
+        .collect();
+    let sky = rand.ambient.sample(rng);
+    let render = RenderScene::new(instances, Some(board), Some(table), lights, [sky; 3]);
+
+    let target = request
+        .aim_at_part
+        .and_then(|i| parts.get(i))
+        .map(|p| Point3::from(p.table_T_part.translation.vector))
+        .unwrap_or_else(Point3::origin);
+    let nominal = request.nominal_table_T_camera;
+    let eye = Point3::new(
+        nominal.translation.x + rand.camera_xy.sample(rng),
+        nominal.translation.y + rand.camera_xy.sample(rng),
+        rand.camera_height.sample(rng),
+    );
+    let aim = target
+        + Vector3::new(
+            rand.camera_aim.sample(rng),
+            rand.camera_aim.sample(rng),
+            0.0,
+        );
+    let roll = rand.camera_roll.sample(rng);
+    let table_T_camera = look_at(&eye, &aim, &(nominal.rotation * Vector3::x()), roll);
+    let sensor = SensorModel {
+        exposure: rand.exposure.sample(rng),
+        blur_sigma: rand.blur_sigma.sample(rng),
+        read_noise: rand.read_noise.sample(rng),
+        shot_noise: rand.shot_noise.sample(rng),
+    };
+    Ok(SampledScene {
+        parts,
+        render,
+        table_T_camera,
+        sensor,
+    })
+}
+
+/// The OpenCV camera pose at `eye` looking at `target`, its x axis as close as possible to
+/// `x_hint`, then turned by `roll` about the optical axis.
+pub fn look_at(
+    eye: &Point3<f64>,
+    target: &Point3<f64>,
+    x_hint: &Vector3<f64>,
+    roll: f64,
+) -> Isometry3<f64> {
+    let z = (target - eye)
+        .try_normalize(1e-12)
+        .unwrap_or_else(|| -Vector3::z());
+    let mut x = x_hint - z * z.dot(x_hint);
+    if x.norm() < 1e-9 {
+        x = Vector3::x() - z * z.x;
+    }
+    let x = x.normalize();
+    let y = z.cross(&x);
+    let r = Rotation3::from_basis_unchecked(&[x, y, z]);
+    let q = UnitQuaternion::from_rotation_matrix(&r)
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll);
+    Isometry3::from_parts(Translation3::from(eye.coords), q)
+}

@@ -1,0 +1,150 @@
+//! Multi-part drops: several parts fall onto the tag board together with rapier and come to
+//! rest touching the board and each other, giving physically realistic scene poses.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, RngExt};
+use rapier3d_f64::math::Vector;
+use rapier3d_f64::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
+
+use super::PartModel;
+use crate::convert::{
+    rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
+    vector_from_vec,
+};
+
+/// A part resting in a scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedPart {
+    /// Index of its model in the slice given to [`drop_parts`].
+    pub model: usize,
+    /// Its pose in the table frame.
+    #[allow(non_snake_case)]
+    pub table_T_part: Isometry3<f64>,
+}
+
+/// Why a drop could not be simulated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DropError {
+    /// The part's vertices span no volume: rapier cannot build its convex hull.
+    #[error("part {0}: no convex hull for physics (degenerate mesh)")]
+    NoHull(String),
+    /// The region to drop parts into is not a positive, finite size.
+    #[error("drop region half-size {0} m must be positive and finite")]
+    BadRegion(f64),
+}
+
+/// Simulation settings of a scene drop.
+const DT: f64 = 1.0 / 500.0;
+const MAX_TIME: f64 = 1.5;
+const REST_SPEED: f64 = 2e-3;
+const REST_ANGULAR_SPEED: f64 = 0.1;
+const REST_TIME: f64 = 0.04;
+const BOARD_HALF: f64 = 0.105;
+const BOARD_THICKNESS: f64 = 0.003;
+
+/// Drops `counts[i]` copies of `models[i]` from random orientations over the square of half-size
+/// `half` centred on (`cx`, `cy`) of the board, and returns their rest poses.
+///
+/// Parts start stacked in height so none overlap at release; they may end touching.
+pub fn drop_parts(
+    models: &[PartModel],
+    counts: &[usize],
+    (cx, cy): (f64, f64),
+    half: f64,
+    rng: &mut impl Rng,
+) -> Result<Vec<PlacedPart>, DropError> {
+    if !(half.is_finite() && half > 0.0) {
+        return Err(DropError::BadRegion(half));
+    }
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::new(0.0, 0.0, -9.81);
+    world.integration_parameters.dt = DT;
+    world.integration_parameters.length_unit = 1e-3;
+    let board = ColliderBuilder::cuboid(BOARD_HALF, BOARD_HALF, BOARD_THICKNESS / 2.0)
+        .translation(Vector::new(0.0, 0.0, -BOARD_THICKNESS / 2.0))
+        .friction(0.5)
+        .restitution(0.1)
+        .build();
+    world.colliders.insert(board);
+    let table = ColliderBuilder::cuboid(2.0, 2.0, 0.05)
+        .translation(Vector::new(0.0, 0.0, -BOARD_THICKNESS - 0.05))
+        .friction(0.5)
+        .build();
+    world.colliders.insert(table);
+
+    let mut bodies = Vec::new();
+    let mut z = 0.0;
+    for (m, model) in models.iter().enumerate() {
+        let count = counts.get(m).copied().unwrap_or(0);
+        if count == 0 {
+            continue;
+        }
+        let hull: Vec<Vector> = model.mesh.vertices.iter().map(vec_from_point).collect();
+        let shape = ColliderBuilder::convex_hull(&hull)
+            .ok_or_else(|| DropError::NoHull(model.name.clone()))?;
+        let radius = model.mesh.extents().norm() / 2.0;
+        for _ in 0..count {
+            z += radius + 0.002;
+            let centre = Vector3::new(
+                cx + rng.random_range(-half..=half),
+                cy + rng.random_range(-half..=half),
+                z,
+            );
+            z += radius;
+            let rotation = random_rotation(rng);
+            let rb = RigidBodyBuilder::dynamic()
+                .translation(vec_from_vector(&centre))
+                .rotation(rot_from_unit_quaternion(&rotation).to_scaled_axis())
+                .build();
+            let h = world.bodies.insert(rb);
+            let collider = shape
+                .clone()
+                .density(model.density)
+                .friction(0.4)
+                .restitution(0.1)
+                .build();
+            world
+                .colliders
+                .insert_with_parent(collider, h, &mut world.bodies);
+            bodies.push((m, h));
+        }
+    }
+    let mut calm = 0.0;
+    let mut t = 0.0;
+    while t < MAX_TIME && calm < REST_TIME {
+        world.step();
+        t += DT;
+        let still = bodies.iter().all(|(_, h)| {
+            let rb = &world.bodies[*h];
+            rb.is_sleeping()
+                || (rb.linvel().length() < REST_SPEED && rb.angvel().length() < REST_ANGULAR_SPEED)
+        });
+        calm = if still { calm + DT } else { 0.0 };
+    }
+    Ok(bodies
+        .into_iter()
+        .map(|(model, h)| {
+            let rb = &world.bodies[h];
+            let p = vector_from_vec(rb.translation());
+            let r = unit_quaternion_from_rot(rb.rotation());
+            PlacedPart {
+                model,
+                table_T_part: Isometry3::from_parts(Translation3::from(p), r),
+            }
+        })
+        .collect())
+}
+
+/// A uniformly distributed random rotation (Shoemake's method).
+fn random_rotation(rng: &mut impl Rng) -> UnitQuaternion<f64> {
+    let u1: f64 = rng.random_range(0.0..1.0);
+    let u2: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+    let u3: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        b * u3.cos(),
+        a * u2.sin(),
+        a * u2.cos(),
+        b * u3.sin(),
+    ))
+}

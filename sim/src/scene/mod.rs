@@ -1,0 +1,16 @@
+//! Scenes like the seed's cell: the tag board on a table, parts dropped onto it with rapier,
+//! lights, materials and camera randomised within documented ranges, and per-instance labels.
+
+#![allow(non_snake_case)]
+
+mod compose;
+mod drop;
+mod labels;
+mod model;
+mod randomisation;
+
+pub use compose::{SampledScene, SceneError, SceneRequest, look_at, sample_scene};
+pub use drop::{DropError, PlacedPart, drop_parts};
+pub use labels::{InstanceLabel, keypoint_vectors, label_instances};
+pub use model::{PartModel, PartModelError};
+pub use randomisation::{Randomisation, RandomisationError, Range};
