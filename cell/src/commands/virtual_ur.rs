@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long, default_value_t = 30003)]
     pub script_port: u16,
     /// Initial joint angles in radians, six comma-separated values.
-    #[arg(long, value_delimiter = ',', num_args = 6,
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true,
           default_values_t = [0.0, -std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2,
                               -std::f64::consts::FRAC_PI_2, -std::f64::consts::FRAC_PI_2, 0.0])]
     pub initial_q: Vec<f64>,
