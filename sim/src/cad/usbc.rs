@@ -18,6 +18,8 @@ pub const INSERT_CLEARANCE_MM: f64 = 0.09;
 pub const TOP_SKIRT_GAP_MM: f64 = 0.045;
 /// Lead-in chamfer at the top of the shell cavity (mm).
 pub const SHELL_CHAMFER_MM: f64 = 0.10;
+/// Lead-in flare at the bottom inner edge of the top shell's skirts (mm).
+pub const TOP_LEAD_IN_MM: f64 = 0.10;
 /// Clearance between the shell and the nest pocket, per side (mm).
 pub const NEST_GAP_MM: f64 = 0.03;
 /// Lead-in chamfer at the top of the nest pocket (mm).
@@ -106,7 +108,17 @@ pub fn top_shell() -> TriMesh {
     s.cuboid(Rect::new(-skirt_in, skirt_in, -TOP_HALF_DEPTH, rear_in), rear_bottom, plate_z);
     for sign in [-1.0, 1.0] {
         let (a, b) = if sign > 0.0 { (skirt_in, skirt_out) } else { (-skirt_out, -skirt_in) };
-        s.cuboid(Rect::new(a, b, TOP_SKIRT_Y.0, TOP_SKIRT_Y.1), 0.25, plate_z);
+        // The skirt's inner bottom edge is flared by the lead-in so it guides over the shell.
+        let skirt = Rect::new(a, b, TOP_SKIRT_Y.0, TOP_SKIRT_Y.1);
+        let mut flared = skirt;
+        if sign > 0.0 {
+            flared.x0 += TOP_LEAD_IN_MM;
+        } else {
+            flared.x1 -= TOP_LEAD_IN_MM;
+        }
+        let flare_top = 0.25 + 2.0 * TOP_LEAD_IN_MM;
+        s.frustum(flared, 0.25, skirt, flare_top);
+        s.cuboid(skirt, flare_top, plate_z);
         let (fa, fb) = if sign > 0.0 { (skirt_out, TOP_FLANGE_X) } else { (-TOP_FLANGE_X, -skirt_out) };
         s.cuboid(Rect::new(fa, fb, TOP_FLANGE_Y.0, TOP_FLANGE_Y.1), 0.0, 0.25);
     }

@@ -1,6 +1,6 @@
 //! Grouping rest orientations into stable-pose classes by the face the part rests on.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use perception::part::{StablePose, TriMesh};
 
 use super::drop::{DropOutcome, geometric_rest_height};
@@ -105,9 +105,4 @@ fn round(x: f64) -> f64 {
 
 fn round_vec(v: &Vector3<f64>) -> [f64; 3] {
     [round(v.x), round(v.y), round(v.z)]
-}
-
-/// The rotation of a class as a unit quaternion (helper for tests and callers).
-pub fn class_rotation(pose: &StablePose) -> UnitQuaternion<f64> {
-    pose.rest_rotation()
 }

@@ -1,0 +1,148 @@
+//! `cell parts prepare`: compute each part's keypoints, mass properties and stable poses, and
+//! write them back into the catalog file, keeping its comments and hand-written keys.
+
+use std::path::Path;
+
+use indicatif::ProgressBar;
+use nalgebra::Point3;
+use perception::part::{Catalog, PartRole, PartSpec, StablePose, farthest_point_sample, sample_surface};
+use sim::stable_poses::{DropSettings, StablePoseReport, stable_poses};
+use toml_edit::{Array, ArrayOfTables, DocumentMut, Item, Table, value};
+
+/// Surface samples the keypoints are chosen from.
+const SURFACE_SAMPLES: usize = 20_000;
+
+/// What preparing one part produced.
+#[derive(Debug, Clone)]
+pub struct PreparedPart {
+    /// Part name.
+    pub name: String,
+    /// Mass in kg.
+    pub mass: f64,
+    /// Centre of mass, part frame, metres.
+    pub center_of_mass: Point3<f64>,
+    /// 8 FPS keypoints then the centre, metres.
+    pub keypoints: Vec<Point3<f64>>,
+    /// The drop statistics and classes.
+    pub report: StablePoseReport,
+}
+
+/// Errors of `prepare`.
+#[derive(Debug, thiserror::Error)]
+pub enum PrepareError {
+    /// The catalog or a mesh could not be loaded.
+    #[error(transparent)]
+    Part(#[from] perception::part::PartError),
+    /// The catalog could not be rewritten.
+    #[error("{path}: {message}")]
+    Write {
+        /// The catalog file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+/// The 9 keypoints of a mesh: 8 farthest-point samples of its surface, seeded from the
+/// bounding-box centre (the part origin), then the centre itself.
+pub fn keypoints(mesh: &perception::part::TriMesh, seed: u64) -> Vec<Point3<f64>> {
+    let samples = sample_surface(mesh, SURFACE_SAMPLES, seed);
+    let mut kp = farthest_point_sample(&samples, 8, Point3::origin());
+    kp.push(Point3::origin());
+    kp
+}
+
+/// Prepares one part: keypoints, mass properties, stable poses.
+pub fn prepare_part(
+    catalog: &Catalog,
+    part: &PartSpec,
+    settings: &DropSettings,
+    progress: Option<&ProgressBar>,
+) -> Result<PreparedPart, PrepareError> {
+    let mesh = catalog.load_mesh(part)?;
+    let report = stable_poses(&mesh, part.density(), settings, progress);
+    Ok(PreparedPart {
+        name: part.name.clone(),
+        mass: report.mass,
+        center_of_mass: report.center_of_mass,
+        keypoints: keypoints(&mesh, settings.seed),
+        report,
+    })
+}
+
+/// Prepares every non-fixture part of the catalog at `path` and rewrites the file atomically.
+pub fn prepare_catalog(
+    path: &Path,
+    settings: &DropSettings,
+    progress: Option<&ProgressBar>,
+) -> Result<Vec<PreparedPart>, PrepareError> {
+    let catalog = Catalog::load(path)?;
+    let parts: Vec<&PartSpec> = catalog.parts.iter().filter(|p| p.role != PartRole::Fixture).collect();
+    if let Some(p) = progress {
+        p.set_length((parts.len() * settings.drops) as u64);
+    }
+    let prepared = parts
+        .iter()
+        .map(|part| prepare_part(&catalog, part, settings, progress))
+        .collect::<Result<Vec<_>, _>>()?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|source| perception::part::PartError::Io { path: path.into(), source })?;
+    let updated = write_back(&text, &prepared).map_err(|message| PrepareError::Write {
+        path: path.display().to_string(),
+        message,
+    })?;
+    sim::fsutil::write_atomic(path, updated.as_bytes())
+        .map_err(|e| PrepareError::Write { path: path.display().to_string(), message: e.to_string() })?;
+    Ok(prepared)
+}
+
+fn round(x: f64) -> f64 {
+    (x * 1e9).round() / 1e9 + 0.0
+}
+
+fn vec3(v: [f64; 3]) -> Array {
+    v.iter().map(|x| round(*x)).collect()
+}
+
+/// The catalog text with each prepared part's computed keys replaced.
+pub fn write_back(text: &str, prepared: &[PreparedPart]) -> Result<String, String> {
+    let mut doc: DocumentMut = text.parse().map_err(|e| format!("not valid TOML: {e}"))?;
+    let parts = doc
+        .get_mut("part")
+        .and_then(Item::as_array_of_tables_mut)
+        .ok_or("the catalog has no [[part]] tables")?;
+    for table in parts.iter_mut() {
+        let name = table.get("name").and_then(Item::as_str).unwrap_or_default().to_string();
+        let Some(p) = prepared.iter().find(|p| p.name == name) else {
+            continue;
+        };
+        table.insert("mass", value(round(p.mass)));
+        table.insert("center_of_mass", value(vec3(p.center_of_mass.coords.into())));
+        let mut kps = Array::new();
+        for k in &p.keypoints {
+            kps.push(vec3(k.coords.into()));
+        }
+        kps.set_trailing_comma(true);
+        for (i, v) in kps.iter_mut().enumerate() {
+            v.decor_mut().set_prefix(if i == 0 { "\n  " } else { " \n  " }.trim_end_matches(' '));
+        }
+        kps.set_trailing("\n");
+        table.insert("keypoints", value(kps));
+        let mut poses = ArrayOfTables::new();
+        for class in &p.report.classes {
+            poses.push(stable_pose_table(&class.pose));
+        }
+        table.insert("stable_pose", Item::ArrayOfTables(poses));
+    }
+    Ok(doc.to_string())
+}
+
+fn stable_pose_table(s: &StablePose) -> Table {
+    let mut t = Table::new();
+    t.insert("name", value(s.name.clone()));
+    t.insert("probability", value(s.probability));
+    t.insert("up_in_part", value(vec3(s.up_in_part)));
+    t.insert("rotation", value(vec3(s.rotation)));
+    t.insert("rest_height", value(s.rest_height));
+    t
+}

@@ -1,0 +1,76 @@
+//! The scenario file schema: every table and key a scenario may hold. Unknown keys are errors.
+//! The cell's physical description comes from `sim::config`, shared with the simulator.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
+
+/// A whole scenario: the cell, the parts, perception, the assembly sequence and the noise models.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioSpec {
+    /// Short name used in reports.
+    pub name: String,
+    /// One line for people.
+    #[serde(default)]
+    pub description: String,
+    /// Root seed; episode i draws from (seed, i), so any episode replays alone.
+    pub seed: u64,
+    /// Episodes a run performs by default.
+    pub episodes: u32,
+    /// The physical cell.
+    pub cell: CellSpec,
+    /// The part catalog.
+    pub parts: PartsSpec,
+    /// How parts are perceived.
+    pub perception: PerceptionSpec,
+    /// Assembly steps, in order.
+    pub assembly: Vec<AssemblyStep>,
+    /// Error sources; each is a named parameter so failures can be attributed.
+    #[serde(default)]
+    pub noise: NoiseSpec,
+}
+
+/// Where the catalog lives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PartsSpec {
+    /// Catalog file, relative to the scenario file.
+    pub catalog: PathBuf,
+}
+
+/// Perception modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PerceptionMode {
+    /// True keypoints with pixel noise through the real PnP and refinement (the paper's ablation).
+    KeypointNoise,
+    /// Learned segmentation and keypoint networks.
+    Learned,
+}
+
+/// Perception settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerceptionSpec {
+    /// Which pipeline runs.
+    pub mode: PerceptionMode,
+    /// Standard deviation of keypoint noise per axis, pixels (keypoint-noise mode).
+    #[serde(default = "half")]
+    pub keypoint_noise_px: f64,
+    /// Fraction of keypoints replaced by gross outliers (keypoint-noise mode).
+    #[serde(default)]
+    pub outlier_fraction: f64,
+    /// Folder with ONNX models (learned mode), relative to the scenario file.
+    #[serde(default)]
+    pub models: Option<PathBuf>,
+}
+
+fn half() -> f64 {
+    0.5
+}
+
+fn half() -> f64 {
+    0.5
+}
