@@ -1,7 +1,7 @@
 """Drive a UR controller (real or `cell virtual-ur`) with SDU ur_rtde and report what happened.
 
 Runs RTDEReceiveInterface (all default variables), RTDEControlInterface (moveJ, moveL, async
-moveL + stopL, stopScript) and RTDEIOInterface (standard digital out, speed slider) against
+moveL + stopL, servoJ, speedJ, stopScript) and RTDEIOInterface (standard digital out, speed slider) against
 HOST and prints one JSON object per step on stdout. The Rust interop test checks the numbers.
 Usage: python interop.py HOST
 """
@@ -68,6 +68,25 @@ def main():
         speed=receive.getActualTCPSpeed(),
         far=far,
     )
+
+    # servoJ: stream joint targets at 500 Hz, then servoStop.
+    q0 = receive.getActualQ()
+    q = list(q0)
+    for i in range(1, 201):
+        q = [q0[0] + 0.0005 * i] + list(q0[1:])
+        control.servoJ(q, 0.0, 0.0, 0.002, 0.1, 300)
+        time.sleep(0.002)
+    control.servoStop(4.0)
+    time.sleep(0.2)
+    report("servoJ", start=q0, last_target=q, q=receive.getActualQ())
+
+    # speedJ: joint 1 at 0.2 rad/s for 0.5 s, then speedStop.
+    before = receive.getActualQ()
+    control.speedJ([0.2, 0, 0, 0, 0, 0], 1.0, 0.002)
+    time.sleep(0.5)
+    control.speedStop(10.0)
+    time.sleep(0.2)
+    report("speedJ", before=before, after=receive.getActualQ(), qd=receive.getActualQd())
 
     control.stopScript()
     time.sleep(0.1)

@@ -182,6 +182,10 @@ enum Motion {
         qd: Joints,
         accel: f64,
     },
+    Servo {
+        target: Joints,
+        time: f64,
+    },
     Stopping {
         decel: f64,
     },
@@ -301,13 +305,7 @@ impl ArmModel for KinematicArm {
                     return Err(ArmError::InvalidParameter("servo target"));
                 }
                 let time = positive(time, "servo time")?;
-                let qd = std::array::from_fn(|i| {
-                    ((q[i] - self.q[i]) / time).clamp(-self.max_joint_speed, self.max_joint_speed)
-                });
-                Motion::Speed {
-                    qd,
-                    accel: self.max_joint_accel,
-                }
+                Motion::Servo { target: q, time }
             }
             ArmCommand::Stop { decel } => Motion::Stopping {
                 decel: positive(decel, "deceleration")?.min(self.max_joint_accel * 2.0),
@@ -383,6 +381,25 @@ impl ArmModel for KinematicArm {
                 let next: Joints = std::array::from_fn(|i| {
                     let dv = (qd[i] * speed_fraction - self.qd[i]).clamp(-accel * dt, accel * dt);
                     self.qd[i] + dv
+                });
+                let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
+                self.set_q(q, dt);
+            }
+            Motion::Servo { target, time } => {
+                // Reach the target in `time` where the limits allow; never pass it.
+                let (target, time) = (*target, time.max(dt));
+                let a = self.max_joint_accel * dt;
+                let next: Joints = std::array::from_fn(|i| {
+                    let want = ((target[i] - self.q[i]) / time)
+                        .clamp(-self.max_joint_speed, self.max_joint_speed);
+                    let v = self.qd[i] + (want - self.qd[i]).clamp(-a, a);
+                    let step = v * dt;
+                    let remaining = target[i] - self.q[i];
+                    if step.abs() >= remaining.abs() {
+                        remaining / dt
+                    } else {
+                        v
+                    }
                 });
                 let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
                 self.set_q(q, dt);

@@ -225,9 +225,10 @@ impl Drop for VirtualUr {
     }
 }
 
-/// Runs the control loop on a dedicated thread with absolute deadlines, so the period does not
-/// drift; a cycle that starts more than a period late is counted as an overrun and the schedule
-/// is re-based (the controller skips, like a real one under load).
+/// Runs the control loop on a dedicated thread with absolute deadlines, so controller time
+/// tracks wall-clock time: a cycle that starts late is counted as an overrun and the missed
+/// cycles are stepped at once (clients then see skipped packages, as from a loaded controller);
+/// beyond [`MAX_CATCH_UP`] missed cycles the schedule is re-based instead.
 fn control_loop(controller: &VirtualController, stop: &AtomicBool, stats: &LoopStats) {
     let period = controller.period;
     let mut next = Instant::now() + period;
@@ -239,10 +240,22 @@ fn control_loop(controller: &VirtualController, stop: &AtomicBool, stats: &LoopS
             std::thread::sleep(next - now);
         } else if now - next > period {
             stats.overruns.fetch_add(1, Ordering::Relaxed);
-            next = now;
+            let missed = ((now - next).as_secs_f64() / period.as_secs_f64()) as u32;
+            if missed > MAX_CATCH_UP {
+                next = now;
+            } else {
+                for _ in 0..missed {
+                    controller.tick();
+                    stats.cycles.fetch_add(1, Ordering::Relaxed);
+                    next += period;
+                }
+            }
         }
         controller.tick();
         stats.cycles.fetch_add(1, Ordering::Relaxed);
         next += period;
     }
 }
+
+/// Most missed cycles the control loop steps to catch up (0.5 s at 500 Hz).
+pub const MAX_CATCH_UP: u32 = 250;
