@@ -10,7 +10,7 @@ mod refine;
 use nalgebra::{Isometry3, Matrix2, Matrix6, Point2, Point3};
 
 pub use initial::{check_geometry, initial_pose};
-pub use refine::{RefineOutcome, refine_pose, reprojection_rms};
+pub use refine::{PixelScale, RefineOutcome, refine_pose, reprojection_rms};
 
 use crate::CameraError;
 
@@ -107,7 +107,18 @@ pub fn solve_pnp(
         .iter()
         .map(|p| camera.unproject(*p).map(Point2::from))
         .collect::<Result<Vec<_>, _>>()?;
-    solve_pnp_normalized(camera.fx, camera.fy, model, &normalized, covariances)
+    // Refinement measures residuals in pixels through the lens: the observations stay distorted.
+    let distorted: Vec<Point2<f64>> = pixels
+        .iter()
+        .map(|p| Point2::from(camera.pixel_to_normalized(*p)))
+        .collect();
+    solve(
+        &PixelScale::of(camera),
+        model,
+        &normalized,
+        &distorted,
+        covariances,
+    )
 }
 
 /// [`solve_pnp`] on undistorted normalised image coordinates (x/z, y/z); `fx`, `fy` scale the
@@ -119,14 +130,30 @@ pub fn solve_pnp_normalized(
     normalized: &[Point2<f64>],
     covariances: Option<&[Matrix2<f64>]>,
 ) -> Result<PnpSolution, PnpError> {
-    check_geometry(model, normalized)?;
-    let initial = initial_pose(model, normalized)?;
-    let outcome = refine_pose(fx, fy, model, normalized, covariances, &initial)?;
+    solve(
+        &PixelScale::ideal(fx, fy),
+        model,
+        normalized,
+        normalized,
+        covariances,
+    )
+}
+
+fn solve(
+    scale: &PixelScale,
+    model: &[Point3<f64>],
+    undistorted: &[Point2<f64>],
+    distorted: &[Point2<f64>],
+    covariances: Option<&[Matrix2<f64>]>,
+) -> Result<PnpSolution, PnpError> {
+    check_geometry(model, undistorted)?;
+    let initial = initial_pose(model, undistorted)?;
+    let outcome = refine_pose(scale, model, distorted, covariances, &initial)?;
     Ok(PnpSolution {
         camera_T_part: outcome.camera_T_part,
         initial_camera_T_part: initial,
         rms_px: outcome.rms_px,
-        initial_rms_px: reprojection_rms(fx, fy, model, normalized, &initial),
+        initial_rms_px: reprojection_rms(scale, model, distorted, &initial),
         covariance: outcome.covariance,
         evaluations: outcome.evaluations,
     })

@@ -7,6 +7,46 @@ use nalgebra::{
 };
 
 use super::PnpError;
+use crate::Distortion;
+
+/// What maps a normalised ray to pixel offsets from the principal point: focal lengths and lens
+/// distortion. Residuals are measured through it, so they are true pixel errors (the maximum
+/// likelihood objective for pixel noise).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelScale {
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Lens distortion.
+    pub distortion: Distortion,
+}
+
+impl PixelScale {
+    /// The scale of a camera.
+    pub fn of(camera: &crate::Camera) -> Self {
+        Self {
+            fx: camera.fx,
+            fy: camera.fy,
+            distortion: camera.distortion,
+        }
+    }
+
+    /// Focal lengths without distortion (observations already undistorted).
+    pub fn ideal(fx: f64, fy: f64) -> Self {
+        Self {
+            fx,
+            fy,
+            distortion: Distortion::NONE,
+        }
+    }
+
+    /// Pixel residual of camera-frame point `c` against distorted normalised observation `o`.
+    fn residual(&self, c: &Vector3<f64>, o: &Point2<f64>) -> Vector2<f64> {
+        let d = self.distortion.apply(Vector2::new(c.x / c.z, c.y / c.z));
+        Vector2::new(self.fx * (d.x - o.x), self.fy * (d.y - o.y))
+    }
+}
 
 /// A refined pose with its statistics.
 #[derive(Debug, Clone, PartialEq)]
@@ -22,10 +62,10 @@ pub struct RefineOutcome {
     pub evaluations: usize,
 }
 
-/// Reprojection RMS (pixels, per point) of a pose on undistorted normalised observations.
+/// Reprojection RMS (pixels, per point) of a pose on distorted normalised observations
+/// ((u − cx)/fx, (v − cy)/fy).
 pub fn reprojection_rms(
-    fx: f64,
-    fy: f64,
+    scale: &PixelScale,
     model: &[Point3<f64>],
     normalized: &[Point2<f64>],
     #[allow(non_snake_case)] camera_T_part: &Isometry3<f64>,
@@ -41,18 +81,16 @@ pub fn reprojection_rms(
             if c.z <= 0.0 {
                 return f64::INFINITY;
             }
-            let e = Vector2::new(fx * (c.x / c.z - o.x), fy * (c.y / c.z - o.y));
-            e.norm_squared()
+            scale.residual(&c.coords, o).norm_squared()
         })
         .sum();
     (sum / model.len() as f64).sqrt()
 }
 
 /// Refines `initial` by Levenberg–Marquardt on the (Mahalanobis, when `covariances` are given)
-/// reprojection error in pixels.
+/// reprojection error in pixels; `normalized` are distorted normalised observations.
 pub fn refine_pose(
-    fx: f64,
-    fy: f64,
+    scale: &PixelScale,
     model: &[Point3<f64>],
     normalized: &[Point2<f64>],
     covariances: Option<&[Matrix2<f64>]>,
@@ -69,11 +107,12 @@ pub fn refine_pose(
     if n < 4 {
         return Err(PnpError::TooFewPoints(n));
     }
+    let (fx, fy) = (scale.fx, scale.fy);
     if !(fx.is_finite() && fy.is_finite() && fx > 0.0 && fy > 0.0) {
         return Err(PnpError::NonFinite("focal lengths"));
     }
     let whiten = whitening(covariances, n)?;
-    let problem = PoseProblem::new(fx, fy, model, normalized, &whiten, initial);
+    let problem = PoseProblem::new(*scale, model, normalized, &whiten, initial);
     let initial_cost = problem.cost();
     let (problem, report) = LevenbergMarquardt::new().minimize(problem);
     let mut pose = problem.pose();
@@ -83,10 +122,9 @@ pub fn refine_pose(
         // against a failed run leaving the parameters at a rejected trial point).
         pose = *initial;
     }
-    let rms = reprojection_rms(fx, fy, model, normalized, &pose);
+    let rms = reprojection_rms(scale, model, normalized, &pose);
     let covariance = pose_covariance(
-        fx,
-        fy,
+        scale,
         model,
         normalized,
         &whiten,
@@ -135,15 +173,14 @@ fn whitening(
 /// The 6×6 pose covariance at `pose`: (JᵀJ)⁻¹ on whitened residuals, scaled by the residual
 /// variance when the keypoint covariances were not given.
 fn pose_covariance(
-    fx: f64,
-    fy: f64,
+    scale: &PixelScale,
     model: &[Point3<f64>],
     normalized: &[Point2<f64>],
     whiten: &[Matrix2<f64>],
     #[allow(non_snake_case)] pose: &Isometry3<f64>,
     calibrated: bool,
 ) -> Matrix6<f64> {
-    let problem = PoseProblem::new(fx, fy, model, normalized, whiten, pose);
+    let problem = PoseProblem::new(*scale, model, normalized, whiten, pose);
     let (Some(j), Some(r)) = (problem.jacobian(), problem.residuals()) else {
         return Matrix6::from_diagonal_element(f64::INFINITY);
     };
@@ -178,8 +215,7 @@ fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
 
 /// The least-squares problem: parameters `[t; ω]`, pose `(exp(ω)·R₀, t)`.
 struct PoseProblem<'a> {
-    fx: f64,
-    fy: f64,
+    scale: PixelScale,
     model: &'a [Point3<f64>],
     observed: &'a [Point2<f64>],
     whiten: &'a [Matrix2<f64>],
@@ -190,8 +226,7 @@ struct PoseProblem<'a> {
 
 impl<'a> PoseProblem<'a> {
     fn new(
-        fx: f64,
-        fy: f64,
+        scale: PixelScale,
         model: &'a [Point3<f64>],
         observed: &'a [Point2<f64>],
         whiten: &'a [Matrix2<f64>],
@@ -202,8 +237,7 @@ impl<'a> PoseProblem<'a> {
             .fixed_rows_mut::<3>(0)
             .copy_from(&start.translation.vector);
         Self {
-            fx,
-            fy,
+            scale,
             model,
             observed,
             whiten,
@@ -248,8 +282,7 @@ impl LeastSquaresProblem<f64, Dyn, U6> for PoseProblem<'_> {
         for (i, (p, o)) in self.model.iter().zip(self.observed).enumerate() {
             let c = self.rotation * p.coords + t;
             let e = if c.z > 1e-9 {
-                self.whiten[i]
-                    * Vector2::new(self.fx * (c.x / c.z - o.x), self.fy * (c.y / c.z - o.y))
+                self.whiten[i] * self.scale.residual(&c, o)
             } else {
                 // Behind the camera: a large residual makes LM reject the step.
                 Vector2::new(1e6, 1e6)
@@ -272,15 +305,14 @@ impl LeastSquaresProblem<f64, Dyn, U6> for PoseProblem<'_> {
                 continue;
             }
             let iz = 1.0 / c.z;
-            let dproj = Matrix2x3::new(
-                self.fx * iz,
-                0.0,
-                -self.fx * c.x * iz * iz,
-                0.0,
-                self.fy * iz,
-                -self.fy * c.y * iz * iz,
-            );
-            let d = self.whiten[i] * dproj;
+            // d(normalised)/d(c), then through the distortion, then to pixels.
+            let dproj = Matrix2x3::new(iz, 0.0, -c.x * iz * iz, 0.0, iz, -c.y * iz * iz);
+            let ddist = self
+                .scale
+                .distortion
+                .jacobian(Vector2::new(c.x * iz, c.y * iz));
+            let focal = Matrix2::new(self.scale.fx, 0.0, 0.0, self.scale.fy);
+            let d = self.whiten[i] * focal * ddist * dproj;
             let drot = d * (-rp.cross_matrix() * jl);
             let mut rows = jac.fixed_rows_mut::<2>(2 * i);
             rows.fixed_columns_mut::<3>(0).copy_from(&d);
@@ -312,7 +344,8 @@ mod tests {
             })
             .collect();
         let whiten = vec![Matrix2::new(1.0, 0.2, 0.0, 0.7); model.len()];
-        let mut problem = PoseProblem::new(10704.0, 10727.0, &model, &obs, &whiten, &truth);
+        let scale = PixelScale::of(&crate::Camera::basler_seed());
+        let mut problem = PoseProblem::new(scale, &model, &obs, &whiten, &truth);
         problem.set_params(&Vector6::new(0.02, -0.01, 1.5, 0.05, -0.02, 0.03));
         let numeric = differentiate_numerically(&mut problem).unwrap();
         let analytic = problem.jacobian().unwrap();
