@@ -3,6 +3,7 @@
 pub mod cad;
 pub mod config;
 pub mod convert;
+pub mod dataset;
 pub mod fsutil;
 pub mod render;
 pub mod scene;

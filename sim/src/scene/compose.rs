@@ -82,6 +82,18 @@ pub fn sample_scene(
         request.drop_half,
         rng,
     )?;
+    dress_scene(models, parts, request, rand, rng)
+}
+
+/// Draws lights, materials, camera and sensor around parts already at rest.
+pub fn dress_scene(
+    models: &[PartModel],
+    parts: Vec<PlacedPart>,
+    request: &SceneRequest,
+    rand: &Randomisation,
+    rng: &mut impl Rng,
+) -> Result<SampledScene, SceneError> {
+    rand.validate()?;
 
     let tints: Vec<Appearance> = models
         .iter()

@@ -1,0 +1,178 @@
+//! What a dataset run produces, with the seed's defaults.
+
+use std::path::PathBuf;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use perception::camera::Camera;
+
+use super::DatasetError;
+use crate::render::RenderSettings;
+use crate::scene::Randomisation;
+
+/// Training or test split.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Split {
+    /// Training data.
+    Train,
+    /// Held-out test data.
+    Test,
+}
+
+impl Split {
+    /// Folder of the BOP scenes of this split.
+    pub fn bop_dir(self) -> &'static str {
+        match self {
+            Split::Train => "train_pbr",
+            Split::Test => "test",
+        }
+    }
+
+    /// Folder name of the crops of this split.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Test => "test",
+        }
+    }
+
+    /// A number mixed into the random streams.
+    pub(crate) fn code(self) -> u64 {
+        match self {
+            Split::Train => 1,
+            Split::Test => 2,
+        }
+    }
+}
+
+/// A dataset run.
+#[derive(Debug, Clone)]
+pub struct DatasetConfig {
+    /// Output folder.
+    pub out: PathBuf,
+    /// Master seed: the same seed gives a bit-identical dataset.
+    pub seed: u64,
+    /// The full-resolution camera (crops are cut from it at full resolution).
+    pub camera: Camera,
+    /// Nominal camera pose over the board (randomised around it).
+    pub nominal_table_T_camera: Isometry3<f64>,
+    /// Keypoint training crops per part.
+    pub crops_train: usize,
+    /// Keypoint test crops per part.
+    pub crops_test: usize,
+    /// Overview images (all parts, BOP format) for training.
+    pub overviews_train: usize,
+    /// Overview images for testing.
+    pub overviews_test: usize,
+    /// Side of a keypoint crop, px.
+    pub crop_size: u32,
+    /// Crops rendered from one physics drop (with independent lights, camera and sensor).
+    pub views_per_drop: usize,
+    /// Downscaling of the overview images relative to the full camera.
+    pub overview_scale: f64,
+    /// Overview window (width, height) around the board, px at the reduced resolution.
+    pub overview_size: (u32, u32),
+    /// Copies of each part per overview scene, inclusive range.
+    pub parts_per_class: (usize, usize),
+    /// Randomisation ranges.
+    pub randomisation: Randomisation,
+    /// Render settings.
+    pub render: RenderSettings,
+    /// Millimetres per unit of the 16-bit depth PNGs.
+    pub depth_scale: f64,
+    /// Images per BOP scene folder.
+    pub images_per_scene: usize,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+impl DatasetConfig {
+    /// The seed's sizes: 20 000 training and 2 000 test crops per part, plus overview images.
+    pub fn new(out: PathBuf, seed: u64) -> Self {
+        Self {
+            out,
+            seed,
+            camera: Camera::basler_seed(),
+            nominal_table_T_camera: Isometry3::from_parts(
+                Translation3::new(0.0, 0.0, 1.51),
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+            ),
+            crops_train: 20_000,
+            crops_test: 2_000,
+            overviews_train: 2_000,
+            overviews_test: 200,
+            crop_size: 128,
+            views_per_drop: 4,
+            overview_scale: 0.4,
+            overview_size: (1000, 700),
+            parts_per_class: (1, 3),
+            randomisation: Randomisation::default(),
+            render: RenderSettings::default(),
+            depth_scale: 0.1,
+            images_per_scene: 1000,
+            progress: true,
+        }
+    }
+
+    /// Checks sizes and ranges.
+    pub fn validate(&self) -> Result<(), DatasetError> {
+        self.randomisation.validate()?;
+        self.camera
+            .validate()
+            .map_err(|e| DatasetError::Config(e.to_string()))?;
+        let (lo, hi) = self.parts_per_class;
+        if lo > hi {
+            return Err(DatasetError::Config(format!(
+                "parts per class range is inverted: {lo} > {hi}"
+            )));
+        }
+        if hi == 0 {
+            return Err(DatasetError::Config(
+                "parts per class range is empty: it allows no parts (0..=0)".into(),
+            ));
+        }
+        if self.crop_size == 0 || self.crop_size > self.camera.width.min(self.camera.height) {
+            return Err(DatasetError::Config(format!(
+                "crop size {} px must be between 1 and the image size",
+                self.crop_size
+            )));
+        }
+        if !(self.overview_scale.is_finite()
+            && self.overview_scale > 0.0
+            && self.overview_scale <= 1.0)
+        {
+            return Err(DatasetError::Config(format!(
+                "overview scale {} must be in (0, 1]",
+                self.overview_scale
+            )));
+        }
+        if self.overview_size.0 == 0 || self.overview_size.1 == 0 {
+            return Err(DatasetError::Config(
+                "overview size must be positive".into(),
+            ));
+        }
+        if self.views_per_drop == 0 || self.images_per_scene == 0 {
+            return Err(DatasetError::Config(
+                "views per drop and images per scene must be positive".into(),
+            ));
+        }
+        if !(self.depth_scale.is_finite() && self.depth_scale > 0.0) {
+            return Err(DatasetError::Config(format!(
+                "depth scale {} mm must be positive",
+                self.depth_scale
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The random stream of one work item: (master seed, stream tag, index) mixed by splitmix64.
+pub(crate) fn item_seed(seed: u64, tag: u64, index: u64) -> u64 {
+    let mut z = seed;
+    for v in [tag, index] {
+        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15).wrapping_add(v);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+    }
+    z
+}

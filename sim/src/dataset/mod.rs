@@ -1,0 +1,21 @@
+//! Datasets for training and evaluating perception: BOP-format scenes (overview images with all
+//! parts, for segmentation) and the keypoint crop set (128 × 128 crops with shifted intrinsics),
+//! written deterministically, in parallel, resumably and atomically; and a BOP reader.
+
+#![allow(non_snake_case)]
+
+mod bop;
+mod config;
+mod crops;
+mod error;
+mod files;
+mod generate;
+mod overview;
+mod reader;
+
+pub use bop::{BopCamera, GtInfo, GtPose, ModelInfo, SceneCamera, pose_from_bop, write_models};
+pub use config::{DatasetConfig, Split};
+pub use crops::CropLabel;
+pub use error::DatasetError;
+pub use generate::{GenerateSummary, generate};
+pub use reader::{BopDataset, BopImage, BopScene};
