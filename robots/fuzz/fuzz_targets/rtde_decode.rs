@@ -4,9 +4,9 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use robots::rtde::Recipe;
 use robots::rtde::package::{Protocol, Reply, Request, split_frame};
 use robots::rtde::types::DataType;
-use robots::rtde::Recipe;
 
 fuzz_target!(|data: &[u8]| {
     let recipe = Recipe::new(
