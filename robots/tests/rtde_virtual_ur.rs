@@ -71,6 +71,18 @@ fn client_config(vur: &VirtualUr) -> ClientConfig {
     c
 }
 
+async fn wait_count(count: impl Fn() -> u64, at_least: u64, within: Duration) {
+    let deadline = Instant::now() + within;
+    while count() < at_least {
+        assert!(
+            Instant::now() < deadline,
+            "count {} < {at_least} after {within:?}",
+            count()
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
 async fn wait_status(client: &RtdeClient, want: impl Fn(&LinkStatus) -> bool, within: Duration) {
     let mut rx = client.subscribe_status();
     tokio::time::timeout(within, async {
@@ -142,27 +154,12 @@ async fn client_recovers_from_dropped_connections_silence_and_skipped_packages()
     client.next_state(Duration::from_secs(1)).await.unwrap();
 
     vur.drop_rtde_connections();
-    wait_status(
-        &client,
-        |s| matches!(s, LinkStatus::Reconnecting(_)),
-        Duration::from_secs(1),
-    )
-    .await;
-    wait_status(
-        &client,
-        |s| *s == LinkStatus::Streaming,
-        Duration::from_secs(2),
-    )
-    .await;
+    wait_count(|| client.reconnects(), 1, Duration::from_secs(3)).await;
     client.next_state(Duration::from_secs(1)).await.unwrap();
 
     vur.faults.go_silent(Duration::from_millis(400));
-    wait_status(
-        &client,
-        |s| *s == LinkStatus::Stalled,
-        Duration::from_secs(1),
-    )
-    .await;
+    wait_count(|| client.stalls(), 1, Duration::from_secs(2)).await;
+    wait_count(|| client.reconnects(), 2, Duration::from_secs(3)).await;
     wait_status(
         &client,
         |s| *s == LinkStatus::Streaming,
@@ -171,18 +168,14 @@ async fn client_recovers_from_dropped_connections_silence_and_skipped_packages()
     .await;
 
     vur.faults.skip_packages(100); // 200 ms without data at 500 Hz: a stall
-    wait_status(
-        &client,
-        |s| *s != LinkStatus::Streaming,
-        Duration::from_secs(1),
-    )
-    .await;
+    wait_count(|| client.stalls(), 2, Duration::from_secs(2)).await;
     wait_status(
         &client,
         |s| *s == LinkStatus::Streaming,
         Duration::from_secs(3),
     )
     .await;
+    client.next_state(Duration::from_secs(1)).await.unwrap();
 
     // Delayed packages still arrive (late, but no stall under 100 ms).
     vur.faults.set_output_delay(Duration::from_millis(5));
@@ -402,11 +395,20 @@ async fn refused_program_and_dropped_link_give_typed_errors() {
 
     // A dropped RTDE link is re-established and commands work again.
     vur.drop_rtde_connections();
-    tokio::time::sleep(Duration::from_millis(20)).await;
-    assert!(matches!(
-        robot.joints().await,
-        Err(RobotError::ConnectionLost { .. })
-    ));
+    // While the link is down, state queries fail with a typed error.
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        let status = robot.rtde().status();
+        if status != LinkStatus::Streaming {
+            match robot.joints().await {
+                Err(RobotError::ConnectionLost { .. }) => break,
+                Ok(_) if robot.rtde().reconnects() > 0 => break, // already back up
+                other => panic!("{other:?} while {status:?}"),
+            }
+        }
+        assert!(Instant::now() < deadline, "drop not noticed");
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
     let deadline = Instant::now() + Duration::from_secs(3);
     while robot.rtde().status() != LinkStatus::Streaming {
         assert!(Instant::now() < deadline, "link not back");

@@ -10,6 +10,7 @@ use super::state::{OutputState, RobotMode, RuntimeState, SafetyMode};
 use super::types::{Slot, Value};
 use std::io;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 use tokio::io::AsyncWriteExt;
@@ -316,7 +317,15 @@ pub struct RtdeClient {
     writes: mpsc::Sender<InputWrite>,
     version: ControllerVersion,
     input_recipes: Vec<Recipe>,
+    counters: Arc<LinkCounters>,
     task: tokio::task::JoinHandle<()>,
+}
+
+/// Link health counters.
+#[derive(Debug, Default)]
+struct LinkCounters {
+    stalls: AtomicU64,
+    reconnects: AtomicU64,
 }
 
 impl Drop for RtdeClient {
@@ -334,13 +343,22 @@ impl RtdeClient {
         let (writes, writes_rx) = mpsc::channel(64);
         let version = session.version;
         let input_recipes = session.inputs.clone();
-        let task = tokio::spawn(run_link(config, session, state_tx, status_tx, writes_rx));
+        let counters = Arc::new(LinkCounters::default());
+        let task = tokio::spawn(run_link(
+            config,
+            session,
+            state_tx,
+            status_tx,
+            writes_rx,
+            counters.clone(),
+        ));
         Ok(RtdeClient {
             state,
             status,
             writes,
             version,
             input_recipes,
+            counters,
             task,
         })
     }
@@ -374,6 +392,16 @@ impl RtdeClient {
     /// Link health.
     pub fn status(&self) -> LinkStatus {
         self.status.borrow().clone()
+    }
+
+    /// Stalls detected so far (no package within the stall timeout).
+    pub fn stalls(&self) -> u64 {
+        self.counters.stalls.load(Ordering::Relaxed)
+    }
+
+    /// Successful reconnections so far.
+    pub fn reconnects(&self) -> u64 {
+        self.counters.reconnects.load(Ordering::Relaxed)
     }
 
     /// A receiver of link status changes.
@@ -488,6 +516,7 @@ async fn run_link(
     state_tx: watch::Sender<Option<Arc<OutputState>>>,
     status_tx: watch::Sender<LinkStatus>,
     mut writes: mpsc::Receiver<InputWrite>,
+    counters: Arc<LinkCounters>,
 ) {
     loop {
         let end = stream_session(&config, &mut session, &state_tx, &mut writes).await;
@@ -497,6 +526,7 @@ async fn run_link(
                 return;
             }
             LinkEnd::Stalled => {
+                counters.stalls.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(timeout = ?config.stall_timeout, "RTDE stream stalled; reconnecting");
                 status_tx.send_replace(LinkStatus::Stalled);
             }
@@ -520,6 +550,7 @@ async fn run_link(
                 Err(e) => tracing::debug!(attempt, error = %e, "RTDE reconnect failed"),
             }
         };
+        counters.reconnects.fetch_add(1, Ordering::Relaxed);
         status_tx.send_replace(LinkStatus::Streaming);
     }
 }
