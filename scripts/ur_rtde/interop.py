@@ -44,6 +44,7 @@ def main():
 
     q_target = [0.3, -1.3, 1.4, -1.6, -1.5708, 0.2]
     ok = control.moveJ(q_target, 1.0, 2.0)
+    time.sleep(0.05)  # let the receive interface's cached state catch up with the done signal
     report("moveJ", ok=ok, target=q_target, q=receive.getActualQ())
 
     start = receive.getActualTCPPose()
