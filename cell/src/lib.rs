@@ -1,5 +1,6 @@
 //! The cell orchestrator library: scenario files, part preparation, runs, reports and the
 //! regression gate. The `cell` binary is a thin command-line layer over it.
 
+pub mod episode;
 pub mod prepare;
 pub mod scenario;

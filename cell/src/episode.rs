@@ -1,0 +1,89 @@
+//! What one episode produced: the record a run appends (one JSON line per episode) and that
+//! reports, merges and the regression gate read. This is the contract between the orchestrator
+//! (which fills it) and the run harness (which stores and summarises it).
+
+use serde::{Deserialize, Serialize};
+
+/// Format version of episode records; a results file with another version is refused.
+pub const RECORD_VERSION: u32 = 1;
+
+/// The outcome of one assembly step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StepOutcome {
+    /// Fully inserted within the step's tolerances.
+    Seated,
+    /// Stuck part-way (wedged on a chamfer, tilted, over-constrained).
+    Jammed,
+    /// Landed beside the mating feature.
+    Missed,
+    /// The step never reached insertion (nothing pickable, grasp failures, planning, safety).
+    Aborted,
+}
+
+/// True error of the held part relative to its target when insertion started.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseError {
+    /// Offset along the target frame's x, millimetres.
+    pub dx_mm: f64,
+    /// Offset along the target frame's y, millimetres.
+    pub dy_mm: f64,
+    /// Height above fully seated at the end, millimetres.
+    pub depth_mm: f64,
+    /// Tilt from the target orientation, degrees.
+    pub tilt_deg: f64,
+    /// Rotation about the insertion axis, degrees.
+    pub yaw_deg: f64,
+}
+
+/// One assembly step of an episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepRecord {
+    /// Catalog part placed by the step.
+    pub part: String,
+    /// How it ended.
+    pub outcome: StepOutcome,
+    /// Pick-and-insert attempts used (1 when the first attempt worked).
+    pub attempts: u32,
+    /// Feeder shakes used.
+    pub shakes: u32,
+    /// Why it failed, in words, when it did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cause: Option<String>,
+    /// Error sources blamed for a failure, by their scenario parameter names
+    /// (`perception`, `calibration_translation`, `robot_repeatability`, `grasp_offset`, ...).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<String>,
+    /// True pose error at insertion, when an insertion happened.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_error: Option<PoseError>,
+    /// Perception error of the picked instance in the table plane (x, y in mm; yaw in degrees).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub perception_error: Option<[f64; 3]>,
+    /// Simulated seconds the step took.
+    pub sim_time_s: f64,
+}
+
+/// One episode: the full assembly attempt from a fresh feeder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeRecord {
+    /// Record format version ([`RECORD_VERSION`]).
+    pub version: u32,
+    /// Scenario name.
+    pub scenario: String,
+    /// Scenario seed.
+    pub seed: u64,
+    /// Episode index; with the seed it replays the episode alone.
+    pub episode: u32,
+    /// Every step seated.
+    pub success: bool,
+    /// The steps attempted, in order.
+    pub steps: Vec<StepRecord>,
+    /// Simulated cycle time of the whole assembly, seconds.
+    pub cycle_time_s: f64,
+    /// Wall-clock seconds the episode took to compute.
+    pub wall_time_s: f64,
+    /// Why the episode stopped early, if it did (safety stop, lost connection, ...).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub abort: Option<String>,
+}
