@@ -111,18 +111,6 @@ fn three() -> u32 {
     3
 }
 
-fn sampled() -> Placement {
-    Placement::Sampled
-}
-
-fn three() -> u32 {
-    3
-}
-
-fn three() -> u32 {
-    3
-}
-
 /// The fixture nest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -149,10 +137,6 @@ pub struct GripperSpec {
     /// Coulomb friction between fingers and parts.
     #[serde(default = "friction")]
     pub friction: f64,
-}
-
-fn friction() -> f64 {
-    0.3
 }
 
 fn friction() -> f64 {
@@ -217,19 +201,6 @@ pub struct NoiseSpec {
     /// Residual rotation of a part in the fingers after closing (one sigma), radians.
     pub grasp_rotation: f64,
 }
-
-impl Default for NoiseSpec {
-    fn default() -> Self {
-        Self {
-            robot_repeatability: 3e-5,
-            calibration_translation: 5e-5,
-            calibration_rotation: 2e-4,
-            grasp_offset: 5e-5,
-            grasp_rotation: 2e-3,
-        }
-    }
-}
-
 
 impl Default for NoiseSpec {
     fn default() -> Self {
