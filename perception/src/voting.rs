@@ -148,6 +148,7 @@ pub struct Voter {
     uy: Vec<f32>,
     usable: Vec<u32>,
     inliers: Vec<u32>,
+    voters: [Vec<f32>; 4],
 }
 
 impl Voter {
@@ -351,14 +352,7 @@ impl Voter {
     /// loop vectorises).
     fn count_inliers(&self, hx: f32, hy: f32) -> usize {
         let t2 = self.config.inlier_cosine * self.config.inlier_cosine;
-        let mut count = 0u32;
-        for (((&x, &y), &ux), &uy) in self.xs.iter().zip(&self.ys).zip(&self.ux).zip(&self.uy) {
-            let dx = hx - x;
-            let dy = hy - y;
-            let dot = dx * ux + dy * uy;
-            count += u32::from((dot > 0.0) & (dot * dot > t2 * (dx * dx + dy * dy)));
-        }
-        count as usize
+        count_votes([&self.xs, &self.ys, &self.ux, &self.uy], hx, hy, t2)
     }
 
     fn collect_inliers(&mut self, hx: f32, hy: f32) {
@@ -396,21 +390,31 @@ impl Voter {
 
     /// PVNet's uncertainty: hypotheses from random inlier pairs, each weighted by the votes it
     /// gets from (a subset of) the foreground, then their weighted covariance.
-    fn covariance(&self, rng: &mut ChaCha8Rng, estimate: Vector2<f64>) -> Matrix2<f64> {
-        let c = &self.config;
+    fn covariance(&mut self, rng: &mut ChaCha8Rng, estimate: Vector2<f64>) -> Matrix2<f64> {
+        let c = self.config;
         let floor = Matrix2::identity() * c.covariance_floor;
         let n = self.inliers.len();
         if c.covariance_hypotheses == 0 || n < 2 {
             return floor;
         }
-        let voters: Vec<usize> = if self.usable.len() <= c.covariance_voters {
-            self.usable.iter().map(|&j| j as usize).collect()
-        } else {
-            (0..c.covariance_voters)
-                .map(|_| self.usable[rng.random_range(0..self.usable.len())] as usize)
-                .collect()
-        };
-        let t2 = f64::from(c.inlier_cosine * c.inlier_cosine);
+        // The voters, gathered into contiguous arrays once so that counting vectorises.
+        let mut voters = std::mem::take(&mut self.voters);
+        for v in voters.iter_mut() {
+            v.clear();
+        }
+        let take = self.usable.len().min(c.covariance_voters);
+        for i in 0..take {
+            let j = if self.usable.len() <= c.covariance_voters {
+                self.usable[i] as usize
+            } else {
+                self.usable[rng.random_range(0..self.usable.len())] as usize
+            };
+            voters[0].push(self.xs[j]);
+            voters[1].push(self.ys[j]);
+            voters[2].push(self.ux[j]);
+            voters[3].push(self.uy[j]);
+        }
+        let t2 = c.inlier_cosine * c.inlier_cosine;
         let (mut wsum, mut mean, mut second) = (0.0, Vector2::zeros(), Matrix2::zeros());
         for _ in 0..c.covariance_hypotheses {
             let a = self.inliers[rng.random_range(0..n)] as usize;
@@ -418,21 +422,19 @@ impl Voter {
             let Some(h) = self.intersect(a, b) else {
                 continue;
             };
-            let mut votes = 0.0;
-            for &j in &voters {
-                let dx = h.x - f64::from(self.xs[j]);
-                let dy = h.y - f64::from(self.ys[j]);
-                let dot = dx * f64::from(self.ux[j]) + dy * f64::from(self.uy[j]);
-                if dot > 0.0 && dot * dot > t2 * (dx * dx + dy * dy) {
-                    votes += 1.0;
-                }
-            }
+            let votes = count_votes(
+                [&voters[0], &voters[1], &voters[2], &voters[3]],
+                h.x as f32,
+                h.y as f32,
+                t2,
+            ) as f64;
             // Centre on the estimate for numerical stability; shifted back below.
             let d = h - estimate;
             wsum += votes;
             mean += d * votes;
             second += d * d.transpose() * votes;
         }
+        self.voters = voters;
         if wsum <= 0.0 {
             return floor;
         }
@@ -445,6 +447,20 @@ impl Voter {
             floor
         }
     }
+}
+
+/// Pixels of `[xs, ys, ux, uy]` whose vector points at `(hx, hy)` within cosine √`t2`
+/// (branch-free, so the loop vectorises).
+fn count_votes(pixels: [&[f32]; 4], hx: f32, hy: f32, t2: f32) -> usize {
+    let [xs, ys, uxs, uys] = pixels;
+    let mut count = 0u32;
+    for (((&x, &y), &ux), &uy) in xs.iter().zip(ys).zip(uxs).zip(uys) {
+        let dx = hx - x;
+        let dy = hy - y;
+        let dot = dx * ux + dy * uy;
+        count += u32::from((dot > 0.0) & (dot * dot > t2 * (dx * dx + dy * dy)));
+    }
+    count as usize
 }
 
 /// Hypotheses needed to draw one all-inlier pair with probability `confidence` at inlier ratio `w`.

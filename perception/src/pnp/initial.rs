@@ -88,7 +88,7 @@ pub fn initial_pose(
         .iter()
         .map(|p| nalgebra::Vector2::<f32>::new(p.x as f32, p.y as f32).into())
         .collect();
-    let mut solver = sqpnp::Solver::<sqpnp::DefaultParameters>::new();
+    let mut solver = sqpnp::Solver::<InitialParameters>::new();
     if !solver.solve(points_3d.as_slice(), points_2d.as_slice(), None) {
         return Err(PnpError::NoSolution("SQPnP found no solution"));
     }
@@ -125,4 +125,28 @@ pub(crate) fn nearest_rotation(m: &Matrix3<f64>) -> Rotation3<f64> {
         d[(2, 2)] = -1.0;
     }
     Rotation3::from_matrix_unchecked(u * d * v_t)
+}
+
+/// SQPnP's default tolerances, with FOAM for the nearest rotation (the C++ reference's default):
+/// faster than SVD, and its lower accuracy does not matter because refinement follows.
+struct InitialParameters;
+
+impl sqpnp::Parameters for InitialParameters {
+    const RANK_TOLERANCE: f64 = sqpnp::DefaultParameters::RANK_TOLERANCE;
+    const SQP_SQUARED_TOLERANCE: f64 = sqpnp::DefaultParameters::SQP_SQUARED_TOLERANCE;
+    const SQP_DET_THRESHOLD: f64 = sqpnp::DefaultParameters::SQP_DET_THRESHOLD;
+    const SQP_MAX_ITERATIONS: usize = sqpnp::DefaultParameters::SQP_MAX_ITERATIONS;
+    const ORTHOGONALITY_SQUARED_ERROR_THRESHOLD: f64 =
+        sqpnp::DefaultParameters::ORTHOGONALITY_SQUARED_ERROR_THRESHOLD;
+    const EQUAL_VECTORS_SQUARED_DIFF: f64 = sqpnp::DefaultParameters::EQUAL_VECTORS_SQUARED_DIFF;
+    const EQUAL_SQUARED_ERRORS_DIFF: f64 = sqpnp::DefaultParameters::EQUAL_SQUARED_ERRORS_DIFF;
+    const POINT_VARIANCE_THRESHOLD: f64 = sqpnp::DefaultParameters::POINT_VARIANCE_THRESHOLD;
+
+    fn nearest_rotation_matrix(m: &sqpnp::NMat3) -> sqpnp::NMat3 {
+        sqpnp::nearest_rotation_matrix_foam(m)
+    }
+
+    fn eigen_vectors(m: &sqpnp::NMat9) -> (sqpnp::NMat9, sqpnp::NVec9) {
+        sqpnp::eigen_vectors_rrqr(m)
+    }
 }

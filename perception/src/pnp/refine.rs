@@ -1,9 +1,10 @@
 //! Covariance-weighted Levenberg–Marquardt refinement of a pose on the reprojection error.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+#[cfg(test)]
+use nalgebra::{DVector, Dyn};
 use nalgebra::{
-    DVector, Dyn, Isometry3, Matrix2, Matrix2x3, Matrix3, Matrix6, Owned, Point2, Point3,
-    Translation3, U6, UnitQuaternion, Vector2, Vector3, Vector6,
+    Isometry3, Matrix2, Matrix2x3, Matrix2x6, Matrix3, Matrix6, Point2, Point3, Translation3,
+    UnitQuaternion, Vector2, Vector3, Vector6,
 };
 
 use super::PnpError;
@@ -112,9 +113,9 @@ pub fn refine_pose(
         return Err(PnpError::NonFinite("focal lengths"));
     }
     let whiten = whitening(covariances, n)?;
-    let problem = PoseProblem::new(*scale, model, normalized, &whiten, initial);
+    let mut problem = PoseProblem::new(*scale, model, normalized, &whiten, initial);
     let initial_cost = problem.cost();
-    let (problem, report) = LevenbergMarquardt::new().minimize(problem);
+    let evaluations = problem.minimize();
     let mut pose = problem.pose();
     let cost = problem.cost();
     if cost.is_nan() || cost > initial_cost {
@@ -135,7 +136,7 @@ pub fn refine_pose(
         camera_T_part: pose,
         rms_px: rms,
         covariance,
-        evaluations: report.number_of_evaluations,
+        evaluations,
     })
 }
 
@@ -181,18 +182,15 @@ fn pose_covariance(
     calibrated: bool,
 ) -> Matrix6<f64> {
     let problem = PoseProblem::new(*scale, model, normalized, whiten, pose);
-    let (Some(j), Some(r)) = (problem.jacobian(), problem.residuals()) else {
-        return Matrix6::from_diagonal_element(f64::INFINITY);
-    };
-    let jtj: Matrix6<f64> = (j.transpose() * &j).fixed_view::<6, 6>(0, 0).into_owned();
+    let (jtj, _, cost) = problem.normal_equations();
     let Some(inv) = jtj.try_inverse() else {
         return Matrix6::from_diagonal_element(f64::INFINITY);
     };
     let scale = if calibrated {
         1.0
     } else {
-        let dof = (r.len() as f64 - 6.0).max(1.0);
-        r.norm_squared() / dof
+        let dof = (2.0 * model.len() as f64 - 6.0).max(1.0);
+        cost / dof
     };
     inv * scale
 }
@@ -251,25 +249,146 @@ impl<'a> PoseProblem<'a> {
         self.params.fixed_rows::<3>(0).into_owned()
     }
 
-    /// The minimised objective: the sum of squared whitened residuals.
-    fn cost(&self) -> f64 {
-        self.residuals().map_or(f64::INFINITY, |r| r.norm_squared())
-    }
-
     fn pose(&self) -> Isometry3<f64> {
         Isometry3::from_parts(Translation3::from(self.translation()), self.rotation)
     }
-}
 
-impl LeastSquaresProblem<f64, Dyn, U6> for PoseProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, U6>;
-    type ParameterStorage = Owned<f64, U6>;
-
+    /// Sets `[t; ω]`: pose `(exp(ω)·R₀, t)` (the derivative check varies ω away from zero).
+    #[cfg(test)]
     fn set_params(&mut self, x: &Vector6<f64>) {
         self.params = *x;
         let w: Vector3<f64> = x.fixed_rows::<3>(3).into_owned();
         self.rotation = UnitQuaternion::from_scaled_axis(w) * self.reference;
+    }
+
+    /// Applies an increment `[δt; δω]` as `(exp(δω)·R, t + δt)` and re-bases ω at zero.
+    fn apply_step(&mut self, step: &Vector6<f64>) {
+        let w: Vector3<f64> = step.fixed_rows::<3>(3).into_owned();
+        let t = self.translation() + step.fixed_rows::<3>(0);
+        self.reference = UnitQuaternion::from_scaled_axis(w) * self.rotation;
+        self.rotation = self.reference;
+        self.params = Vector6::new(t.x, t.y, t.z, 0.0, 0.0, 0.0);
+    }
+
+    /// Whitened residual of point i (large when it is behind the camera, so steps there fail).
+    fn residual(&self, i: usize, t: &Vector3<f64>) -> Vector2<f64> {
+        let c = self.rotation * self.model[i].coords + t;
+        if c.z > 1e-9 {
+            self.whiten[i] * self.scale.residual(&c, &self.observed[i])
+        } else {
+            Vector2::new(1e6, 1e6)
+        }
+    }
+
+    /// Whitened residual and its 2×6 Jacobian for point i; `None` behind the camera.
+    fn terms(
+        &self,
+        i: usize,
+        t: &Vector3<f64>,
+        jl: &Matrix3<f64>,
+    ) -> Option<(Vector2<f64>, Matrix2x6<f64>)> {
+        let rp = self.rotation * self.model[i].coords;
+        let c = rp + t;
+        if c.z <= 1e-9 {
+            return None;
+        }
+        let iz = 1.0 / c.z;
+        // d(normalised)/d(c), then through the distortion, then to pixels.
+        let dproj = Matrix2x3::new(iz, 0.0, -c.x * iz * iz, 0.0, iz, -c.y * iz * iz);
+        let ddist = self
+            .scale
+            .distortion
+            .jacobian(Vector2::new(c.x * iz, c.y * iz));
+        let focal = Matrix2::new(self.scale.fx, 0.0, 0.0, self.scale.fy);
+        let d = self.whiten[i] * focal * ddist * dproj;
+        let drot = d * (-rp.cross_matrix() * jl);
+        let mut j = Matrix2x6::zeros();
+        j.fixed_columns_mut::<3>(0).copy_from(&d);
+        j.fixed_columns_mut::<3>(3).copy_from(&drot);
+        Some((
+            self.whiten[i] * self.scale.residual(&c, &self.observed[i]),
+            j,
+        ))
+    }
+
+    /// The minimised objective: the sum of squared whitened residuals.
+    fn cost(&self) -> f64 {
+        let t = self.translation();
+        (0..self.model.len())
+            .map(|i| self.residual(i, &t).norm_squared())
+            .sum()
+    }
+
+    /// JᵀJ, Jᵀr and the cost at the current parameters, without allocating.
+    fn normal_equations(&self) -> (Matrix6<f64>, Vector6<f64>, f64) {
+        let t = self.translation();
+        let w: Vector3<f64> = self.params.fixed_rows::<3>(3).into_owned();
+        let jl = left_jacobian(&w);
+        let (mut h, mut g, mut cost) = (Matrix6::zeros(), Vector6::zeros(), 0.0);
+        for i in 0..self.model.len() {
+            match self.terms(i, &t, &jl) {
+                Some((r, j)) => {
+                    h += j.transpose() * j;
+                    g += j.transpose() * r;
+                    cost += r.norm_squared();
+                }
+                None => cost += 2e12,
+            }
+        }
+        (h, g, cost)
+    }
+
+    /// Levenberg–Marquardt (Marquardt's diagonal scaling) on the 6×6 normal equations; returns
+    /// the number of cost evaluations.
+    fn minimize(&mut self) -> usize {
+        let (mut h, mut g, mut current) = self.normal_equations();
+        let mut evaluations = 1;
+        let mut lambda = 1e-3;
+        for _ in 0..100 {
+            if !current.is_finite() || g.amax() <= 1e-15 * (1.0 + current) {
+                break;
+            }
+            let mut accepted = false;
+            for _ in 0..16 {
+                let mut a = h;
+                for k in 0..6 {
+                    a[(k, k)] += lambda * h[(k, k)].max(1e-12);
+                }
+                let Some(step) = a.cholesky().map(|c| -c.solve(&g)) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let saved = (self.reference, self.rotation, self.params);
+                self.apply_step(&step);
+                let (h2, g2, cost) = self.normal_equations();
+                evaluations += 1;
+                if cost < current {
+                    let small = (current - cost) <= 1e-15 * current
+                        || step.norm() <= 1e-15 * (1.0 + self.translation().norm());
+                    (h, g, current) = (h2, g2, cost);
+                    lambda = (lambda * 0.2).max(1e-15);
+                    accepted = !small;
+                    break;
+                }
+                (self.reference, self.rotation, self.params) = saved;
+                lambda *= 10.0;
+            }
+            if !accepted {
+                break;
+            }
+        }
+        evaluations
+    }
+}
+
+#[cfg(test)]
+impl levenberg_marquardt::LeastSquaresProblem<f64, Dyn, nalgebra::U6> for PoseProblem<'_> {
+    type ResidualStorage = nalgebra::Owned<f64, Dyn>;
+    type JacobianStorage = nalgebra::Owned<f64, Dyn, nalgebra::U6>;
+    type ParameterStorage = nalgebra::Owned<f64, nalgebra::U6>;
+
+    fn set_params(&mut self, x: &Vector6<f64>) {
+        PoseProblem::set_params(self, x);
     }
 
     fn params(&self) -> Vector6<f64> {
@@ -279,44 +398,22 @@ impl LeastSquaresProblem<f64, Dyn, U6> for PoseProblem<'_> {
     fn residuals(&self) -> Option<DVector<f64>> {
         let t = self.translation();
         let mut r = DVector::zeros(2 * self.model.len());
-        for (i, (p, o)) in self.model.iter().zip(self.observed).enumerate() {
-            let c = self.rotation * p.coords + t;
-            let e = if c.z > 1e-9 {
-                self.whiten[i] * self.scale.residual(&c, o)
-            } else {
-                // Behind the camera: a large residual makes LM reject the step.
-                Vector2::new(1e6, 1e6)
-            };
-            r[2 * i] = e.x;
-            r[2 * i + 1] = e.y;
+        for i in 0..self.model.len() {
+            r.fixed_rows_mut::<2>(2 * i)
+                .copy_from(&self.residual(i, &t));
         }
         Some(r)
     }
 
-    fn jacobian(&self) -> Option<nalgebra::OMatrix<f64, Dyn, U6>> {
+    fn jacobian(&self) -> Option<nalgebra::OMatrix<f64, Dyn, nalgebra::U6>> {
         let t = self.translation();
         let w: Vector3<f64> = self.params.fixed_rows::<3>(3).into_owned();
         let jl = left_jacobian(&w);
-        let mut jac = nalgebra::OMatrix::<f64, Dyn, U6>::zeros(2 * self.model.len());
-        for (i, p) in self.model.iter().enumerate() {
-            let rp = self.rotation * p.coords;
-            let c = rp + t;
-            if c.z <= 1e-9 {
-                continue;
+        let mut jac = nalgebra::OMatrix::<f64, Dyn, nalgebra::U6>::zeros(2 * self.model.len());
+        for i in 0..self.model.len() {
+            if let Some((_, j)) = self.terms(i, &t, &jl) {
+                jac.fixed_rows_mut::<2>(2 * i).copy_from(&j);
             }
-            let iz = 1.0 / c.z;
-            // d(normalised)/d(c), then through the distortion, then to pixels.
-            let dproj = Matrix2x3::new(iz, 0.0, -c.x * iz * iz, 0.0, iz, -c.y * iz * iz);
-            let ddist = self
-                .scale
-                .distortion
-                .jacobian(Vector2::new(c.x * iz, c.y * iz));
-            let focal = Matrix2::new(self.scale.fx, 0.0, 0.0, self.scale.fy);
-            let d = self.whiten[i] * focal * ddist * dproj;
-            let drot = d * (-rp.cross_matrix() * jl);
-            let mut rows = jac.fixed_rows_mut::<2>(2 * i);
-            rows.fixed_columns_mut::<3>(0).copy_from(&d);
-            rows.fixed_columns_mut::<3>(3).copy_from(&drot);
         }
         Some(jac)
     }
@@ -325,7 +422,7 @@ impl LeastSquaresProblem<f64, Dyn, U6> for PoseProblem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use levenberg_marquardt::differentiate_numerically;
+    use levenberg_marquardt::{LeastSquaresProblem, differentiate_numerically};
 
     #[test]
     fn jacobian_matches_numeric_differentiation() {
