@@ -4,9 +4,9 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::camera::Camera;
 use robots::limits::Limits;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// A pose in a scenario file: `{ translation = [x, y, z], rotation = [rx, ry, rz] }`.
@@ -39,7 +39,10 @@ impl PoseSpec {
 
     /// Whether every number is finite.
     pub fn is_finite(&self) -> bool {
-        self.translation.iter().chain(&self.rotation).all(|v| v.is_finite())
+        self.translation
+            .iter()
+            .chain(&self.rotation)
+            .all(|v| v.is_finite())
     }
 }
 
@@ -137,6 +140,14 @@ pub struct GripperSpec {
     /// Coulomb friction between fingers and parts.
     #[serde(default = "friction")]
     pub friction: f64,
+    /// Distance from the robot flange to the fingertip centre (the TCP) along the tool axis,
+    /// metres; the simulated cell's `flange_T_tcp` (default 0.15 m, a small parallel gripper).
+    #[serde(default = "tcp_offset")]
+    pub tcp_offset: f64,
+}
+
+fn tcp_offset() -> f64 {
+    0.15
 }
 
 fn friction() -> f64 {
@@ -213,4 +224,3 @@ impl Default for NoiseSpec {
         }
     }
 }
-

@@ -1,6 +1,7 @@
 //! Physics, stable poses, part CAD authoring, rendering, datasets and the simulated cell.
 
 pub mod cad;
+pub mod cell;
 pub mod config;
 pub mod convert;
 pub mod dataset;

@@ -1,0 +1,219 @@
+//! The contact simulation: rapier at millimetre scale pushes the held part's real convex pieces
+//! into the receivers' pieces through a compliant wrist, so chamfers guide it or it jams.
+//!
+//! The wrist is a kinematic body descending along the insertion axis; the part hangs on it by a
+//! six-axis spring (a remote-centre-compliance device with its centre at the part's leading
+//! face): lateral and rotational springs, and an axial spring whose force is capped (the push
+//! force). The moving mass is the compliant platform with the fingers and the part. The world is
+//! in metres with rapier's length unit set to a millimetre, so contact tolerances are microns.
+
+use nalgebra::{Isometry3, Translation3, Vector3};
+use rapier3d_f64::prelude::{
+    ColliderBuilder, GenericJointBuilder, JointAxesMask, JointAxis, MassProperties, MotorModel,
+    PhysicsWorld, RigidBodyBuilder, Vector,
+};
+
+use super::{InsertionResult, Mating, ReceiverPart, classify};
+use crate::cell::geometry::PartGeometry;
+use crate::convert::{isometry_from_pose, pose_from_isometry, vec_from_point};
+
+/// Parameters of the compliant wrist and the simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactSettings {
+    /// Time step, seconds.
+    pub dt: f64,
+    /// Wrist descent speed, m/s.
+    pub speed: f64,
+    /// How far below seated the wrist is commanded, metres (loads the axial spring).
+    pub overtravel: f64,
+    /// Lateral stiffness, N/m.
+    pub lateral_stiffness: f64,
+    /// Rotational stiffness, N·m/rad.
+    pub rotational_stiffness: f64,
+    /// Axial stiffness, N/m.
+    pub axial_stiffness: f64,
+    /// Largest axial push, N.
+    pub max_push: f64,
+    /// Damping ratio of every spring.
+    pub damping_ratio: f64,
+    /// Moving mass (platform, fingers and part), kg.
+    pub mass: f64,
+    /// Moving rotational inertia about each axis, kg·m².
+    pub inertia: f64,
+    /// Clear height above first contact where the part starts, metres.
+    pub standoff: f64,
+    /// Time the part must be still to end the simulation, seconds.
+    pub settle: f64,
+    /// Speed under which the part counts as still, m/s.
+    pub still_speed: f64,
+    /// Longest simulated time, seconds.
+    pub max_time: f64,
+}
+
+impl Default for ContactSettings {
+    fn default() -> Self {
+        Self {
+            dt: 5e-4,
+            speed: 0.025,
+            overtravel: 1e-3,
+            lateral_stiffness: 2_000.0,
+            rotational_stiffness: 1.0,
+            axial_stiffness: 5_000.0,
+            max_push: 5.0,
+            damping_ratio: 1.0,
+            mass: 0.05,
+            inertia: 2e-6,
+            standoff: 2e-4,
+            settle: 0.02,
+            still_speed: 5e-4,
+            max_time: 1.0,
+        }
+    }
+}
+
+/// What the simulation did, next to its result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactRun {
+    /// The scored insertion.
+    pub result: InsertionResult,
+    /// Simulated seconds.
+    pub simulated_time: f64,
+    /// Physics steps taken.
+    pub steps: usize,
+}
+
+/// Simulates an insertion that starts with the held part at `ins_T_part` (insertion frame,
+/// lateral and angular error as given; it is lifted to just clear of the receivers).
+#[allow(non_snake_case)]
+pub fn simulate(
+    mating: &Mating,
+    held: &PartGeometry,
+    receivers: &[ReceiverPart<'_>],
+    ins_T_part: &Isometry3<f64>,
+    settings: &ContactSettings,
+) -> ContactRun {
+    let start = mating.pose_error(ins_T_part);
+    // Start clear of the receivers: the leading face a standoff above the fit's top, lowered by
+    // how far the tilt drops a corner.
+    let corner_drop = mating.width_along(&start.tilt_direction) / 2.0 * start.tilt.sin();
+    let start_height = mating.engagement + settings.standoff + corner_drop.max(0.0);
+    let mut start_pose = *ins_T_part;
+    start_pose.translation.vector.z = start_height;
+
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::ZERO;
+    world.integration_parameters.dt = settings.dt;
+    world.integration_parameters.length_unit = 1e-3;
+
+    let ins_T_d = mating.destination_T_insertion.inverse();
+    let fixed = world.bodies.insert(RigidBodyBuilder::fixed().build());
+    for r in receivers {
+        let pose = ins_T_d * r.destination_T_part;
+        for piece in &r.geometry.pieces.pieces {
+            let pts: Vec<Vector> = piece.iter().map(|p| vec_from_point(&(pose * p))).collect();
+            if let Some(c) = ColliderBuilder::convex_hull(&pts) {
+                world.colliders.insert_with_parent(
+                    c.friction(mating.friction).build(),
+                    fixed,
+                    &mut world.bodies,
+                );
+            }
+        }
+    }
+
+    let s = settings;
+    let part = world.bodies.insert(
+        RigidBodyBuilder::dynamic()
+            .pose(pose_from_isometry(&start_pose))
+            .additional_mass_properties(MassProperties::new(
+                Vector::ZERO,
+                s.mass,
+                Vector::splat(s.inertia),
+            ))
+            .can_sleep(false)
+            .build(),
+    );
+    for piece in &held.pieces.pieces {
+        let pts: Vec<Vector> = piece.iter().map(vec_from_point).collect();
+        if let Some(c) = ColliderBuilder::convex_hull(&pts) {
+            world.colliders.insert_with_parent(
+                c.density(0.0).friction(mating.friction).build(),
+                part,
+                &mut world.bodies,
+            );
+        }
+    }
+    let wrist = world.bodies.insert(
+        RigidBodyBuilder::kinematic_position_based()
+            .pose(pose_from_isometry(&start_pose))
+            .build(),
+    );
+    let centre = pose_from_isometry(&Isometry3::translation(
+        mating.lead_point.x,
+        mating.lead_point.y,
+        mating.lead_point.z,
+    ));
+    let damping = |k: f64, m: f64| 2.0 * s.damping_ratio * (k * m).sqrt();
+    let mut joint = GenericJointBuilder::new(JointAxesMask::empty())
+        .local_frame1(centre)
+        .local_frame2(centre);
+    for (axis, k, m) in [
+        (JointAxis::LinX, s.lateral_stiffness, s.mass),
+        (JointAxis::LinY, s.lateral_stiffness, s.mass),
+        (JointAxis::LinZ, s.axial_stiffness, s.mass),
+        (JointAxis::AngX, s.rotational_stiffness, s.inertia),
+        (JointAxis::AngY, s.rotational_stiffness, s.inertia),
+        (JointAxis::AngZ, s.rotational_stiffness, s.inertia),
+    ] {
+        joint = joint
+            .motor_model(axis, MotorModel::ForceBased)
+            .motor_position(axis, 0.0, k, damping(k, m));
+    }
+    joint = joint.motor_max_force(JointAxis::LinZ, s.max_push);
+    world
+        .impulse_joints
+        .insert(wrist, part, joint.build(), true);
+
+    let end_height = -s.overtravel;
+    let mut t = 0.0;
+    let mut still = 0.0;
+    let mut steps = 0;
+    while t < s.max_time {
+        t += s.dt;
+        steps += 1;
+        let z = (start_height - s.speed * t).max(end_height);
+        let mut wrist_pose = start_pose;
+        wrist_pose.translation = Translation3::from(Vector3::new(
+            start_pose.translation.x,
+            start_pose.translation.y,
+            z,
+        ));
+        world.bodies[wrist].set_next_kinematic_position(pose_from_isometry(&wrist_pose));
+        world.step();
+        let rb = &world.bodies[part];
+        let moving = rb.linvel().length() > s.still_speed
+            || rb.angvel().length() * mating.half_width.max() > s.still_speed;
+        still = if z <= end_height && !moving {
+            still + s.dt
+        } else {
+            0.0
+        };
+        if still >= s.settle {
+            break;
+        }
+    }
+    let end_pose = isometry_from_pose(world.bodies[part].position());
+    let end = mating.pose_error(&end_pose);
+    let (verdict, cause) = classify(mating, &start, &end);
+    ContactRun {
+        result: InsertionResult {
+            verdict,
+            cause,
+            start,
+            end,
+            ins_T_part: end_pose,
+        },
+        simulated_time: t,
+        steps,
+    }
+}

@@ -1,0 +1,197 @@
+//! The geometry of one assembly step that both scorers use.
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector2, Vector3};
+
+use super::{PoseError, tilt_of, twist_about_z};
+use crate::cell::geometry::{PartGeometry, destination_T_insertion};
+use crate::config::{AssemblyStep, Tolerances};
+
+/// Coulomb friction between metal and plastic part surfaces (used by both scorers).
+pub const PART_FRICTION: f64 = 0.3;
+
+/// A part already in place that the held part mates with.
+#[derive(Debug, Clone, Copy)]
+#[allow(non_snake_case)]
+pub struct ReceiverPart<'a> {
+    /// Its shapes.
+    pub geometry: &'a PartGeometry,
+    /// Its true pose in the step's destination frame.
+    pub destination_T_part: Isometry3<f64>,
+}
+
+/// The mating geometry of one step, derived from the real meshes.
+#[derive(Debug, Clone)]
+#[allow(non_snake_case)]
+pub struct Mating {
+    /// Name of the held part.
+    pub part: String,
+    /// Total clearance across the mating features, metres.
+    pub clearance: f64,
+    /// Lead-in chamfer size, metres.
+    pub lead_in: f64,
+    /// What counts as seated.
+    pub tolerances: Tolerances,
+    /// Depth over which the held part engages the destination when seated, metres.
+    pub engagement: f64,
+    /// Half-widths (x, y) of the mating fit in the insertion frame, metres.
+    pub half_width: Vector2<f64>,
+    /// The held part's leading point (centre of its leading face), part frame.
+    pub lead_point: Point3<f64>,
+    /// Rotation of the seated part in the insertion frame.
+    pub ins_R_seat: UnitQuaternion<f64>,
+    /// The insertion frame in the destination frame.
+    pub destination_T_insertion: Isometry3<f64>,
+    /// Friction between the parts.
+    pub friction: f64,
+}
+
+impl Mating {
+    /// The mating of `held` into `receivers` (the first is the destination itself).
+    pub fn new(step: &AssemblyStep, held: &PartGeometry, receivers: &[ReceiverPart<'_>]) -> Self {
+        let d_T_ins = destination_T_insertion(step);
+        let ins_T_d = d_T_ins.inverse();
+        let ins_R_seat = (ins_T_d * step.target.isometry()).rotation;
+        let axis_in_part = ins_R_seat.inverse() * -Vector3::z();
+        let (_, lead) = held.extent_along(&axis_in_part);
+        let lead_point = Point3::from(axis_in_part * lead);
+        let seated: Vec<Point3<f64>> = held.mesh.vertices.iter().map(|p| ins_R_seat * p).collect();
+        let bottom = seated.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+        let top_of = |r: &ReceiverPart<'_>| {
+            let t = ins_T_d * r.destination_T_part;
+            r.geometry
+                .mesh
+                .vertices
+                .iter()
+                .map(|p| (t * p).z)
+                .fold(f64::NEG_INFINITY, f64::max)
+        };
+        let engagement = receivers
+            .first()
+            .map_or(0.0, |r| (top_of(r) - bottom).max(0.0));
+        let band = |z: f64| z < bottom + engagement - 1e-7;
+        let footprint = |pts: &mut dyn Iterator<Item = Point3<f64>>| {
+            pts.filter(|p| band(p.z))
+                .fold(Vector2::zeros(), |m: Vector2<f64>, p| {
+                    Vector2::new(m.x.max(p.x.abs()), m.y.max(p.y.abs()))
+                })
+        };
+        let held_fp = footprint(&mut seated.iter().copied());
+        let half_width = match receivers.first() {
+            Some(r) => {
+                let t = ins_T_d * r.destination_T_part;
+                let recv_fp = footprint(&mut r.geometry.mesh.vertices.iter().map(|p| t * p));
+                Vector2::new(held_fp.x.min(recv_fp.x), held_fp.y.min(recv_fp.y))
+            }
+            None => held_fp,
+        };
+        Self {
+            part: step.part.clone(),
+            clearance: step.clearance,
+            lead_in: step.lead_in,
+            tolerances: step.tolerances,
+            engagement,
+            half_width,
+            lead_point,
+            ins_R_seat,
+            destination_T_insertion: d_T_ins,
+            friction: PART_FRICTION,
+        }
+    }
+
+    /// Capture half-width: clearance/2 + lead-in.
+    pub fn capture(&self) -> f64 {
+        self.clearance / 2.0 + self.lead_in
+    }
+
+    /// How far the leading face reaches laterally on its worst axis, the yaw's corner swing
+    /// included.
+    pub fn capture_reach(&self, e: &PoseError) -> f64 {
+        let s = e.yaw.sin().abs();
+        (e.lateral.x.abs() + s * self.half_width.y).max(e.lateral.y.abs() + s * self.half_width.x)
+    }
+
+    /// Mating width along a horizontal direction (the tilt's), metres.
+    pub fn width_along(&self, dir: &Vector2<f64>) -> f64 {
+        if dir.norm() < 1e-12 {
+            return 2.0 * self.half_width.x.min(self.half_width.y);
+        }
+        2.0 * (dir.x.abs() * self.half_width.x + dir.y.abs() * self.half_width.y)
+    }
+
+    /// Largest tilt (toward `dir`) at which a rigidly held part still passes the whole engagement
+    /// depth: the two-point condition `w cos θ + D tan θ = w + c`.
+    pub fn jam_angle(&self, dir: &Vector2<f64>) -> f64 {
+        let w = self.width_along(dir);
+        let (d, c) = (self.engagement, self.clearance);
+        let f = |t: f64| w * t.cos() + d * t.tan() - w - c;
+        bisect(f, 0.0, 1.2)
+    }
+
+    /// Largest yaw about the insertion axis whose footprint still fits the clearance.
+    pub fn yaw_limit(&self) -> f64 {
+        let (a, b, h) = (self.half_width.x, self.half_width.y, self.clearance / 2.0);
+        let f = |t: f64| (a * t.cos() + b * t.sin() - a - h).max(b * t.cos() + a * t.sin() - b - h);
+        bisect(f, 0.0, 0.7)
+    }
+
+    /// The pose error of a part pose given in the insertion frame.
+    #[allow(non_snake_case)]
+    pub fn pose_error(&self, ins_T_part: &Isometry3<f64>) -> PoseError {
+        let r = ins_T_part.rotation * self.ins_R_seat.inverse();
+        let (tilt, tilt_direction) = tilt_of(&r);
+        let lead = ins_T_part * self.lead_point;
+        let lead0 = self.ins_R_seat * self.lead_point;
+        PoseError {
+            lateral: Vector2::new(lead.x - lead0.x, lead.y - lead0.y),
+            height: ins_T_part.translation.z,
+            tilt,
+            tilt_direction,
+            yaw: twist_about_z(&r),
+        }
+    }
+
+    /// The part pose in the insertion frame with a given error (the inverse of [`Self::pose_error`]
+    /// for lateral, height, yaw and tilt about a horizontal axis).
+    pub fn pose_with_error(
+        &self,
+        lateral: Vector2<f64>,
+        height: f64,
+        yaw: f64,
+        tilt: f64,
+        tilt_direction: Vector2<f64>,
+    ) -> Isometry3<f64> {
+        let axis = Vector3::new(-tilt_direction.y, tilt_direction.x, 0.0);
+        let tilt_r = match nalgebra::Unit::try_new(axis, 1e-12) {
+            Some(a) => UnitQuaternion::from_axis_angle(&a, tilt),
+            None => UnitQuaternion::identity(),
+        };
+        let r = tilt_r * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw) * self.ins_R_seat;
+        let lead0 = self.ins_R_seat * self.lead_point;
+        let lead_now = r * self.lead_point;
+        let t = Vector3::new(
+            lateral.x + lead0.x - lead_now.x,
+            lateral.y + lead0.y - lead_now.y,
+            height,
+        );
+        Isometry3::from_parts(t.into(), r)
+    }
+}
+
+/// Root of an increasing function on [lo, hi] by bisection (hi when it never crosses zero).
+fn bisect(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+    if f(hi) <= 0.0 {
+        return hi;
+    }
+    if f(lo) > 0.0 {
+        return lo;
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if f(mid) > 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}

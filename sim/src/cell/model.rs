@@ -1,0 +1,148 @@
+//! What stays the same across episodes of a scenario: specs, shapes, kinematics, home pose.
+
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use perception::part::Catalog;
+use robots::kinematics::{Joints, UrKinematics};
+
+use super::error::CellError;
+use super::feasible::check_feasible;
+use super::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
+use super::insertion::Scorer;
+use super::insertion::contact::ContactSettings;
+use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec, Placement};
+use crate::scene::PartModel;
+
+/// Height of the home TCP above the feeder centre, metres.
+const HOME_HEIGHT: f64 = 0.15;
+/// A UR5e elbow-up, wrist-down configuration used to pick the home IK branch.
+const HOME_REFERENCE: Joints = [
+    -std::f64::consts::FRAC_PI_2,
+    -std::f64::consts::FRAC_PI_2,
+    std::f64::consts::FRAC_PI_2,
+    -std::f64::consts::FRAC_PI_2,
+    -std::f64::consts::FRAC_PI_2,
+    0.0,
+];
+
+/// The fixed part of a simulated cell, shared (behind an `Arc`) by every episode.
+#[derive(Debug)]
+pub struct CellModel {
+    /// The cell as the scenario describes it.
+    pub spec: CellSpec,
+    /// The assembly steps in order.
+    pub steps: Vec<AssemblyStep>,
+    /// The error sources.
+    pub noise: NoiseSpec,
+    /// Which scorer decides insertions.
+    pub scorer: Scorer,
+    /// Contact-simulation settings (used when `scorer` is [`Scorer::Contact`]).
+    pub contact: ContactSettings,
+    /// Frames and part shapes.
+    pub geometry: CellGeometry,
+    /// UR5e kinematics with the gripper's TCP.
+    pub kinematics: UrKinematics,
+    /// Joints at the start of every episode: TCP pointing down above the feeder.
+    pub home: Joints,
+    /// Render/physics models for dropped placement (empty for sampled placement).
+    pub drop_models: Vec<PartModel>,
+}
+
+impl CellModel {
+    /// Checks the scenario and builds the shared model.
+    pub fn new(
+        spec: &CellSpec,
+        steps: &[AssemblyStep],
+        noise: &NoiseSpec,
+        catalog: &Catalog,
+        scorer: Scorer,
+    ) -> Result<Arc<Self>, CellError> {
+        let problems = check_feasible(spec, steps, noise, catalog);
+        if !problems.is_empty() {
+            return Err(CellError::Infeasible(problems));
+        }
+        let geometry = CellGeometry::new(spec, steps, catalog)?;
+        let kinematics = UrKinematics::ur5e().with_tcp(Isometry3::translation(
+            0.0,
+            0.0,
+            spec.gripper.tcp_offset,
+        ));
+        let [cx, cy] = spec.feeder.center;
+        let home_tcp = geometry.base_T_table
+            * Isometry3::from_parts(
+                Translation3::new(cx, cy, HOME_HEIGHT),
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+            );
+        let home = kinematics
+            .inverse_nearest(&home_tcp, &HOME_REFERENCE)
+            .map_err(|e| CellError::Home(e.to_string()))?
+            .joints;
+        let drop_models = if spec.feeder.placement == Placement::Dropped {
+            let names: Vec<String> = spec.feeder.parts.keys().cloned().collect();
+            PartModel::from_catalog(catalog, &names).map_err(|e| CellError::Drop(e.to_string()))?
+        } else {
+            Vec::new()
+        };
+        Ok(Arc::new(Self {
+            spec: spec.clone(),
+            steps: steps.to_vec(),
+            noise: noise.clone(),
+            scorer,
+            contact: ContactSettings::default(),
+            geometry,
+            kinematics,
+            home,
+            drop_models,
+        }))
+    }
+
+    /// The shapes of a part.
+    pub fn part(&self, name: &str) -> Result<&PartGeometry, CellError> {
+        self.geometry.part(name)
+    }
+
+    /// The nominal seated pose of step `step`'s part in the base frame, with every earlier part
+    /// seated exactly (what a planner knows before anything is measured).
+    pub fn nominal_target(&self, step: usize) -> Option<Isometry3<f64>> {
+        let s = self.steps.get(step)?;
+        let dest = match &s.into {
+            Destination::Fixture => self.geometry.base_T_fixture,
+            Destination::Part(name) => {
+                let earlier = self.steps[..step].iter().rposition(|e| &e.part == name)?;
+                self.nominal_target(earlier)?
+            }
+        };
+        Some(dest * s.target.isometry())
+    }
+
+    /// The insertion frame of step `step` for a destination at `base_T_destination`.
+    pub fn insertion_frame(
+        &self,
+        step: usize,
+        base_T_destination: &Isometry3<f64>,
+    ) -> Option<Isometry3<f64>> {
+        Some(base_T_destination * destination_T_insertion(self.steps.get(step)?))
+    }
+
+    /// A top-down TCP pose that grasps a part lying at `base_T_part` with the catalog grasp of its
+    /// stable pose: TCP over the part centre at the grip height, z down, closing (TCP y) along
+    /// the part's closing axis. `None` when the part's pose has no grasp.
+    pub fn grasp_tcp(&self, part: &str, base_T_part: &Isometry3<f64>) -> Option<Isometry3<f64>> {
+        let g = self.geometry.parts.get(part)?;
+        let table_T_part = self.geometry.base_T_table.inverse() * base_T_part;
+        let pose = g.stable_pose_of(&table_T_part)?;
+        let grasp = g.grasps.iter().find(|gr| gr.stable_pose == pose.name)?;
+        let closing = table_T_part.rotation * Vector3::from(grasp.closing_axis);
+        let y = Vector3::new(closing.x, closing.y, 0.0).try_normalize(1e-9)?;
+        let z = -Vector3::z();
+        let x = y.cross(&z);
+        let r = nalgebra::Rotation3::from_basis_unchecked(&[x, y, z]);
+        let t = table_T_part.translation.vector;
+        let table_T_tcp = Isometry3::from_parts(
+            Translation3::new(t.x, t.y, grasp.grip_height),
+            UnitQuaternion::from_rotation_matrix(&r),
+        );
+        Some(self.geometry.base_T_table * table_T_tcp)
+    }
+}

@@ -1,0 +1,755 @@
+//! `SimCell`: one episode of the simulated cell, driven through `robots::Robot` and a small
+//! sim-only API (see the module documentation of `sim::cell`).
+
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Point2, Point3, Translation3, Vector2, Vector3};
+use robots::kinematics::Joints;
+use robots::limits::Limits;
+use robots::robot::{
+    JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode, RobotStatus, SafetyStatus,
+};
+use serde::{Deserialize, Serialize};
+
+use super::error::CellError;
+use super::feeder::{self, FeederPart};
+use super::gripper::{self, ACTUATION_TIME, Grasp, GraspCandidate, GraspFailure};
+use super::insertion::{
+    InsertionCause, InsertionResult, Mating, ReceiverPart, Scorer, Verdict, analytic, contact,
+};
+use super::model::CellModel;
+use super::motion::{move_j_time, move_l_time};
+use super::noise::{EpisodeStreams, ErrorBudget, ErrorSource, gauss3, true_camera_pose};
+use crate::config::{Destination, Placement};
+
+/// Samples along a motion's path checked for reachability and table clearance.
+const PATH_SAMPLES: usize = 12;
+/// How far laterally from a target a held part may come down and still count as inserting
+/// (beyond it, it comes down beside the receiver), metres.
+const INSERTION_REACH: f64 = 0.01;
+
+/// A part the camera sees in the feeder, from the TRUE camera pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[allow(non_snake_case)]
+pub struct CameraPart {
+    /// Instance id.
+    pub instance: u32,
+    /// Catalog name.
+    pub part: String,
+    /// True pose of the part in the true camera frame.
+    pub camera_T_part: Isometry3<f64>,
+    /// Where its origin projects in the image, pixels.
+    pub pixel: Point2<f64>,
+}
+
+/// The part in the gripper.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[allow(non_snake_case)]
+pub struct HeldPart {
+    /// Instance id.
+    pub instance: u32,
+    /// Catalog name.
+    pub part: String,
+    /// True pose of the part in the TCP frame.
+    pub tcp_T_part: Isometry3<f64>,
+}
+
+/// A part placed by an insertion (whatever its verdict).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[allow(non_snake_case)]
+pub struct PlacedPart {
+    /// Instance id.
+    pub instance: u32,
+    /// Catalog name.
+    pub part: String,
+    /// Assembly step index.
+    pub step: usize,
+    /// True pose in the base frame.
+    pub base_T_part: Isometry3<f64>,
+    /// Its insertion's verdict.
+    pub verdict: Verdict,
+}
+
+/// The outcome of the last release: an insertion's verdict, cause, true pose errors and the
+/// attribution of its start error to the named error sources.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReleaseReport {
+    /// Assembly step index (`None` when released away from every target).
+    pub step: Option<usize>,
+    /// Instance released.
+    pub instance: u32,
+    /// Its name.
+    pub part: String,
+    /// Seated, jammed or missed.
+    pub verdict: Verdict,
+    /// Why.
+    pub cause: InsertionCause,
+    /// The scorer's full result (absent when released away from every target).
+    pub insertion: Option<InsertionResult>,
+    /// The start lateral error split by error source.
+    pub budget: Option<ErrorBudget>,
+}
+
+/// What a grasp carried in from its error sources, in the TCP frame at the grasp.
+#[derive(Debug, Clone, PartialEq)]
+struct GraspErrors {
+    repeatability: Vector3<f64>,
+    calibration: Vector3<f64>,
+    residual: Vector3<f64>,
+}
+
+#[derive(Debug, Clone)]
+struct Held {
+    part: HeldPart,
+    errors: GraspErrors,
+    /// Set once a motion pushed the part into a target: (step, result, true final base pose).
+    inserted: Option<(usize, InsertionResult, Isometry3<f64>, ErrorBudget)>,
+}
+
+/// One episode of the simulated cell.
+#[derive(Debug, Clone)]
+pub struct SimCell {
+    model: Arc<CellModel>,
+    seed: u64,
+    episode: u64,
+    streams: EpisodeStreams,
+    base_T_camera: Isometry3<f64>,
+    q: Joints,
+    /// Repeatability offset of the true TCP from the commanded one (base frame).
+    tcp_error: Vector3<f64>,
+    gripper_open: bool,
+    feeder: Vec<FeederPart>,
+    held: Option<Held>,
+    placed: Vec<PlacedPart>,
+    next_instance: u32,
+    clock: f64,
+    safety: SafetyStatus,
+    last_grasp: Option<Result<Grasp, GraspFailure>>,
+    last_release: Option<ReleaseReport>,
+    shakes: u32,
+}
+
+#[allow(non_snake_case)]
+impl SimCell {
+    /// Episode `episode` of a run seeded with `seed`: the same triple gives the same world and
+    /// outcomes, and any episode can be replayed alone.
+    pub fn new(model: Arc<CellModel>, seed: u64, episode: u64) -> Result<Self, CellError> {
+        let mut streams = EpisodeStreams::new(seed, episode);
+        let base_T_camera = true_camera_pose(
+            &model.geometry.base_T_camera_nominal,
+            &model.noise,
+            &mut streams.calibration,
+        );
+        let mut cell = Self {
+            q: model.home,
+            model,
+            seed,
+            episode,
+            streams,
+            base_T_camera,
+            tcp_error: Vector3::zeros(),
+            gripper_open: true,
+            feeder: Vec::new(),
+            held: None,
+            placed: Vec::new(),
+            next_instance: 1,
+            clock: 0.0,
+            safety: SafetyStatus::Normal,
+            last_grasp: None,
+            last_release: None,
+            shakes: 0,
+        };
+        cell.refill()?;
+        Ok(cell)
+    }
+
+    /// The shared model (specs, shapes, kinematics, nominal targets, grasp poses).
+    pub fn model(&self) -> &Arc<CellModel> {
+        &self.model
+    }
+
+    /// (seed, episode) of this episode.
+    pub fn episode(&self) -> (u64, u64) {
+        (self.seed, self.episode)
+    }
+
+    /// Simulated time since the episode started, seconds (motions, gripper actuation).
+    pub fn clock(&self) -> f64 {
+        self.clock
+    }
+
+    /// The calibrated (nominal) camera pose the orchestrator knows.
+    pub fn base_T_camera_nominal(&self) -> Isometry3<f64> {
+        self.model.geometry.base_T_camera_nominal
+    }
+
+    /// The true camera pose (diagnostics only: a real cell does not know it).
+    pub fn base_T_camera_true(&self) -> Isometry3<f64> {
+        self.base_T_camera
+    }
+
+    /// What the camera sees: every feeder part whose origin projects into the image, with its
+    /// true pose in the TRUE camera frame.
+    pub fn camera_view(&self) -> Vec<CameraPart> {
+        let cam = &self.model.spec.camera.intrinsics;
+        let camera_T_base = self.base_T_camera.inverse();
+        self.feeder
+            .iter()
+            .filter_map(|p| {
+                let camera_T_part =
+                    camera_T_base * self.model.geometry.base_T_table * p.table_T_part;
+                let pixel = cam
+                    .project(&Point3::from(camera_T_part.translation.vector))
+                    .ok()?;
+                cam.contains(pixel).then(|| CameraPart {
+                    instance: p.instance,
+                    part: p.part.clone(),
+                    camera_T_part,
+                    pixel,
+                })
+            })
+            .collect()
+    }
+
+    /// True poses of the parts in the feeder, table frame (diagnostics and perception-free runs).
+    pub fn feeder_parts(&self) -> &[FeederPart] {
+        &self.feeder
+    }
+
+    /// The part in the gripper and its true pose in the TCP frame.
+    pub fn held(&self) -> Option<&HeldPart> {
+        self.held.as_ref().map(|h| &h.part)
+    }
+
+    /// The outcome of the last `close_gripper`: the grasp, or why it failed.
+    pub fn last_grasp(&self) -> Option<&Result<Grasp, GraspFailure>> {
+        self.last_grasp.as_ref()
+    }
+
+    /// The outcome of the last release with a part in the gripper.
+    pub fn last_release(&self) -> Option<&ReleaseReport> {
+        self.last_release.as_ref()
+    }
+
+    /// Parts placed by insertions so far.
+    pub fn placed(&self) -> &[PlacedPart] {
+        &self.placed
+    }
+
+    /// Shakes done so far this episode.
+    pub fn shakes(&self) -> u32 {
+        self.shakes
+    }
+
+    /// The true base-frame pose where step `step`'s part goes, as the world now is: on the
+    /// fixture, or relative to the true pose of the part placed by the earlier step.
+    pub fn target(&self, step: usize) -> Option<Isometry3<f64>> {
+        let s = self.model.steps.get(step)?;
+        Some(self.destination(&s.into)? * s.target.isometry())
+    }
+
+    /// The true pose of the TCP (the commanded pose off by the robot's repeatability).
+    pub fn true_tcp(&self) -> Isometry3<f64> {
+        Translation3::from(self.tcp_error) * self.model.kinematics.forward_tcp(&self.q)
+    }
+
+    /// Clears a protective stop (like the dashboard's `unlock protective stop`).
+    pub fn unlock_protective_stop(&mut self) {
+        self.safety = SafetyStatus::Normal;
+    }
+
+    /// Shakes the feeder: every part in it is re-placed (re-sampled or re-dropped).
+    pub fn shake(&mut self) -> Result<(), CellError> {
+        let wanted: Vec<(String, u32)> = self
+            .feeder
+            .iter()
+            .map(|p| (p.part.clone(), p.instance))
+            .collect();
+        self.feeder = self.place(&wanted, &[])?;
+        self.shakes += 1;
+        Ok(())
+    }
+
+    /// Refills the feeder up to the scenario's count of each part (new instance ids).
+    pub fn refill(&mut self) -> Result<(), CellError> {
+        let mut wanted = Vec::new();
+        for (name, &count) in &self.model.spec.feeder.parts {
+            let have = self.feeder.iter().filter(|p| &p.part == name).count() as u32;
+            for _ in have..count {
+                wanted.push((name.clone(), self.next_instance));
+                self.next_instance += 1;
+            }
+        }
+        if wanted.is_empty() {
+            return Ok(());
+        }
+        let keep = self.feeder.clone();
+        let added = match self.model.spec.feeder.placement {
+            Placement::Sampled => self.place(&wanted, &keep)?,
+            // A drop re-settles everything in the feeder together.
+            Placement::Dropped => {
+                let mut all: Vec<(String, u32)> =
+                    keep.iter().map(|p| (p.part.clone(), p.instance)).collect();
+                all.extend(wanted);
+                self.feeder.clear();
+                self.place(&all, &[])?
+            }
+        };
+        self.feeder.extend(added);
+        Ok(())
+    }
+
+    fn place(
+        &mut self,
+        wanted: &[(String, u32)],
+        keep: &[FeederPart],
+    ) -> Result<Vec<FeederPart>, CellError> {
+        let spec = &self.model.spec.feeder;
+        match spec.placement {
+            Placement::Sampled => feeder::sample(
+                spec,
+                &self.model.geometry,
+                wanted,
+                keep,
+                &mut self.streams.feeder,
+            ),
+            Placement::Dropped => feeder::drop(
+                spec,
+                &self.model.drop_models,
+                wanted,
+                &mut self.streams.feeder,
+            ),
+        }
+    }
+
+    fn destination(&self, into: &Destination) -> Option<Isometry3<f64>> {
+        match into {
+            Destination::Fixture => Some(self.model.geometry.base_T_fixture),
+            Destination::Part(name) => self
+                .placed
+                .iter()
+                .rev()
+                .find(|p| &p.part == name)
+                .map(|p| p.base_T_part),
+        }
+    }
+
+    fn check_motion_allowed(&self) -> Result<(), RobotError> {
+        match self.safety.motion_error() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Lowest point (table frame z) of the fingertips and the held part at a TCP pose.
+    fn lowest_z(&self, base_T_tcp: &Isometry3<f64>) -> f64 {
+        let table_T_base = self.model.geometry.base_T_table.inverse();
+        let tip = (table_T_base * base_T_tcp).translation.z;
+        let part = self.held.as_ref().and_then(|h| {
+            let g = self.model.geometry.parts.get(&h.part.part)?;
+            let t = table_T_base * base_T_tcp * h.part.tcp_T_part;
+            Some(
+                g.mesh
+                    .vertices
+                    .iter()
+                    .map(|p| (t * p).z)
+                    .fold(f64::INFINITY, f64::min),
+            )
+        });
+        part.map_or(tip, |p| p.min(tip))
+    }
+
+    /// Protective stop when a pose on the path puts the fingertips or the held part into the
+    /// table, unless the held part is coming down into its target.
+    fn check_clearance(&mut self, poses: &[Isometry3<f64>]) -> Result<(), RobotError> {
+        for pose in poses {
+            if self.lowest_z(pose) < 0.0 && self.insertion_at(pose).is_none() {
+                self.safety = SafetyStatus::ProtectiveStop;
+                return Err(RobotError::ProtectiveStop);
+            }
+        }
+        Ok(())
+    }
+
+    /// The step and insertion frame when the held part at TCP pose `base_T_tcp` is coming down
+    /// into its target: below the receiver's top and within reach of the target laterally.
+    fn insertion_at(&self, base_T_tcp: &Isometry3<f64>) -> Option<(usize, Isometry3<f64>, Mating)> {
+        let held = self.held.as_ref()?;
+        let step = self.pending_step(&held.part.part)?;
+        let s = &self.model.steps[step];
+        let base_T_dest = self.destination(&s.into)?;
+        let base_T_ins = self.model.insertion_frame(step, &base_T_dest)?;
+        let mating = self.mating(step, &base_T_dest)?;
+        let ins_T_part = base_T_ins.inverse() * base_T_tcp * held.part.tcp_T_part;
+        let e = mating.pose_error(&ins_T_part);
+        (e.height < mating.engagement && e.lateral.norm() < INSERTION_REACH)
+            .then_some((step, base_T_ins, mating))
+    }
+
+    fn pending_step(&self, part: &str) -> Option<usize> {
+        self.model.steps.iter().enumerate().position(|(i, s)| {
+            s.part == part
+                && !self
+                    .placed
+                    .iter()
+                    .any(|p| p.step == i && p.verdict == Verdict::Seated)
+        })
+    }
+
+    fn receivers(
+        &self,
+        step: usize,
+        base_T_dest: &Isometry3<f64>,
+    ) -> Option<Vec<ReceiverPart<'_>>> {
+        let s = &self.model.steps[step];
+        let geo = &self.model.geometry;
+        let dest_T_base = base_T_dest.inverse();
+        let mut out = Vec::new();
+        match &s.into {
+            Destination::Fixture => out.push(ReceiverPart {
+                geometry: geo.parts.get(&geo.fixture_part)?,
+                destination_T_part: Isometry3::identity(),
+            }),
+            Destination::Part(name) => {
+                out.push(ReceiverPart {
+                    geometry: geo.parts.get(name)?,
+                    destination_T_part: Isometry3::identity(),
+                });
+                out.push(ReceiverPart {
+                    geometry: geo.parts.get(&geo.fixture_part)?,
+                    destination_T_part: dest_T_base * geo.base_T_fixture,
+                });
+                for p in &self.placed {
+                    if &p.part != name {
+                        out.push(ReceiverPart {
+                            geometry: geo.parts.get(&p.part)?,
+                            destination_T_part: dest_T_base * p.base_T_part,
+                        });
+                    }
+                }
+            }
+        }
+        Some(out)
+    }
+
+    fn mating(&self, step: usize, base_T_dest: &Isometry3<f64>) -> Option<Mating> {
+        let s = &self.model.steps[step];
+        let held = self.model.geometry.parts.get(&s.part)?;
+        let receivers = self.receivers(step, base_T_dest)?;
+        Some(Mating::new(s, held, &receivers[..1]))
+    }
+
+    /// After a motion: if the held part came down into its target, score the insertion.
+    fn settle_insertion(&mut self) {
+        let tcp = self.true_tcp();
+        let Some((step, base_T_ins, mating)) = self.insertion_at(&tcp) else {
+            return;
+        };
+        let Some(held) = self.held.as_ref() else {
+            return;
+        };
+        let ins_T_part = base_T_ins.inverse() * tcp * held.part.tcp_T_part;
+        let result = match self.model.scorer {
+            Scorer::Analytic => analytic::score(&mating, &ins_T_part),
+            Scorer::Contact => {
+                let s = &self.model.steps[step];
+                let base_T_dest = self
+                    .destination(&s.into)
+                    .unwrap_or(self.model.geometry.base_T_fixture);
+                let (Some(geom), Some(receivers)) = (
+                    self.model.geometry.parts.get(&s.part),
+                    self.receivers(step, &base_T_dest),
+                ) else {
+                    return;
+                };
+                let run =
+                    contact::simulate(&mating, geom, &receivers, &ins_T_part, &self.model.contact);
+                self.clock += run.simulated_time;
+                run.result
+            }
+        };
+        let budget = self.budget(&base_T_ins, &tcp, &result);
+        let base_T_part = base_T_ins * result.ins_T_part;
+        if let Some(h) = self.held.as_mut() {
+            h.part.tcp_T_part = tcp.inverse() * base_T_part;
+            h.inserted = Some((step, result, base_T_part, budget));
+        }
+    }
+
+    /// Splits the start lateral error into the named sources.
+    fn budget(
+        &self,
+        base_T_ins: &Isometry3<f64>,
+        base_T_tcp: &Isometry3<f64>,
+        result: &InsertionResult,
+    ) -> ErrorBudget {
+        let ins_R_base = base_T_ins.rotation.inverse();
+        let to_ins = |v_tcp: &Vector3<f64>| {
+            let v = ins_R_base * (base_T_tcp.rotation * v_tcp);
+            Vector2::new(v.x, v.y)
+        };
+        let now = ins_R_base * self.tcp_error;
+        let mut named = vec![(ErrorSource::RobotRepeatability, Vector2::new(now.x, now.y))];
+        if let Some(h) = &self.held {
+            named[0].1 += to_ins(&h.errors.repeatability);
+            named.push((
+                ErrorSource::CameraCalibration,
+                to_ins(&h.errors.calibration),
+            ));
+            named.push((ErrorSource::GraspResidual, to_ins(&h.errors.residual)));
+        }
+        ErrorBudget::new(named, result.start.lateral)
+    }
+
+    /// Runs a joint move now (the `Robot::move_j` body).
+    pub fn move_j_sync(&mut self, target: Joints, motion: JointMotion) -> Result<(), RobotError> {
+        self.check_motion_allowed()?;
+        let limits = &self.model.spec.limits;
+        limits.check_move_j(
+            &self.model.kinematics,
+            &self.q,
+            &target,
+            &motion,
+            PATH_SAMPLES,
+        )?;
+        let poses: Vec<Isometry3<f64>> = (1..=PATH_SAMPLES)
+            .map(|k| {
+                let s = k as f64 / PATH_SAMPLES as f64;
+                let q: Joints = std::array::from_fn(|i| self.q[i] + s * (target[i] - self.q[i]));
+                self.model.kinematics.forward_tcp(&q)
+            })
+            .collect();
+        self.begin_motion();
+        self.check_clearance(&poses)?;
+        self.clock += move_j_time(&self.q, &target, &motion, &self.model.spec.limits);
+        self.q = target;
+        self.end_motion();
+        Ok(())
+    }
+
+    /// Runs a straight-line TCP move now (the `Robot::move_l` body).
+    pub fn move_l_sync(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+    ) -> Result<(), RobotError> {
+        self.check_motion_allowed()?;
+        self.model.spec.limits.check_move_l(&base_T_tcp, &motion)?;
+        let start = self.model.kinematics.forward_tcp(&self.q);
+        let mut q = self.q;
+        let mut poses = Vec::with_capacity(PATH_SAMPLES);
+        for k in 1..=PATH_SAMPLES {
+            let pose = start.lerp_slerp(&base_T_tcp, k as f64 / PATH_SAMPLES as f64);
+            q = self.model.kinematics.inverse_nearest(&pose, &q)?.joints;
+            poses.push(pose);
+        }
+        self.begin_motion();
+        self.check_clearance(&poses)?;
+        self.clock += move_l_time(&start, &base_T_tcp, &motion, &self.model.spec.limits);
+        self.q = q;
+        self.end_motion();
+        Ok(())
+    }
+
+    fn begin_motion(&mut self) {
+        // A part pushed into a target and still held comes back out with the gripper.
+        if let Some(h) = self.held.as_mut() {
+            h.inserted = None;
+        }
+    }
+
+    fn end_motion(&mut self) {
+        self.tcp_error = gauss3(
+            &mut self.streams.robot,
+            self.model.noise.robot_repeatability,
+        );
+        if !self.gripper_open {
+            self.settle_insertion();
+        }
+    }
+
+    /// Opens the gripper now (the `Robot::open_gripper` body); a held part is released where it
+    /// is and the release is reported.
+    pub fn open_gripper_sync(&mut self) {
+        self.clock += ACTUATION_TIME;
+        self.gripper_open = true;
+        let Some(held) = self.held.take() else { return };
+        let report = match held.inserted {
+            Some((step, result, base_T_part, budget)) => {
+                self.placed.push(PlacedPart {
+                    instance: held.part.instance,
+                    part: held.part.part.clone(),
+                    step,
+                    base_T_part,
+                    verdict: result.verdict,
+                });
+                ReleaseReport {
+                    step: Some(step),
+                    instance: held.part.instance,
+                    part: held.part.part,
+                    verdict: result.verdict,
+                    cause: result.cause,
+                    insertion: Some(result),
+                    budget: Some(budget),
+                }
+            }
+            None => ReleaseReport {
+                step: None,
+                instance: held.part.instance,
+                part: held.part.part,
+                verdict: Verdict::Missed,
+                cause: InsertionCause::ReleasedAwayFromTarget,
+                insertion: None,
+                budget: None,
+            },
+        };
+        self.last_release = Some(report);
+    }
+
+    /// Closes the gripper now (the `Robot::close_gripper` body); see [`Self::last_grasp`].
+    pub fn close_gripper_sync(&mut self) {
+        self.clock += ACTUATION_TIME;
+        if !self.gripper_open {
+            return;
+        }
+        self.gripper_open = false;
+        let tcp = self.true_tcp();
+        let geo = &self.model.geometry;
+        let candidates: Vec<GraspCandidate<'_>> = self
+            .feeder
+            .iter()
+            .filter_map(|p| {
+                Some(GraspCandidate {
+                    instance: p.instance,
+                    geometry: geo.parts.get(&p.part)?,
+                    base_T_part: geo.base_T_table * p.table_T_part,
+                })
+            })
+            .collect();
+        let result = gripper::close(
+            &self.model.spec.gripper,
+            &self.model.noise,
+            &tcp,
+            &candidates,
+            &mut self.streams.grasp,
+        );
+        if let Ok(g) = &result
+            && let Some(i) = self.feeder.iter().position(|p| p.instance == g.instance)
+        {
+            let p = self.feeder.remove(i);
+            let base_T_part = geo.base_T_table * p.table_T_part;
+            // Where the orchestrator would have believed the part was with perfect perception
+            // through the calibrated camera, and what that did across the jaws.
+            let seen = self.model.geometry.base_T_camera_nominal
+                * self.base_T_camera.inverse()
+                * Point3::from(base_T_part.translation.vector);
+            let e_cal = seen.coords - base_T_part.translation.vector;
+            let tcp_R_base = tcp.rotation.inverse();
+            let across = |v: Vector3<f64>| {
+                let t = tcp_R_base * v;
+                Vector3::new(t.x, 0.0, 0.0)
+            };
+            let bottom = geo.parts.get(&p.part).map_or(0.0, |pg| pg.aabb.0.z);
+            let lead = g.tcp_T_part.rotation * Vector3::new(0.0, 0.0, bottom);
+            let errors = GraspErrors {
+                repeatability: -across(self.tcp_error),
+                calibration: -across(e_cal),
+                residual: g.residual_offset + g.residual_rotation.cross(&lead),
+            };
+            self.held = Some(Held {
+                part: HeldPart {
+                    instance: p.instance,
+                    part: p.part,
+                    tcp_T_part: g.tcp_T_part,
+                },
+                errors,
+                inserted: None,
+            });
+        }
+        self.last_grasp = Some(result);
+    }
+
+    /// Mode, safety and program state.
+    pub fn status_now(&self) -> RobotStatus {
+        RobotStatus {
+            mode: RobotMode::Running,
+            safety: self.safety,
+            program_running: true,
+        }
+    }
+
+    /// Current joints.
+    pub fn joints_now(&self) -> Joints {
+        self.q
+    }
+
+    /// Current measured TCP pose (the commanded one; repeatability is invisible to encoders).
+    pub fn tcp_pose_now(&self) -> Isometry3<f64> {
+        self.model.kinematics.forward_tcp(&self.q)
+    }
+
+    /// Moves the arm to joints `q` at once without timing or checks (used by the virtual
+    /// controller's arm model, which times the motion itself).
+    pub(crate) fn set_joints_after_motion(&mut self, q: Joints, elapsed: f64) {
+        self.begin_motion();
+        self.q = q;
+        self.clock += elapsed;
+        self.end_motion();
+    }
+
+    /// Sets the gripper from the controller's tool output.
+    pub(crate) fn set_gripper(&mut self, closed: bool) {
+        if closed {
+            self.close_gripper_sync()
+        } else {
+            self.open_gripper_sync()
+        }
+    }
+}
+
+impl Robot for SimCell {
+    fn limits(&self) -> &Limits {
+        &self.model.spec.limits
+    }
+
+    fn joints(&mut self) -> RobotFuture<'_, Joints> {
+        let q = self.q;
+        Box::pin(async move { Ok(q) })
+    }
+
+    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
+        let pose = self.tcp_pose_now();
+        Box::pin(async move { Ok(pose) })
+    }
+
+    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
+        Box::pin(async move { self.move_j_sync(target, motion) })
+    }
+
+    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
+        Box::pin(async move { self.move_l_sync(base_T_tcp, motion) })
+    }
+
+    fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            self.open_gripper_sync();
+            Ok(())
+        })
+    }
+
+    fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            self.close_gripper_sync();
+            Ok(())
+        })
+    }
+
+    fn stop(&mut self) -> RobotFuture<'_, ()> {
+        Box::pin(async move { Ok(()) })
+    }
+
+    fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
+        let s = self.status_now();
+        Box::pin(async move { Ok(s) })
+    }
+}
