@@ -281,13 +281,7 @@ fn setup_json(config: &AblationConfig, parts: &[AblationPart]) -> anyhow::Result
     }))?)
 }
 
-fn row<'a>(
-    rows: &'a [AblationRow],
-    d: f64,
-    axis: NoiseAxis,
-    n: f64,
-    m: Method,
-) -> Option<&'a AblationRow> {
+fn row(rows: &[AblationRow], d: f64, axis: NoiseAxis, n: f64, m: Method) -> Option<&AblationRow> {
     rows.iter()
         .find(|r| r.distance_m == d && r.axis == axis && r.noise_px == n && r.method == m)
 }
