@@ -120,11 +120,11 @@ impl Default for Randomisation {
     fn default() -> Self {
         Self {
             lights: Range::new(1.0, 2.0),
-            light_height: Range::new(0.6, 1.6),
+            light_height: Range::new(0.8, 1.6),
             light_radius: Range::new(0.0, 0.8),
-            light_intensity: Range::new(1.5, 3.5),
+            light_intensity: Range::new(0.7, 1.8),
             light_tint: Range::new(0.92, 1.08),
-            ambient: Range::new(0.05, 0.25),
+            ambient: Range::new(0.04, 0.15),
             table_albedo: Range::new(0.05, 0.6),
             material_tint: Range::new(0.85, 1.15),
             roughness_scale: Range::new(0.7, 1.4),
