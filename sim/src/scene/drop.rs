@@ -95,6 +95,7 @@ pub fn drop_parts(
             let rb = RigidBodyBuilder::dynamic()
                 .translation(vec_from_vector(&centre))
                 .rotation(rot_from_unit_quaternion(&rotation).to_scaled_axis())
+                .ccd_enabled(true)
                 .build();
             let h = world.bodies.insert(rb);
             let collider = shape
