@@ -70,7 +70,3 @@ pub struct PerceptionSpec {
 fn half() -> f64 {
     0.5
 }
-
-fn half() -> f64 {
-    0.5
-}

@@ -15,16 +15,20 @@ pub struct PoseClass {
     pub pose: StablePose,
     /// Number of drops that rested in it.
     pub count: usize,
-    /// Largest |physics height − geometric height| over its drops, metres.
+    /// Of those, drops still jittering in place at the time limit.
+    pub jittering: usize,
+    /// Largest |physics height − geometric height| over its settled drops, metres.
     pub max_height_error: f64,
     /// Largest angle between a member's table normal and the class normal, radians.
     pub spread: f64,
 }
 
-/// Clusters settled outcomes by resting face; classes with fewer than `min_count` drops are left
-/// out (their drops still count in the denominator). Most probable first; ties by direction.
+/// Clusters outcomes by resting face; classes with fewer than `min_count` drops are left out
+/// (their drops still count in the denominator). Drops still jittering in place at the time limit
+/// count by their face; only settled drops enter the physics-vs-geometry height comparison.
+/// Most probable first; ties by direction.
 pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Vec<PoseClass> {
-    let settled: Vec<&DropOutcome> = outcomes.iter().filter(|o| o.settled).collect();
+    let settled: Vec<&DropOutcome> = outcomes.iter().collect();
     let total = settled.len().max(1) as f64;
     // Greedy leader clustering in drop order (deterministic), then one re-assignment pass to the
     // nearest final centre, so the result does not depend on which member came first.
@@ -47,6 +51,16 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
             .map(|(s, c)| s.try_normalize(1e-12).unwrap_or(*c))
             .collect();
     }
+    // A resting class is a face of the convex hull: snap each centre to the nearest hull face's
+    // inward normal, so canonical rotations and rest heights are exact, not averaged jitter.
+    let faces = hull_up_directions(mesh);
+    for c in centres.iter_mut() {
+        if let Some(f) = faces.iter().max_by(|a, b| a.dot(c).total_cmp(&b.dot(c))) {
+            if f.angle(c) < CLASS_ANGLE_RAD {
+                *c = *f;
+            }
+        }
+    }
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); centres.len()];
     for (i, up) in ups.iter().enumerate() {
         members[nearest(&centres, up)].push(i);
@@ -60,6 +74,7 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
             let rest_height = geometric_rest_height(mesh, &rotation);
             let max_height_error = m
                 .iter()
+                .filter(|&&i| settled[i].settled)
                 .map(|&i| (settled[i].height - geometric_rest_height(mesh, &settled[i].rotation)).abs())
                 .fold(0.0, f64::max);
             let spread = m.iter().map(|&i| ups[i].angle(centre)).fold(0.0, f64::max);
@@ -72,6 +87,7 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
                     rest_height: round(rest_height),
                 },
                 count: m.len(),
+                jittering: m.iter().filter(|&&i| !settled[i].settled).count(),
                 max_height_error,
                 spread,
             }
@@ -87,6 +103,19 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
         c.pose.probability = round(c.pose.probability);
     }
     classes
+}
+
+/// For each face of the mesh's convex hull, the table-up direction (in the part frame) of the
+/// part resting on it: the face's inward normal.
+fn hull_up_directions(mesh: &TriMesh) -> Vec<Vector3<f64>> {
+    let points: Vec<_> = mesh.vertices.iter().map(crate::convert::vec_from_point).collect();
+    let (verts, tris) = parry3d_f64::transformation::convex_hull(&points);
+    tris.iter()
+        .filter_map(|t| {
+            let [a, b, c] = t.map(|i| crate::convert::vector_from_vec(verts[i as usize]));
+            (b - a).cross(&(c - a)).try_normalize(1e-18).map(|n| -n)
+        })
+        .collect()
 }
 
 fn nearest(centres: &[Vector3<f64>], up: &Vector3<f64>) -> usize {

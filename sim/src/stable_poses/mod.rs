@@ -18,7 +18,7 @@ pub struct StablePoseReport {
     pub classes: Vec<PoseClass>,
     /// Drops simulated.
     pub drops: usize,
-    /// Drops that did not come to rest within the time limit.
+    /// Drops still jittering in place at the time limit (classified by their face all the same).
     pub unsettled: usize,
     /// Settled drops in classes too rare to keep.
     pub rare: usize,
@@ -56,17 +56,18 @@ pub fn stable_poses(
         .collect();
     let min_count = (settings.drops / 1000).max(2);
     let classes = cluster(&outcomes, mesh, min_count);
-    let settled = outcomes.iter().filter(|o| o.settled).count();
     let classified: usize = classes.iter().map(|c| c.count).sum();
+    let settled = outcomes.len();
+    let jittering = outcomes.iter().filter(|o| !o.settled).count();
     let (mass, center_of_mass) = body.mass_and_com();
     StablePoseReport {
         classes,
         drops: outcomes.len(),
-        unsettled: outcomes.len() - settled,
+        unsettled: jittering,
         rare: settled - classified,
         mass,
         center_of_mass,
         mean_rest_time: outcomes.iter().filter(|o| o.settled).map(|o| o.time).sum::<f64>()
-            / settled.max(1) as f64,
+            / (settled - jittering).max(1) as f64,
     }
 }
