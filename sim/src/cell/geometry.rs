@@ -144,9 +144,9 @@ impl CellGeometry {
         names.push(cell.fixture.part.clone());
         let mut parts = BTreeMap::new();
         for name in names {
-            if !parts.contains_key(&name) {
-                let g = PartGeometry::from_catalog(catalog, &name)?;
-                parts.insert(name, g);
+            if let std::collections::btree_map::Entry::Vacant(slot) = parts.entry(name) {
+                let g = PartGeometry::from_catalog(catalog, slot.key())?;
+                slot.insert(g);
             }
         }
         let base_T_table = cell.base_T_table.isometry();

@@ -12,7 +12,13 @@ const ROTATION_PER_METRE: f64 = 0.1;
 
 /// Duration of a rest-to-rest trapezoidal (or triangular) profile over `length`.
 pub fn trapezoid_time(length: f64, speed: f64, accel: f64) -> f64 {
-    if !(length > 0.0) || !(speed > 0.0) || !(accel > 0.0) {
+    if length.is_nan()
+        || speed.is_nan()
+        || accel.is_nan()
+        || length <= 0.0
+        || speed <= 0.0
+        || accel <= 0.0
+    {
         return 0.0;
     }
     let d_accel = speed * speed / accel;

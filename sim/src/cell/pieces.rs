@@ -1,9 +1,11 @@
 //! Convex pieces of a part mesh for contact simulation.
 //!
 //! The project's meshes are built by [`crate::cad::solid::Solid`] from hexahedra (12 consecutive
-//! triangles each, in order, also after an OBJ round trip). Each hexahedron is convex, so the
-//! union of their convex hulls is the exact solid, chamfers and clearances included. A mesh not
-//! made that way falls back to its single convex hull (flagged so callers can tell).
+//! triangles each, in order, also after an OBJ round trip). The union of their convex hulls is
+//! the solid, chamfers and clearances included: a hexahedron's only non-planar faces are the
+//! mitres where two wall pieces of a ring meet, and the hull fills those inside the solid. A mesh
+//! not made of closed 12-triangle pieces falls back to its single convex hull (flagged so callers
+//! can tell).
 
 use nalgebra::Point3;
 use perception::part::TriMesh;
@@ -39,44 +41,34 @@ fn hexahedra(mesh: &TriMesh) -> Option<Vec<Vec<Point3<f64>>>> {
     if mesh.triangles.is_empty() || !mesh.triangles.len().is_multiple_of(HEX_TRIANGLES) {
         return None;
     }
-    let scale = {
-        let e = mesh.extents();
-        e.x.max(e.y).max(e.z).max(1e-9)
-    };
-    let tol = 1e-7 * scale;
     let mut pieces = Vec::with_capacity(mesh.triangles.len() / HEX_TRIANGLES);
     for chunk in mesh.triangles.chunks(HEX_TRIANGLES) {
         let mut ids: Vec<u32> = chunk.iter().flatten().copied().collect();
         ids.sort_unstable();
         ids.dedup();
-        if ids.len() < 4 || ids.len() > 8 {
+        if ids.len() < 4 || ids.len() > 8 || !closed(chunk) {
             return None;
         }
         let points: Vec<Point3<f64>> = ids
             .iter()
             .map(|&i| mesh.vertices.get(i as usize).copied())
             .collect::<Option<_>>()?;
-        // Convex: every vertex lies on one side of every non-degenerate face plane.
-        for t in chunk {
-            let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-            let n = (b - a).cross(&(c - a));
-            if n.norm() < 1e-18 {
-                continue;
-            }
-            let n = n.normalize();
-            let (mut lo, mut hi) = (0.0f64, 0.0f64);
-            for p in &points {
-                let d = n.dot(&(p - a));
-                lo = lo.min(d);
-                hi = hi.max(d);
-            }
-            if lo < -tol && hi > tol {
-                return None;
-            }
-        }
         pieces.push(points);
     }
     Some(pieces)
+}
+
+/// Whether the triangles form a closed surface on their own: every directed edge is matched by
+/// its reverse.
+fn closed(triangles: &[[u32; 3]]) -> bool {
+    let mut edges: Vec<(u32, u32)> = triangles
+        .iter()
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .collect();
+    edges.sort_unstable();
+    edges
+        .iter()
+        .all(|&(a, b)| a == b || edges.binary_search(&(b, a)).is_ok())
 }
 
 #[cfg(test)]

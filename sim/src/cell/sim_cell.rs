@@ -27,6 +27,9 @@ const PATH_SAMPLES: usize = 12;
 /// How far laterally from a target a held part may come down and still count as inserting
 /// (beyond it, it comes down beside the receiver), metres.
 const INSERTION_REACH: f64 = 0.01;
+/// Highest a released part may be above its receiver and still fall into its target (straight
+/// down, scored like an insertion from where it was released), metres.
+const DROP_HEIGHT: f64 = 0.02;
 
 /// A part the camera sees in the feeder, from the TRUE camera pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -363,7 +366,7 @@ impl SimCell {
     /// table, unless the held part is coming down into its target.
     fn check_clearance(&mut self, poses: &[Isometry3<f64>]) -> Result<(), RobotError> {
         for pose in poses {
-            if self.lowest_z(pose) < 0.0 && self.insertion_at(pose).is_none() {
+            if self.lowest_z(pose) < 0.0 && self.insertion_at(pose, 0.0).is_none() {
                 self.safety = SafetyStatus::ProtectiveStop;
                 return Err(RobotError::ProtectiveStop);
             }
@@ -373,7 +376,11 @@ impl SimCell {
 
     /// The step and insertion frame when the held part at TCP pose `base_T_tcp` is coming down
     /// into its target: below the receiver's top and within reach of the target laterally.
-    fn insertion_at(&self, base_T_tcp: &Isometry3<f64>) -> Option<(usize, Isometry3<f64>, Mating)> {
+    fn insertion_at(
+        &self,
+        base_T_tcp: &Isometry3<f64>,
+        above: f64,
+    ) -> Option<(usize, Isometry3<f64>, Mating)> {
         let held = self.held.as_ref()?;
         let step = self.pending_step(&held.part.part)?;
         let s = &self.model.steps[step];
@@ -382,7 +389,7 @@ impl SimCell {
         let mating = self.mating(step, &base_T_dest)?;
         let ins_T_part = base_T_ins.inverse() * base_T_tcp * held.part.tcp_T_part;
         let e = mating.pose_error(&ins_T_part);
-        (e.height < mating.engagement && e.lateral.norm() < INSERTION_REACH)
+        (e.height < mating.engagement + above && e.lateral.norm() < INSERTION_REACH)
             .then_some((step, base_T_ins, mating))
     }
 
@@ -440,9 +447,9 @@ impl SimCell {
     }
 
     /// After a motion: if the held part came down into its target, score the insertion.
-    fn settle_insertion(&mut self) {
+    fn settle_insertion(&mut self, above: f64) {
         let tcp = self.true_tcp();
-        let Some((step, base_T_ins, mating)) = self.insertion_at(&tcp) else {
+        let Some((step, base_T_ins, mating)) = self.insertion_at(&tcp, above) else {
             return;
         };
         let Some(held) = self.held.as_ref() else {
@@ -564,7 +571,7 @@ impl SimCell {
             self.model.noise.robot_repeatability,
         );
         if !self.gripper_open {
-            self.settle_insertion();
+            self.settle_insertion(0.0);
         }
     }
 
@@ -573,6 +580,10 @@ impl SimCell {
     pub fn open_gripper_sync(&mut self) {
         self.clock += ACTUATION_TIME;
         self.gripper_open = true;
+        // Released above its target: it falls in, scored from where it was let go.
+        if self.held.as_ref().is_some_and(|h| h.inserted.is_none()) {
+            self.settle_insertion(DROP_HEIGHT);
+        }
         let Some(held) = self.held.take() else { return };
         let report = match held.inserted {
             Some((step, result, base_T_part, budget)) => {

@@ -177,21 +177,29 @@ impl Mating {
     }
 }
 
-/// Root of an increasing function on [lo, hi] by bisection (hi when it never crosses zero).
-fn bisect(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
-    if f(hi) <= 0.0 {
-        return hi;
-    }
+/// The first root of `f` on [lo, hi], where `f(lo) ≤ 0`: scanned in steps of 1 mrad, then
+/// bisected; `hi` when `f` never rises above zero there.
+fn bisect(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
     if f(lo) > 0.0 {
         return lo;
     }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if f(mid) > 0.0 {
-            hi = mid;
-        } else {
-            lo = mid;
+    let step = 1e-3;
+    let mut a = lo;
+    while a < hi {
+        let b = (a + step).min(hi);
+        if f(b) > 0.0 {
+            let (mut l, mut h) = (a, b);
+            for _ in 0..50 {
+                let mid = 0.5 * (l + h);
+                if f(mid) > 0.0 {
+                    h = mid;
+                } else {
+                    l = mid;
+                }
+            }
+            return 0.5 * (l + h);
         }
+        a = b;
     }
-    0.5 * (lo + hi)
+    hi
 }

@@ -134,7 +134,7 @@ pub fn classify(mating: &Mating, start: &PoseError, end: &PoseError) -> (Verdict
     }
     let capture = mating.capture();
     let reach = mating.capture_reach(end);
-    if reach > capture && end.height > mating.engagement - mating.lead_in {
+    if reach > capture {
         return (
             Verdict::Missed,
             InsertionCause::LateralBeyondCapture {

@@ -1,0 +1,138 @@
+//! Simulated-cell benchmarks: pick-and-insert episodes for the three parts (sampled feeder,
+//! analytic scoring, perception excluded) one at a time and 2 cores at a time, and one
+//! contact-simulated insertion.
+//!
+//! `cargo bench -p sim --bench cell`
+
+#![allow(missing_docs, non_snake_case)]
+
+use std::hint::black_box;
+use std::path::Path;
+use std::sync::Arc;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use nalgebra::{Isometry3, Vector2, Vector3};
+use perception::part::{Catalog, PartRole, StablePose};
+use rayon::prelude::*;
+use sim::cad::usbc;
+use sim::cell::geometry::PartGeometry;
+use sim::cell::insertion::contact::{self, ContactSettings};
+use sim::cell::insertion::{Mating, ReceiverPart, Scorer};
+use sim::cell::{CellModel, SimCell, script};
+use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
+use sim::stable_poses::geometric_rest_height;
+
+#[derive(serde::Deserialize)]
+struct Scenario {
+    cell: CellSpec,
+    assembly: Vec<AssemblyStep>,
+    noise: NoiseSpec,
+}
+
+fn root() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+fn scenario() -> Scenario {
+    let text = std::fs::read_to_string(root().join("scenarios/usbc_nominal.toml")).unwrap();
+    toml::from_str(&text).unwrap()
+}
+
+/// The catalog, with upright/upside-down stable poses from geometry if it is not prepared yet.
+fn catalog() -> Catalog {
+    let mut catalog = Catalog::load(&root().join("scenarios/parts/usbc.toml")).unwrap();
+    for i in 0..catalog.parts.len() {
+        let part = &catalog.parts[i];
+        if part.role == PartRole::Fixture || !part.stable_poses.is_empty() {
+            continue;
+        }
+        let mesh = catalog.load_mesh(part).unwrap();
+        let mut poses = Vec::new();
+        for (name, up, probability) in [("+z", Vector3::z(), 0.7), ("-z", -Vector3::z(), 0.3)] {
+            let rotation = StablePose::canonical_rotation(&up);
+            poses.push(StablePose {
+                name: name.into(),
+                probability,
+                up_in_part: up.into(),
+                rotation: rotation.scaled_axis().into(),
+                rest_height: geometric_rest_height(&mesh, &rotation),
+            });
+        }
+        catalog.parts[i].stable_poses = poses;
+    }
+    catalog
+}
+
+fn episodes(c: &mut Criterion) {
+    let s = scenario();
+    let model: Arc<CellModel> =
+        CellModel::new(&s.cell, &s.assembly, &s.noise, &catalog(), Scorer::Analytic).unwrap();
+    let mut episode = 0u64;
+    c.bench_function("cell/episode_analytic_1_core", |b| {
+        b.iter(|| {
+            episode += 1;
+            let mut cell = SimCell::new(model.clone(), 7, episode).unwrap();
+            black_box(script::run_episode(&mut cell).unwrap())
+        })
+    });
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let batch = 200u64;
+    let mut group = c.benchmark_group("cell");
+    group.throughput(Throughput::Elements(batch));
+    group.sample_size(10);
+    let mut first = 0u64;
+    group.bench_function("episodes_analytic_2_cores", |b| {
+        b.iter(|| {
+            first += batch;
+            let seated: usize = pool.install(|| {
+                (first..first + batch)
+                    .into_par_iter()
+                    .map(|e| {
+                        let mut cell = SimCell::new(model.clone(), 7, e).unwrap();
+                        usize::from(script::run_episode(&mut cell).unwrap().success)
+                    })
+                    .sum()
+            });
+            black_box(seated)
+        })
+    });
+    group.finish();
+}
+
+fn contact_insertion(c: &mut Criterion) {
+    let s = scenario();
+    let g = |name: &str, mesh| PartGeometry::from_mesh(name, mesh, 1e-3, vec![], vec![]).unwrap();
+    let (shell, insert, nest) = (
+        g("main_shell", usbc::main_shell()),
+        g("insert_mold", usbc::insert_mold()),
+        g("fixture_nest", usbc::fixture_nest()),
+    );
+    let t = usbc::assembly_targets();
+    let receivers = [
+        ReceiverPart {
+            geometry: &shell,
+            destination_T_part: Isometry3::identity(),
+        },
+        ReceiverPart {
+            geometry: &nest,
+            destination_T_part: t.nest_t_main.inverse(),
+        },
+    ];
+    let mating = Mating::new(&s.assembly[1], &insert, &receivers[..1]);
+    // Inside the chamfer: the lead-in guides it, the typical case.
+    let start = mating.pose_with_error(Vector2::new(8e-5, -5e-5), 0.0, 1e-3, 2e-3, Vector2::x());
+    let settings = ContactSettings::default();
+    c.bench_function("cell/contact_insertion_insert_mold", |b| {
+        b.iter(|| {
+            black_box(contact::simulate(
+                &mating, &insert, &receivers, &start, &settings,
+            ))
+        })
+    });
+}
+
+criterion_group!(benches, episodes, contact_insertion);
+criterion_main!(benches);
