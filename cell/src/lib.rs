@@ -2,5 +2,6 @@
 //! regression gate. The `cell` binary is a thin command-line layer over it.
 
 pub mod episode;
+pub mod orchestrator;
 pub mod prepare;
 pub mod scenario;

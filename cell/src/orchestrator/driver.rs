@@ -1,0 +1,551 @@
+//! The episode driver: the state machine that runs every assembly step on a robot and a cell.
+
+use std::collections::BTreeSet;
+use std::time::Duration;
+
+use nalgebra::Isometry3;
+use perception::part::Catalog;
+use robots::kinematics::Joints;
+use robots::robot::{Robot, RobotError};
+use sim::cell::geometry::PartGeometry;
+
+use super::cell_io::CellIo;
+use super::events::EventLog;
+use super::geometry::CellKnowledge;
+use super::perception::{DetectedPart, Frame, PartPerception};
+use super::planning::{Motion, Plan, Planner, PlanningConfig, Speeds, grasped_offset};
+use super::selection::{Selection, SelectionConfig, select};
+use super::state::{State, Timeouts};
+use crate::episode::{EpisodeRecord, PoseError, RECORD_VERSION, StepOutcome, StepRecord};
+
+/// Policies and tuning of an episode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeSettings {
+    /// Bounds of every state.
+    pub timeouts: Timeouts,
+    /// Instance selection.
+    pub selection: SelectionConfig,
+    /// Motion planning.
+    pub planning: PlanningConfig,
+    /// Pick attempts per step (a failed grasp re-perceives and retries).
+    pub max_grasp_attempts: u32,
+    /// Home joints; the robot's joints at the start when `None`.
+    pub home: Option<Joints>,
+}
+
+impl Default for EpisodeSettings {
+    fn default() -> Self {
+        Self {
+            timeouts: Timeouts::default(),
+            selection: SelectionConfig::default(),
+            planning: PlanningConfig::default(),
+            max_grasp_attempts: 3,
+            home: None,
+        }
+    }
+}
+
+/// Why the state machine stopped the episode early.
+enum Stop {
+    /// A robot command failed.
+    Robot(State, RobotError),
+    /// A state overran its bound.
+    Timeout(State, Duration),
+}
+
+impl Stop {
+    fn text(&self) -> String {
+        match self {
+            Stop::Robot(s, e) => format!("{s:?}: {e}"),
+            Stop::Timeout(s, d) => format!("{s:?} timed out after {d:?}"),
+        }
+    }
+}
+
+/// Everything the state machine carries.
+pub(super) struct Driver<'a> {
+    pub scenario_name: String,
+    pub seed: u64,
+    pub episode: u32,
+    pub catalog: &'a Catalog,
+    pub knowledge: &'a CellKnowledge,
+    pub robot: &'a mut dyn Robot,
+    pub io: &'a mut dyn CellIo,
+    pub perception: &'a mut dyn PartPerception,
+    pub settings: &'a EpisodeSettings,
+    pub max_shakes: u32,
+    pub log: EventLog,
+    // Episode state.
+    home: Joints,
+    /// Clock when homing ended: the assembly cycle starts there.
+    cycle_start: f64,
+    step: usize,
+    records: Vec<StepRecord>,
+    placed: Vec<(String, Isometry3<f64>)>,
+    abort: Option<String>,
+    // Step state.
+    step_start: f64,
+    attempts: u32,
+    shakes: u32,
+    frame: Option<Frame>,
+    detections: Vec<DetectedPart>,
+    excluded: BTreeSet<usize>,
+    selection: Option<Selection>,
+    plan: Option<Plan>,
+    perception_error: Option<[f64; 3]>,
+    last_reason: String,
+}
+
+impl<'a> Driver<'a> {
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn new(
+        scenario_name: String,
+        seed: u64,
+        episode: u32,
+        catalog: &'a Catalog,
+        knowledge: &'a CellKnowledge,
+        robot: &'a mut dyn Robot,
+        io: &'a mut dyn CellIo,
+        perception: &'a mut dyn PartPerception,
+        settings: &'a EpisodeSettings,
+        max_shakes: u32,
+    ) -> Self {
+        Self {
+            scenario_name,
+            seed,
+            episode,
+            catalog,
+            knowledge,
+            robot,
+            io,
+            perception,
+            settings,
+            max_shakes,
+            log: EventLog::new(episode),
+            home: [0.0; 6],
+            cycle_start: 0.0,
+            step: 0,
+            records: Vec::new(),
+            placed: Vec::new(),
+            abort: None,
+            step_start: 0.0,
+            attempts: 0,
+            shakes: 0,
+            frame: None,
+            detections: Vec::new(),
+            excluded: BTreeSet::new(),
+            selection: None,
+            plan: None,
+            perception_error: None,
+            last_reason: String::new(),
+        }
+    }
+
+    fn step_part(&self) -> String {
+        self.knowledge
+            .steps
+            .get(self.step)
+            .map(|s| s.part.clone())
+            .unwrap_or_default()
+    }
+
+    fn begin_step(&mut self) {
+        self.step_start = self.io.clock();
+        self.attempts = 0;
+        self.shakes = 0;
+        self.excluded.clear();
+        self.selection = None;
+        self.plan = None;
+        self.perception_error = None;
+    }
+
+    /// Closes the current step with an outcome; returns the next state.
+    fn finish_step(
+        &mut self,
+        outcome: StepOutcome,
+        cause: Option<String>,
+        sources: Vec<String>,
+        pose_error: Option<PoseError>,
+    ) -> State {
+        self.records.push(StepRecord {
+            part: self.step_part(),
+            outcome,
+            attempts: self.attempts,
+            shakes: self.shakes,
+            cause,
+            sources,
+            pose_error,
+            perception_error: self.perception_error,
+            sim_time_s: self.io.clock() - self.step_start,
+        });
+        if outcome == StepOutcome::Seated && self.step + 1 < self.knowledge.steps.len() {
+            self.step += 1;
+            self.begin_step();
+            State::Capture
+        } else {
+            State::Done
+        }
+    }
+
+    fn placed_shapes(&self) -> Vec<(&'a PartGeometry, Isometry3<f64>)> {
+        let k: &'a CellKnowledge = self.knowledge;
+        let mut out: Vec<(&'a PartGeometry, Isometry3<f64>)> = Vec::new();
+        if let Some(f) = k.part(&k.geometry.fixture_part) {
+            out.push((f, k.geometry.base_T_fixture));
+        }
+        for (name, pose) in &self.placed {
+            if let Some(g) = k.part(name) {
+                out.push((g, *pose));
+            }
+        }
+        out
+    }
+
+    fn planner(&self) -> Planner<'a> {
+        Planner {
+            knowledge: self.knowledge,
+            config: self.settings.planning,
+            speeds: Speeds::within(self.robot.limits(), self.settings.planning.slow_speed),
+        }
+    }
+
+    async fn execute(&mut self, state: State, plan: &Plan) -> Result<(), Stop> {
+        for (name, m) in &plan.motions {
+            let r = match m {
+                Motion::MoveJ(q, s) => self.robot.move_j(*q, *s).await,
+                Motion::MoveL(p, s) => self.robot.move_l(*p, *s).await,
+                Motion::Open => self.robot.open_gripper().await,
+                Motion::Close => self.robot.close_gripper().await,
+            };
+            if let Err(e) = r {
+                tracing::warn!(
+                    episode = self.episode,
+                    waypoint = name,
+                    "motion failed: {e}"
+                );
+                return Err(Stop::Robot(state, e));
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs one state; returns the next.
+    async fn run_state(&mut self, state: State) -> Result<State, Stop> {
+        match state {
+            State::Home => {
+                let r = async {
+                    self.robot.open_gripper().await?;
+                    let q = self.robot.joints().await?;
+                    self.home = self
+                        .settings
+                        .home
+                        .unwrap_or_else(|| self.knowledge.safe_home(&q));
+                    if robots::kinematics::joint_distance(&self.home, &q) > 1e-9 {
+                        let speeds = Speeds::within(self.robot.limits(), 0.01);
+                        self.robot.move_j(self.home, speeds.joint).await?;
+                    }
+                    Ok::<_, RobotError>(())
+                }
+                .await;
+                r.map_err(|e| Stop::Robot(state, e))?;
+                self.cycle_start = self.io.clock();
+                self.begin_step();
+                Ok(State::Capture)
+            }
+            State::Capture => match self.io.capture() {
+                Ok(f) => {
+                    self.frame = Some(f);
+                    self.excluded.clear();
+                    Ok(State::Perceive)
+                }
+                Err(e) => {
+                    self.last_reason = e.to_string();
+                    Ok(self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None))
+                }
+            },
+            State::Perceive => {
+                let frame = self.frame.take();
+                let r = match &frame {
+                    Some(f) => self.perception.perceive(f),
+                    None => Ok(Vec::new()),
+                };
+                match r {
+                    Ok(d) => {
+                        self.detections = d;
+                        Ok(State::Select)
+                    }
+                    Err(e) => Ok(self.finish_step(
+                        StepOutcome::Aborted,
+                        Some(format!("perception failed: {e}")),
+                        vec!["perception".into()],
+                        None,
+                    )),
+                }
+            }
+            State::Select => {
+                let candidates: Vec<DetectedPart> = self
+                    .detections
+                    .iter()
+                    .filter(|d| !self.excluded.contains(&d.index))
+                    .cloned()
+                    .collect();
+                let mut result = select(
+                    self.knowledge,
+                    self.catalog,
+                    self.step,
+                    &candidates,
+                    &self.home,
+                    &self.settings.selection,
+                );
+                // Excluded detections still count as neighbours for finger clearance.
+                if candidates.len() != self.detections.len()
+                    && let Some(c) = &result.chosen
+                {
+                    let k = self.knowledge;
+                    let blocked = self.detections.iter().any(|n| {
+                        n.index != c.detection.index
+                            && self.excluded.contains(&n.index)
+                            && k.part(&n.part).is_some_and(|g| {
+                                k.finger_distance(&c.base_T_grasp, g.hull.as_ref(), &n.base_T_part)
+                                    < self.settings.selection.finger_margin
+                            })
+                    });
+                    if blocked {
+                        self.excluded.insert(c.detection.index);
+                        result.chosen = None;
+                        return Ok(State::Select);
+                    }
+                }
+                match result.chosen {
+                    Some(sel) => {
+                        self.perception_error = sel
+                            .detection
+                            .truth_instance
+                            .and_then(|i| self.io.true_table_T_part(i))
+                            .map(|truth| table_error(&truth, &sel.detection.table_T_part));
+                        self.selection = Some(sel);
+                        Ok(State::PlanPick)
+                    }
+                    None => {
+                        self.last_reason = result.summary();
+                        if self.shakes < self.max_shakes {
+                            Ok(State::Shake)
+                        } else {
+                            let part = self.step_part();
+                            let cause = format!(
+                                "no usable {part} after {} shakes ({})",
+                                self.shakes, self.last_reason
+                            );
+                            Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None))
+                        }
+                    }
+                }
+            }
+            State::Shake => match self.io.shake_feeder() {
+                Ok(()) => {
+                    self.shakes += 1;
+                    Ok(State::Capture)
+                }
+                Err(e) => {
+                    Ok(self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None))
+                }
+            },
+            State::PlanPick => {
+                let Some(sel) = self.selection.clone() else {
+                    return Ok(State::Select);
+                };
+                let start = self
+                    .robot
+                    .joints()
+                    .await
+                    .map_err(|e| Stop::Robot(state, e))?;
+                let placed = self.placed_shapes();
+                match self.planner().pick(&sel, &start, &placed) {
+                    Ok(plan) => {
+                        self.plan = Some(plan);
+                        Ok(State::Pick)
+                    }
+                    Err(e) => {
+                        self.last_reason = format!("pick plan: {e}");
+                        self.excluded.insert(sel.detection.index);
+                        Ok(State::Select)
+                    }
+                }
+            }
+            State::Pick => {
+                let Some(plan) = self.plan.take() else {
+                    return Ok(State::PlanPick);
+                };
+                self.attempts += 1;
+                self.execute(state, &plan).await?;
+                Ok(State::VerifyGrasp)
+            }
+            State::VerifyGrasp => {
+                if self.io.part_in_gripper() {
+                    Ok(State::PlanInsert)
+                } else if self.attempts < self.settings.max_grasp_attempts {
+                    self.last_reason = "grasp failed: nothing between the fingers".into();
+                    Ok(State::Retract)
+                } else {
+                    let cause = format!("grasp failed {} times", self.attempts);
+                    Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None))
+                }
+            }
+            State::Retract => {
+                let r = async {
+                    self.robot.open_gripper().await?;
+                    let tcp = self.robot.tcp_pose().await?;
+                    let up = nalgebra::Translation3::new(
+                        0.0,
+                        0.0,
+                        self.settings.planning.clearance_height,
+                    ) * tcp;
+                    let speeds = Speeds::within(self.robot.limits(), 0.01);
+                    self.robot.move_l(up, speeds.fast).await
+                }
+                .await;
+                r.map_err(|e| Stop::Robot(state, e))?;
+                Ok(State::Capture)
+            }
+            State::PlanInsert => {
+                let Some(sel) = self.selection.clone() else {
+                    return Ok(State::Done);
+                };
+                let Some(g) = self.knowledge.part(&sel.detection.part) else {
+                    return Ok(State::Done);
+                };
+                let tcp_T_part = grasped_offset(&sel.tcp_T_part);
+                let start = self
+                    .robot
+                    .joints()
+                    .await
+                    .map_err(|e| Stop::Robot(state, e))?;
+                let placed = self.placed_shapes();
+                match self
+                    .planner()
+                    .insert(self.step, (g, &tcp_T_part), &start, &placed)
+                {
+                    Ok(plan) => {
+                        self.plan = Some(plan);
+                        Ok(State::Insert)
+                    }
+                    Err(e) => {
+                        let cause = format!("insertion plan: {e}");
+                        // Put the part down where it came from rather than carry it around.
+                        let back = async {
+                            self.robot
+                                .move_l(
+                                    sel.base_T_grasp,
+                                    Speeds::within(self.robot.limits(), 0.01).slow,
+                                )
+                                .await?;
+                            self.robot.open_gripper().await
+                        }
+                        .await;
+                        back.map_err(|e| Stop::Robot(state, e))?;
+                        Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None))
+                    }
+                }
+            }
+            State::Insert => {
+                let Some(plan) = self.plan.take() else {
+                    return Ok(State::PlanInsert);
+                };
+                self.execute(state, &plan).await?;
+                Ok(State::Verify)
+            }
+            State::Verify => {
+                let check = self.io.insertion_check();
+                let part = self.step_part();
+                match check {
+                    Some(c) => {
+                        if c.outcome == StepOutcome::Seated {
+                            self.placed
+                                .push((part, self.knowledge.base_T_targets[self.step]));
+                        }
+                        Ok(self.finish_step(c.outcome, c.cause, c.sources, c.pose_error))
+                    }
+                    None => Ok(self.finish_step(
+                        StepOutcome::Missed,
+                        Some("the cell reported no insertion".into()),
+                        vec![],
+                        None,
+                    )),
+                }
+            }
+            State::Done | State::SafeStop => Ok(state),
+        }
+    }
+
+    /// Runs the state machine to its end and returns the episode record.
+    pub(super) async fn run(mut self) -> (EpisodeRecord, EventLog) {
+        let mut state = State::Home;
+        self.log.push(None, state, state, self.io.clock(), "start");
+        while !state.is_terminal() {
+            let bound = self.settings.timeouts.of(state);
+            let next = match tokio::time::timeout(bound, self.run_state(state)).await {
+                Ok(r) => r,
+                Err(_) => Err(Stop::Timeout(state, bound)),
+            };
+            let (next, detail) = match next {
+                Ok(n) => {
+                    let d = match n {
+                        State::Shake | State::Retract => self.last_reason.clone(),
+                        _ => String::new(),
+                    };
+                    (n, d)
+                }
+                Err(stop) => {
+                    let text = stop.text();
+                    tracing::warn!(episode = self.episode, "safe stop: {text}");
+                    // Stop the arm, bounded; errors here change nothing (it may be gone).
+                    let _ = tokio::time::timeout(Duration::from_secs(2), self.robot.stop()).await;
+                    if self.records.len() <= self.step && self.step < self.knowledge.steps.len() {
+                        self.records.push(StepRecord {
+                            part: self.step_part(),
+                            outcome: StepOutcome::Aborted,
+                            attempts: self.attempts,
+                            shakes: self.shakes,
+                            cause: Some(text.clone()),
+                            sources: vec![],
+                            pose_error: None,
+                            perception_error: self.perception_error,
+                            sim_time_s: self.io.clock() - self.step_start,
+                        });
+                    }
+                    self.abort = Some(text.clone());
+                    (State::SafeStop, text)
+                }
+            };
+            let step = (self.step < self.knowledge.steps.len()).then_some(self.step);
+            self.log.push(step, state, next, self.io.clock(), detail);
+            state = next;
+        }
+        let success = self.records.len() == self.knowledge.steps.len()
+            && self
+                .records
+                .iter()
+                .all(|r| r.outcome == StepOutcome::Seated);
+        let record = EpisodeRecord {
+            version: RECORD_VERSION,
+            scenario: self.scenario_name.clone(),
+            seed: self.seed,
+            episode: self.episode,
+            success,
+            steps: std::mem::take(&mut self.records),
+            cycle_time_s: self.io.clock() - self.cycle_start,
+            wall_time_s: self.log.wall_time_s(),
+            abort: self.abort.take(),
+        };
+        (record, self.log)
+    }
+}
+
+/// Perception error in the table plane: [x mm, y mm, yaw degrees] of the estimate.
+#[allow(non_snake_case)]
+fn table_error(truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> [f64; 3] {
+    let d = estimate.translation.vector - truth.translation.vector;
+    let r = estimate.rotation * truth.rotation.inverse();
+    let yaw = r.scaled_axis().z;
+    [d.x * 1e3, d.y * 1e3, yaw.to_degrees()]
+}

@@ -1,0 +1,305 @@
+//! Motion planning for one pick and one insertion.
+//!
+//! Waypoints: approach (above the grasp), grasp, lift, transfer (above the insertion), pre-insert,
+//! insert, release, retreat. Every waypoint is solved by IK (nearest the previous solution) and
+//! every motion between them is checked: the arm's joint frames and gripper body stay above the
+//! table, and the fingers, palm and held part keep a clearance (parry distances) from the fixture
+//! and the parts already placed, except on the final slow insertion into the target. The last
+//! millimetres of the grasp and of the insertion are slow Cartesian moves. The insertion target is
+//! corrected by the estimated grasp offset: the jaws centre the part along the closing axis (TCP
+//! y), so that component of the pre-grasp estimate is removed; the rest is kept.
+
+use nalgebra::{Isometry3, Translation3};
+use robots::kinematics::Joints;
+use robots::limits::Limits;
+use robots::robot::{JointMotion, LinearMotion};
+use sim::cell::geometry::PartGeometry;
+
+use super::geometry::CellKnowledge;
+use super::selection::Selection;
+
+/// Planning tuning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanningConfig {
+    /// Height of approach, lift, transfer and retreat poses above their grasp or insert pose, m.
+    pub clearance_height: f64,
+    /// Length of the slow final segment into a grasp or an insertion, metres.
+    pub slow_distance: f64,
+    /// Speed of the slow final segments, m/s.
+    pub slow_speed: f64,
+    /// Smallest height of the arm's joint frames and gripper body above the table, metres.
+    pub arm_table_margin: f64,
+    /// Smallest distance of gripper and held part to the fixture and placed parts in transit, m.
+    pub transit_margin: f64,
+    /// Joint-space samples checked along each joint move.
+    pub samples: usize,
+}
+
+impl Default for PlanningConfig {
+    fn default() -> Self {
+        Self {
+            clearance_height: 0.015,
+            slow_distance: 0.003,
+            slow_speed: 0.02,
+            arm_table_margin: 0.02,
+            transit_margin: 0.001,
+            samples: 10,
+        }
+    }
+}
+
+/// One command of a plan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Motion {
+    /// Joint move.
+    MoveJ(Joints, JointMotion),
+    /// Straight-line TCP move.
+    MoveL(Isometry3<f64>, LinearMotion),
+    /// Open the gripper.
+    Open,
+    /// Close the gripper.
+    Close,
+}
+
+/// A checked sequence of commands with a name for each.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// (waypoint name, command), in order.
+    pub motions: Vec<(&'static str, Motion)>,
+    /// Joints at the end of the plan.
+    pub end_joints: Joints,
+}
+
+/// Why no plan was found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// A waypoint has no IK solution within the joint limits.
+    #[error("{waypoint} unreachable: {reason}")]
+    Unreachable {
+        /// The waypoint.
+        waypoint: &'static str,
+        /// The IK error.
+        reason: String,
+    },
+    /// A waypoint or a motion violates the cell's limits.
+    #[error("{waypoint} outside the cell limits: {reason}")]
+    Limits {
+        /// The waypoint.
+        waypoint: &'static str,
+        /// The violation.
+        reason: String,
+    },
+    /// A motion would collide.
+    #[error("{waypoint}: {what} (clearance {distance_mm:.2} mm)")]
+    Collision {
+        /// The motion's target waypoint.
+        waypoint: &'static str,
+        /// What would touch what.
+        what: String,
+        /// The clearance found, millimetres (negative: penetration below the table).
+        distance_mm: f64,
+    },
+}
+
+/// The fast and slow motions allowed by the limits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Speeds {
+    /// Joint moves.
+    pub joint: JointMotion,
+    /// Fast linear moves.
+    pub fast: LinearMotion,
+    /// Slow final linear moves.
+    pub slow: LinearMotion,
+}
+
+impl Speeds {
+    /// Speeds within `limits`: joint and fast linear moves at the limits, the slow segments at
+    /// `slow_speed`.
+    pub fn within(limits: &Limits, slow_speed: f64) -> Self {
+        Self {
+            joint: JointMotion {
+                speed: limits.max_joint_speed,
+                acceleration: limits.max_joint_acceleration,
+            },
+            fast: LinearMotion {
+                speed: limits.max_tcp_speed,
+                acceleration: limits.max_tcp_acceleration,
+            },
+            slow: LinearMotion {
+                speed: slow_speed.min(limits.max_tcp_speed),
+                acceleration: (0.5f64).min(limits.max_tcp_acceleration),
+            },
+        }
+    }
+}
+
+fn raised(pose: &Isometry3<f64>, h: f64) -> Isometry3<f64> {
+    Translation3::new(0.0, 0.0, h) * pose
+}
+
+/// Plans with the cell model.
+pub struct Planner<'a> {
+    /// The cell.
+    pub knowledge: &'a CellKnowledge,
+    /// Tuning.
+    pub config: PlanningConfig,
+    /// Speeds.
+    pub speeds: Speeds,
+}
+
+impl Planner<'_> {
+    fn ik(
+        &self,
+        waypoint: &'static str,
+        pose: &Isometry3<f64>,
+        near: &Joints,
+    ) -> Result<Joints, PlanError> {
+        self.knowledge
+            .spec
+            .limits
+            .check_tcp_target(pose)
+            .map_err(|e| PlanError::Limits {
+                waypoint,
+                reason: e.to_string(),
+            })?;
+        self.knowledge
+            .kinematics
+            .inverse_nearest(pose, near)
+            .map(|s| s.joints)
+            .map_err(|e| PlanError::Unreachable {
+                waypoint,
+                reason: e.to_string(),
+            })
+    }
+
+    fn check_arm(&self, waypoint: &'static str, q: &Joints) -> Result<(), PlanError> {
+        let low = self.knowledge.arm_lowest_height(q);
+        if low < self.config.arm_table_margin {
+            return Err(PlanError::Collision {
+                waypoint,
+                what: "arm or gripper body too close to the table".into(),
+                distance_mm: low * 1e3,
+            });
+        }
+        Ok(())
+    }
+
+    /// Checks a joint move from `from` to `to` at `samples` points: arm above the table, gripper
+    /// and held part clear of the table, the fixture and the placed parts.
+    #[allow(non_snake_case)]
+    fn check_transit(
+        &self,
+        waypoint: &'static str,
+        from: &Joints,
+        to: &Joints,
+        held: Option<(&PartGeometry, &Isometry3<f64>)>,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+    ) -> Result<(), PlanError> {
+        let k = self.knowledge;
+        let n = self.config.samples.max(1);
+        for i in 1..=n {
+            let s = i as f64 / n as f64;
+            let q: Joints = std::array::from_fn(|j| from[j] + s * (to[j] - from[j]));
+            self.check_arm(waypoint, &q)?;
+            let tcp = k.kinematics.forward_tcp(&q);
+            let low = k.lowest_height(&tcp, held);
+            if low < self.config.transit_margin {
+                return Err(PlanError::Collision {
+                    waypoint,
+                    what: "fingertips or held part too close to the table".into(),
+                    distance_mm: low * 1e3,
+                });
+            }
+            for (g, base_T_obstacle) in placed {
+                let d = k.gripper_distance(&tcp, held, g.hull.as_ref(), base_T_obstacle);
+                if d < self.config.transit_margin {
+                    return Err(PlanError::Collision {
+                        waypoint,
+                        what: format!("gripper or held part too close to {}", g.name),
+                        distance_mm: d * 1e3,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The pick of `selection` starting from joints `start`: joint move to the approach pose,
+    /// fast then slow straight down to the grasp, close, lift.
+    pub fn pick(
+        &self,
+        selection: &Selection,
+        start: &Joints,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+    ) -> Result<Plan, PlanError> {
+        let c = &self.config;
+        let grasp = selection.base_T_grasp;
+        let approach = raised(&grasp, c.clearance_height);
+        let pre = raised(&grasp, c.slow_distance);
+        let q_approach = self.ik("approach", &approach, start)?;
+        self.check_transit("approach", start, &q_approach, None, placed)?;
+        let q_pre = self.ik("pre-grasp", &pre, &q_approach)?;
+        let q_grasp = self.ik("grasp", &grasp, &q_pre)?;
+        self.check_arm("grasp", &q_grasp)?;
+        let s = &self.speeds;
+        Ok(Plan {
+            motions: vec![
+                ("approach", Motion::MoveJ(q_approach, s.joint)),
+                ("pre-grasp", Motion::MoveL(pre, s.fast)),
+                ("grasp", Motion::MoveL(grasp, s.slow)),
+                ("close", Motion::Close),
+                ("lift", Motion::MoveL(approach, s.fast)),
+            ],
+            end_joints: q_approach,
+        })
+    }
+
+    /// The insertion of a held part (estimated `tcp_T_part`) into step `step`'s nominal target,
+    /// from joints `start` (the lift pose): joint move to the transfer pose, fast down to the
+    /// pre-insert pose, slow insertion, release, retreat.
+    #[allow(non_snake_case)]
+    pub fn insert(
+        &self,
+        step: usize,
+        held: (&PartGeometry, &Isometry3<f64>),
+        start: &Joints,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+    ) -> Result<Plan, PlanError> {
+        let k = self.knowledge;
+        let c = &self.config;
+        let base_T_target = k.base_T_targets[step];
+        let base_T_ins = k.base_T_insertions[step];
+        let tcp_T_part = held.1;
+        let insert = base_T_target * tcp_T_part.inverse();
+        // Back out along the insertion frame's z (out of the hole).
+        let out = base_T_ins.rotation * nalgebra::Vector3::z();
+        let along = |h: f64| Translation3::from(out * h) * insert;
+        let transfer = along(c.clearance_height);
+        let pre = along(c.slow_distance);
+        let q_transfer = self.ik("transfer", &transfer, start)?;
+        self.check_transit("transfer", start, &q_transfer, Some(held), placed)?;
+        let q_pre = self.ik("pre-insert", &pre, &q_transfer)?;
+        let q_insert = self.ik("insert", &insert, &q_pre)?;
+        self.check_arm("insert", &q_insert)?;
+        let s = &self.speeds;
+        Ok(Plan {
+            motions: vec![
+                ("transfer", Motion::MoveJ(q_transfer, s.joint)),
+                ("pre-insert", Motion::MoveL(pre, s.fast)),
+                ("insert", Motion::MoveL(insert, s.slow)),
+                ("release", Motion::Open),
+                ("retreat", Motion::MoveL(transfer, s.fast)),
+            ],
+            end_joints: q_transfer,
+        })
+    }
+}
+
+/// The estimated pose of a grasped part in the TCP frame: the pre-grasp estimate with the
+/// component along the closing axis (TCP y) removed, since the jaws centre the part there.
+#[allow(non_snake_case)]
+pub fn grasped_offset(tcp_T_part_estimate: &Isometry3<f64>) -> Isometry3<f64> {
+    let mut t = *tcp_T_part_estimate;
+    t.translation.vector.y = 0.0;
+    t
+}

@@ -1,0 +1,261 @@
+//! Instance selection: which detected part to pick for a step.
+//!
+//! An instance qualifies when its stable pose has a catalog grasp, that grasp leads to the
+//! step's insertion orientation (a part lying the wrong way up is never picked), the approach,
+//! grasp and insertion poses are reachable by IK, and the open fingers clear every other
+//! detection by a margin (parry distance against their convex hulls at the estimated poses).
+//! Qualified instances are ranked by perception confidence in bands of
+//! [`SelectionConfig::confidence_band`] (confidences within a band are equally trustworthy);
+//! ties are broken by the motion the pick and insertion need (the largest joint travel from home
+//! to the grasp plus from the grasp to the insertion, a proxy for their time), then by the
+//! estimated position (table x, then y), so the choice is deterministic.
+
+use nalgebra::{Isometry3, Vector3};
+use perception::part::Catalog;
+use robots::kinematics::Joints;
+
+use super::geometry::CellKnowledge;
+use super::perception::DetectedPart;
+
+/// Selection tuning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SelectionConfig {
+    /// Smallest distance between an open finger and a neighbouring part, metres.
+    pub finger_margin: f64,
+    /// Largest angle between the part's resting up direction and the direction it must face
+    /// at its target, radians.
+    pub max_orientation_error: f64,
+    /// Smallest confidence a detection needs to be considered.
+    pub min_confidence: f64,
+    /// Height of the approach pose above the grasp, metres.
+    pub approach_height: f64,
+    /// Width of the confidence bands instances are ranked in.
+    pub confidence_band: f64,
+}
+
+impl Default for SelectionConfig {
+    fn default() -> Self {
+        Self {
+            finger_margin: 0.0005,
+            max_orientation_error: 10f64.to_radians(),
+            min_confidence: 0.2,
+            approach_height: 0.015,
+            confidence_band: 0.05,
+        }
+    }
+}
+
+/// Why a detection was not chosen.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Rejection {
+    /// Another part than the step needs.
+    OtherPart,
+    /// Confidence below the threshold.
+    LowConfidence(f64),
+    /// Its stable pose has no grasp (e.g. upside down).
+    NoGraspForPose(String),
+    /// The grasp would not present the part the way the target needs.
+    WrongOrientation(String),
+    /// A pose of the pick or the insertion has no IK solution.
+    Unreachable(String),
+    /// An open finger would come closer than the margin to a neighbour.
+    NeighbourTooClose {
+        /// The neighbour's detection index.
+        neighbour: usize,
+        /// The distance, metres.
+        distance: f64,
+    },
+}
+
+/// A chosen instance with its grasp.
+#[derive(Debug, Clone, PartialEq)]
+#[allow(non_snake_case)]
+pub struct Selection {
+    /// The detection.
+    pub detection: DetectedPart,
+    /// TCP pose that grasps it.
+    pub base_T_grasp: Isometry3<f64>,
+    /// The part in the TCP frame as estimated at the grasp.
+    pub tcp_T_part: Isometry3<f64>,
+    /// Largest joint travel home → grasp plus grasp → insertion, radians (the tie-breaker).
+    pub travel: f64,
+}
+
+/// The outcome of a selection: the chosen instance, and why each other one was not.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SelectionResult {
+    /// The best qualified instance.
+    pub chosen: Option<Selection>,
+    /// (detection index, reason) of each rejected detection of the step's part.
+    pub rejected: Vec<(usize, Rejection)>,
+}
+
+impl SelectionResult {
+    /// A short summary of the rejections (for causes and logs).
+    pub fn summary(&self) -> String {
+        let mut counts: std::collections::BTreeMap<&str, usize> = Default::default();
+        for (_, r) in &self.rejected {
+            let k = match r {
+                Rejection::OtherPart => continue,
+                Rejection::LowConfidence(_) => "low confidence",
+                Rejection::NoGraspForPose(_) => "no grasp for its stable pose (wrong way up)",
+                Rejection::WrongOrientation(_) => "wrong orientation for the target",
+                Rejection::Unreachable(_) => "unreachable",
+                Rejection::NeighbourTooClose { .. } => "neighbour too close for the fingers",
+            };
+            *counts.entry(k).or_default() += 1;
+        }
+        if counts.is_empty() {
+            return "no instance detected".into();
+        }
+        counts
+            .iter()
+            .map(|(k, n)| format!("{n} {k}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// Chooses the instance of step `step`'s part to pick among `detections`.
+#[allow(non_snake_case)]
+pub fn select(
+    knowledge: &CellKnowledge,
+    catalog: &Catalog,
+    step: usize,
+    detections: &[DetectedPart],
+    home: &Joints,
+    config: &SelectionConfig,
+) -> SelectionResult {
+    let mut rejected = Vec::new();
+    let mut qualified: Vec<Selection> = Vec::new();
+    let Some(s) = knowledge.steps.get(step) else {
+        return SelectionResult {
+            chosen: None,
+            rejected,
+        };
+    };
+    let part = catalog.part(&s.part);
+    let base_T_target = knowledge.base_T_targets[step];
+    let base_T_ins = knowledge.base_T_insertions[step];
+    let home_tcp = knowledge.kinematics.forward_tcp(home);
+    let home_yaw = knowledge.tcp_yaw(&home_tcp);
+    // The direction, in the part frame, that must point up (out of the hole) at the target.
+    let up_at_target = base_T_target.rotation.inverse() * (base_T_ins.rotation * Vector3::z());
+    for d in detections {
+        if d.part != s.part {
+            rejected.push((d.index, Rejection::OtherPart));
+            continue;
+        }
+        if d.confidence < config.min_confidence {
+            rejected.push((d.index, Rejection::LowConfidence(d.confidence)));
+            continue;
+        }
+        let (Some(part), Some(pose)) = (part, part.and_then(|p| p.stable_pose(&d.stable_pose)))
+        else {
+            rejected.push((d.index, Rejection::NoGraspForPose(d.stable_pose.clone())));
+            continue;
+        };
+        let Some(grasp) = part.grasp_for(&d.stable_pose) else {
+            rejected.push((d.index, Rejection::NoGraspForPose(d.stable_pose.clone())));
+            continue;
+        };
+        let up = Vector3::from(pose.up_in_part);
+        let angle = up.normalize().dot(&up_at_target).clamp(-1.0, 1.0).acos();
+        if angle > config.max_orientation_error {
+            rejected.push((
+                d.index,
+                Rejection::WrongOrientation(format!(
+                    "lies on \"{}\", {:.0}° from the target's up",
+                    d.stable_pose,
+                    angle.to_degrees()
+                )),
+            ));
+            continue;
+        }
+        let Some(base_T_grasp) = knowledge.grasp_tcp(
+            &d.base_T_part,
+            &Vector3::from(grasp.closing_axis),
+            grasp.grip_height,
+            home_yaw,
+        ) else {
+            rejected.push((d.index, Rejection::NoGraspForPose(d.stable_pose.clone())));
+            continue;
+        };
+        let tcp_T_part = base_T_grasp.inverse() * d.base_T_part;
+        let approach = nalgebra::Translation3::new(0.0, 0.0, config.approach_height) * base_T_grasp;
+        let insert = base_T_target * tcp_T_part.inverse();
+        let mut q = *home;
+        let mut unreachable = None;
+        let mut travel = 0.0;
+        for (what, pose) in [
+            ("approach", approach),
+            ("grasp", base_T_grasp),
+            ("insert", insert),
+        ] {
+            match knowledge.kinematics.inverse_nearest(&pose, &q) {
+                Ok(sol) => {
+                    if what != "grasp" {
+                        travel += sol
+                            .joints
+                            .iter()
+                            .zip(&q)
+                            .map(|(a, b)| (a - b).abs())
+                            .fold(0.0, f64::max);
+                    }
+                    q = sol.joints;
+                }
+                Err(e) => {
+                    unreachable = Some(format!("{what}: {e}"));
+                    break;
+                }
+            }
+        }
+        if let Some(why) = unreachable {
+            rejected.push((d.index, Rejection::Unreachable(why)));
+            continue;
+        }
+        let mut blocked = None;
+        for n in detections.iter().filter(|n| n.index != d.index) {
+            let Some(g) = knowledge.part(&n.part) else {
+                continue;
+            };
+            let dist = knowledge.finger_distance(&base_T_grasp, g.hull.as_ref(), &n.base_T_part);
+            if dist < config.finger_margin {
+                blocked = Some(Rejection::NeighbourTooClose {
+                    neighbour: n.index,
+                    distance: dist,
+                });
+                break;
+            }
+        }
+        if let Some(r) = blocked {
+            rejected.push((d.index, r));
+            continue;
+        }
+        qualified.push(Selection {
+            detection: d.clone(),
+            base_T_grasp,
+            tcp_T_part,
+            travel,
+        });
+    }
+    let band = |c: f64| (c / config.confidence_band.max(1e-9)).floor();
+    qualified.sort_by(|a, b| {
+        let (ca, cb) = (band(a.detection.confidence), band(b.detection.confidence));
+        if ca != cb {
+            return cb.total_cmp(&ca);
+        }
+        if (a.travel - b.travel).abs() > 1e-9 {
+            return a.travel.total_cmp(&b.travel);
+        }
+        let (ta, tb) = (
+            a.detection.table_T_part.translation,
+            b.detection.table_T_part.translation,
+        );
+        ta.x.total_cmp(&tb.x).then(ta.y.total_cmp(&tb.y))
+    });
+    SelectionResult {
+        chosen: qualified.into_iter().next(),
+        rejected,
+    }
+}

@@ -1,0 +1,85 @@
+//! The orchestrator's explicit states and the time each may take.
+
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+/// A state of the episode state machine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum State {
+    /// Open the gripper and move to the home joints.
+    Home,
+    /// Take a camera frame.
+    Capture,
+    /// Estimate part poses in the frame.
+    Perceive,
+    /// Choose an instance to pick.
+    Select,
+    /// Plan and check the pick motion.
+    PlanPick,
+    /// Approach, grasp, lift.
+    Pick,
+    /// Check that a part is in the fingers.
+    VerifyGrasp,
+    /// Plan and check the insertion motion.
+    PlanInsert,
+    /// Transfer, pre-insert, insert (slow), release.
+    Insert,
+    /// Check the insertion result and retreat.
+    Verify,
+    /// Shake the feeder because nothing is pickable.
+    Shake,
+    /// Open the gripper and back away after a failed grasp or a jam.
+    Retract,
+    /// Every step done (seated or given up).
+    Done,
+    /// Stopped safely after a safety event or a lost connection.
+    SafeStop,
+}
+
+impl State {
+    /// Whether the episode ends in this state.
+    pub fn is_terminal(self) -> bool {
+        matches!(self, State::Done | State::SafeStop)
+    }
+}
+
+/// Wall-clock bound of every state; a state that overruns it stops the episode safely.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Timeouts {
+    /// Bound of states that only compute (capture, perceive, select, plan, verify).
+    pub compute: Duration,
+    /// Bound of states that move the arm (home, pick, insert, retract, shake).
+    pub motion: Duration,
+}
+
+impl Default for Timeouts {
+    /// 10 s to compute, 60 s to move (a real UR at cell speeds needs a few seconds per move).
+    fn default() -> Self {
+        Self {
+            compute: Duration::from_secs(10),
+            motion: Duration::from_secs(60),
+        }
+    }
+}
+
+impl Timeouts {
+    /// The bound of `state`.
+    pub fn of(&self, state: State) -> Duration {
+        match state {
+            State::Home | State::Pick | State::Insert | State::Retract | State::Shake => {
+                self.motion
+            }
+            State::Capture
+            | State::Perceive
+            | State::Select
+            | State::PlanPick
+            | State::VerifyGrasp
+            | State::PlanInsert
+            | State::Verify
+            | State::Done
+            | State::SafeStop => self.compute,
+        }
+    }
+}

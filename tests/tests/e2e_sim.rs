@@ -1,0 +1,189 @@
+//! End to end in the in-process simulated cell: the nominal scenario's success rate over 200
+//! episodes, determinism, the event log, and the failure paths (empty feeder, every part upside
+//! down, perception finding nothing, an unreachable target).
+
+mod e2e_support;
+
+use cell::episode::StepOutcome;
+use cell::orchestrator::{SimSetup, State, run_sim_episode_blocking};
+use rayon::prelude::*;
+use sim::cell::CellModel;
+use sim::cell::insertion::Scorer;
+
+use e2e_support::{scenario_with, setup};
+
+#[test]
+fn nominal_scenario_assembles_at_least_95_percent_of_200_episodes() {
+    let setup = setup(|_| {});
+    let outputs: Vec<_> = (0..200u32)
+        .into_par_iter()
+        .map(|e| run_sim_episode_blocking(&setup, e).expect("episode set up"))
+        .collect();
+    let successes = outputs.iter().filter(|o| o.record.success).count();
+    let cycle: f64 = outputs
+        .iter()
+        .filter(|o| o.record.success)
+        .map(|o| o.record.cycle_time_s)
+        .sum::<f64>()
+        / successes.max(1) as f64;
+    let failures: Vec<String> = outputs
+        .iter()
+        .filter(|o| !o.record.success)
+        .map(|o| {
+            let last = o.record.steps.last();
+            format!(
+                "episode {}: {:?} {:?} {:?}",
+                o.record.episode,
+                last.map(|s| &s.part),
+                last.map(|s| s.outcome),
+                last.and_then(|s| s.cause.as_deref())
+            )
+        })
+        .collect();
+    println!(
+        "success {successes}/200, mean cycle {cycle:.2} s (simulated); failures: {failures:#?}"
+    );
+    assert!(
+        successes >= 190,
+        "success {successes}/200 < 95 %: {failures:#?}"
+    );
+    for o in &outputs {
+        let r = &o.record;
+        assert!(
+            r.abort.is_none(),
+            "episode {} aborted: {:?}",
+            r.episode,
+            r.abort
+        );
+        assert!(r.cycle_time_s > 0.0 && r.cycle_time_s.is_finite());
+        // Every episode starts at Home and ends in Done, and every transition is logged in order.
+        let ev = o.events.events();
+        assert_eq!(ev.first().map(|e| e.to), Some(State::Home));
+        assert_eq!(ev.last().map(|e| e.to), Some(State::Done));
+        for w in ev.windows(2) {
+            assert_eq!(w[0].to, w[1].from, "transitions chain");
+            assert!(w[1].sim_time_s >= w[0].sim_time_s && w[1].wall_time_s >= w[0].wall_time_s);
+        }
+        if r.success {
+            assert_eq!(r.steps.len(), 3);
+            for s in &r.steps {
+                let p = s
+                    .perception_error
+                    .expect("perception error measured in simulation");
+                assert!(
+                    p[0].abs() < 0.5 && p[1].abs() < 0.5,
+                    "perception error {p:?} mm"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn an_episode_replays_alone_with_the_same_record() {
+    let setup = setup(|_| {});
+    for e in [3u32, 117] {
+        let mut a = run_sim_episode_blocking(&setup, e).unwrap().record;
+        let mut b = run_sim_episode_blocking(&setup, e).unwrap().record;
+        a.wall_time_s = 0.0;
+        b.wall_time_s = 0.0;
+        assert_eq!(a, b);
+    }
+    let mut lines = Vec::new();
+    let out = run_sim_episode_blocking(&setup, 5).unwrap();
+    out.events.write_jsonl(&mut lines).unwrap();
+    let text = String::from_utf8(lines).unwrap();
+    assert_eq!(text.lines().count(), out.events.events().len());
+    for line in text.lines() {
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert!(v["sim_time_s"].is_f64() && v["wall_time_s"].is_f64() && v["to"].is_string());
+    }
+}
+
+fn first_step(setup: &SimSetup) -> cell::episode::StepRecord {
+    let out = run_sim_episode_blocking(setup, 0).unwrap();
+    assert!(!out.record.success);
+    assert_eq!(
+        out.record.steps.len(),
+        1,
+        "the episode stops at the failed step"
+    );
+    out.record.steps[0].clone()
+}
+
+#[test]
+fn an_empty_feeder_shakes_the_bounded_number_of_times_then_aborts() {
+    // A scenario file cannot ask for an empty feeder (validation refuses it), so the simulated
+    // cell is built with no main shell in it: the feeder ran empty.
+    let base = setup(|_| {});
+    let mut spec = base.scenario.spec.clone();
+    spec.cell.feeder.parts.insert("main_shell".into(), 0);
+    let model = CellModel::new(
+        &spec.cell,
+        &spec.assembly,
+        &spec.noise,
+        &base.scenario.catalog,
+        Scorer::Analytic,
+    )
+    .unwrap();
+    let setup = SimSetup {
+        scenario: base.scenario.clone(),
+        model,
+        knowledge: base.knowledge.clone(),
+        settings: base.settings.clone(),
+    };
+    let s = first_step(&setup);
+    assert_eq!(s.outcome, StepOutcome::Aborted);
+    assert_eq!(s.attempts, 0);
+    assert_eq!(s.shakes, setup.scenario.spec.cell.feeder.max_shakes);
+    let cause = s.cause.unwrap();
+    assert!(cause.contains("no usable main_shell"), "{cause}");
+}
+
+#[test]
+fn parts_lying_upside_down_are_never_picked() {
+    // Every main shell rests on its back ("-z": open side down).
+    let setup = scenario_with(
+        |_| {},
+        |catalog| e2e_support::all_in_pose(catalog, "main_shell", "-z"),
+    );
+    let s = first_step(&setup);
+    assert_eq!(s.outcome, StepOutcome::Aborted);
+    assert_eq!(s.attempts, 0, "nothing was picked");
+    let cause = s.cause.unwrap();
+    assert!(cause.contains("wrong way up"), "{cause}");
+}
+
+#[test]
+fn perception_that_finds_nothing_aborts_with_the_cause() {
+    // Every keypoint an outlier: PnP results fail the reprojection gate, nothing is detected.
+    let setup = setup(|doc| {
+        doc["perception"]["outlier_fraction"] = toml_edit::value(1.0);
+    });
+    let s = first_step(&setup);
+    assert_eq!(s.outcome, StepOutcome::Aborted);
+    assert_eq!(s.attempts, 0);
+    let cause = s.cause.unwrap();
+    assert!(cause.contains("no instance detected"), "{cause}");
+}
+
+#[test]
+fn an_unreachable_target_is_refused_before_moving() {
+    // The nest target moved 1.2 m away (limits widened so only kinematics refuses it).
+    let setup = setup(|doc| {
+        let t = toml_edit::Array::from_iter([1.2, 0.0, 0.0035]);
+        doc["assembly"][0]["target"]["translation"] = toml_edit::value(t);
+        let min = toml_edit::Array::from_iter([-2.0, -2.0, -0.1]);
+        let max = toml_edit::Array::from_iter([2.0, 2.0, 1.0]);
+        doc["cell"]["limits"]["workspace"]["min"] = toml_edit::value(min);
+        doc["cell"]["limits"]["workspace"]["max"] = toml_edit::value(max);
+    });
+    let s = first_step(&setup);
+    assert_eq!(s.outcome, StepOutcome::Aborted);
+    assert_eq!(
+        s.attempts, 0,
+        "no pick was started for an unreachable target"
+    );
+    let cause = s.cause.unwrap();
+    assert!(cause.contains("unreachable"), "{cause}");
+}
