@@ -5,7 +5,9 @@ use std::path::Path;
 
 use indicatif::ProgressBar;
 use nalgebra::Point3;
-use perception::part::{Catalog, PartRole, PartSpec, StablePose, farthest_point_sample, sample_surface};
+use perception::part::{
+    Catalog, PartRole, PartSpec, StablePose, farthest_point_sample, sample_surface,
+};
 use sim::stable_poses::{DropSettings, StablePoseReport, stable_poses};
 use toml_edit::{Array, ArrayOfTables, DocumentMut, Item, Table, value};
 
@@ -77,7 +79,11 @@ pub fn prepare_catalog(
     progress: Option<&ProgressBar>,
 ) -> Result<Vec<PreparedPart>, PrepareError> {
     let catalog = Catalog::load(path)?;
-    let parts: Vec<&PartSpec> = catalog.parts.iter().filter(|p| p.role != PartRole::Fixture).collect();
+    let parts: Vec<&PartSpec> = catalog
+        .parts
+        .iter()
+        .filter(|p| p.role != PartRole::Fixture)
+        .collect();
     if let Some(p) = progress {
         p.set_length((parts.len() * settings.drops) as u64);
     }
@@ -85,14 +91,18 @@ pub fn prepare_catalog(
         .iter()
         .map(|part| prepare_part(&catalog, part, settings, progress))
         .collect::<Result<Vec<_>, _>>()?;
-    let text = std::fs::read_to_string(path)
-        .map_err(|source| perception::part::PartError::Io { path: path.into(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|source| perception::part::PartError::Io {
+        path: path.into(),
+        source,
+    })?;
     let updated = write_back(&text, &prepared).map_err(|message| PrepareError::Write {
         path: path.display().to_string(),
         message,
     })?;
-    sim::fsutil::write_atomic(path, updated.as_bytes())
-        .map_err(|e| PrepareError::Write { path: path.display().to_string(), message: e.to_string() })?;
+    sim::fsutil::write_atomic(path, updated.as_bytes()).map_err(|e| PrepareError::Write {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
     Ok(prepared)
 }
 
@@ -112,19 +122,27 @@ pub fn write_back(text: &str, prepared: &[PreparedPart]) -> Result<String, Strin
         .and_then(Item::as_array_of_tables_mut)
         .ok_or("the catalog has no [[part]] tables")?;
     for table in parts.iter_mut() {
-        let name = table.get("name").and_then(Item::as_str).unwrap_or_default().to_string();
+        let name = table
+            .get("name")
+            .and_then(Item::as_str)
+            .unwrap_or_default()
+            .to_string();
         let Some(p) = prepared.iter().find(|p| p.name == name) else {
             continue;
         };
         table.insert("mass", value(round(p.mass)));
-        table.insert("center_of_mass", value(vec3(p.center_of_mass.coords.into())));
+        table.insert(
+            "center_of_mass",
+            value(vec3(p.center_of_mass.coords.into())),
+        );
         let mut kps = Array::new();
         for k in &p.keypoints {
             kps.push(vec3(k.coords.into()));
         }
         kps.set_trailing_comma(true);
         for (i, v) in kps.iter_mut().enumerate() {
-            v.decor_mut().set_prefix(if i == 0 { "\n  " } else { " \n  " }.trim_end_matches(' '));
+            v.decor_mut()
+                .set_prefix(if i == 0 { "\n  " } else { " \n  " }.trim_end_matches(' '));
         }
         kps.set_trailing("\n");
         table.insert("keypoints", value(kps));

@@ -22,14 +22,23 @@ fn variant(name: &str, text: &str) -> PathBuf {
 }
 
 fn line_of(text: &str, needle: &str) -> usize {
-    text.lines().position(|l| l.contains(needle)).expect("needle in text") + 1
+    text.lines()
+        .position(|l| l.contains(needle))
+        .expect("needle in text")
+        + 1
 }
 
 #[test]
 fn the_nominal_scenario_is_valid() {
     let s = Scenario::load(&scenarios().join("usbc_nominal.toml")).unwrap();
     assert_eq!(s.spec.assembly.len(), 3);
-    assert!(s.catalog.parts.iter().filter(|p| p.role != perception::part::PartRole::Fixture).all(|p| p.is_prepared()));
+    assert!(
+        s.catalog
+            .parts
+            .iter()
+            .filter(|p| p.role != perception::part::PartRole::Fixture)
+            .all(|p| p.is_prepared())
+    );
 }
 
 #[test]
@@ -60,15 +69,31 @@ fn a_negative_clearance_names_the_step_and_line() {
 #[test]
 fn a_missing_catalog_or_robot_file_is_named() {
     let text = nominal_text()
-        .replace("catalog = \"parts/usbc.toml\"", "catalog = \"parts/nope.toml\"")
-        .replace("robot = \"robots/ur5e.urdf\"", "robot = \"robots/ur3.urdf\"");
+        .replace(
+            "catalog = \"parts/usbc.toml\"",
+            "catalog = \"parts/nope.toml\"",
+        )
+        .replace(
+            "robot = \"robots/ur5e.urdf\"",
+            "robot = \"robots/ur3.urdf\"",
+        );
     let path = variant("missing", &text);
     let err = Scenario::load(&path).unwrap_err();
     std::fs::remove_file(&path).ok();
     let all = err.to_string();
-    assert!(all.contains("nope.toml") && all.contains("parts.catalog"), "{all}");
-    assert!(all.contains("ur3.urdf") && all.contains("cell.robot"), "{all}");
-    let robot = err.0.iter().find(|p| p.key.as_deref() == Some("cell.robot")).unwrap();
+    assert!(
+        all.contains("nope.toml") && all.contains("parts.catalog"),
+        "{all}"
+    );
+    assert!(
+        all.contains("ur3.urdf") && all.contains("cell.robot"),
+        "{all}"
+    );
+    let robot = err
+        .0
+        .iter()
+        .find(|p| p.key.as_deref() == Some("cell.robot"))
+        .unwrap();
     assert_eq!(robot.line, line_of(&text, "ur3.urdf"));
 }
 
@@ -76,7 +101,11 @@ fn a_missing_catalog_or_robot_file_is_named() {
 fn a_part_wider_than_the_stroke_and_a_zero_tolerance_are_rejected() {
     let text = nominal_text()
         .replace("stroke = 0.014", "stroke = 0.008")
-        .replacen("tolerances = { lateral = 0.0001", "tolerances = { lateral = 0.0", 1);
+        .replacen(
+            "tolerances = { lateral = 0.0001",
+            "tolerances = { lateral = 0.0",
+            1,
+        );
     let path = variant("stroke", &text);
     let err = Scenario::load(&path).unwrap_err().to_string();
     std::fs::remove_file(&path).ok();
@@ -88,16 +117,27 @@ fn a_part_wider_than_the_stroke_and_a_zero_tolerance_are_rejected() {
 fn the_binary_exits_non_zero_and_prints_the_location() {
     let text = nominal_text().replace("episodes = 200", "episodes = 0");
     let path = variant("binary", &text);
-    let out = Command::new(env!("CARGO_BIN_EXE_cell")).arg("check").arg(&path).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_cell"))
+        .arg("check")
+        .arg(&path)
+        .output()
+        .unwrap();
     std::fs::remove_file(&path).ok();
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     let want = format!("{}:{}:", path.display(), line_of(&text, "episodes = 0"));
-    assert!(stderr.contains(&want) && stderr.contains("episodes"), "{stderr}");
+    assert!(
+        stderr.contains(&want) && stderr.contains("episodes"),
+        "{stderr}"
+    );
     let ok = Command::new(env!("CARGO_BIN_EXE_cell"))
         .args(["check", "../scenarios/usbc_nominal.toml"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .unwrap();
-    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
 }

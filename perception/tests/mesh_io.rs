@@ -17,8 +17,18 @@ fn block() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
             ]
         })
         .collect();
-    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-    let t = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+    let quads = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let t = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
     (v, t)
 }
 
@@ -45,7 +55,10 @@ fn obj_text(scale: f64, drop_last: bool) -> String {
 
 fn check_block(mesh: &perception::part::TriMesh) {
     let e = mesh.extents();
-    assert!((e.x - 0.009).abs() < 1e-9 && (e.y - 0.006).abs() < 1e-9 && (e.z - 0.003).abs() < 1e-9, "{e}");
+    assert!(
+        (e.x - 0.009).abs() < 1e-9 && (e.y - 0.006).abs() < 1e-9 && (e.z - 0.003).abs() < 1e-9,
+        "{e}"
+    );
     assert!((mesh.volume() - 0.009 * 0.006 * 0.003).abs() < 1e-15);
 }
 
@@ -91,7 +104,10 @@ fn a_millimetre_part_read_as_metres_is_caught_with_the_fix() {
     let err = load_mesh(&obj, LengthUnit::M).unwrap_err();
     assert!(matches!(err, PartError::ImplausibleSize { .. }), "{err}");
     let msg = err.to_string();
-    assert!(msg.contains("b.obj") && msg.contains("unit = \"mm\""), "{msg}");
+    assert!(
+        msg.contains("b.obj") && msg.contains("unit = \"mm\""),
+        "{msg}"
+    );
     // And the other way round: a part exported in metres but declared in millimetres.
     let metres = write(dir.path(), "m.obj", obj_text(1e-3, false).as_bytes());
     let msg = load_mesh(&metres, LengthUnit::Mm).unwrap_err().to_string();
@@ -103,7 +119,10 @@ fn missing_empty_open_and_unknown_files_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nope.obj");
     let msg = load_mesh(&missing, LengthUnit::Mm).unwrap_err().to_string();
-    assert!(msg.contains("nope.obj") && msg.contains("cannot read"), "{msg}");
+    assert!(
+        msg.contains("nope.obj") && msg.contains("cannot read"),
+        "{msg}"
+    );
 
     let empty = write(dir.path(), "empty.obj", b"# nothing\n");
     let err = load_mesh(&empty, LengthUnit::Mm).unwrap_err();
@@ -111,7 +130,10 @@ fn missing_empty_open_and_unknown_files_are_named() {
 
     let open = write(dir.path(), "open.obj", obj_text(1.0, true).as_bytes());
     let msg = load_mesh(&open, LengthUnit::Mm).unwrap_err().to_string();
-    assert!(msg.contains("open.obj") && msg.contains("not closed") && msg.contains("watertight"), "{msg}");
+    assert!(
+        msg.contains("open.obj") && msg.contains("not closed") && msg.contains("watertight"),
+        "{msg}"
+    );
 
     let txt = write(dir.path(), "part.step", b"ISO-10303-21;");
     let err = load_mesh(&txt, LengthUnit::Mm).unwrap_err();

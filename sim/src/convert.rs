@@ -30,7 +30,10 @@ pub fn unit_quaternion_from_rot(r: &Rotation) -> UnitQuaternion<f64> {
 
 /// A nalgebra isometry as a parry/rapier pose.
 pub fn pose_from_isometry(iso: &Isometry3<f64>) -> Pose {
-    Pose::from_parts(vec_from_vector(&iso.translation.vector), rot_from_unit_quaternion(&iso.rotation))
+    Pose::from_parts(
+        vec_from_vector(&iso.translation.vector),
+        rot_from_unit_quaternion(&iso.rotation),
+    )
 }
 
 /// A parry/rapier pose as a nalgebra isometry.

@@ -33,10 +33,18 @@ fn meshes_are_closed_and_match_the_seed_sizes() {
         let mesh = load_mesh(&parts_dir().join(name), LengthUnit::Mm).unwrap();
         let e = mesh.extents() * 1e3;
         for i in 0..3 {
-            assert!((e[i] - size[i]).abs() < 1e-4, "{name}: extent {i} is {} mm, want {}", e[i], size[i]);
+            assert!(
+                (e[i] - size[i]).abs() < 1e-4,
+                "{name}: extent {i} is {} mm, want {}",
+                e[i],
+                size[i]
+            );
         }
         let (lo, hi) = mesh.aabb();
-        assert!((lo.coords + hi.coords).norm() < 1e-9, "{name}: origin is not the box centre");
+        assert!(
+            (lo.coords + hi.coords).norm() < 1e-9,
+            "{name}: origin is not the box centre"
+        );
         assert!(mesh.volume() > 0.0);
     }
 }
@@ -64,7 +72,10 @@ fn the_insert_fits_the_cavity_with_usb_c_clearance() {
         .map(|p| p.x.abs())
         .fold(0.0, f64::max);
     let clearance_mm = 2.0 * (cavity_half_x - insert_half_x) * 1e3;
-    assert!((clearance_mm - INSERT_CLEARANCE_MM).abs() < 1e-6, "clearance {clearance_mm} mm");
+    assert!(
+        (clearance_mm - INSERT_CLEARANCE_MM).abs() < 1e-6,
+        "clearance {clearance_mm} mm"
+    );
     // Seated, the insert's bottom rests on the shell floor.
     let insert_bottom = insert.aabb().0.z;
     let shell_floor_top = shell.aabb().0.z + 0.30e-3;

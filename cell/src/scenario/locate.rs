@@ -53,7 +53,9 @@ pub struct Locator {
 impl Locator {
     /// A locator over a TOML text (an unparsable text locates nothing).
     pub fn new(text: &str) -> Self {
-        Self { doc: toml_edit::Document::parse(text.to_string()).ok() }
+        Self {
+            doc: toml_edit::Document::parse(text.to_string()).ok(),
+        }
     }
 
     /// Byte offset where the value at `path` starts, or the deepest existing ancestor's.
@@ -67,9 +69,7 @@ impl Locator {
                 (Seg::Key(k), toml_edit::Item::Value(toml_edit::Value::InlineTable(t))) => {
                     t.get(k).map(|_| &item[k.as_str()])
                 }
-                (Seg::Index(i), toml_edit::Item::ArrayOfTables(a)) => {
-                    a.get(*i).map(|_| &item[*i])
-                }
+                (Seg::Index(i), toml_edit::Item::ArrayOfTables(a)) => a.get(*i).map(|_| &item[*i]),
                 (Seg::Index(i), toml_edit::Item::Value(toml_edit::Value::Array(a))) => {
                     a.get(*i).map(|_| &item[*i])
                 }
@@ -108,7 +108,12 @@ mod tests {
         let l = Locator::new(text);
         let path = KeyPath::default().key("step").index(1).key("x");
         assert_eq!(&text[l.offset(&path).unwrap()..][..1], "3");
-        let deep = KeyPath::default().key("step").index(1).key("y").key("z").index(1);
+        let deep = KeyPath::default()
+            .key("step")
+            .index(1)
+            .key("y")
+            .key("z")
+            .index(1);
         assert_eq!(&text[l.offset(&deep).unwrap()..][..1], "5");
         assert_eq!(path.to_string(), "step[1].x");
     }

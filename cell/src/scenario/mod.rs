@@ -84,7 +84,10 @@ impl Scenario {
     /// Parses and validates scenario text that was read from `path`.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ScenarioError> {
         let spec: ScenarioSpec = toml::from_str(text).map_err(|e| {
-            let (line, column) = e.span().map(|s| line_column(text, s.start)).unwrap_or((1, 1));
+            let (line, column) = e
+                .span()
+                .map(|s| line_column(text, s.start))
+                .unwrap_or((1, 1));
             ScenarioError(vec![Problem {
                 file: path.into(),
                 line,
@@ -100,15 +103,27 @@ impl Scenario {
             let problems = issues
                 .into_iter()
                 .map(|(key, message)| {
-                    let (line, column) =
-                        locator.offset(&key).map(|o| line_column(text, o)).unwrap_or((1, 1));
-                    Problem { file: path.into(), line, column, key: Some(key.to_string()), message }
+                    let (line, column) = locator
+                        .offset(&key)
+                        .map(|o| line_column(text, o))
+                        .unwrap_or((1, 1));
+                    Problem {
+                        file: path.into(),
+                        line,
+                        column,
+                        key: Some(key.to_string()),
+                        message,
+                    }
                 })
                 .collect();
             return Err(ScenarioError(problems));
         }
         let catalog = catalog.expect("validation loads the catalog when it reports no problem");
-        Ok(Self { path: path.into(), spec, catalog })
+        Ok(Self {
+            path: path.into(),
+            spec,
+            catalog,
+        })
     }
 
     /// A path in the scenario file, resolved against the scenario's folder.

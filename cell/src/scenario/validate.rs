@@ -16,13 +16,19 @@ fn root() -> KeyPath {
 
 fn positive(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
     if !(value.is_finite() && value > 0.0) {
-        issues.push((path, format!("{what} must be a positive number, got {value}")));
+        issues.push((
+            path,
+            format!("{what} must be a positive number, got {value}"),
+        ));
     }
 }
 
 fn non_negative(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
     if !(value.is_finite() && value >= 0.0) {
-        issues.push((path, format!("{what} must be zero or positive, got {value}")));
+        issues.push((
+            path,
+            format!("{what} must be zero or positive, got {value}"),
+        ));
     }
 }
 
@@ -50,21 +56,47 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         issues.push((camera.key("intrinsics"), format!("invalid camera: {e}")));
     }
     if !spec.cell.camera.base_T_camera.is_finite() {
-        issues.push((camera.key("base_T_camera"), "pose has a non-finite number".into()));
+        issues.push((
+            camera.key("base_T_camera"),
+            "pose has a non-finite number".into(),
+        ));
     }
     if let Err(e) = spec.cell.limits.validate() {
-        issues.push((cell.key("limits").key(e.field), format!("invalid limits: {}", e.reason)));
+        issues.push((
+            cell.key("limits").key(e.field),
+            format!("invalid limits: {}", e.reason),
+        ));
     }
     let g = &spec.cell.gripper;
     let gp = cell.key("gripper");
     positive(&mut issues, gp.key("stroke"), g.stroke, "stroke");
-    positive(&mut issues, gp.key("finger_width"), g.finger_width, "finger_width");
-    positive(&mut issues, gp.key("finger_thickness"), g.finger_thickness, "finger_thickness");
-    positive(&mut issues, gp.key("finger_length"), g.finger_length, "finger_length");
+    positive(
+        &mut issues,
+        gp.key("finger_width"),
+        g.finger_width,
+        "finger_width",
+    );
+    positive(
+        &mut issues,
+        gp.key("finger_thickness"),
+        g.finger_thickness,
+        "finger_thickness",
+    );
+    positive(
+        &mut issues,
+        gp.key("finger_length"),
+        g.finger_length,
+        "finger_length",
+    );
     non_negative(&mut issues, gp.key("friction"), g.friction, "friction");
     let fp = cell.key("feeder");
     for i in 0..2 {
-        positive(&mut issues, fp.key("size").index(i), spec.cell.feeder.size[i], "feeder size");
+        positive(
+            &mut issues,
+            fp.key("size").index(i),
+            spec.cell.feeder.size[i],
+            "feeder size",
+        );
     }
     let np = root().key("noise");
     let n = &spec.noise;
@@ -78,17 +110,28 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         non_negative(&mut issues, np.key(key), v, key);
     }
     let pp = root().key("perception");
-    non_negative(&mut issues, pp.key("keypoint_noise_px"), spec.perception.keypoint_noise_px, "keypoint_noise_px");
+    non_negative(
+        &mut issues,
+        pp.key("keypoint_noise_px"),
+        spec.perception.keypoint_noise_px,
+        "keypoint_noise_px",
+    );
     let f = spec.perception.outlier_fraction;
     if !(0.0..=1.0).contains(&f) {
-        issues.push((pp.key("outlier_fraction"), format!("outlier_fraction must be in [0, 1], got {f}")));
+        issues.push((
+            pp.key("outlier_fraction"),
+            format!("outlier_fraction must be in [0, 1], got {f}"),
+        ));
     }
     // The catalog, then everything that names its parts.
     let catalog_path = dir.join(&spec.parts.catalog);
     let catalog = match Catalog::load(&catalog_path) {
         Ok(c) => Some(c),
         Err(e) => {
-            issues.push((root().key("parts").key("catalog"), format!("cannot use the catalog: {e}")));
+            issues.push((
+                root().key("parts").key("catalog"),
+                format!("cannot use the catalog: {e}"),
+            ));
             None
         }
     };
@@ -118,7 +161,10 @@ fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Is
     if catalog.part(&spec.cell.fixture.part).is_none() {
         issues.push((
             cell.key("fixture").key("part"),
-            format!("no part \"{}\" in the catalog (it has: {known})", spec.cell.fixture.part),
+            format!(
+                "no part \"{}\" in the catalog (it has: {known})",
+                spec.cell.fixture.part
+            ),
         ));
     }
     let mut placed: Vec<&str> = Vec::new();
@@ -140,20 +186,32 @@ fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Is
                             catalog.dir.join("usbc.toml").display()
                         ),
                     ));
-                } else if !part.grasps.iter().any(|g| part.stable_pose(&g.stable_pose).is_some()) {
+                } else if !part
+                    .grasps
+                    .iter()
+                    .any(|g| part.stable_pose(&g.stable_pose).is_some())
+                {
                     issues.push((
                         sp.key("part"),
-                        format!("part \"{}\" has no grasp for any of its stable poses", step.part),
+                        format!(
+                            "part \"{}\" has no grasp for any of its stable poses",
+                            step.part
+                        ),
                     ));
                 }
                 let stroke = spec.cell.gripper.stroke;
                 for g in &part.grasps {
                     let axis = Vector3::from(g.closing_axis);
-                    if let (Some(axis), Ok(mesh)) = (axis.try_normalize(1e-12), catalog.load_mesh(part)) {
-                        let (lo, hi) = mesh.vertices.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-                            let d = p.coords.dot(&axis);
-                            (lo.min(d), hi.max(d))
-                        });
+                    if let (Some(axis), Ok(mesh)) =
+                        (axis.try_normalize(1e-12), catalog.load_mesh(part))
+                    {
+                        let (lo, hi) =
+                            mesh.vertices
+                                .iter()
+                                .fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+                                    let d = p.coords.dot(&axis);
+                                    (lo.min(d), hi.max(d))
+                                });
                         if hi - lo >= stroke {
                             issues.push((
                                 cell.key("gripper").key("stroke"),
@@ -170,31 +228,52 @@ fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Is
                 }
             }
         }
-        if let Destination::Part(target) = &step.into {
-            if !placed.contains(&target.as_str()) {
-                issues.push((
-                    sp.key("into"),
-                    format!("\"{target}\" is not placed by an earlier step, so nothing can go into it"),
-                ));
-            }
+        if let Destination::Part(target) = &step.into
+            && !placed.contains(&target.as_str())
+        {
+            issues.push((
+                sp.key("into"),
+                format!("\"{target}\" is not placed by an earlier step, so nothing can go into it"),
+            ));
         }
         if !step.target.is_finite() {
             issues.push((sp.key("target"), "pose has a non-finite number".into()));
         }
         let axis = Vector3::from(step.insertion_axis);
         if !(axis.norm() > 1e-9 && axis.iter().all(|v| v.is_finite())) {
-            issues.push((sp.key("insertion_axis"), "insertion_axis must be a non-zero vector".into()));
+            issues.push((
+                sp.key("insertion_axis"),
+                "insertion_axis must be a non-zero vector".into(),
+            ));
         }
         positive(issues, sp.key("clearance"), step.clearance, "clearance");
         non_negative(issues, sp.key("lead_in"), step.lead_in, "lead_in");
         let tp = sp.key("tolerances");
-        positive(issues, tp.key("lateral"), step.tolerances.lateral, "tolerance lateral");
-        positive(issues, tp.key("depth"), step.tolerances.depth, "tolerance depth");
-        positive(issues, tp.key("tilt"), step.tolerances.tilt, "tolerance tilt");
+        positive(
+            issues,
+            tp.key("lateral"),
+            step.tolerances.lateral,
+            "tolerance lateral",
+        );
+        positive(
+            issues,
+            tp.key("depth"),
+            step.tolerances.depth,
+            "tolerance depth",
+        );
+        positive(
+            issues,
+            tp.key("tilt"),
+            step.tolerances.tilt,
+            "tolerance tilt",
+        );
         if spec.cell.feeder.parts.get(&step.part).copied().unwrap_or(0) == 0 {
             issues.push((
                 sp.key("part"),
-                format!("no \"{}\" in the feeder: add it to cell.feeder.parts", step.part),
+                format!(
+                    "no \"{}\" in the feeder: add it to cell.feeder.parts",
+                    step.part
+                ),
             ));
         }
         placed.push(step.part.as_str());

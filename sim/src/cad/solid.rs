@@ -35,7 +35,12 @@ impl Rect {
 
     /// Corners counter-clockwise seen from +z, starting at (x0, y0).
     fn corners(&self) -> [(f64, f64); 4] {
-        [(self.x0, self.y0), (self.x1, self.y0), (self.x1, self.y1), (self.x0, self.y1)]
+        [
+            (self.x0, self.y0),
+            (self.x1, self.y0),
+            (self.x1, self.y1),
+            (self.x0, self.y1),
+        ]
     }
 
     fn contains_open(&self, x: f64, y: f64) -> bool {
@@ -97,7 +102,12 @@ impl Solid {
         (outer0, inner0): (Rect, Rect),
         (outer1, inner1): (Rect, Rect),
     ) -> &mut Self {
-        let (o0, i0, o1, i1) = (outer0.corners(), inner0.corners(), outer1.corners(), inner1.corners());
+        let (o0, i0, o1, i1) = (
+            outer0.corners(),
+            inner0.corners(),
+            outer1.corners(),
+            inner1.corners(),
+        );
         for k in 0..4 {
             let n = (k + 1) % 4;
             let p = |c: (f64, f64), z: f64| Point3::new(c.0, c.1, z);
@@ -176,7 +186,11 @@ impl Solid {
         let (lo, hi) = mesh.aabb();
         let centre = nalgebra::center(&lo, &hi);
         let centred = TriMesh {
-            vertices: mesh.vertices.iter().map(|p| Point3::from(p - centre)).collect(),
+            vertices: mesh
+                .vertices
+                .iter()
+                .map(|p| Point3::from(p - centre))
+                .collect(),
             triangles: mesh.triangles,
         };
         centred.scaled(1e-3)
@@ -199,7 +213,11 @@ mod tests {
         // Plate 100 mm³ + ring: frustum-walled ring volume = outer prism − inner frustum.
         let inner_frustum = 2.0 / 3.0 * (64.0 + 81.0 + (64.0f64 * 81.0).sqrt());
         let expect = 100.0 + 200.0 - inner_frustum;
-        assert!((m.volume() * 1e9 - expect).abs() < 1e-6, "{}", m.volume() * 1e9);
+        assert!(
+            (m.volume() * 1e9 - expect).abs() < 1e-6,
+            "{}",
+            m.volume() * 1e9
+        );
     }
 
     #[test]

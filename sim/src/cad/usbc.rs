@@ -55,7 +55,10 @@ const NEST_BASE: f64 = 5.0;
 const NEST_POCKET_DEPTH: f64 = 1.0;
 
 fn cavity() -> Rect {
-    Rect::centred(INSERT_LOWER.0 + INSERT_CLEARANCE_MM, INSERT_LOWER.1 + INSERT_CLEARANCE_MM)
+    Rect::centred(
+        INSERT_LOWER.0 + INSERT_CLEARANCE_MM,
+        INSERT_LOWER.1 + INSERT_CLEARANCE_MM,
+    )
 }
 
 /// The main shell: a sheet-metal tray with an open top, a floor window off-centre toward −y, and
@@ -66,11 +69,29 @@ pub fn main_shell() -> TriMesh {
     s.plate_with_holes(SHELL_BODY, 0.0, SHELL_FLOOR, &[window], None);
     let inner = cavity();
     let chamfer_z = SHELL_HEIGHT - SHELL_CHAMFER_MM;
-    s.ring(SHELL_FLOOR, chamfer_z, (SHELL_BODY, inner), (SHELL_BODY, inner));
-    s.ring(chamfer_z, SHELL_HEIGHT, (SHELL_BODY, inner), (SHELL_BODY, inner.grown(SHELL_CHAMFER_MM)));
+    s.ring(
+        SHELL_FLOOR,
+        chamfer_z,
+        (SHELL_BODY, inner),
+        (SHELL_BODY, inner),
+    );
+    s.ring(
+        chamfer_z,
+        SHELL_HEIGHT,
+        (SHELL_BODY, inner),
+        (SHELL_BODY, inner.grown(SHELL_CHAMFER_MM)),
+    );
     for sign in [-1.0, 1.0] {
-        let (a, b) = if sign > 0.0 { (SHELL_BODY.x1, SHELL_TAB_X) } else { (-SHELL_TAB_X, SHELL_BODY.x0) };
-        s.cuboid(Rect::new(a, b, SHELL_TAB_Y.0, SHELL_TAB_Y.1), 0.0, SHELL_TAB_HEIGHT);
+        let (a, b) = if sign > 0.0 {
+            (SHELL_BODY.x1, SHELL_TAB_X)
+        } else {
+            (-SHELL_TAB_X, SHELL_BODY.x0)
+        };
+        s.cuboid(
+            Rect::new(a, b, SHELL_TAB_Y.0, SHELL_TAB_Y.1),
+            0.0,
+            SHELL_TAB_HEIGHT,
+        );
     }
     s.into_part_mesh()
 }
@@ -79,13 +100,21 @@ pub fn main_shell() -> TriMesh {
 /// tongue carries a row of twelve gold contact pins near +y.
 pub fn insert_mold() -> TriMesh {
     let mut s = Solid::new();
-    s.cuboid(Rect::centred(INSERT_LOWER.0, INSERT_LOWER.1), 0.0, INSERT_LOWER_HEIGHT);
+    s.cuboid(
+        Rect::centred(INSERT_LOWER.0, INSERT_LOWER.1),
+        0.0,
+        INSERT_LOWER_HEIGHT,
+    );
     let top = INSERT_HEIGHT - PIN_HEIGHT;
     s.cuboid(INSERT_UPPER, INSERT_LOWER_HEIGHT, top);
     let pitch = 0.5;
     for i in 0..12 {
         let x = (i as f64 - 5.5) * pitch;
-        s.cuboid(Rect::new(x - 0.125, x + 0.125, 2.6, 3.6), top, INSERT_HEIGHT);
+        s.cuboid(
+            Rect::new(x - 0.125, x + 0.125, 2.6, 3.6),
+            top,
+            INSERT_HEIGHT,
+        );
     }
     s.into_part_mesh()
 }
@@ -105,9 +134,17 @@ pub fn top_shell() -> TriMesh {
     let rear_in = -(INSERT_UPPER.y1 + TOP_SKIRT_GAP_MM);
     let insert_over_shell = INSERT_HEIGHT - INSERT_LOWER_HEIGHT;
     let rear_bottom = plate_z - insert_over_shell + 0.10;
-    s.cuboid(Rect::new(-skirt_in, skirt_in, -TOP_HALF_DEPTH, rear_in), rear_bottom, plate_z);
+    s.cuboid(
+        Rect::new(-skirt_in, skirt_in, -TOP_HALF_DEPTH, rear_in),
+        rear_bottom,
+        plate_z,
+    );
     for sign in [-1.0, 1.0] {
-        let (a, b) = if sign > 0.0 { (skirt_in, skirt_out) } else { (-skirt_out, -skirt_in) };
+        let (a, b) = if sign > 0.0 {
+            (skirt_in, skirt_out)
+        } else {
+            (-skirt_out, -skirt_in)
+        };
         // The skirt's inner bottom edge is flared by the lead-in so it guides over the shell.
         let skirt = Rect::new(a, b, TOP_SKIRT_Y.0, TOP_SKIRT_Y.1);
         let mut flared = skirt;
@@ -119,7 +156,11 @@ pub fn top_shell() -> TriMesh {
         let flare_top = 0.25 + 2.0 * TOP_LEAD_IN_MM;
         s.frustum(flared, 0.25, skirt, flare_top);
         s.cuboid(skirt, flare_top, plate_z);
-        let (fa, fb) = if sign > 0.0 { (skirt_out, TOP_FLANGE_X) } else { (-TOP_FLANGE_X, -skirt_out) };
+        let (fa, fb) = if sign > 0.0 {
+            (skirt_out, TOP_FLANGE_X)
+        } else {
+            (-TOP_FLANGE_X, -skirt_out)
+        };
         s.cuboid(Rect::new(fa, fb, TOP_FLANGE_Y.0, TOP_FLANGE_Y.1), 0.0, 0.25);
     }
     s.into_part_mesh()
@@ -131,9 +172,14 @@ pub fn fixture_nest() -> TriMesh {
     let mut s = Solid::new();
     let outer = Rect::centred(NEST_SIZE, NEST_SIZE);
     s.cuboid(outer, 0.0, NEST_BASE);
-    let pocket = Rect::new(-SHELL_TAB_X, SHELL_TAB_X, SHELL_BODY.y0, SHELL_BODY.y1).grown(NEST_GAP_MM);
+    let pocket =
+        Rect::new(-SHELL_TAB_X, SHELL_TAB_X, SHELL_BODY.y0, SHELL_BODY.y1).grown(NEST_GAP_MM);
     let relief = |sign: f64| {
-        let (a, b) = if sign > 0.0 { (pocket.x1, 6.4) } else { (-6.4, pocket.x0) };
+        let (a, b) = if sign > 0.0 {
+            (pocket.x1, 6.4)
+        } else {
+            (-6.4, pocket.x0)
+        };
         Rect::new(a, b, TOP_SKIRT_Y.0 - 0.4, TOP_SKIRT_Y.1 + 0.3)
     };
     s.plate_with_holes(
@@ -171,11 +217,23 @@ pub fn assembly_targets() -> AssemblyTargets {
     let shell_y_centre = 0.0;
     // Nest: bounding box from 0 to NEST_BASE + depth; pocket floor at NEST_BASE.
     let nest_centre_z = (NEST_BASE + NEST_POCKET_DEPTH) / 2.0;
-    let nest_t_main = mm(0.0, shell_y_centre, NEST_BASE + shell_centre_z - nest_centre_z);
+    let nest_t_main = mm(
+        0.0,
+        shell_y_centre,
+        NEST_BASE + shell_centre_z - nest_centre_z,
+    );
     let insert_bottom = SHELL_FLOOR;
-    let main_t_insert = mm(0.0, 0.0, insert_bottom + INSERT_HEIGHT / 2.0 - shell_centre_z);
+    let main_t_insert = mm(
+        0.0,
+        0.0,
+        insert_bottom + INSERT_HEIGHT / 2.0 - shell_centre_z,
+    );
     let insert_top = insert_bottom + INSERT_HEIGHT - PIN_HEIGHT;
     let top_bottom = insert_top + TOP_PLATE_THICKNESS - TOP_HEIGHT;
     let main_t_top = mm(0.0, 0.0, top_bottom + TOP_HEIGHT / 2.0 - shell_centre_z);
-    AssemblyTargets { nest_t_main, main_t_insert, main_t_top }
+    AssemblyTargets {
+        nest_t_main,
+        main_t_insert,
+        main_t_top,
+    }
 }

@@ -94,8 +94,8 @@ impl SensorModel {
         let noisy = self.read_noise > 0.0 || self.shot_noise > 0.0;
         let mut img = RgbImage::new(w as u32, h as u32);
         for (px, c) in img.pixels_mut().zip(&lin) {
-            for k in 0..3 {
-                let mut x = c[k];
+            for (k, &channel) in c.iter().enumerate().take(3) {
+                let mut x = channel;
                 if noisy {
                     let sd =
                         (self.read_noise * self.read_noise + self.shot_noise * x.max(0.0)).sqrt();

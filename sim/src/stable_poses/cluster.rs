@@ -32,8 +32,10 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
     let total = settled.len().max(1) as f64;
     // Greedy leader clustering in drop order (deterministic), then one re-assignment pass to the
     // nearest final centre, so the result does not depend on which member came first.
-    let ups: Vec<Vector3<f64>> =
-        settled.iter().map(|o| o.rotation.inverse() * Vector3::z()).collect();
+    let ups: Vec<Vector3<f64>> = settled
+        .iter()
+        .map(|o| o.rotation.inverse() * Vector3::z())
+        .collect();
     let mut centres: Vec<Vector3<f64>> = Vec::new();
     for up in &ups {
         if !centres.iter().any(|c| c.angle(up) < CLASS_ANGLE_RAD) {
@@ -55,10 +57,10 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
     // inward normal, so canonical rotations and rest heights are exact, not averaged jitter.
     let faces = hull_up_directions(mesh);
     for c in centres.iter_mut() {
-        if let Some(f) = faces.iter().max_by(|a, b| a.dot(c).total_cmp(&b.dot(c))) {
-            if f.angle(c) < CLASS_ANGLE_RAD {
-                *c = *f;
-            }
+        if let Some(f) = faces.iter().max_by(|a, b| a.dot(c).total_cmp(&b.dot(c)))
+            && f.angle(c) < CLASS_ANGLE_RAD
+        {
+            *c = *f;
         }
     }
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); centres.len()];
@@ -75,7 +77,9 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
             let max_height_error = m
                 .iter()
                 .filter(|&&i| settled[i].settled)
-                .map(|&i| (settled[i].height - geometric_rest_height(mesh, &settled[i].rotation)).abs())
+                .map(|&i| {
+                    (settled[i].height - geometric_rest_height(mesh, &settled[i].rotation)).abs()
+                })
                 .fold(0.0, f64::max);
             let spread = m.iter().map(|&i| ups[i].angle(centre)).fold(0.0, f64::max);
             PoseClass {
@@ -95,7 +99,10 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
         .collect();
     classes.sort_by(|a, b| {
         b.count.cmp(&a.count).then_with(|| {
-            a.pose.up_in_part.partial_cmp(&b.pose.up_in_part).unwrap_or(std::cmp::Ordering::Equal)
+            a.pose
+                .up_in_part
+                .partial_cmp(&b.pose.up_in_part)
+                .unwrap_or(std::cmp::Ordering::Equal)
         })
     });
     for (i, c) in classes.iter_mut().enumerate() {
@@ -108,7 +115,11 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
 /// For each face of the mesh's convex hull, the table-up direction (in the part frame) of the
 /// part resting on it: the face's inward normal.
 fn hull_up_directions(mesh: &TriMesh) -> Vec<Vector3<f64>> {
-    let points: Vec<_> = mesh.vertices.iter().map(crate::convert::vec_from_point).collect();
+    let points: Vec<_> = mesh
+        .vertices
+        .iter()
+        .map(crate::convert::vec_from_point)
+        .collect();
     let (verts, tris) = parry3d_f64::transformation::convex_hull(&points);
     tris.iter()
         .filter_map(|t| {
@@ -123,7 +134,10 @@ fn nearest(centres: &[Vector3<f64>], up: &Vector3<f64>) -> usize {
         .iter()
         .enumerate()
         .map(|(i, c)| (i, c.dot(up)))
-        .fold((0, f64::NEG_INFINITY), |acc, x| if x.1 > acc.1 { x } else { acc })
+        .fold(
+            (0, f64::NEG_INFINITY),
+            |acc, x| if x.1 > acc.1 { x } else { acc },
+        )
         .0
 }
 

@@ -88,7 +88,11 @@ pub fn random_rotation(rng: &mut impl rand::Rng) -> UnitQuaternion<f64> {
 /// Height of the part origin when the mesh, rotated by `rotation`, rests on z = 0: the
 /// geometric rest height.
 pub fn geometric_rest_height(mesh: &TriMesh, rotation: &UnitQuaternion<f64>) -> f64 {
-    -mesh.vertices.iter().map(|p| (rotation * p).z).fold(f64::INFINITY, f64::min)
+    -mesh
+        .vertices
+        .iter()
+        .map(|p| (rotation * p).z)
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// The physics body shared by every drop: convex-hull contact shape and the true mass properties
@@ -106,7 +110,12 @@ impl DropBody {
         let verts: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
         let mass = MassProperties::from_trimesh(density, &verts, &mesh.triangles);
         let (lo, hi) = mesh.aabb();
-        Self { hull: verts, mass, mesh: mesh.clone(), diameter: (hi - lo).norm() }
+        Self {
+            hull: verts,
+            mass,
+            mesh: mesh.clone(),
+            diameter: (hi - lo).norm(),
+        }
     }
 
     /// Mass in kg and centre of mass in the part frame.
@@ -129,10 +138,15 @@ pub fn simulate_batch(
     world.integration_parameters.length_unit = 1e-3;
     // Push penetrations out at up to 2 cm/s instead of 3 mm/s, so parts settle onto the
     // geometric rest height quickly instead of sinking into the contact's softness.
-    world.integration_parameters.normalized_max_corrective_velocity = 20.0;
+    world
+        .integration_parameters
+        .normalized_max_corrective_velocity = 20.0;
     // Rapier's default table contact is a 60 Hz spring: it sags g/ω² ≈ 70 µm under gravity, more
     // than the 10 µm this table must agree with geometry. A 400 Hz spring sags 1.6 µm.
-    world.integration_parameters.static_contact_softness.natural_frequency = 400.0;
+    world
+        .integration_parameters
+        .static_contact_softness
+        .natural_frequency = 400.0;
     let spacing = 3.0 * body.diameter + 0.01;
     let side = (count as f64).sqrt().ceil() as usize;
     let half = spacing * side as f64;
@@ -148,7 +162,9 @@ pub fn simulate_batch(
     let mut handles = Vec::with_capacity(count);
     for k in 0..count {
         let index = first + k;
-        let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            settings.seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
         let rotation = random_rotation(&mut rng);
         let z = geometric_rest_height(&body.mesh, &rotation) + settings.drop_height;
         let (i, j) = (k % side, k / side);
@@ -165,14 +181,21 @@ pub fn simulate_batch(
             .friction(settings.friction)
             .restitution(settings.restitution)
             .build();
-        world.colliders.insert_with_parent(collider, h, &mut world.bodies);
+        world
+            .colliders
+            .insert_with_parent(collider, h, &mut world.bodies);
         handles.push(h);
     }
     let mut outcomes: Vec<Option<DropOutcome>> = vec![None; count];
     let mut calm = vec![0.0f64; count];
     let mut anchor: Vec<(Vector, UnitQuaternion<f64>)> = handles
         .iter()
-        .map(|h| (world.bodies[*h].translation(), unit_quaternion_from_rot(world.bodies[*h].rotation())))
+        .map(|h| {
+            (
+                world.bodies[*h].translation(),
+                unit_quaternion_from_rot(world.bodies[*h].rotation()),
+            )
+        })
         .collect();
     let mut remaining = count;
     let mut t = 0.0;

@@ -5,7 +5,9 @@ mod cluster;
 mod drop;
 
 pub use cluster::{CLASS_ANGLE_RAD, PoseClass, cluster};
-pub use drop::{DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch};
+pub use drop::{
+    DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch,
+};
 
 use indicatif::ProgressBar;
 use perception::part::TriMesh;
@@ -67,7 +69,11 @@ pub fn stable_poses(
         rare: settled - classified,
         mass,
         center_of_mass,
-        mean_rest_time: outcomes.iter().filter(|o| o.settled).map(|o| o.time).sum::<f64>()
+        mean_rest_time: outcomes
+            .iter()
+            .filter(|o| o.settled)
+            .map(|o| o.time)
+            .sum::<f64>()
             / (settled - jittering).max(1) as f64,
     }
 }
