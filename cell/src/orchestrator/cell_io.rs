@@ -127,7 +127,7 @@ impl CellIo for SimCellIo {
             })
             .collect();
         Ok(Frame {
-            camera: c.model().spec.camera.intrinsics.clone(),
+            camera: c.model().spec.camera.intrinsics,
             base_T_camera: c.base_T_camera_nominal(),
             content: FrameContent::Simulated(parts),
         })
