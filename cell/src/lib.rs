@@ -4,4 +4,7 @@
 pub mod episode;
 pub mod orchestrator;
 pub mod prepare;
+pub mod regress;
+pub mod report;
+pub mod run;
 pub mod scenario;

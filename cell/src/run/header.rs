@@ -1,0 +1,96 @@
+//! The first line of a results file: which scenario file, seed, record format and shard the
+//! episodes below it belong to.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::Shard;
+use crate::episode::RECORD_VERSION;
+
+/// The `format` value that marks a file as a cell results file.
+pub const RESULTS_FORMAT: &str = "cell-episodes";
+
+/// Header line of `episodes.jsonl`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResultsHeader {
+    /// Always [`RESULTS_FORMAT`].
+    pub format: String,
+    /// Episode record version ([`RECORD_VERSION`]).
+    pub record_version: u32,
+    /// Scenario name.
+    pub scenario: String,
+    /// Scenario seed.
+    pub seed: u64,
+    /// SHA-256 of the scenario file's bytes, lowercase hex.
+    pub scenario_sha256: String,
+    /// The slice of episodes this file holds.
+    pub shard: Shard,
+}
+
+impl ResultsHeader {
+    /// The header for a scenario file's bytes, its name and seed, and a shard.
+    pub fn new(scenario: &str, seed: u64, scenario_file: &[u8], shard: Shard) -> Self {
+        Self {
+            format: RESULTS_FORMAT.into(),
+            record_version: RECORD_VERSION,
+            scenario: scenario.into(),
+            seed,
+            scenario_sha256: sha256_hex(scenario_file),
+            shard,
+        }
+    }
+
+    /// The first field in which `self` (found in a file) differs from `expected`, as
+    /// (field, expected, found).
+    pub fn mismatch(&self, expected: &ResultsHeader) -> Option<(&'static str, String, String)> {
+        let pairs: [(&'static str, String, String); 6] = [
+            ("format", expected.format.clone(), self.format.clone()),
+            (
+                "record_version",
+                expected.record_version.to_string(),
+                self.record_version.to_string(),
+            ),
+            ("scenario", expected.scenario.clone(), self.scenario.clone()),
+            ("seed", expected.seed.to_string(), self.seed.to_string()),
+            (
+                "scenario_sha256",
+                expected.scenario_sha256.clone(),
+                self.scenario_sha256.clone(),
+            ),
+            ("shard", expected.shard.to_string(), self.shard.to_string()),
+        ];
+        pairs.into_iter().find(|(_, e, f)| e != f)
+    }
+}
+
+/// SHA-256 of `bytes` as lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sha256_matches_the_standard_vector() {
+        assert_eq!(
+            sha256_hex(b"abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+
+    #[test]
+    fn mismatch_names_the_field() {
+        let a = ResultsHeader::new("s", 7, b"x", Shard::ALL);
+        assert_eq!(a.mismatch(&a), None);
+        let b = ResultsHeader::new("s", 7, b"y", Shard::ALL);
+        assert_eq!(b.mismatch(&a).unwrap().0, "scenario_sha256");
+        let c = ResultsHeader::new("s", 8, b"x", Shard::ALL);
+        assert_eq!(c.mismatch(&a).unwrap().0, "seed");
+    }
+}

@@ -1,0 +1,17 @@
+//! Runs: N episodes of a scenario in parallel, each appended to a resumable results file
+//! (`<root>/<scenario>/<shard>/episodes.jsonl`), sharded for external schedulers, merged back,
+//! and summarised.
+
+pub mod header;
+pub mod merge;
+pub mod runner;
+pub mod shard;
+pub mod store;
+pub mod summary;
+
+pub use header::{ResultsHeader, sha256_hex};
+pub use merge::{MergeError, Merged, merge, write_results};
+pub use runner::{LoadedScenario, RunError, RunOptions, RunOutcome, results_dir, run_episodes};
+pub use shard::{Shard, ShardParseError};
+pub use store::{RESULTS_FILE, Results, ResultsStore, StoreError, read_results};
+pub use summary::Summary;
