@@ -1,0 +1,110 @@
+//! `cell parts ...`: prepare a catalog (keypoints, mass, stable poses) or regenerate the CAD.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use cell::prepare::prepare_catalog;
+use indicatif::{ProgressBar, ProgressStyle};
+use sim::stable_poses::DropSettings;
+
+/// Subcommands of `cell parts`.
+#[derive(Debug, clap::Subcommand)]
+pub enum PartsCommand {
+    /// Compute keypoints, mass properties and stable poses (physics drops) and write them into
+    /// the catalog, keeping its comments.
+    Prepare(PrepareArgs),
+    /// Regenerate this project's USB-C part meshes (bit for bit) into a folder.
+    Cad(CadArgs),
+}
+
+/// Arguments of `cell parts prepare`.
+#[derive(Debug, clap::Args)]
+pub struct PrepareArgs {
+    /// The catalog file, e.g. scenarios/parts/usbc.toml.
+    pub catalog: PathBuf,
+    /// Drops per part.
+    #[arg(long, default_value_t = 5000)]
+    pub drops: usize,
+    /// Seed of the drop orientations (the same seed reproduces the table).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Arguments of `cell parts cad`.
+#[derive(Debug, clap::Args)]
+pub struct CadArgs {
+    /// Output folder.
+    #[arg(default_value = "scenarios/parts")]
+    pub dir: PathBuf,
+}
+
+/// Runs a `cell parts` subcommand.
+pub fn run(cmd: PartsCommand) -> anyhow::Result<ExitCode> {
+    match cmd {
+        PartsCommand::Prepare(args) => prepare(args),
+        PartsCommand::Cad(args) => {
+            for path in sim::cad::write_usbc_meshes(&args.dir)? {
+                println!("wrote {}", path.display());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
+    if args.drops == 0 {
+        anyhow::bail!("--drops must be at least 1");
+    }
+    let settings = DropSettings {
+        drops: args.drops,
+        seed: args.seed,
+        ..DropSettings::default()
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} drops ({per_sec}, eta {eta})")?
+            .progress_chars("=> "),
+    );
+    bar.set_message("dropping");
+    let start = Instant::now();
+    let prepared = prepare_catalog(&args.catalog, &settings, Some(&bar))?;
+    bar.finish_and_clear();
+    let elapsed = start.elapsed().as_secs_f64();
+    let total: usize = prepared.iter().map(|p| p.report.drops).sum();
+    println!(
+        "{}: {} parts, {total} drops in {elapsed:.1} s ({:.0} drops/s, {} threads)",
+        args.catalog.display(),
+        prepared.len(),
+        total as f64 / elapsed,
+        rayon::current_num_threads()
+    );
+    for p in &prepared {
+        let r = &p.report;
+        println!(
+            "\n{}: mass {:.3} g, centre of mass ({:.3}, {:.3}, {:.3}) mm, {} still jittering at the time limit, {} in rare classes",
+            p.name,
+            p.mass * 1e3,
+            p.center_of_mass.x * 1e3,
+            p.center_of_mass.y * 1e3,
+            p.center_of_mass.z * 1e3,
+            r.unsettled,
+            r.rare
+        );
+        println!(
+            "  {:<10} {:>8} {:>14} {:>18} {:>10}",
+            "class", "prob %", "rest height mm", "physics-geom µm", "spread °"
+        );
+        for c in &r.classes {
+            println!(
+                "  {:<10} {:>8.2} {:>14.4} {:>18.3} {:>10.3} {:>10}",
+                c.pose.name,
+                c.pose.probability * 100.0,
+                c.pose.rest_height * 1e3,
+                c.max_height_error * 1e6,
+                c.spread.to_degrees(),
+                c.jittering
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
