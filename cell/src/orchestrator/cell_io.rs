@@ -45,8 +45,9 @@ pub trait CellIo: Send {
     fn capture(&mut self) -> Result<Frame, CellIoError>;
     /// Shakes the feeder so parts come to rest anew.
     fn shake_feeder(&mut self) -> Result<(), CellIoError>;
-    /// Whether a part is between the closed fingers.
-    fn part_in_gripper(&mut self) -> bool;
+    /// Whether a part is between the closed fingers; `None` when the cell has no grasp sensor
+    /// (the grasp is then assumed to hold and the insertion check decides).
+    fn part_in_gripper(&mut self) -> Option<bool>;
     /// The result of the insertion just released, if there was one.
     fn insertion_check(&mut self) -> Option<InsertionCheck>;
     /// Seconds on the cell's clock since the episode started (simulated time in simulation).
@@ -139,8 +140,8 @@ impl CellIo for SimCellIo {
             .map_err(|e| CellIoError::Feeder(e.to_string()))
     }
 
-    fn part_in_gripper(&mut self) -> bool {
-        lock(&self.cell).held().is_some()
+    fn part_in_gripper(&mut self) -> Option<bool> {
+        Some(lock(&self.cell).held().is_some())
     }
 
     fn insertion_check(&mut self) -> Option<InsertionCheck> {

@@ -381,7 +381,7 @@ impl<'a> Driver<'a> {
                 Ok(State::VerifyGrasp)
             }
             State::VerifyGrasp => {
-                if self.io.part_in_gripper() {
+                if self.io.part_in_gripper().unwrap_or(true) {
                     Ok(State::PlanInsert)
                 } else if self.attempts < self.settings.max_grasp_attempts {
                     self.last_reason = "grasp failed: nothing between the fingers".into();

@@ -20,6 +20,9 @@
 //!   [`SharedSimRobot`], or `robots::ur_robot::UrRobot` over RTDE to a real controller or to
 //!   `cell virtual-ur`), a [`CellIo`] (camera, feeder, sensors; [`SimCellIo`] for the simulated
 //!   cell) and a [`PartPerception`] ([`KeypointNoise`] until learned models exist).
+//! - Production: [`preflight`] refuses to start without the explicit opt-in, valid limits, a
+//!   camera source with images ([`ImageSource`]) and an image-reading perception mode; then
+//!   [`ProductionCellIo`] with `UrRobot` and the learned perception go through [`run_episode`].
 //! - [`keypoint_noise_for`] builds the scenario's keypoint-noise perception for an episode from
 //!   its own seeded stream.
 //!
@@ -33,6 +36,7 @@ mod events;
 mod geometry;
 mod perception;
 mod planning;
+mod production;
 mod selection;
 mod state;
 
@@ -45,6 +49,9 @@ pub use perception::{
     PerceptionError, TruePart,
 };
 pub use planning::{Motion, Plan, PlanError, Planner, PlanningConfig, Speeds, grasped_offset};
+pub use production::{
+    ImageSource, ProductionCellIo, ProductionError, ProductionOptions, preflight,
+};
 pub use selection::{Rejection, Selection, SelectionConfig, SelectionResult, select};
 pub use state::{State, Timeouts};
 
