@@ -1,10 +1,10 @@
 //! UR5e description and kinematics, RTDE, the Robot trait and the virtual UR controller.
+pub mod dashboard;
 pub mod description;
 pub mod kinematics;
 pub mod limits;
-pub mod robot;
-pub mod dashboard;
 pub mod program;
+pub mod robot;
 pub mod rtde;
 pub mod ur_robot;
 pub mod virtual_ur;
