@@ -217,6 +217,12 @@ impl<'a> Driver<'a> {
                 Motion::Open => self.robot.open_gripper().await,
                 Motion::Close => self.robot.close_gripper().await,
             };
+            tracing::debug!(
+                episode = self.episode,
+                waypoint = name,
+                clock = self.io.clock(),
+                "motion done"
+            );
             if let Err(e) = r {
                 tracing::warn!(
                     episode = self.episode,
