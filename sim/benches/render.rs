@@ -35,6 +35,7 @@ fn scene(counts: Vec<usize>) -> (Vec<PartModel>, SampledScene) {
     (models, s)
 }
 
+#[allow(non_snake_case)]
 fn bench(c: &mut Criterion) {
     let camera = Camera::basler_seed();
     let settings = RenderSettings::default();

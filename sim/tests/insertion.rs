@@ -116,9 +116,9 @@ fn mating_geometry_comes_from_the_meshes() {
 #[test]
 fn a_perfect_pose_is_seated_by_both_scorers() {
     let (p, s) = (parts(), steps());
-    for i in 0..3 {
+    for (i, step) in s.iter().enumerate().take(3) {
         let (held, recv) = setup(&p, i);
-        let m = Mating::new(&s[i], held, &recv[..1]);
+        let m = Mating::new(step, held, &recv[..1]);
         let pose = m.pose_with_error(Vector2::zeros(), 0.0, 0.0, 0.0, Vector2::zeros());
         let run = contact::simulate(&m, held, &recv, &pose, &ContactSettings::default());
         assert_eq!(
@@ -143,9 +143,9 @@ fn a_perfect_pose_is_seated_by_both_scorers() {
 #[test]
 fn lateral_error_just_beyond_the_capture_band_misses_or_jams() {
     let (p, s) = (parts(), steps());
-    for i in 0..3 {
+    for (i, step) in s.iter().enumerate().take(3) {
         let (held, recv) = setup(&p, i);
-        let m = Mating::new(&s[i], held, &recv[..1]);
+        let m = Mating::new(step, held, &recv[..1]);
         // The top shell's fit is its skirts over the shell walls along x (with the flare); along
         // y only its rear wall meets the insert's tongue, one-sided and without a lead-in, so its
         // capture band is along x only.

@@ -1,6 +1,8 @@
 //! Labels against renders of the real parts: the 9 keypoints reproject onto the rendered part,
 //! and dropped parts come to rest on the board (not still falling).
 
+#![allow(non_snake_case)] // poses are named a_T_b, the workspace convention
+
 use std::path::Path;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
