@@ -65,8 +65,9 @@ mod tests {
 
     #[test]
     fn trapezoid_and_triangle_times() {
-        // 1 m at 0.5 m/s, 1 m/s²: 0.5 s up, 0.5 s down (0.25 m each way), 0.5 m cruise in 1 s.
-        assert!((trapezoid_time(1.0, 0.5, 1.0) - 2.0).abs() < 1e-12);
+        // 1 m at 0.5 m/s, 1 m/s²: 0.5 s up and 0.5 s down (0.125 m each way), then 0.75 m of
+        // cruise at 0.5 m/s in 1.5 s: 2.5 s in all.
+        assert!((trapezoid_time(1.0, 0.5, 1.0) - 2.5).abs() < 1e-12);
         // 0.1 m never reaches 0.5 m/s: 2 sqrt(0.1) s.
         assert!((trapezoid_time(0.1, 0.5, 1.0) - 2.0 * 0.1f64.sqrt()).abs() < 1e-12);
         assert_eq!(trapezoid_time(0.0, 0.5, 1.0), 0.0);
