@@ -17,7 +17,7 @@ use crate::convert::{
 pub struct DropSettings {
     /// Number of drops.
     pub drops: usize,
-    /// Seed for the random orientations; the same seed gives the same outcomes.
+    /// Seed of the orientation sequence's random shift; the same seed gives the same outcomes.
     pub seed: u64,
     /// Height of the part's lowest point above the table at release, metres.
     pub drop_height: f64,
@@ -74,7 +74,22 @@ pub struct DropOutcome {
 
 /// A uniformly distributed random rotation (Shoemake's method).
 pub fn random_rotation(rng: &mut impl rand::Rng) -> UnitQuaternion<f64> {
-    let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+    rotation_from_unit_cube(rng.random(), rng.random(), rng.random())
+}
+
+/// Rotation `index` of a low-discrepancy sequence covering SO(3) evenly: Roberts' R3 additive
+/// recurrence, randomly shifted by `shift` (one shift per seed), through Shoemake's map. Class
+/// probabilities estimated from it vary far less between seeds than with independent draws.
+pub fn stratified_rotation(index: usize, shift: [f64; 3]) -> UnitQuaternion<f64> {
+    // g is the unique positive root of x⁴ = x + 1; (1/g, 1/g², 1/g³) is R3's generator.
+    const G: f64 = 1.220_744_084_605_759_6;
+    let n = (index + 1) as f64;
+    let u = |k: i32, s: f64| (s + n / G.powi(k)).fract();
+    rotation_from_unit_cube(u(1, shift[0]), u(2, shift[1]), u(3, shift[2]))
+}
+
+/// Shoemake's map from the unit cube onto unit quaternions (uniform in, uniform out).
+fn rotation_from_unit_cube(u1: f64, u2: f64, u3: f64) -> UnitQuaternion<f64> {
     let tau = std::f64::consts::TAU;
     let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
     UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
@@ -159,13 +174,12 @@ pub fn simulate_batch(
     let Some(shape) = ColliderBuilder::convex_hull(&body.hull) else {
         return Vec::new();
     };
+    let mut seed_rng = ChaCha8Rng::seed_from_u64(settings.seed);
+    let shift: [f64; 3] = [seed_rng.random(), seed_rng.random(), seed_rng.random()];
     let mut handles = Vec::with_capacity(count);
     for k in 0..count {
         let index = first + k;
-        let mut rng = ChaCha8Rng::seed_from_u64(
-            settings.seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-        );
-        let rotation = random_rotation(&mut rng);
+        let rotation = stratified_rotation(index, shift);
         let z = geometric_rest_height(&body.mesh, &rotation) + settings.drop_height;
         let (i, j) = (k % side, k / side);
         let centre = Vector3::new((i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing, z);

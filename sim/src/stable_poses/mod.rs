@@ -7,6 +7,7 @@ mod drop;
 pub use cluster::{CLASS_ANGLE_RAD, PoseClass, cluster};
 pub use drop::{
     DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch,
+    stratified_rotation,
 };
 
 use indicatif::ProgressBar;
