@@ -121,7 +121,8 @@ impl Solid {
 
     /// Adds a plate over `outer` from `z0` to `z1` with rectangular through-holes, as a grid of
     /// boxes cut at every hole edge. `chamfer` (size, the hole it applies to) bevels that hole's
-    /// top edge by moving the top inner edge of each bordering cell outward.
+    /// top edge by moving the top inner edge of each bordering cell outward, so no other hole
+    /// may cut the plate within `size` of that hole (asserted).
     pub fn plate_with_holes(
         &mut self,
         outer: Rect,
@@ -167,6 +168,10 @@ impl Solid {
                         top.y0 += c;
                     }
                 }
+                assert!(
+                    top.x0 < top.x1 && top.y0 < top.y1,
+                    "a chamfered cell {cell:?} is narrower than the chamfer"
+                );
                 if top == cell {
                     self.cuboid(cell, z0, z1);
                 } else {

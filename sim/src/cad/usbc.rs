@@ -24,6 +24,11 @@ pub const TOP_LEAD_IN_MM: f64 = 0.10;
 pub const NEST_GAP_MM: f64 = 0.03;
 /// Lead-in chamfer at the top of the nest pocket (mm).
 pub const NEST_CHAMFER_MM: f64 = 0.30;
+/// Half-size of the square reliefs milled at the nest pocket's corners (mm): an end mill leaves
+/// round inside corners, so pockets for sharp-cornered parts get corner reliefs; they also let
+/// a shell arriving off-centre on both axes slide down both chamfers instead of landing its
+/// corner on an unchamfered corner.
+pub const NEST_CORNER_RELIEF_MM: f64 = 0.40;
 
 // Main shell.
 const SHELL_BODY: Rect = Rect::new(-4.32, 4.32, -4.535, 4.535);
@@ -119,8 +124,9 @@ pub fn insert_mold() -> TriMesh {
     s.into_part_mesh()
 }
 
-/// The top shell: a cover plate with a window over the pins near +y, a rear wall, two side skirts that slide
-/// down outside the shell walls, and solder flanges that make it the widest part.
+/// The top shell: a cover plate with a window over the pins near +y, rear and front walls that
+/// locate it on the insert's tongue, two side skirts (toward −y) that slide down outside the shell
+/// walls, and solder flanges that make it the widest part.
 pub fn top_shell() -> TriMesh {
     let mut s = Solid::new();
     let skirt_in = SHELL_BODY.x1 + TOP_SKIRT_GAP_MM;
@@ -130,15 +136,28 @@ pub fn top_shell() -> TriMesh {
     let window = Rect::new(-3.2, 3.2, 2.4, 3.8);
     let plate = Rect::new(-skirt_out, skirt_out, -TOP_HALF_DEPTH, TOP_HALF_DEPTH);
     s.plate_with_holes(plate, plate_z, top, &[window], None);
-    // Rear wall between the skirts, down to just above the shell's top edge.
-    let rear_in = -(INSERT_UPPER.y1 + TOP_SKIRT_GAP_MM);
+    // Rear and front walls between the skirts, down to just above the shell's top edge: they
+    // locate the cover along y on the insert's tongue (0.045 mm a side), their inner bottom
+    // edges flared by the lead-in like the skirts'.
+    let wall_in = INSERT_UPPER.y1 + TOP_SKIRT_GAP_MM;
     let insert_over_shell = INSERT_HEIGHT - INSERT_LOWER_HEIGHT;
-    let rear_bottom = plate_z - insert_over_shell + 0.10;
-    s.cuboid(
-        Rect::new(-skirt_in, skirt_in, -TOP_HALF_DEPTH, rear_in),
-        rear_bottom,
-        plate_z,
-    );
+    let wall_bottom = plate_z - insert_over_shell + 0.10;
+    let flare_height = 2.0 * TOP_LEAD_IN_MM;
+    for sign in [-1.0, 1.0] {
+        let wall = if sign > 0.0 {
+            Rect::new(-skirt_in, skirt_in, wall_in, TOP_HALF_DEPTH)
+        } else {
+            Rect::new(-skirt_in, skirt_in, -TOP_HALF_DEPTH, -wall_in)
+        };
+        let mut flared = wall;
+        if sign > 0.0 {
+            flared.y0 += TOP_LEAD_IN_MM;
+        } else {
+            flared.y1 -= TOP_LEAD_IN_MM;
+        }
+        s.frustum(flared, wall_bottom, wall, wall_bottom + flare_height);
+        s.cuboid(wall, wall_bottom + flare_height, plate_z);
+    }
     for sign in [-1.0, 1.0] {
         let (a, b) = if sign > 0.0 {
             (skirt_in, skirt_out)
@@ -153,7 +172,7 @@ pub fn top_shell() -> TriMesh {
         } else {
             flared.x1 -= TOP_LEAD_IN_MM;
         }
-        let flare_top = 0.25 + 2.0 * TOP_LEAD_IN_MM;
+        let flare_top = 0.25 + flare_height;
         s.frustum(flared, 0.25, skirt, flare_top);
         s.cuboid(skirt, flare_top, plate_z);
         let (fa, fb) = if sign > 0.0 {
@@ -167,7 +186,7 @@ pub fn top_shell() -> TriMesh {
 }
 
 /// The fixture nest: an aluminium block with a pocket for the main shell (small clearance,
-/// chamfered lead-in) and reliefs where the top shell's skirts come down.
+/// chamfered lead-in, corner reliefs) and reliefs where the top shell's skirts come down.
 pub fn fixture_nest() -> TriMesh {
     let mut s = Solid::new();
     let outer = Rect::centred(NEST_SIZE, NEST_SIZE);
@@ -180,13 +199,24 @@ pub fn fixture_nest() -> TriMesh {
         } else {
             (-6.4, pocket.x0)
         };
-        Rect::new(a, b, TOP_SKIRT_Y.0 - 0.4, TOP_SKIRT_Y.1 + 0.3)
+        // Down to the corner reliefs' edge: no cut may fall inside the pocket's chamfer band.
+        Rect::new(a, b, pocket.y0 - NEST_CORNER_RELIEF_MM, TOP_SKIRT_Y.1 + 0.3)
     };
+    let r = NEST_CORNER_RELIEF_MM;
+    let corner = |x: f64, y: f64| Rect::new(x - r, x + r, y - r, y + r);
     s.plate_with_holes(
         outer,
         NEST_BASE,
         NEST_BASE + NEST_POCKET_DEPTH,
-        &[pocket, relief(-1.0), relief(1.0)],
+        &[
+            pocket,
+            relief(-1.0),
+            relief(1.0),
+            corner(pocket.x0, pocket.y0),
+            corner(pocket.x1, pocket.y0),
+            corner(pocket.x1, pocket.y1),
+            corner(pocket.x0, pocket.y1),
+        ],
         Some((NEST_CHAMFER_MM, pocket)),
     );
     s.into_part_mesh()

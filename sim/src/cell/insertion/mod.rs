@@ -4,11 +4,13 @@
 //! Two scorers share [`Mating`] (the step's geometry) and [`classify`]:
 //! [`analytic`] (capture by clearance and lead-in, two-point tilt jam; microseconds) and
 //! [`contact`] (rapier at millimetre scale with a compliant wrist pushing the real meshes
-//! together; the reference where the two disagree).
+//! together; the reference where the two disagree). [`agreement`] measures how often they agree
+//! near the capture boundary.
 //!
 //! Poses are expressed in the step's insertion frame: origin at the seated part origin, z pointing
 //! out of the hole (against the insertion axis).
 
+pub mod agreement;
 pub mod analytic;
 pub mod contact;
 mod mating;
