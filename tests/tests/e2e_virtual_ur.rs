@@ -13,6 +13,10 @@ use cell::episode::StepOutcome;
 use cell::orchestrator::{
     EpisodeOutput, SimCellIo, State, keypoint_noise_for, run_episode, run_sim_episode,
 };
+use nalgebra::Isometry3;
+use robots::kinematics::Joints;
+use robots::limits::Limits;
+use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
 use robots::ur_robot::{UrRobot, UrRobotConfig};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use sim::cell::SimCell;
@@ -44,7 +48,7 @@ async fn start(setup: &Setup, episode: u32) -> (VirtualUr, UrRobot, Arc<Mutex<Si
 
 async fn run_over_rtde(
     setup: &Setup,
-    robot: &mut UrRobot,
+    robot: &mut dyn Robot,
     cell: Arc<Mutex<SimCell>>,
     episode: u32,
 ) -> EpisodeOutput {
@@ -62,17 +66,62 @@ async fn run_over_rtde(
     .await
 }
 
+/// A robot that counts the moves it passes on.
+struct CountingRobot<'a> {
+    inner: &'a mut UrRobot,
+    moves: usize,
+}
+
+#[allow(non_snake_case)]
+impl Robot for CountingRobot<'_> {
+    fn limits(&self) -> &Limits {
+        self.inner.limits()
+    }
+    fn joints(&mut self) -> RobotFuture<'_, Joints> {
+        self.inner.joints()
+    }
+    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
+        self.inner.tcp_pose()
+    }
+    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
+        self.moves += 1;
+        self.inner.move_j(target, motion)
+    }
+    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
+        self.moves += 1;
+        self.inner.move_l(base_T_tcp, motion)
+    }
+    fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
+        self.inner.open_gripper()
+    }
+    fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
+        self.inner.close_gripper()
+    }
+    fn stop(&mut self) -> RobotFuture<'_, ()> {
+        self.inner.stop()
+    }
+    fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
+        self.inner.status()
+    }
+}
+
+/// The virtual controller's control period.
+const PERIOD_S: f64 = 0.002;
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-#[ignore = "needs the virtual controller to forward the gripper's tool output to the arm model \
-            (ArmModel::digital_output, see notes/simcell-needs.md) and KinematicArm with a TCP"]
 async fn five_episodes_over_rtde_match_the_in_process_run() {
     let setup = setup(|_| {});
     for episode in 0..5u32 {
         let local = run_sim_episode(&setup, episode).await.unwrap().record;
         let (vur, mut robot, cell) = start(&setup, episode).await;
-        let remote = run_over_rtde(&setup, &mut robot, cell, episode)
+        let mut counting = CountingRobot {
+            inner: &mut robot,
+            moves: 0,
+        };
+        let remote = run_over_rtde(&setup, &mut counting, cell, episode)
             .await
             .record;
+        let moves = counting.moves;
         drop(robot);
         drop(vur);
         assert_eq!(remote.abort, None, "episode {episode}");
@@ -88,6 +137,45 @@ async fn five_episodes_over_rtde_match_the_in_process_run() {
                 .collect::<Vec<_>>()
         };
         assert_eq!(key(&remote), key(&local), "episode {episode}");
+        for (r, l) in remote.steps.iter().zip(&local.steps) {
+            // The same world: the same true insertion errors (the controller's 500 Hz stepping
+            // ends each move on exactly the commanded joints).
+            match (&r.pose_error, &l.pose_error) {
+                (Some(a), Some(b)) => {
+                    let d = [
+                        a.dx_mm - b.dx_mm,
+                        a.dy_mm - b.dy_mm,
+                        a.depth_mm - b.depth_mm,
+                        a.tilt_deg - b.tilt_deg,
+                        a.yaw_deg - b.yaw_deg,
+                    ];
+                    assert!(
+                        d.iter().all(|x| x.abs() < 1e-6),
+                        "episode {episode} {}: pose errors differ by {d:?}",
+                        r.part
+                    );
+                }
+                (None, None) => {}
+                (a, b) => panic!("episode {episode} {}: {a:?} vs {b:?}", r.part),
+            }
+            // The simulated clock: every move ends on a control cycle over RTDE, so it runs
+            // at most a cycle per move longer; never shorter.
+            let dt = r.sim_time_s - l.sim_time_s;
+            assert!(
+                (-1e-9..=moves as f64 * PERIOD_S).contains(&dt),
+                "episode {episode} {}: {} s over RTDE, {} s in process ({moves} moves)",
+                r.part,
+                r.sim_time_s,
+                l.sim_time_s
+            );
+        }
+        let dt = remote.cycle_time_s - local.cycle_time_s;
+        assert!(
+            (-1e-9..=moves as f64 * PERIOD_S).contains(&dt),
+            "episode {episode}: cycle {} s over RTDE, {} s in process ({moves} moves)",
+            remote.cycle_time_s,
+            local.cycle_time_s
+        );
     }
 }
 

@@ -104,6 +104,15 @@ pub trait ArmModel: Send + 'static {
     fn forward(&self, q: &Joints) -> [f64; 6];
     /// Inverse kinematics nearest `near`.
     fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError>;
+    /// A digital output changed: standard 0–7, configurable 8–15, tool 16–17 (as
+    /// `actual_digital_output_bits`). The controller calls it from every path that sets one.
+    fn digital_output(&mut self, _pin: u32, _level: bool) {}
+    /// Seconds the device on output `pin` needs to act after a change (a gripper's stroke);
+    /// programs that set an output wait this long before reporting it done, as a UR program
+    /// with a `sleep` after `set_tool_digital_out` would.
+    fn actuation_time(&self, _pin: u32) -> f64 {
+        0.0
+    }
 }
 
 /// Trapezoidal (or triangular) velocity profile over a path of length `length`.
@@ -168,6 +177,7 @@ enum Motion {
     Idle,
     Joint {
         start: Joints,
+        end: Joints,
         delta: Joints,
         profile: Trapezoid,
         t: f64,
@@ -191,8 +201,10 @@ enum Motion {
     },
 }
 
-/// Kinematic UR5e: perfect tracking of joint-space and straight-line trajectories, joint speeds
-/// capped at π rad/s and accelerations at `max_joint_accel`.
+/// Kinematic UR arm: perfect tracking of joint-space and straight-line trajectories, joint speeds
+/// capped at `max_joint_speed` and accelerations at `max_joint_accel`. Poses (TCP state, `movel`
+/// targets, forward and inverse kinematics) are of the TCP set by the kinematics'
+/// `flange_T_tcp`, as the TCP configured in a real controller's installation.
 #[derive(Debug, Clone)]
 pub struct KinematicArm {
     kinematics: UrKinematics,
@@ -211,10 +223,16 @@ pub struct KinematicArm {
 }
 
 impl KinematicArm {
-    /// A UR5e at joints `q`.
+    /// A UR5e at joints `q`, TCP at the flange.
     pub fn ur5e(q: Joints) -> KinematicArm {
+        KinematicArm::new(UrKinematics::ur5e(), q)
+    }
+
+    /// An arm with `kinematics` (its `flange_T_tcp` is the TCP) at joints `q`, with a UR5e's
+    /// joint and tool limits.
+    pub fn new(kinematics: UrKinematics, q: Joints) -> KinematicArm {
         KinematicArm {
-            kinematics: UrKinematics::ur5e(),
+            kinematics,
             q,
             qd: [0.0; 6],
             qdd: [0.0; 6],
@@ -224,6 +242,11 @@ impl KinematicArm {
             max_tool_speed: 3.0,
             max_tool_accel: 15.0,
         }
+    }
+
+    /// The kinematics (with the TCP).
+    pub fn kinematics(&self) -> &UrKinematics {
+        &self.kinematics
     }
 
     fn set_q(&mut self, q: Joints, dt: f64) {
@@ -262,6 +285,7 @@ impl ArmModel for KinematicArm {
                 } else {
                     Motion::Joint {
                         start: self.q,
+                        end: q,
                         delta,
                         profile: Trapezoid::new(length, speed, accel),
                         t: 0.0,
@@ -328,15 +352,21 @@ impl ArmModel for KinematicArm {
             }
             Motion::Joint {
                 start,
+                end,
                 delta,
                 profile,
                 t,
             } => {
                 *t += scaled;
-                let (s, _, _) = profile.at(*t);
-                let f = s / profile.length;
-                let q = std::array::from_fn(|i| start[i] + delta[i] * f);
                 let done = *t >= profile.duration();
+                let q = if done {
+                    // Exactly the commanded joints (start + delta may differ in the last bit).
+                    *end
+                } else {
+                    let (s, _, _) = profile.at(*t);
+                    let f = s / profile.length;
+                    std::array::from_fn(|i| start[i] + delta[i] * f)
+                };
                 self.set_q(q, dt);
                 if done {
                     self.motion = Motion::Idle;

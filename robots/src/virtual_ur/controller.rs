@@ -2,7 +2,10 @@
 //! loop; and the RTDE variable mapping (it implements [`crate::rtde::server::Controller`]).
 
 use super::arm::{ArmCommand, ArmModel, ArmState};
-use super::programs::{CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram};
+use super::programs::{
+    CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram, notify_output_changes,
+    set_digital_output,
+};
 use super::registers::{Registers, StandardIo};
 use crate::program::{PROGRAM_NAME, UR_RTDE_PROGRAM_NAME, program_name};
 use crate::rtde::ControllerVersion;
@@ -187,6 +190,62 @@ fn constant_value(name: &str, ty: DataType) -> Value {
         "tool_mode" => Value::Uint32(255),
         _ => ty.zero(),
     }
+}
+
+/// A script made only of digital-output statements.
+#[derive(Debug, Clone, PartialEq)]
+struct IoScript {
+    /// A `sec` program (runs beside the main program) rather than bare statements.
+    secondary: bool,
+    /// (pin as in `actual_digital_output_bits`, level), in order.
+    writes: Vec<(i64, bool)>,
+}
+
+/// Parses `set_standard_digital_out(n, b)`, `set_digital_out(n, b)`,
+/// `set_configurable_digital_out(n, b)` and `set_tool_digital_out(n, b)` statements, bare or in
+/// one `sec name():` … `end` block; `None` for anything else (or an out-of-range pin).
+fn io_script(script: &str) -> Option<IoScript> {
+    let mut lines = script
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .peekable();
+    let secondary = lines
+        .peek()
+        .is_some_and(|l| l.starts_with("sec ") && l.ends_with(':'));
+    if secondary {
+        lines.next();
+    }
+    let mut writes = Vec::new();
+    let mut ended = false;
+    for line in lines {
+        if ended {
+            return None;
+        }
+        if secondary && line == "end" {
+            ended = true;
+            continue;
+        }
+        let (call, args) = line.strip_suffix(')')?.split_once('(')?;
+        let (offset, count) = match call.trim() {
+            "set_standard_digital_out" | "set_digital_out" => (0, 8),
+            "set_configurable_digital_out" => (8, 8),
+            "set_tool_digital_out" => (16, 2),
+            _ => return None,
+        };
+        let (n, level) = args.split_once(',')?;
+        let n: i64 = n.trim().parse().ok()?;
+        let level = match level.trim() {
+            "True" | "true" | "1" => true,
+            "False" | "false" | "0" => false,
+            _ => return None,
+        };
+        if !(0..count).contains(&n) {
+            return None;
+        }
+        writes.push((offset + n, level));
+    }
+    (!writes.is_empty() && ended == secondary).then_some(IoScript { secondary, writes })
 }
 
 /// Mutable controller state, behind one mutex.
@@ -417,7 +476,24 @@ impl VirtualController {
     }
 
     /// A script arrived on the script port: recognise it and run it (replacing the program).
+    /// A script of digital-output statements only is executed at once: as a secondary program
+    /// (`sec name():` … `end`) beside the running program, or as bare statements, which (as on a
+    /// real controller) stop the running program first.
     pub fn upload_script(&self, script: &str) -> Result<(), ControllerError> {
+        if let Some(outputs) = io_script(script) {
+            if self.refuse_programs.load(Ordering::Relaxed) {
+                return Err(ControllerError::Refused);
+            }
+            let mut core = self.lock();
+            let core = &mut *core;
+            if !outputs.secondary {
+                Self::stop_program(core);
+            }
+            for (pin, level) in outputs.writes {
+                set_digital_output(&mut core.io, core.arm.as_mut(), pin, level);
+            }
+            return Ok(());
+        }
         let name = program_name(script).ok_or(ControllerError::NotAProgram)?;
         if self.refuse_programs.load(Ordering::Relaxed) {
             return Err(ControllerError::Refused);
@@ -711,6 +787,8 @@ impl Controller for VirtualController {
             (Some(Value::Uint8(m)), Some(Value::Uint8(v))) => (old & !m) | (v & m),
             _ => old,
         };
+        let core = &mut *core;
+        let before = core.io.digital_output_bits();
         let io = &mut core.io;
         io.standard_do = masked(
             io.standard_do,
@@ -727,6 +805,8 @@ impl Controller for VirtualController {
             get("tool_digital_output_mask"),
             get("tool_digital_output"),
         ) & 0b11;
+        let after = io.digital_output_bits();
+        notify_output_changes(core.arm.as_mut(), before, after);
         if let (Some(Value::Uint32(1)), Some(Value::Double(f))) =
             (get("speed_slider_mask"), get("speed_slider_fraction"))
             && f.is_finite()

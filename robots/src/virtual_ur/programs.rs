@@ -22,6 +22,41 @@ pub struct ProgramIo<'a> {
     pub protective_stop: bool,
 }
 
+impl ProgramIo<'_> {
+    /// Sets a standard (0–7), configurable (8–15) or tool (16–17) digital output and tells the
+    /// arm model when its level changed; false if there is no such pin.
+    pub fn set_digital_output(&mut self, pin: i64, level: bool) -> bool {
+        set_digital_output(self.io, self.arm, pin, level)
+    }
+}
+
+/// Sets digital output `pin` in `io` and calls [`ArmModel::digital_output`] when the level
+/// changed; false if there is no such pin.
+pub fn set_digital_output(
+    io: &mut StandardIo,
+    arm: &mut dyn ArmModel,
+    pin: i64,
+    level: bool,
+) -> bool {
+    let before = io.digital_output_bits();
+    if !io.set_digital_output(pin, level) {
+        return false;
+    }
+    notify_output_changes(arm, before, io.digital_output_bits());
+    true
+}
+
+/// Calls [`ArmModel::digital_output`] for every bit that differs between two
+/// `actual_digital_output_bits` words, lowest pin first.
+pub fn notify_output_changes(arm: &mut dyn ArmModel, before: u64, after: u64) {
+    let changed = before ^ after;
+    for pin in 0..18u32 {
+        if changed >> pin & 1 == 1 {
+            arm.digital_output(pin, after >> pin & 1 == 1);
+        }
+    }
+}
+
 /// Whether a program keeps running after a cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ProgramStep {
@@ -49,6 +84,8 @@ pub struct CellProgram {
     last_id: i32,
     active: Option<i32>,
     pending: Option<(i32, ArmCommand)>,
+    /// A digital-output command waiting for its device to act: id and seconds left.
+    settling: Option<(i32, f64)>,
     last_heartbeat: i32,
     silent: f64,
     watchdog_tripped: bool,
@@ -147,8 +184,15 @@ impl CellProgram {
                 } else {
                     (0..=7).contains(&pin)
                 };
-                if in_range && io.io.set_digital_output(pin, level) {
-                    Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
+                if in_range && io.set_digital_output(pin, level) {
+                    // The program sleeps while the device (a gripper) acts, then reports done.
+                    let wait = io.arm.actuation_time(pin as u32);
+                    if wait.is_finite() && wait > 0.0 {
+                        self.settling = Some((id, wait));
+                        io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
+                    } else {
+                        Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
+                    }
                 } else {
                     Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_UNKNOWN_COMMAND);
                 }
@@ -168,6 +212,7 @@ impl Program for CellProgram {
         self.last_heartbeat = io.regs.input_int[L::HEARTBEAT_REG];
         self.silent = 0.0;
         self.watchdog_tripped = false;
+        self.settling = None;
         io.regs.output_int[L::ERROR_REG] = L::ERROR_NONE;
         io.regs.output_int[L::STATUS_REG] = L::STATUS_IDLE;
         io.regs.output_int[L::ACCEPTED_ID_REG] = self.last_id;
@@ -207,6 +252,16 @@ impl Program for CellProgram {
         {
             self.start_move(io, id, cmd);
         }
+        if let Some((id, left)) = self.settling.as_mut() {
+            *left -= io.dt;
+            if *left > 1e-9 {
+                // Still sleeping: the next command is read afterwards.
+                return ProgramStep::Continue;
+            }
+            let id = *id;
+            self.settling = None;
+            Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
+        }
 
         let id = io.regs.input_int[L::CMD_ID_REG];
         if id != self.last_id {
@@ -218,6 +273,9 @@ impl Program for CellProgram {
 
     fn interrupted(&mut self, io: &mut ProgramIo<'_>) {
         if let Some(id) = self.active.take() {
+            Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
+        }
+        if let Some((id, _)) = self.settling.take() {
             Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
         }
         if let Some((id, _)) = self.pending.take() {
@@ -352,7 +410,7 @@ impl UrRtdeProgram {
                 let offset = if cmd == SET_TOOL_DIGITAL_OUT { 16 } else { 0 };
                 let pin = i64::from(regs.input_int[1]) + offset;
                 let level = regs.input_int[2] != 0;
-                io.io.set_digital_output(pin, level);
+                io.set_digital_output(pin, level);
                 false
             }
             STOP_L | STOP_J | SPEED_STOP | SERVO_STOP => {

@@ -13,10 +13,15 @@ use robots::kinematics::Joints;
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 
 use super::SimCell;
+use super::gripper::ACTUATION_TIME;
 
 /// The tool digital output pin that drives the gripper (closed when high), as
 /// `robots::ur_robot`'s default gripper configuration.
 pub const GRIPPER_TOOL_PIN: u32 = 0;
+
+/// The first tool output's pin number in `actual_digital_output_bits` (and in
+/// [`ArmModel::digital_output`]).
+pub const TOOL_OUTPUT_BASE: u32 = 16;
 
 /// A [`SimCell`] behind the virtual controller's [`ArmModel`] trait.
 pub struct SimArm {
@@ -29,11 +34,17 @@ pub struct SimArm {
 impl SimArm {
     /// Wraps a shared cell; the arm starts at the cell's joints.
     pub fn new(cell: Arc<Mutex<SimCell>>) -> Self {
-        let (q, limits) = {
+        let (q, limits, kinematics) = {
             let c = lock(&cell);
-            (c.joints_now(), c.model().spec.limits.clone())
+            (
+                c.joints_now(),
+                c.model().spec.limits.clone(),
+                c.model().kinematics.clone(),
+            )
         };
-        let mut arm = KinematicArm::ur5e(q);
+        // The cell's kinematics carry its gripper TCP, so `actual_TCP_pose` and `movel`
+        // targets are the gripper's, as with the TCP set in a real controller's installation.
+        let mut arm = KinematicArm::new(kinematics, q);
         arm.max_joint_speed = limits.max_joint_speed;
         arm.max_joint_accel = limits.max_joint_acceleration;
         arm.max_tool_speed = limits.max_tcp_speed;
@@ -72,6 +83,12 @@ impl ArmModel for SimArm {
         self.arm.command(cmd)?;
         self.elapsed = 0.0;
         self.was_moving = self.arm.is_moving();
+        if !self.was_moving && matches!(cmd, ArmCommand::MoveJ { .. } | ArmCommand::MoveL { .. }) {
+            // A move to where the arm already is still ends a motion in the cell (as in
+            // process: repeatability is drawn and a held part settles).
+            let q = self.arm.state().q;
+            lock(&self.cell).set_joints_after_motion(q, 0.0);
+        }
         Ok(())
     }
 
@@ -99,15 +116,24 @@ impl ArmModel for SimArm {
     }
 
     fn forward(&self, q: &Joints) -> [f64; 6] {
-        robots::kinematics::to_ur_pose(&lock(&self.cell).model().kinematics.forward_tcp(q))
+        self.arm.forward(q)
     }
 
     fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError> {
-        lock(&self.cell)
-            .model()
-            .kinematics
-            .inverse_nearest(&robots::kinematics::from_ur_pose(pose), near)
-            .map(|s| s.joints)
-            .map_err(|e| ArmError::Unreachable(e.to_string()))
+        self.arm.inverse(pose, near)
+    }
+
+    fn digital_output(&mut self, pin: u32, level: bool) {
+        if let Some(tool) = pin.checked_sub(TOOL_OUTPUT_BASE) {
+            self.set_tool_output(tool, level);
+        }
+    }
+
+    fn actuation_time(&self, pin: u32) -> f64 {
+        if pin == TOOL_OUTPUT_BASE + GRIPPER_TOOL_PIN {
+            ACTUATION_TIME
+        } else {
+            0.0
+        }
     }
 }

@@ -1,0 +1,276 @@
+//! The virtual controller and its arm model: every path that sets a digital output (our
+//! program's gripper command, RTDE input registers, the script port) reaches
+//! `ArmModel::digital_output` once per change; our program waits for the device's actuation
+//! time; a `KinematicArm` with a TCP reports and moves that TCP. Loopback only.
+
+use nalgebra::{Isometry3, Translation3, Vector3};
+use robots::kinematics::{Joints, UrKinematics};
+use robots::program::layout as L;
+use robots::robot::{JointMotion, LinearMotion, Robot};
+use robots::rtde::client::{ClientConfig, RtdeClient};
+use robots::rtde::state::RuntimeState;
+use robots::rtde::types::Value;
+use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
+use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
+use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
+use std::f64::consts::FRAC_PI_2;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+const Q0: Joints = [0.2, -1.4, 1.5, -1.7, -FRAC_PI_2, 0.3];
+const GRIPPER_PIN: u32 = 16;
+const STROKE_S: f64 = 0.3;
+
+type Log = Arc<Mutex<Vec<(u32, bool)>>>;
+
+/// A kinematic arm that records output changes and has a gripper on tool output 0.
+struct Recording {
+    arm: KinematicArm,
+    log: Log,
+}
+
+impl ArmModel for Recording {
+    fn command(&mut self, cmd: ArmCommand) -> Result<(), ArmError> {
+        self.arm.command(cmd)
+    }
+    fn step(&mut self, dt: f64, speed_fraction: f64) -> Result<(), ArmError> {
+        self.arm.step(dt, speed_fraction)
+    }
+    fn state(&self) -> ArmState {
+        self.arm.state()
+    }
+    fn is_moving(&self) -> bool {
+        self.arm.is_moving()
+    }
+    fn forward(&self, q: &Joints) -> [f64; 6] {
+        self.arm.forward(q)
+    }
+    fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError> {
+        self.arm.inverse(pose, near)
+    }
+    fn digital_output(&mut self, pin: u32, level: bool) {
+        self.log.lock().unwrap().push((pin, level));
+    }
+    fn actuation_time(&self, pin: u32) -> f64 {
+        if pin == GRIPPER_PIN { STROKE_S } else { 0.0 }
+    }
+}
+
+fn tcp() -> Isometry3<f64> {
+    Isometry3::translation(0.0, 0.0, 0.15)
+}
+
+async fn start() -> (VirtualUr, Log) {
+    let log = Log::default();
+    let arm = Recording {
+        arm: KinematicArm::new(UrKinematics::ur5e().with_tcp(tcp()), Q0),
+        log: log.clone(),
+    };
+    let config = VirtualUrConfig {
+        initial_q: Q0,
+        ..VirtualUrConfig::ephemeral()
+    };
+    let vur = VirtualUr::start_with_arm(config, Box::new(arm))
+        .await
+        .unwrap();
+    (vur, log)
+}
+
+fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
+    UrRobotConfig {
+        rtde_port: vur.rtde_addr().port(),
+        dashboard_port: vur.dashboard_addr().port(),
+        script_port: vur.script_addr().port(),
+        command_timeout: Duration::from_secs(10),
+        kinematics: UrKinematics::ur5e().with_tcp(tcp()),
+        ..UrRobotConfig::new("127.0.0.1")
+    }
+}
+
+fn taken(log: &Log) -> Vec<(u32, bool)> {
+    std::mem::take(&mut *log.lock().unwrap())
+}
+
+async fn wait_for(what: &str, cond: impl Fn() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while !cond() {
+        assert!(
+            Instant::now() < deadline,
+            "{what} did not happen within 2 s"
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_gripper_command_reaches_the_arm_model_and_waits_for_the_stroke() {
+    let (vur, log) = start().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+
+    let t0 = vur.controller.snapshot().timestamp;
+    robot.close_gripper().await.unwrap();
+    let t1 = vur.controller.snapshot().timestamp;
+    assert_eq!(taken(&log), [(GRIPPER_PIN, true)]);
+    // The program reported done only after the stroke (controller time, 2 ms cycles).
+    assert!(t1 - t0 >= STROKE_S - 1e-9, "done after {} s", t1 - t0);
+    assert_eq!(vur.controller.snapshot().io.tool_do, 1);
+
+    // Closing a closed gripper changes nothing: no call, though the program still waits.
+    robot.close_gripper().await.unwrap();
+    assert_eq!(taken(&log), []);
+
+    robot.open_gripper().await.unwrap();
+    assert_eq!(taken(&log), [(GRIPPER_PIN, false)]);
+    assert_eq!(vur.controller.snapshot().io.tool_do, 0);
+
+    // A standard output (no actuation time) reports done at once and reaches the model too.
+    let t0 = vur.controller.snapshot().timestamp;
+    let mut config = robot_config(&vur);
+    config.gripper = robots::ur_robot::GripperOutput::Standard(5);
+    drop(robot);
+    let mut robot = UrRobot::connect(config).await.unwrap();
+    robot.close_gripper().await.unwrap();
+    assert_eq!(taken(&log), [(5, true)]);
+    let snap = vur.controller.snapshot();
+    assert!(snap.timestamp - t0 < 5.0);
+    assert_eq!(snap.io.standard_do, 1 << 5);
+    assert_eq!(snap.regs.output_int[L::ERROR_REG], L::ERROR_NONE);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rtde_output_registers_reach_the_arm_model_once_per_change() {
+    let (vur, log) = start().await;
+    let mut config = ClientConfig::new(vur.rtde_addr().to_string(), &["timestamp"]);
+    config.inputs = vec![
+        [
+            "standard_digital_output_mask",
+            "standard_digital_output",
+            "configurable_digital_output_mask",
+            "configurable_digital_output",
+            "tool_digital_output_mask",
+            "tool_digital_output",
+        ]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect(),
+    ];
+    let client = RtdeClient::connect(config).await.unwrap();
+    let send =
+        |sm: u8, s: u8, cm: u8, c: u8, tm: u8, t: u8| [sm, s, cm, c, tm, t].map(Value::Uint8);
+    // Standard 1 and 3, configurable 2 (pin 10), tool 1 (pin 17) high; masked bits ignored.
+    client
+        .send_inputs(0, &send(0b1010, 0b1111, 0b100, 0b110, 0b10, 0b11))
+        .await
+        .unwrap();
+    wait_for("the first write", || log.lock().unwrap().len() == 4).await;
+    assert_eq!(taken(&log), [(1, true), (3, true), (10, true), (17, true)]);
+    // Rewriting the same levels calls nothing; lowering standard 3 calls once.
+    client
+        .send_inputs(0, &send(0b1010, 0b0010, 0b100, 0b100, 0b10, 0b10))
+        .await
+        .unwrap();
+    wait_for("the second write", || !log.lock().unwrap().is_empty()).await;
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    assert_eq!(taken(&log), [(3, false)]);
+    assert_eq!(
+        vur.controller.snapshot().io.digital_output_bits(),
+        (1 << 1) | (1 << 10) | (1 << 17)
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn script_port_output_statements_reach_the_arm_model() {
+    let (vur, log) = start().await;
+    let robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let address = vur.script_addr().to_string();
+    let timeout = Duration::from_secs(2);
+
+    // A secondary program sets outputs beside the running program.
+    upload_script(
+        &address,
+        "sec outputs():\n  set_standard_digital_out(2, True)\n  set_tool_digital_out(0, True)\nend\n",
+        timeout,
+    )
+    .await
+    .unwrap();
+    wait_for("the secondary program", || log.lock().unwrap().len() == 2).await;
+    assert_eq!(taken(&log), [(2, true), (16, true)]);
+    assert_eq!(
+        vur.controller.snapshot().runtime_state,
+        RuntimeState::Playing
+    );
+
+    // Something else than output statements is not executed.
+    upload_script(
+        &address,
+        "set_tool_digital_out(0, False)\nmovej(q)\n",
+        timeout,
+    )
+    .await
+    .unwrap();
+    tokio::time::sleep(Duration::from_millis(150)).await;
+    assert_eq!(taken(&log), []);
+    assert_eq!(vur.controller.snapshot().io.tool_do, 1);
+
+    // Bare statements run as a primary program: the running program stops, as on a UR.
+    upload_script(&address, "set_configurable_digital_out(7, True)\n", timeout)
+        .await
+        .unwrap();
+    wait_for("the bare statement", || !log.lock().unwrap().is_empty()).await;
+    assert_eq!(taken(&log), [(15, true)]);
+    assert_eq!(
+        vur.controller.snapshot().runtime_state,
+        RuntimeState::Stopped
+    );
+    drop(robot);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_kinematic_arm_with_a_tcp_reports_and_moves_the_tcp() {
+    let kin = UrKinematics::ur5e().with_tcp(tcp());
+    let arm = KinematicArm::new(kin.clone(), Q0);
+    let flange = UrKinematics::ur5e().forward_tcp(&Q0);
+    let expected = kin.forward_tcp(&Q0);
+    let state = arm.state();
+    let reported = robots::kinematics::from_ur_pose(&state.tcp_pose);
+    assert!((reported.translation.vector - expected.translation.vector).norm() < 1e-12);
+    // The TCP is 0.15 m from the flange along the flange z axis.
+    let offset = reported.translation.vector - flange.translation.vector;
+    assert!((offset - flange.rotation * Vector3::new(0.0, 0.0, 0.15)).norm() < 1e-12);
+
+    // Over RTDE: a movel target is the TCP's, and actual_TCP_pose reports it.
+    let (vur, _log) = start().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let start_pose = robot.tcp_pose().await.unwrap();
+    assert!((start_pose.translation.vector - expected.translation.vector).norm() < 1e-9);
+    let target = Translation3::new(0.02, -0.03, -0.04) * start_pose;
+    robot
+        .move_l(
+            target,
+            LinearMotion {
+                speed: 0.25,
+                acceleration: 1.2,
+            },
+        )
+        .await
+        .unwrap();
+    let reached = robot.tcp_pose().await.unwrap();
+    assert!((reached.translation.vector - target.translation.vector).norm() < 1e-6);
+    assert!(reached.rotation.angle_to(&target.rotation) < 1e-6);
+    let q = robot.joints().await.unwrap();
+    assert!((kin.forward_tcp(&q).translation.vector - target.translation.vector).norm() < 1e-6);
+
+    // A joint move ends on exactly the commanded joints.
+    let q1 = [0.1, -1.3, 1.4, -1.6, -FRAC_PI_2, 0.2];
+    robot
+        .move_j(
+            q1,
+            JointMotion {
+                speed: 2.0,
+                acceleration: 4.0,
+            },
+        )
+        .await
+        .unwrap();
+    assert_eq!(robot.joints().await.unwrap(), q1);
+}
