@@ -48,6 +48,9 @@ enum Command {
     /// Success-rate regression gate: run scenarios and compare with their baselines
     /// (one-sided Fisher exact test); exits non-zero on a significant drop.
     Regress(commands::regress::Args),
+    /// How often the fast analytic insertion scorer agrees with the contact simulation near each
+    /// step's capture boundary; exits non-zero below `--min-agreement`.
+    Scorers(commands::scorers::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -67,6 +70,7 @@ fn main() -> std::process::ExitCode {
         Command::Run(args) => commands::run::run(args),
         Command::Merge(args) => commands::merge::run(args),
         Command::Regress(args) => commands::regress::run(args),
+        Command::Scorers(args) => commands::scorers::run(args),
     };
     match result {
         Ok(code) => code,

@@ -8,4 +8,5 @@ pub mod merge;
 pub mod parts;
 pub mod regress;
 pub mod run;
+pub mod scorers;
 pub mod virtual_ur;
