@@ -3,31 +3,17 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use perception::part::{LengthUnit, PartError, load_mesh};
+use nalgebra::Vector3;
+use perception::part::{LengthUnit, PartError, TriMesh, load_mesh};
 
 /// A 9 × 6 × 3 mm box as (vertices in mm, outward triangles).
 fn block() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
-    let (x, y, z) = (4.5, 3.0, 1.5);
-    let v = (0..8)
-        .map(|i| {
-            [
-                if i & 1 == 0 { -x } else { x },
-                if i & 2 == 0 { -y } else { y },
-                if i & 4 == 0 { -z } else { z },
-            ]
-        })
-        .collect();
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let t = quads
+    let mesh = TriMesh::cuboid(Vector3::new(9.0, 6.0, 3.0));
+    let v = mesh.vertices.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let t = mesh
+        .triangles
         .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .map(|t| t.map(|i| i as usize))
         .collect();
     (v, t)
 }

@@ -12,28 +12,7 @@ use sim::scene::{PartModel, RandomisationError, Range};
 
 /// A box mesh (metres) with outward triangles.
 fn cuboid(sx: f64, sy: f64, sz: f64) -> TriMesh {
-    let v: Vec<nalgebra::Point3<f64>> = (0..8)
-        .map(|i| {
-            nalgebra::Point3::new(
-                if i & 1 == 0 { -sx / 2.0 } else { sx / 2.0 },
-                if i & 2 == 0 { -sy / 2.0 } else { sy / 2.0 },
-                if i & 4 == 0 { -sz / 2.0 } else { sz / 2.0 },
-            )
-        })
-        .collect();
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let t = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
-    TriMesh::new(v, t)
+    TriMesh::cuboid(nalgebra::Vector3::new(sx, sy, sz))
 }
 
 /// Two part-sized boxes in a catalog on disk (a metal shell and a dark plastic insert).

@@ -48,6 +48,34 @@ pub enum MeshDefect {
 }
 
 impl TriMesh {
+    /// An axis-aligned box of the given full size centred on the origin, outward triangles:
+    /// the simplest closed part, for fixtures, placeholders and tests.
+    pub fn cuboid(size: Vector3<f64>) -> Self {
+        let h = size / 2.0;
+        let vertices = (0..8)
+            .map(|i| {
+                Point3::new(
+                    if i & 1 == 0 { -h.x } else { h.x },
+                    if i & 2 == 0 { -h.y } else { h.y },
+                    if i & 4 == 0 { -h.z } else { h.z },
+                )
+            })
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let triangles = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Self::new(vertices, triangles)
+    }
+
     /// A mesh from vertices and triangles, merging vertices at bit-identical positions.
     pub fn new(vertices: Vec<Point3<f64>>, triangles: Vec<[u32; 3]>) -> Self {
         let mut mesh = Self {
@@ -206,31 +234,9 @@ impl TriMesh {
 pub(crate) mod tests {
     use super::*;
 
-    /// A unit cube, outward triangles.
+    /// A cube of the given side, outward triangles.
     pub(crate) fn cube(side: f64) -> TriMesh {
-        let h = side / 2.0;
-        let v: Vec<Point3<f64>> = (0..8)
-            .map(|i| {
-                Point3::new(
-                    if i & 1 == 0 { -h } else { h },
-                    if i & 2 == 0 { -h } else { h },
-                    if i & 4 == 0 { -h } else { h },
-                )
-            })
-            .collect();
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let t = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        TriMesh::new(v, t)
+        TriMesh::cuboid(Vector3::repeat(side))
     }
 
     #[test]
