@@ -45,6 +45,9 @@ pub struct StepRecord {
     pub outcome: StepOutcome,
     /// Pick-and-insert attempts used (1 when the first attempt worked).
     pub attempts: u32,
+    /// Insertions tried (1 when the first one seated; retries after a jam or miss add one each).
+    #[serde(default)]
+    pub insertion_attempts: u32,
     /// Feeder shakes used.
     pub shakes: u32,
     /// Why it failed, in words, when it did.

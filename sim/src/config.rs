@@ -104,6 +104,13 @@ pub struct FeederSpec {
     /// Shakes allowed per step before a run gives up on finding a usable part.
     #[serde(default = "three")]
     pub max_shakes: u32,
+    /// Seconds one shake takes until the parts are at rest again (vibration plus settling).
+    #[serde(default = "shake_time")]
+    pub shake_time: f64,
+}
+
+fn shake_time() -> f64 {
+    1.5
 }
 
 fn sampled() -> Placement {

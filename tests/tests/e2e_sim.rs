@@ -138,6 +138,8 @@ fn an_empty_feeder_shakes_the_bounded_number_of_times_then_aborts() {
     assert_eq!(s.shakes, setup.scenario.spec.cell.feeder.max_shakes);
     let cause = s.cause.unwrap();
     assert!(cause.contains("no usable main_shell"), "{cause}");
+    // The error budget names the cause.
+    assert_eq!(s.sources, vec!["feeder.parts".to_string()]);
 }
 
 #[test]
@@ -152,6 +154,75 @@ fn parts_lying_upside_down_are_never_picked() {
     assert_eq!(s.attempts, 0, "nothing was picked");
     let cause = s.cause.unwrap();
     assert!(cause.contains("wrong way up"), "{cause}");
+    assert_eq!(s.sources, vec!["feeder.max_shakes".to_string()]);
+}
+
+/// Insertion statistics of `episodes` episodes: (steps seated after a retry, steps given up
+/// after retries, largest insertion count of any step).
+fn insertion_retries(setup: &SimSetup, episodes: u32) -> (usize, usize, u32) {
+    let outputs: Vec<_> = (0..episodes)
+        .into_par_iter()
+        .map(|e| run_sim_episode_blocking(setup, e).expect("episode set up"))
+        .collect();
+    let steps = || outputs.iter().flat_map(|o| o.record.steps.iter());
+    let retried_seated = steps()
+        .filter(|s| s.insertion_attempts > 1 && s.outcome == StepOutcome::Seated)
+        .count();
+    let given_up = steps()
+        .filter(|s| s.insertion_attempts > 1 && s.outcome != StepOutcome::Seated)
+        .count();
+    for o in &outputs {
+        for s in &o.record.steps {
+            // Every step that reached the insertion counts it; failed retries say so.
+            if matches!(s.outcome, StepOutcome::Jammed | StepOutcome::Missed) {
+                assert!(s.insertion_attempts >= 1);
+            }
+            if s.insertion_attempts > 1 && s.outcome != StepOutcome::Seated {
+                let cause = s.cause.as_deref().unwrap_or_default();
+                assert!(cause.contains("insertion attempts"), "{cause}");
+            }
+        }
+        // Each retry is a logged Verify → PlanInsert transition with its reason.
+        let retries = o
+            .events
+            .events()
+            .iter()
+            .filter(|e| e.from == State::Verify && e.to == State::PlanInsert)
+            .count();
+        let expected: u32 = o
+            .record
+            .steps
+            .iter()
+            .map(|s| s.insertion_attempts.saturating_sub(1))
+            .sum();
+        assert_eq!(retries, expected as usize, "episode {}", o.record.episode);
+    }
+    let most = steps().map(|s| s.insertion_attempts).max().unwrap_or(0);
+    (retried_seated, given_up, most)
+}
+
+#[test]
+fn jammed_insertions_are_lifted_and_retried_within_the_bound() {
+    // Three times the nominal grasp rotation: the yaw in the fingers often exceeds what the
+    // clearances admit, so insertions jam (or miss) before the fingers open.
+    let jammy = |doc: &mut toml_edit::DocumentMut, attempts: i64| {
+        doc["noise"]["grasp_rotation"] = toml_edit::value(0.006);
+        doc["cell"]["feeder"]["max_shakes"] = toml_edit::value(10);
+        doc["policy"]["max_insertion_attempts"] = toml_edit::value(attempts);
+    };
+    let four = setup(|doc| jammy(doc, 4));
+    let (seated, given_up, most) = insertion_retries(&four, 120);
+    assert!(seated >= 10, "only {seated} steps seated after a retry");
+    assert!(most <= 4, "a step made {most} insertions, the bound is 4");
+    assert_eq!(
+        most, 4,
+        "some step should have used every attempt ({given_up} gave up)"
+    );
+    // With one attempt allowed there is no retry at all.
+    let once = setup(|doc| jammy(doc, 1));
+    let (seated, given_up, most) = insertion_retries(&once, 60);
+    assert_eq!((seated, given_up), (0, 0));
+    assert_eq!(most, 1);
 }
 
 #[test]

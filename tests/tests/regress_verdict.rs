@@ -25,6 +25,7 @@ fn episode(i: u32, success: bool) -> EpisodeRecord {
                 StepOutcome::Missed
             },
             attempts: 1,
+            insertion_attempts: 1,
             shakes: 0,
             cause: (!seated).then(|| "landed beside the nest".into()),
             sources: if seated {

@@ -56,6 +56,7 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
             part: (*part).into(),
             outcome,
             attempts: 1 + (mix(seed, episode, 10 + i as u64) % 2) as u32,
+            insertion_attempts: 1,
             shakes: (mix(seed, episode, 20 + i as u64) % 3) as u32,
             cause: failed.then(|| "lateral error beyond the chamfer".into()),
             sources: if failed {

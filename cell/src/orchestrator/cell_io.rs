@@ -8,9 +8,9 @@ use nalgebra::Isometry3;
 use robots::kinematics::Joints;
 use robots::limits::Limits;
 use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
-use sim::cell::SimCell;
 use sim::cell::insertion::{InsertionCause, Verdict};
 use sim::cell::noise::ErrorSource;
+use sim::cell::{ReleaseReport, SimCell};
 
 use super::perception::{Frame, FrameContent, TruePart};
 use crate::episode::{PoseError, StepOutcome};
@@ -37,6 +37,9 @@ pub struct InsertionCheck {
     pub sources: Vec<String>,
     /// True pose error (simulation only).
     pub pose_error: Option<PoseError>,
+    /// How far above fully seated the part stopped, metres: what the cell measures (arm height
+    /// at the force threshold), and the slip of the part up the fingers when it was pushed.
+    pub stop_height: Option<f64>,
 }
 
 /// The camera, feeder and sensors of a cell.
@@ -50,6 +53,12 @@ pub trait CellIo: Send {
     fn part_in_gripper(&mut self) -> Option<bool>;
     /// The result of the insertion just released, if there was one.
     fn insertion_check(&mut self) -> Option<InsertionCheck>;
+    /// Whether the part still in the fingers is seated, checked before the fingers open (by
+    /// height and force in production); `None` when the cell cannot tell before release (the
+    /// part is then released and [`CellIo::insertion_check`] decides, with no retry).
+    fn seating_check(&mut self) -> Option<InsertionCheck> {
+        None
+    }
     /// Seconds on the cell's clock since the episode started (simulated time in simulation).
     fn clock(&self) -> f64;
     /// True table pose of a simulated instance (simulation only; for error reports).
@@ -115,6 +124,41 @@ fn cause_text(c: &InsertionCause) -> Option<String> {
     })
 }
 
+/// What an insertion report says, in the orchestrator's terms.
+fn check_of(r: &ReleaseReport) -> InsertionCheck {
+    let outcome = match r.verdict {
+        Verdict::Seated => StepOutcome::Seated,
+        Verdict::Jammed => StepOutcome::Jammed,
+        Verdict::Missed => StepOutcome::Missed,
+    };
+    let mut sources = Vec::new();
+    if outcome != StepOutcome::Seated
+        && let Some(b) = &r.budget
+    {
+        let mut shares = b.shares.clone();
+        shares.sort_by(|a, b| b.1.total_cmp(&a.1));
+        sources = shares
+            .iter()
+            .filter(|(_, s)| *s >= 0.2)
+            .map(|(s, _)| source_name(*s).to_string())
+            .collect();
+    }
+    let pose_error = r.insertion.as_ref().map(|i| PoseError {
+        dx_mm: i.start.lateral.x * 1e3,
+        dy_mm: i.start.lateral.y * 1e3,
+        depth_mm: i.end.height * 1e3,
+        tilt_deg: i.start.tilt.to_degrees(),
+        yaw_deg: i.start.yaw.to_degrees(),
+    });
+    InsertionCheck {
+        outcome,
+        cause: cause_text(&r.cause),
+        sources,
+        pose_error,
+        stop_height: r.insertion.as_ref().map(|i| i.end.height),
+    }
+}
+
 impl CellIo for SimCellIo {
     fn capture(&mut self) -> Result<Frame, CellIoError> {
         let c = lock(&self.cell);
@@ -145,37 +189,22 @@ impl CellIo for SimCellIo {
     }
 
     fn insertion_check(&mut self) -> Option<InsertionCheck> {
+        lock(&self.cell).last_release().map(check_of)
+    }
+
+    fn seating_check(&mut self) -> Option<InsertionCheck> {
         let c = lock(&self.cell);
-        let r = c.last_release()?;
-        let outcome = match r.verdict {
-            Verdict::Seated => StepOutcome::Seated,
-            Verdict::Jammed => StepOutcome::Jammed,
-            Verdict::Missed => StepOutcome::Missed,
-        };
-        let mut sources = Vec::new();
-        if outcome != StepOutcome::Seated
-            && let Some(b) = &r.budget
-        {
-            let mut shares = b.shares.clone();
-            shares.sort_by(|a, b| b.1.total_cmp(&a.1));
-            sources = shares
-                .iter()
-                .filter(|(_, s)| *s >= 0.2)
-                .map(|(s, _)| source_name(*s).to_string())
-                .collect();
-        }
-        let pose_error = r.insertion.as_ref().map(|i| PoseError {
-            dx_mm: i.start.lateral.x * 1e3,
-            dy_mm: i.start.lateral.y * 1e3,
-            depth_mm: i.end.height * 1e3,
-            tilt_deg: i.start.tilt.to_degrees(),
-            yaw_deg: i.start.yaw.to_degrees(),
-        });
-        Some(InsertionCheck {
-            outcome,
-            cause: cause_text(&r.cause),
-            sources,
-            pose_error,
+        c.held()?;
+        Some(match c.held_insertion() {
+            Some(r) => check_of(&r),
+            // Held but never came down into the target: it stopped on whatever it met first.
+            None => InsertionCheck {
+                outcome: StepOutcome::Missed,
+                cause: Some("the part did not enter the target".into()),
+                sources: vec![],
+                pose_error: None,
+                stop_height: None,
+            },
         })
     }
 

@@ -14,9 +14,14 @@ use super::events::EventLog;
 use super::geometry::CellKnowledge;
 use super::perception::{DetectedPart, Frame, PartPerception};
 use super::planning::{Motion, Plan, Planner, PlanningConfig, Speeds, grasped_offset};
-use super::selection::{Selection, SelectionConfig, select};
+use super::selection::{Rejection, Selection, SelectionConfig, select};
 use super::state::{State, Timeouts};
 use crate::episode::{EpisodeRecord, PoseError, RECORD_VERSION, StepOutcome, StepRecord};
+
+/// Error-budget name of a step given up because the feeder held none of its part.
+pub const FEEDER_EXHAUSTED: &str = "feeder.parts";
+/// Error-budget name of a step given up after `max_shakes` shakes left no usable instance.
+pub const FEEDER_SHAKE_BOUND: &str = "feeder.max_shakes";
 
 /// Policies and tuning of an episode.
 #[derive(Debug, Clone, PartialEq)]
@@ -74,6 +79,7 @@ pub(super) struct Driver<'a> {
     pub perception: &'a mut dyn PartPerception,
     pub settings: &'a EpisodeSettings,
     pub max_shakes: u32,
+    pub max_insertion_attempts: u32,
     pub log: EventLog,
     // Episode state.
     home: Joints,
@@ -87,6 +93,16 @@ pub(super) struct Driver<'a> {
     step_start: f64,
     attempts: u32,
     shakes: u32,
+    /// Insertion attempts this step (first try and retries).
+    insertions: u32,
+    /// Correction of the next insertion in the insertion frame (search offset, slip).
+    correction: Isometry3<f64>,
+    /// Measured slip of the held part up the fingers so far, metres.
+    slip: f64,
+    /// Release and retreat of the insertion in progress, run once it is judged.
+    pending: Vec<(&'static str, Motion)>,
+    /// Why the last insertion attempt was retried.
+    retry_reason: Option<String>,
     frame: Option<Frame>,
     detections: Vec<DetectedPart>,
     excluded: BTreeSet<usize>,
@@ -109,6 +125,7 @@ impl<'a> Driver<'a> {
         perception: &'a mut dyn PartPerception,
         settings: &'a EpisodeSettings,
         max_shakes: u32,
+        max_insertion_attempts: u32,
     ) -> Self {
         Self {
             scenario_name,
@@ -121,6 +138,7 @@ impl<'a> Driver<'a> {
             perception,
             settings,
             max_shakes,
+            max_insertion_attempts: max_insertion_attempts.max(1),
             log: EventLog::new(episode),
             home: [0.0; 6],
             cycle_start: 0.0,
@@ -131,6 +149,11 @@ impl<'a> Driver<'a> {
             step_start: 0.0,
             attempts: 0,
             shakes: 0,
+            insertions: 0,
+            correction: Isometry3::identity(),
+            slip: 0.0,
+            pending: Vec::new(),
+            retry_reason: None,
             frame: None,
             detections: Vec::new(),
             excluded: BTreeSet::new(),
@@ -153,6 +176,11 @@ impl<'a> Driver<'a> {
         self.step_start = self.io.clock();
         self.attempts = 0;
         self.shakes = 0;
+        self.insertions = 0;
+        self.correction = Isometry3::identity();
+        self.slip = 0.0;
+        self.pending.clear();
+        self.retry_reason = None;
         self.excluded.clear();
         self.selection = None;
         self.plan = None;
@@ -171,6 +199,7 @@ impl<'a> Driver<'a> {
             part: self.step_part(),
             outcome,
             attempts: self.attempts,
+            insertion_attempts: self.insertions,
             shakes: self.shakes,
             cause,
             sources,
@@ -201,6 +230,65 @@ impl<'a> Driver<'a> {
         out
     }
 
+    /// A jammed or missed insertion with the part still in the fingers: lift it clear along the
+    /// insertion axis (the retreat pose, fingers closed), then correct the next attempt: the
+    /// measured stop height is how far the part slipped up the fingers, so the next insertion
+    /// goes that much deeper; and a search offset (lateral for a miss, yaw for a jam, since a
+    /// real cell measures neither error directly) is tried, a different one each attempt.
+    async fn retry_insertion(
+        &mut self,
+        state: State,
+        check: super::cell_io::InsertionCheck,
+    ) -> Result<State, Stop> {
+        let pending = std::mem::take(&mut self.pending);
+        let lift: Vec<(&'static str, Motion)> = pending
+            .into_iter()
+            .filter(|(_, m)| *m != Motion::Open)
+            .map(|(_, m)| ("lift clear", m))
+            .collect();
+        self.execute(state, &lift).await?;
+        // The part pushed back comes out a little higher in the fingers than it went in.
+        let engagement_cap = self.settings.planning.clearance_height / 2.0;
+        self.slip = (self.slip + check.stop_height.unwrap_or(0.0)).clamp(0.0, engagement_cap);
+        let k = self.insertions as usize; // retries so far, ≥ 1
+        let search = self.settings.planning.search;
+        let step = &self.knowledge.steps[self.step];
+        let lateral = step
+            .lead_in
+            .max(step.clearance / 2.0)
+            .max(search.min_lateral);
+        let (offset, yaw) = match check.outcome {
+            StepOutcome::Missed => {
+                const PATTERN: [(f64, f64); 4] = [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)];
+                let (x, y) = PATTERN[(k - 1) % PATTERN.len()];
+                let ring = ((k - 1) / PATTERN.len() + 1) as f64;
+                (nalgebra::Vector2::new(x, y) * lateral * ring, 0.0)
+            }
+            _ => {
+                let ring = (k.div_ceil(2)) as f64;
+                let sign = if k % 2 == 1 { 1.0 } else { -1.0 };
+                (nalgebra::Vector2::zeros(), sign * ring * search.yaw_step)
+            }
+        };
+        self.correction = Isometry3::from_parts(
+            nalgebra::Translation3::new(offset.x, offset.y, -self.slip),
+            nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), yaw),
+        );
+        let what = match check.outcome {
+            StepOutcome::Missed => "missed",
+            _ => "jammed",
+        };
+        self.retry_reason = Some(format!(
+            "insertion {} {what} ({}); retry {} of {}",
+            self.insertions,
+            check.cause.as_deref().unwrap_or("not seated"),
+            self.insertions,
+            self.max_insertion_attempts - 1
+        ));
+        self.last_reason = self.retry_reason.clone().unwrap_or_default();
+        Ok(State::PlanInsert)
+    }
+
     fn planner(&self) -> Planner<'a> {
         Planner {
             knowledge: self.knowledge,
@@ -209,8 +297,12 @@ impl<'a> Driver<'a> {
         }
     }
 
-    async fn execute(&mut self, state: State, plan: &Plan) -> Result<(), Stop> {
-        for (name, m) in &plan.motions {
+    async fn execute(
+        &mut self,
+        state: State,
+        motions: &[(&'static str, Motion)],
+    ) -> Result<(), Stop> {
+        for (name, m) in motions {
             let r = match m {
                 Motion::MoveJ(q, s) => self.robot.move_j(*q, *s).await,
                 Motion::MoveL(p, s) => self.robot.move_l(*p, *s).await,
@@ -342,7 +434,23 @@ impl<'a> Driver<'a> {
                                 "no usable {part} after {} shakes ({})",
                                 self.shakes, self.last_reason
                             );
-                            Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None))
+                            // Named causes for the error budget: an exhausted feeder, or parts
+                            // there that the shake bound gave no chance to come to rest usably.
+                            let any = result
+                                .rejected
+                                .iter()
+                                .any(|(_, r)| !matches!(r, Rejection::OtherPart));
+                            let source = if any {
+                                FEEDER_SHAKE_BOUND
+                            } else {
+                                FEEDER_EXHAUSTED
+                            };
+                            Ok(self.finish_step(
+                                StepOutcome::Aborted,
+                                Some(cause),
+                                vec![source.into()],
+                                None,
+                            ))
                         }
                     }
                 }
@@ -383,7 +491,10 @@ impl<'a> Driver<'a> {
                     return Ok(State::PlanPick);
                 };
                 self.attempts += 1;
-                self.execute(state, &plan).await?;
+                // A new part in the fingers: nothing learnt from an earlier one applies.
+                self.correction = Isometry3::identity();
+                self.slip = 0.0;
+                self.execute(state, &plan.motions).await?;
                 Ok(State::VerifyGrasp)
             }
             State::VerifyGrasp => {
@@ -421,16 +532,20 @@ impl<'a> Driver<'a> {
                     return Ok(State::Done);
                 };
                 let tcp_T_part = grasped_offset(&sel.tcp_T_part);
+                let correction = self.correction;
                 let start = self
                     .robot
                     .joints()
                     .await
                     .map_err(|e| Stop::Robot(state, e))?;
                 let placed = self.placed_shapes();
-                match self
-                    .planner()
-                    .insert(self.step, (g, &tcp_T_part), &start, &placed)
-                {
+                match self.planner().insert(
+                    self.step,
+                    (g, &tcp_T_part),
+                    &correction,
+                    &start,
+                    &placed,
+                ) {
                     Ok(plan) => {
                         self.plan = Some(plan);
                         Ok(State::Insert)
@@ -457,10 +572,26 @@ impl<'a> Driver<'a> {
                 let Some(plan) = self.plan.take() else {
                     return Ok(State::PlanInsert);
                 };
-                self.execute(state, &plan).await?;
+                let split = plan
+                    .motions
+                    .iter()
+                    .position(|(_, m)| *m == Motion::Open)
+                    .unwrap_or(plan.motions.len());
+                self.insertions += 1;
+                self.pending = plan.motions[split..].to_vec();
+                self.execute(state, &plan.motions[..split]).await?;
                 Ok(State::Verify)
             }
             State::Verify => {
+                // Judge the insertion before the fingers open, when the cell can.
+                if let Some(c) = self.io.seating_check()
+                    && c.outcome != StepOutcome::Seated
+                    && self.insertions < self.max_insertion_attempts
+                {
+                    return self.retry_insertion(state, c).await;
+                }
+                let pending = std::mem::take(&mut self.pending);
+                self.execute(state, &pending).await?;
                 let check = self.io.insertion_check();
                 let part = self.step_part();
                 match check {
@@ -469,7 +600,11 @@ impl<'a> Driver<'a> {
                             self.placed
                                 .push((part, self.knowledge.base_T_targets[self.step]));
                         }
-                        Ok(self.finish_step(c.outcome, c.cause, c.sources, c.pose_error))
+                        let cause = c.cause.map(|t| match self.insertions {
+                            0 | 1 => t,
+                            n => format!("{t} (after {n} insertion attempts)"),
+                        });
+                        Ok(self.finish_step(c.outcome, cause, c.sources, c.pose_error))
                     }
                     None => Ok(self.finish_step(
                         StepOutcome::Missed,
@@ -497,6 +632,7 @@ impl<'a> Driver<'a> {
                 Ok(n) => {
                     let d = match n {
                         State::Shake | State::Retract => self.last_reason.clone(),
+                        State::PlanInsert if state == State::Verify => self.last_reason.clone(),
                         _ => String::new(),
                     };
                     (n, d)
@@ -511,6 +647,7 @@ impl<'a> Driver<'a> {
                             part: self.step_part(),
                             outcome: StepOutcome::Aborted,
                             attempts: self.attempts,
+                            insertion_attempts: self.insertions,
                             shakes: self.shakes,
                             cause: Some(text.clone()),
                             sources: vec![],

@@ -6,7 +6,10 @@
 //! Verify → (next step: Capture) or Done, each bounded by a wall-clock timeout ([`Timeouts`]).
 //! Recovery, every path bounded: nothing pickable → Shake → Capture, at most
 //! `cell.feeder.max_shakes` times, then the step aborts with the cause; a failed grasp → Retract
-//! → Capture (re-perceive), at most [`EpisodeSettings::max_grasp_attempts`] picks; a robot error
+//! → Capture (re-perceive), at most [`EpisodeSettings::max_grasp_attempts`] picks; an insertion
+//! found jammed or missed before the fingers open (`CellIo::seating_check`) → lift clear, correct
+//! (the measured slip, a search offset) and insert again, at most `policy.max_insertion_attempts`
+//! insertions, then release with the cause; a robot error
 //! (protective stop, e-stop, lost connection, timeout) → stop the arm → SafeStop, and the record
 //! says why. A failed step ends the episode (later steps build on it). Every transition is an
 //! [`Event`] (JSON line) with simulated and wall time.
@@ -48,7 +51,9 @@ pub use perception::{
     DetectedPart, Frame, FrameContent, KeypointNoise, KeypointNoiseConfig, PartPerception,
     PerceptionError, TruePart,
 };
-pub use planning::{Motion, Plan, PlanError, Planner, PlanningConfig, Speeds, grasped_offset};
+pub use planning::{
+    Motion, Plan, PlanError, Planner, PlanningConfig, SearchConfig, Speeds, grasped_offset,
+};
 pub use production::{
     ImageSource, ProductionCellIo, ProductionError, ProductionOptions, preflight,
 };
@@ -117,6 +122,7 @@ pub async fn run_episode(
         perception,
         settings,
         scenario.spec.cell.feeder.max_shakes,
+        scenario.spec.policy.max_insertion_attempts,
     );
     let (record, events) = d.run().await;
     EpisodeOutput { record, events }

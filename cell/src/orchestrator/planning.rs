@@ -33,6 +33,28 @@ pub struct PlanningConfig {
     pub transit_margin: f64,
     /// Joint-space samples checked along each joint move.
     pub samples: usize,
+    /// Search offsets of insertion retries.
+    pub search: SearchConfig,
+}
+
+/// How a retried insertion searches for the hole (the cell measures neither the lateral nor the
+/// yaw error of a failed insertion, only that it failed and how high it stopped).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchConfig {
+    /// Yaw step about the insertion axis after a jam, radians (±step, ±2 step, ...).
+    pub yaw_step: f64,
+    /// Smallest lateral step after a miss, metres (the step's lead-in or half clearance when
+    /// larger).
+    pub min_lateral: f64,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        Self {
+            yaw_step: 0.3f64.to_radians(),
+            min_lateral: 5e-5,
+        }
+    }
 }
 
 impl Default for PlanningConfig {
@@ -44,6 +66,7 @@ impl Default for PlanningConfig {
             arm_table_margin: 0.02,
             transit_margin: 0.001,
             samples: 10,
+            search: SearchConfig::default(),
         }
     }
 }
@@ -254,21 +277,23 @@ impl Planner<'_> {
         })
     }
 
-    /// The insertion of a held part (estimated `tcp_T_part`) into step `step`'s nominal target,
-    /// from joints `start` (the lift pose): joint move to the transfer pose, fast down to the
-    /// pre-insert pose, slow insertion, release, retreat.
+    /// The insertion of a held part (estimated `tcp_T_part`) into step `step`'s nominal target
+    /// moved by `correction` (in the insertion frame: identity for a first attempt), from joints
+    /// `start` (the lift pose): joint move to the transfer pose, fast down to the pre-insert
+    /// pose, slow insertion, release, retreat.
     #[allow(non_snake_case)]
     pub fn insert(
         &self,
         step: usize,
         held: (&PartGeometry, &Isometry3<f64>),
+        correction: &Isometry3<f64>,
         start: &Joints,
         placed: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<Plan, PlanError> {
         let k = self.knowledge;
         let c = &self.config;
-        let base_T_target = k.base_T_targets[step];
         let base_T_ins = k.base_T_insertions[step];
+        let base_T_target = base_T_ins * correction * base_T_ins.inverse() * k.base_T_targets[step];
         let tcp_T_part = held.1;
         let insert = base_T_target * tcp_T_part.inverse();
         // Back out along the insertion frame's z (out of the hole).

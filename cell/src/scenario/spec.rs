@@ -30,6 +30,37 @@ pub struct ScenarioSpec {
     /// Error sources; each is a named parameter so failures can be attributed.
     #[serde(default)]
     pub noise: NoiseSpec,
+    /// Recovery bounds of the orchestrator.
+    #[serde(default)]
+    pub policy: PolicySpec,
+}
+
+/// The orchestrator's default insertion attempts per step (first try plus retries).
+pub const DEFAULT_INSERTION_ATTEMPTS: u32 = 3;
+/// The most insertion attempts per step a scenario may ask for.
+pub const MAX_INSERTION_ATTEMPTS: u32 = 10;
+
+/// Recovery bounds (`[policy]`): every recovery path of an episode is bounded.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PolicySpec {
+    /// Insertion attempts per step: a jammed or missed insertion, found before the fingers
+    /// open, is lifted clear, corrected and retried until this many attempts were made, then
+    /// released with its cause (1 = no retry).
+    #[serde(default = "default_insertion_attempts")]
+    pub max_insertion_attempts: u32,
+}
+
+impl Default for PolicySpec {
+    fn default() -> Self {
+        Self {
+            max_insertion_attempts: DEFAULT_INSERTION_ATTEMPTS,
+        }
+    }
+}
+
+fn default_insertion_attempts() -> u32 {
+    DEFAULT_INSERTION_ATTEMPTS
 }
 
 /// Where the catalog lives.

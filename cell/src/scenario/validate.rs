@@ -6,7 +6,7 @@ use std::path::Path;
 use nalgebra::Vector3;
 use perception::part::{Catalog, PartRole};
 
-use super::{Destination, KeyPath, ScenarioSpec};
+use super::{Destination, KeyPath, MAX_INSERTION_ATTEMPTS, ScenarioSpec};
 
 type Issues = Vec<(KeyPath, String)>;
 
@@ -108,6 +108,22 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         ("grasp_rotation", n.grasp_rotation),
     ] {
         non_negative(&mut issues, np.key(key), v, key);
+    }
+    let fp2 = cell.key("feeder");
+    non_negative(
+        &mut issues,
+        fp2.key("shake_time"),
+        spec.cell.feeder.shake_time,
+        "shake_time",
+    );
+    let attempts = spec.policy.max_insertion_attempts;
+    if !(1..=MAX_INSERTION_ATTEMPTS).contains(&attempts) {
+        issues.push((
+            root().key("policy").key("max_insertion_attempts"),
+            format!(
+                "max_insertion_attempts must be between 1 and {MAX_INSERTION_ATTEMPTS}, got {attempts}"
+            ),
+        ));
     }
     let pp = root().key("perception");
     non_negative(

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::part::Catalog;
-use robots::kinematics::{Joints, UrKinematics};
+use robots::kinematics::{IkError, Joints, UrDh, UrKinematics, joint_distance};
 
 use super::error::CellError;
 use super::feasible::check_feasible;
@@ -25,6 +25,43 @@ const HOME_REFERENCE: Joints = [
     -std::f64::consts::FRAC_PI_2,
     0.0,
 ];
+
+/// The IK solution for `base_T_tcp` that keeps the arm highest above the table (elbow up: the
+/// lowest of the elbow, wrist and flange frames as high as it can be); among those within 1 cm
+/// of the highest, the one nearest [`HOME_REFERENCE`].
+#[allow(non_snake_case)]
+fn elbow_up(
+    kinematics: &UrKinematics,
+    base_T_table: &Isometry3<f64>,
+    base_T_tcp: &Isometry3<f64>,
+) -> Result<Joints, IkError> {
+    let dh = UrDh::ur5e();
+    let table_T_base = base_T_table.inverse();
+    let lowest = |q: &Joints| {
+        dh.frames(q)[1..]
+            .iter()
+            .map(|f| (table_T_base * f).translation.z)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let all = kinematics.inverse_all(base_T_tcp, HOME_REFERENCE[5])?;
+    let highest = all
+        .iter()
+        .map(|s| lowest(&s.joints))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let best = all
+        .iter()
+        .filter(|s| lowest(&s.joints) >= highest - 0.01)
+        .min_by(|a, b| {
+            joint_distance(&a.joints, &HOME_REFERENCE)
+                .total_cmp(&joint_distance(&b.joints, &HOME_REFERENCE))
+        });
+    match best {
+        Some(s) => Ok(s.joints),
+        None => kinematics
+            .inverse_nearest(base_T_tcp, &HOME_REFERENCE)
+            .map(|s| s.joints),
+    }
+}
 
 /// The fixed part of a simulated cell, shared (behind an `Arc`) by every episode.
 #[derive(Debug)]
@@ -74,10 +111,8 @@ impl CellModel {
                 Translation3::new(cx, cy, HOME_HEIGHT),
                 UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
             );
-        let home = kinematics
-            .inverse_nearest(&home_tcp, &HOME_REFERENCE)
-            .map_err(|e| CellError::Home(e.to_string()))?
-            .joints;
+        let home = elbow_up(&kinematics, &geometry.base_T_table, &home_tcp)
+            .map_err(|e| CellError::Home(e.to_string()))?;
         let drop_models = if spec.feeder.placement == Placement::Dropped {
             let names: Vec<String> = spec.feeder.parts.keys().cloned().collect();
             PartModel::from_catalog(catalog, &names).map_err(|e| CellError::Drop(e.to_string()))?

@@ -239,6 +239,24 @@ impl SimCell {
         &self.placed
     }
 
+    /// The insertion verdict of the part still in the gripper, before release: `Some` once the
+    /// last motion pushed the held part into its target (what a production cell measures by
+    /// height and force before it opens the fingers). The part stays in the fingers where the
+    /// insertion left it (it may have slipped); the next motion takes it back out.
+    pub fn held_insertion(&self) -> Option<ReleaseReport> {
+        let h = self.held.as_ref()?;
+        let (step, result, _, budget) = h.inserted.as_ref()?;
+        Some(ReleaseReport {
+            step: Some(*step),
+            instance: h.part.instance,
+            part: h.part.part.clone(),
+            verdict: result.verdict,
+            cause: result.cause,
+            insertion: Some(result.clone()),
+            budget: Some(budget.clone()),
+        })
+    }
+
     /// Shakes done so far this episode.
     pub fn shakes(&self) -> u32 {
         self.shakes
@@ -261,7 +279,8 @@ impl SimCell {
         self.safety = SafetyStatus::Normal;
     }
 
-    /// Shakes the feeder: every part in it is re-placed (re-sampled or re-dropped).
+    /// Shakes the feeder: every part in it is re-placed (re-sampled or re-dropped); the shake
+    /// and the parts settling take the feeder's `shake_time` on the clock.
     pub fn shake(&mut self) -> Result<(), CellError> {
         let wanted: Vec<(String, u32)> = self
             .feeder
@@ -269,6 +288,7 @@ impl SimCell {
             .map(|p| (p.part.clone(), p.instance))
             .collect();
         self.feeder = self.place(&wanted, &[])?;
+        self.clock += self.model.spec.feeder.shake_time;
         self.shakes += 1;
         Ok(())
     }
