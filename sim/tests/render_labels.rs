@@ -1,5 +1,5 @@
 //! Labels against renders of the real parts: the 9 keypoints reproject onto the rendered part,
-//! and dropped parts come to rest on the board (not still falling).
+//! and dropped parts come to rest on the board (not still falling, not sunk into it).
 
 #![allow(non_snake_case)] // poses are named a_T_b, the workspace convention
 
@@ -51,6 +51,14 @@ fn keypoints_reproject_onto_the_rendered_parts_and_parts_rest_on_the_board() {
             lowest < 6e-3,
             "{} rests {lowest} m above the board",
             models[p.model].name
+        );
+        // The table contact is stiff: nothing sinks into the board (rapier's soft default let
+        // an upside-down shell sink 1.1 mm).
+        assert!(
+            lowest > -2e-5,
+            "{} sank {:.1} µm into the board",
+            models[p.model].name,
+            -lowest * 1e6
         );
     }
     let settings = RenderSettings {

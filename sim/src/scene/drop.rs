@@ -1,7 +1,7 @@
 //! Multi-part drops: several parts fall onto the tag board together with rapier and come to
 //! rest touching the board and each other, giving physically realistic scene poses.
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
 use rand::{Rng, RngExt};
 use rapier3d_f64::math::Vector;
 use rapier3d_f64::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
@@ -11,6 +11,7 @@ use crate::convert::{
     rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
     vector_from_vec,
 };
+use crate::stable_poses::drop::{CORRECTIVE_VELOCITY, TABLE_CONTACT_FREQUENCY, random_rotation};
 
 /// A part resting in a scene.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,6 +61,15 @@ pub fn drop_parts(
     world.gravity = Vector::new(0.0, 0.0, -9.81);
     world.integration_parameters.dt = DT;
     world.integration_parameters.length_unit = 1e-3;
+    // As for the stable-pose drops: a stiff (400 Hz) table contact and a fast push-out, so parts
+    // rest at their geometric height instead of sinking into rapier's soft default contact.
+    world
+        .integration_parameters
+        .normalized_max_corrective_velocity = CORRECTIVE_VELOCITY;
+    world
+        .integration_parameters
+        .static_contact_softness
+        .natural_frequency = TABLE_CONTACT_FREQUENCY;
     let board = ColliderBuilder::cuboid(BOARD_HALF, BOARD_HALF, BOARD_THICKNESS / 2.0)
         .translation(Vector::new(0.0, 0.0, -BOARD_THICKNESS / 2.0))
         .friction(0.5)
@@ -134,18 +144,4 @@ pub fn drop_parts(
             }
         })
         .collect())
-}
-
-/// A uniformly distributed random rotation (Shoemake's method).
-fn random_rotation(rng: &mut impl Rng) -> UnitQuaternion<f64> {
-    let u1: f64 = rng.random_range(0.0..1.0);
-    let u2: f64 = rng.random_range(0.0..std::f64::consts::TAU);
-    let u3: f64 = rng.random_range(0.0..std::f64::consts::TAU);
-    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
-    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        b * u3.cos(),
-        a * u2.sin(),
-        a * u2.cos(),
-        b * u3.sin(),
-    ))
 }

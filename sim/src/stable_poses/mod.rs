@@ -2,7 +2,7 @@
 //! orientations onto a plane, let it rest, and group the rest orientations by resting face.
 
 mod cluster;
-mod drop;
+pub(crate) mod drop;
 
 pub use cluster::{CLASS_ANGLE_RAD, PoseClass, cluster};
 pub use drop::{
