@@ -85,3 +85,61 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         Ok(ExitCode::SUCCESS)
     })
 }
+
+/// Why an episode over loopback RTDE could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum OverRtdeError {
+    /// The simulated cell or perception could not be set up.
+    #[error(transparent)]
+    Setup(#[from] cell::orchestrator::OrchestratorError),
+    /// The virtual controller could not bind its loopback ports.
+    #[error("virtual controller on 127.0.0.1: {0}")]
+    Bind(#[from] std::io::Error),
+    /// The RTDE client could not connect to the virtual controller or start our program.
+    #[error("connecting to the virtual controller: {0}")]
+    Connect(#[from] robots::robot::RobotError),
+}
+
+/// Runs `episode` of the simulated cell behind an in-process virtual UR controller on
+/// 127.0.0.1 free ports, driven by the production client (`UrRobot`) over loopback RTDE. The
+/// orchestrator reads the camera, feeder and verdicts from the same shared cell.
+pub async fn sim_episode_over_rtde(
+    setup: &cell::orchestrator::SimSetup,
+    episode: u32,
+) -> Result<cell::orchestrator::EpisodeOutput, OverRtdeError> {
+    use cell::orchestrator::{SimCellIo, keypoint_noise_for, run_episode};
+    use robots::ur_robot::{UrRobot, UrRobotConfig};
+    use sim::cell::arm::SimArm;
+
+    let cell = setup.cell(episode)?;
+    let mut perception = keypoint_noise_for(&setup.scenario, episode)?;
+    let initial_q = cell.lock().unwrap_or_else(|p| p.into_inner()).joints_now();
+    // Loopback only, free ports: nothing outside this machine can reach the simulated cell.
+    let config = VirtualUrConfig {
+        host: IpAddr::V4(std::net::Ipv4Addr::LOCALHOST),
+        initial_q,
+        ..VirtualUrConfig::ephemeral()
+    };
+    let vur = VirtualUr::start_with_arm(config, Box::new(SimArm::new(cell.clone()))).await?;
+    let mut rc = UrRobotConfig::new("127.0.0.1");
+    rc.rtde_port = vur.rtde_addr().port();
+    rc.dashboard_port = vur.dashboard_addr().port();
+    rc.script_port = vur.script_addr().port();
+    rc.limits = setup.scenario.spec.cell.limits.clone();
+    rc.kinematics = setup.knowledge.kinematics.clone();
+    let mut robot = UrRobot::connect(rc).await?;
+    let mut io = SimCellIo::new(cell);
+    let out = run_episode(
+        &setup.scenario,
+        &setup.knowledge,
+        episode,
+        &mut robot,
+        &mut io,
+        &mut perception,
+        &setup.settings,
+    )
+    .await;
+    drop(robot);
+    drop(vur);
+    Ok(out)
+}
