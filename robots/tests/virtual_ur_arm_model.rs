@@ -6,14 +6,15 @@
 use nalgebra::{Isometry3, Translation3, Vector3};
 use robots::kinematics::{Joints, UrKinematics};
 use robots::program::layout as L;
-use robots::robot::{JointMotion, LinearMotion, Robot};
+use robots::robot::{JointMotion, LinearMotion, Robot, RobotError};
 use robots::rtde::client::{ClientConfig, RtdeClient};
-use robots::rtde::state::RuntimeState;
+use robots::rtde::state::{RuntimeState, SafetyMode};
 use robots::rtde::types::Value;
 use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use std::f64::consts::FRAC_PI_2;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -27,10 +28,16 @@ type Log = Arc<Mutex<Vec<(u32, bool)>>>;
 struct Recording {
     arm: KinematicArm,
     log: Log,
+    /// Refuse the next motion as a collision.
+    collide: Arc<AtomicBool>,
 }
 
 impl ArmModel for Recording {
     fn command(&mut self, cmd: ArmCommand) -> Result<(), ArmError> {
+        let motion = matches!(cmd, ArmCommand::MoveJ { .. } | ArmCommand::MoveL { .. });
+        if motion && self.collide.swap(false, Ordering::Relaxed) {
+            return Err(ArmError::ProtectiveStop("the path meets the table".into()));
+        }
         self.arm.command(cmd)
     }
     fn step(&mut self, dt: f64, speed_fraction: f64) -> Result<(), ArmError> {
@@ -61,10 +68,17 @@ fn tcp() -> Isometry3<f64> {
 }
 
 async fn start() -> (VirtualUr, Log) {
+    let (vur, log, _) = start_colliding().await;
+    (vur, log)
+}
+
+async fn start_colliding() -> (VirtualUr, Log, Arc<AtomicBool>) {
     let log = Log::default();
+    let collide = Arc::new(AtomicBool::new(false));
     let arm = Recording {
         arm: KinematicArm::new(UrKinematics::ur5e().with_tcp(tcp()), Q0),
         log: log.clone(),
+        collide: collide.clone(),
     };
     let config = VirtualUrConfig {
         initial_q: Q0,
@@ -73,7 +87,7 @@ async fn start() -> (VirtualUr, Log) {
     let vur = VirtualUr::start_with_arm(config, Box::new(arm))
         .await
         .unwrap();
-    (vur, log)
+    (vur, log, collide)
 }
 
 fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
@@ -272,4 +286,26 @@ async fn a_kinematic_arm_with_a_tcp_reports_and_moves_the_tcp() {
         .await
         .unwrap();
     assert_eq!(robot.joints().await.unwrap(), q1);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_collision_reported_by_the_arm_model_is_a_protective_stop() {
+    let (vur, _log, collide) = start_colliding().await;
+    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
+    let motion = JointMotion {
+        speed: 2.0,
+        acceleration: 4.0,
+    };
+    collide.store(true, Ordering::Relaxed);
+    let q1 = [0.1, -1.3, 1.4, -1.6, -FRAC_PI_2, 0.2];
+    let err = robot.move_j(q1, motion).await.unwrap_err();
+    assert!(matches!(err, RobotError::ProtectiveStop), "{err:?}");
+    assert_eq!(
+        vur.controller.snapshot().safety_mode,
+        SafetyMode::ProtectiveStop
+    );
+    assert_eq!(robot.joints().await.unwrap(), Q0, "the arm did not move");
+    // Motion stays blocked until the stop is unlocked (after the controller's delay).
+    let again = robot.move_j(q1, motion).await.unwrap_err();
+    assert!(matches!(again, RobotError::ProtectiveStop), "{again:?}");
 }

@@ -79,6 +79,10 @@ pub enum ArmError {
     /// No inverse kinematics solution for a Cartesian target.
     #[error("target pose unreachable: {0}")]
     Unreachable(String),
+    /// The arm met something (a collision, a safety plane): the controller makes a protective
+    /// stop, as a real controller does.
+    #[error("protective stop: {0}")]
+    ProtectiveStop(String),
     /// A straight-line move would need joint speeds over the limit (singularity).
     #[error("straight-line move passes a singularity (joint {joint} would need {speed:.2} rad/s)")]
     Singularity {

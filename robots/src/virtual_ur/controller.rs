@@ -1,7 +1,7 @@
 //! The virtual controller's state: arm, safety, program, registers, I/O; its 500 Hz control
 //! loop; and the RTDE variable mapping (it implements [`crate::rtde::server::Controller`]).
 
-use super::arm::{ArmCommand, ArmModel, ArmState};
+use super::arm::{ArmCommand, ArmError, ArmModel, ArmState};
 use super::programs::{
     CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram, notify_output_changes,
     set_digital_output,
@@ -349,7 +349,8 @@ impl VirtualController {
             if let Some(e) = &arm_error {
                 tracing::warn!(error = %e, "virtual arm aborted a motion");
             }
-            let mut protective_stop = false;
+            // A collision reported by the arm model stops the arm like a real controller.
+            let mut protective_stop = matches!(arm_error, Some(ArmError::ProtectiveStop(_)));
             if core.runtime_state == RuntimeState::Playing
                 && let Some(program) = core.program.as_mut()
             {
@@ -362,7 +363,7 @@ impl VirtualController {
                     protective_stop: false,
                 };
                 let step = program.step(&mut io);
-                protective_stop = io.protective_stop;
+                protective_stop |= io.protective_stop;
                 if step == ProgramStep::Exit {
                     tracing::info!(name = program.name(), "program finished");
                     core.program = None;

@@ -127,7 +127,12 @@ impl CellProgram {
             }
             Err(e) => {
                 tracing::warn!(id, error = %e, "cell_program: motion refused");
-                Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_MOTION);
+                if matches!(e, ArmError::ProtectiveStop(_)) {
+                    io.protective_stop = true;
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
+                } else {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_MOTION);
+                }
             }
         }
     }
@@ -362,6 +367,7 @@ impl UrRtdeProgram {
         let asynchronous = io.regs.input_int[1] != 0;
         if let Err(e) = io.arm.command(cmd) {
             tracing::warn!(error = %e, "rtde_control: motion refused");
+            io.protective_stop |= matches!(e, ArmError::ProtectiveStop(_));
             return false;
         }
         if asynchronous {

@@ -10,6 +10,7 @@
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use robots::kinematics::Joints;
+use robots::robot::RobotError;
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 
 use super::SimCell;
@@ -78,7 +79,10 @@ fn lock(cell: &Arc<Mutex<SimCell>>) -> MutexGuard<'_, SimCell> {
 impl ArmModel for SimArm {
     fn command(&mut self, cmd: ArmCommand) -> Result<(), ArmError> {
         if let Some(e) = lock(&self.cell).status_now().safety.motion_error() {
-            return Err(ArmError::Unreachable(e.to_string()));
+            return Err(match e {
+                RobotError::ProtectiveStop => ArmError::ProtectiveStop(e.to_string()),
+                _ => ArmError::Unreachable(e.to_string()),
+            });
         }
         self.arm.command(cmd)?;
         self.elapsed = 0.0;
