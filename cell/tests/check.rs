@@ -43,7 +43,10 @@ fn the_nominal_scenario_is_valid() {
 
 #[test]
 fn an_unknown_key_is_located() {
-    let text = nominal_text().replace("max_shakes = 3", "max_shakes = 3\nmax_shaeks = 4");
+    let text = nominal_text().replace(
+        "placement = \"sampled\"",
+        "placement = \"sampled\"\nmax_shaeks = 4",
+    );
     let path = variant("unknown", &text);
     let err = Scenario::load(&path).unwrap_err();
     std::fs::remove_file(&path).ok();
@@ -140,4 +143,41 @@ fn the_binary_exits_non_zero_and_prints_the_location() {
         "{}",
         String::from_utf8_lossy(&ok.stderr)
     );
+}
+
+#[test]
+fn a_fixture_out_of_reach_and_a_feeder_over_the_fixture_are_rejected_with_their_lines() {
+    // Inside a widened workspace box but 1.2 m from the base: beyond the UR5e's reach.
+    let text = nominal_text()
+        .replace(
+            "workspace = { min = [-0.3, -0.7, 0.0], max = [0.3, -0.2, 0.5] }",
+            "workspace = { min = [-2.0, -2.0, 0.0], max = [2.0, 2.0, 1.0] }",
+        )
+        .replace(
+            "table_T_fixture = { translation = [0.05, -0.05, 0.003]",
+            "table_T_fixture = { translation = [1.2, -0.05, 0.003]",
+        );
+    let path = variant("reach", &text);
+    let err = Scenario::load(&path).unwrap_err();
+    std::fs::remove_file(&path).ok();
+    let p = err
+        .0
+        .iter()
+        .find(|p| p.key.as_deref() == Some("cell.fixture.table_T_fixture"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(p.message.contains("out of the UR5e's reach"), "{err}");
+    assert_eq!(p.line, line_of(&text, "table_T_fixture ="));
+
+    // The feeder region centred on the fixture nest.
+    let text = nominal_text().replace("center = [0.0, 0.05]", "center = [0.05, -0.05]");
+    let path = variant("overlap", &text);
+    let err = Scenario::load(&path).unwrap_err();
+    std::fs::remove_file(&path).ok();
+    let p = err
+        .0
+        .iter()
+        .find(|p| p.message.contains("overlaps the fixture"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert_eq!(p.key.as_deref(), Some("cell.feeder"));
+    assert_eq!(p.line, line_of(&text, "[cell.feeder]"));
 }

@@ -30,6 +30,26 @@ impl KeyPath {
         p.0.push(Seg::Index(i));
         p
     }
+
+    /// Reads a path written as `assembly[1].tolerances.lateral` (the form [`fmt::Display`]
+    /// writes); a segment that is not a valid index is kept as a key.
+    pub fn parse(text: &str) -> Self {
+        let mut path = Self::default();
+        for part in text.split('.').filter(|p| !p.is_empty()) {
+            let (key, mut rest) = part.split_once('[').map_or((part, ""), |(k, r)| (k, r));
+            if !key.is_empty() {
+                path.0.push(Seg::Key(key.to_string()));
+            }
+            while let Some((index, tail)) = rest.split_once(']') {
+                match index.parse() {
+                    Ok(i) => path.0.push(Seg::Index(i)),
+                    Err(_) => path.0.push(Seg::Key(index.to_string())),
+                }
+                rest = tail.strip_prefix('[').unwrap_or(tail);
+            }
+        }
+        path
+    }
 }
 
 impl fmt::Display for KeyPath {
@@ -116,5 +136,22 @@ mod tests {
             .index(1);
         assert_eq!(&text[l.offset(&deep).unwrap()..][..1], "5");
         assert_eq!(path.to_string(), "step[1].x");
+    }
+
+    #[test]
+    fn parses_what_it_displays() {
+        for text in [
+            "assembly[1].tolerances.lateral",
+            "cell.feeder",
+            "y.z[1]",
+            "a[2][3].b",
+        ] {
+            assert_eq!(KeyPath::parse(text).to_string(), text);
+        }
+        assert_eq!(
+            KeyPath::parse("step[1].x"),
+            KeyPath::default().key("step").index(1).key("x")
+        );
+        assert_eq!(KeyPath::parse(""), KeyPath::default());
     }
 }

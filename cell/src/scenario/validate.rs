@@ -5,6 +5,7 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 use perception::part::{Catalog, PartRole};
+use sim::cell::check_feasible;
 
 use super::{Destination, KeyPath, MAX_INSERTION_ATTEMPTS, ScenarioSpec};
 
@@ -153,6 +154,15 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
     };
     if let Some(catalog) = &catalog {
         check_against_catalog(spec, catalog, &mut issues);
+        // What the simulated cell refuses as impossible (reach, workspace, feeder over the
+        // fixture, parts wider than the stroke), where not already reported at the same key.
+        let c = &spec.cell;
+        for (key, message) in check_feasible(c, &spec.assembly, &spec.noise, catalog) {
+            let path = KeyPath::parse(&key);
+            if !issues.iter().any(|(p, _)| *p == path) {
+                issues.push((path, message));
+            }
+        }
     }
     (catalog, issues)
 }
@@ -214,33 +224,6 @@ fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Is
                             step.part
                         ),
                     ));
-                }
-                let stroke = spec.cell.gripper.stroke;
-                for g in &part.grasps {
-                    let axis = Vector3::from(g.closing_axis);
-                    if let (Some(axis), Ok(mesh)) =
-                        (axis.try_normalize(1e-12), catalog.load_mesh(part))
-                    {
-                        let (lo, hi) =
-                            mesh.vertices
-                                .iter()
-                                .fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-                                    let d = p.coords.dot(&axis);
-                                    (lo.min(d), hi.max(d))
-                                });
-                        if hi - lo >= stroke {
-                            issues.push((
-                                cell.key("gripper").key("stroke"),
-                                format!(
-                                    "part \"{}\" is {:.2} mm wide across its grasp but the gripper \
-                                     opens only {:.2} mm",
-                                    step.part,
-                                    (hi - lo) * 1e3,
-                                    stroke * 1e3
-                                ),
-                            ));
-                        }
-                    }
                 }
             }
         }

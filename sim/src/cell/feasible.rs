@@ -110,7 +110,7 @@ pub fn check_feasible(
                 bad(
                     key.clone(),
                     format!(
-                        "part {name:?} is {:.2} mm across its grasp ({}), wider than the {:.2} mm gripper stroke",
+                        "part {name:?} is {:.2} mm wide across its grasp ({}) but the gripper opens only {:.2} mm",
                         (hi - lo) * 1e3,
                         grasp.stable_pose,
                         g.stroke * 1e3
@@ -131,10 +131,10 @@ pub fn check_feasible(
                 );
             }
         }
-        if !(s.clearance.is_finite() && s.clearance >= 0.0) {
+        if !positive(s.clearance) {
             bad(
                 format!("assembly[{i}].clearance"),
-                format!("must be ≥ 0, got {}", s.clearance),
+                format!("must be positive, got {}", s.clearance),
             );
         }
         if !(s.lead_in.is_finite() && s.lead_in >= 0.0) {
