@@ -40,8 +40,10 @@ enum Command {
     /// Synthetic images and labels in the BOP format (overviews with all parts) plus the keypoint
     /// crop set (128 × 128 crops with shifted intrinsics); deterministic, resumable, parallel.
     Dataset(commands::dataset::Args),
-    /// Run a scenario's episodes in simulation, in parallel and resumably
-    /// (runs/<scenario>/<shard>/episodes.jsonl), then write summary.json and report.html.
+    /// Run a scenario's episodes, resumably (runs/<scenario>/<shard>/episodes.jsonl), then write
+    /// summary.json and report.html: in the in-process simulation (parallel), the simulation
+    /// behind a loopback virtual UR over RTDE (`--robot virtual-ur`), or a real controller
+    /// (`--robot ur://HOST`, after the production pre-flight).
     Run(commands::run::Args),
     /// Combine shard results (`cell run --shard I/N`) into one results set and report.
     Merge(commands::merge::Args),
