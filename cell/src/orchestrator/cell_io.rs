@@ -46,7 +46,8 @@ pub struct InsertionCheck {
 pub trait CellIo: Send {
     /// Takes a camera frame.
     fn capture(&mut self) -> Result<Frame, CellIoError>;
-    /// Shakes the feeder so parts come to rest anew.
+    /// Starts a feeder shake so parts come to rest anew; the feeder runs on its own and the next
+    /// [`CellIo::capture`] waits until the parts are at rest.
     fn shake_feeder(&mut self) -> Result<(), CellIoError>;
     /// Whether a part is between the closed fingers; `None` when the cell has no grasp sensor
     /// (the grasp is then assumed to hold and the insertion check decides).
@@ -161,7 +162,8 @@ fn check_of(r: &ReleaseReport) -> InsertionCheck {
 
 impl CellIo for SimCellIo {
     fn capture(&mut self) -> Result<Frame, CellIoError> {
-        let c = lock(&self.cell);
+        let mut c = lock(&self.cell);
+        c.wait_for_feeder();
         let parts = c
             .camera_view()
             .into_iter()

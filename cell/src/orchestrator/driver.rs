@@ -93,9 +93,11 @@ pub(super) struct Driver<'a> {
     step_start: f64,
     attempts: u32,
     shakes: u32,
+    /// Shakes started for the next step while this one inserts.
+    shakes_ahead: u32,
     /// Insertion attempts this step (first try and retries).
     insertions: u32,
-    /// Correction of the next insertion in the insertion frame (search offset, slip).
+    /// Search offset of the next insertion in the insertion frame.
     correction: Isometry3<f64>,
     /// Measured slip of the held part up the fingers so far, metres.
     slip: f64,
@@ -149,6 +151,7 @@ impl<'a> Driver<'a> {
             step_start: 0.0,
             attempts: 0,
             shakes: 0,
+            shakes_ahead: 0,
             insertions: 0,
             correction: Isometry3::identity(),
             slip: 0.0,
@@ -175,7 +178,8 @@ impl<'a> Driver<'a> {
     fn begin_step(&mut self) {
         self.step_start = self.io.clock();
         self.attempts = 0;
-        self.shakes = 0;
+        // A shake started for this step while the last one inserted counts against its bound.
+        self.shakes = std::mem::take(&mut self.shakes_ahead);
         self.insertions = 0;
         self.correction = Isometry3::identity();
         self.slip = 0.0;
@@ -230,10 +234,38 @@ impl<'a> Driver<'a> {
         out
     }
 
+    /// With this step's part out of the feeder: when the frame that found it shows no usable
+    /// instance for the next step, start a shake now, so the feeder settles while the arm
+    /// inserts (the next step's capture waits for the parts to rest). Counts against the next
+    /// step's shake bound.
+    fn shake_ahead(&mut self, picked: &Selection, here: &Joints) {
+        let next = self.step + 1;
+        if next >= self.knowledge.steps.len() || self.shakes_ahead >= self.max_shakes {
+            return;
+        }
+        let rest: Vec<DetectedPart> = self
+            .detections
+            .iter()
+            .filter(|d| d.index != picked.detection.index)
+            .cloned()
+            .collect();
+        let ahead = select(
+            self.knowledge,
+            self.catalog,
+            next,
+            &rest,
+            here,
+            &self.settings.selection,
+        );
+        if ahead.chosen.is_none() && self.io.shake_feeder().is_ok() {
+            self.shakes_ahead += 1;
+        }
+    }
+
     /// A jammed or missed insertion with the part still in the fingers: lift it clear along the
     /// insertion axis (the retreat pose, fingers closed), then correct the next attempt: the
-    /// measured stop height is how far the part slipped up the fingers, so the next insertion
-    /// goes that much deeper; and a search offset (lateral for a miss, yaw for a jam, since a
+    /// measured stop height is how far the part slipped up the fingers, so the held part's
+    /// estimate moves up by it (the next insertion goes that much deeper); and a search offset (lateral for a miss, yaw for a jam, since a
     /// real cell measures neither error directly) is tried, a different one each attempt.
     async fn retry_insertion(
         &mut self,
@@ -248,8 +280,8 @@ impl<'a> Driver<'a> {
             .collect();
         self.execute(state, &lift).await?;
         // The part pushed back comes out a little higher in the fingers than it went in.
-        let engagement_cap = self.settings.planning.clearance_height / 2.0;
-        self.slip = (self.slip + check.stop_height.unwrap_or(0.0)).clamp(0.0, engagement_cap);
+        let slip_cap = self.settings.planning.clearance_height / 2.0;
+        self.slip = (self.slip + check.stop_height.unwrap_or(0.0)).clamp(0.0, slip_cap);
         let k = self.insertions as usize; // retries so far, ≥ 1
         let search = self.settings.planning.search;
         let step = &self.knowledge.steps[self.step];
@@ -271,7 +303,7 @@ impl<'a> Driver<'a> {
             }
         };
         self.correction = Isometry3::from_parts(
-            nalgebra::Translation3::new(offset.x, offset.y, -self.slip),
+            nalgebra::Translation3::new(offset.x, offset.y, 0.0),
             nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), yaw),
         );
         let what = match check.outcome {
@@ -387,12 +419,18 @@ impl<'a> Driver<'a> {
                     .filter(|d| !self.excluded.contains(&d.index))
                     .cloned()
                     .collect();
+                // Grasp yaw and travel are judged from where the arm is now.
+                let here = self
+                    .robot
+                    .joints()
+                    .await
+                    .map_err(|e| Stop::Robot(state, e))?;
                 let mut result = select(
                     self.knowledge,
                     self.catalog,
                     self.step,
                     &candidates,
-                    &self.home,
+                    &here,
                     &self.settings.selection,
                 );
                 // Excluded detections still count as neighbours for finger clearance.
@@ -474,7 +512,13 @@ impl<'a> Driver<'a> {
                     .await
                     .map_err(|e| Stop::Robot(state, e))?;
                 let placed = self.placed_shapes();
-                match self.planner().pick(&sel, &start, &placed) {
+                let k: &'a CellKnowledge = self.knowledge;
+                let feeder: Vec<(&'a PartGeometry, Isometry3<f64>)> = self
+                    .detections
+                    .iter()
+                    .filter_map(|d| Some((k.part(&d.part)?, d.base_T_part)))
+                    .collect();
+                match self.planner().pick(&sel, &start, &placed, &feeder) {
                     Ok(plan) => {
                         self.plan = Some(plan);
                         Ok(State::Pick)
@@ -531,7 +575,9 @@ impl<'a> Driver<'a> {
                 let Some(g) = self.knowledge.part(&sel.detection.part) else {
                     return Ok(State::Done);
                 };
-                let tcp_T_part = grasped_offset(&sel.tcp_T_part);
+                // The part slipped up the fingers (TCP −z) by what earlier attempts measured.
+                let tcp_T_part = nalgebra::Translation3::new(0.0, 0.0, -self.slip)
+                    * grasped_offset(&sel.tcp_T_part);
                 let correction = self.correction;
                 let start = self
                     .robot
@@ -548,15 +594,19 @@ impl<'a> Driver<'a> {
                 ) {
                     Ok(plan) => {
                         self.plan = Some(plan);
+                        if self.insertions == 0 {
+                            self.shake_ahead(&sel, &start);
+                        }
                         Ok(State::Insert)
                     }
                     Err(e) => {
                         let cause = format!("insertion plan: {e}");
-                        // Put the part down where it came from rather than carry it around.
+                        // Put the part down where it came from rather than carry it around
+                        // (let go 1 mm above the grasp: the grasp may have shifted it down).
                         let back = async {
                             self.robot
                                 .move_l(
-                                    sel.base_T_grasp,
+                                    nalgebra::Translation3::new(0.0, 0.0, 0.001) * sel.base_T_grasp,
                                     Speeds::within(self.robot.limits(), 0.01).slow,
                                 )
                                 .await?;

@@ -207,6 +207,36 @@ impl CellKnowledge {
         low
     }
 
+    /// The IK solution for `base_T_tcp` nearest `near` on the same arm branch (elbow and wrist
+    /// on the same side as at `near`), so a joint move between them does not swing the wrist or
+    /// elbow over; the nearest solution of any branch when that branch cannot reach the pose.
+    #[allow(non_snake_case)]
+    pub fn ik_same_branch(
+        &self,
+        base_T_tcp: &Isometry3<f64>,
+        near: &Joints,
+    ) -> Result<Joints, robots::kinematics::IkError> {
+        let nearest = self.kinematics.inverse_nearest(base_T_tcp, near)?.joints;
+        let branch = |q: &Joints| (q[2].sin() >= 0.0, q[4].sin() >= 0.0);
+        if branch(&nearest) == branch(near) {
+            return Ok(nearest);
+        }
+        let all = self.kinematics.inverse_all(base_T_tcp, near[5])?;
+        Ok(all
+            .iter()
+            .filter_map(|s| {
+                self.kinematics
+                    .joint_limits
+                    .wrap_nearest_all(&s.joints, near)
+            })
+            .filter(|q| branch(q) == branch(near))
+            .min_by(|a, b| {
+                robots::kinematics::joint_distance(a, near)
+                    .total_cmp(&robots::kinematics::joint_distance(b, near))
+            })
+            .unwrap_or(nearest))
+    }
+
     /// The joints that put the TCP where `current` puts it with the arm highest above the table
     /// (elbow up), nearest `current` among those; `current` itself when it is already that high.
     pub fn safe_home(&self, current: &Joints) -> Joints {

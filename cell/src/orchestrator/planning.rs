@@ -23,7 +23,8 @@ use super::selection::Selection;
 pub struct PlanningConfig {
     /// Height of approach, lift, transfer and retreat poses above their grasp or insert pose, m.
     pub clearance_height: f64,
-    /// Length of the slow final segment into a grasp or an insertion, metres.
+    /// Length of the slow final segment into a grasp, and of the slow segment before the held
+    /// part can first touch its receiver in an insertion, metres.
     pub slow_distance: f64,
     /// Speed of the slow final segments, m/s.
     pub slow_speed: f64,
@@ -60,8 +61,8 @@ impl Default for SearchConfig {
 impl Default for PlanningConfig {
     fn default() -> Self {
         Self {
-            clearance_height: 0.015,
-            slow_distance: 0.003,
+            clearance_height: 0.010,
+            slow_distance: 0.001,
             slow_speed: 0.02,
             arm_table_margin: 0.02,
             transit_margin: 0.001,
@@ -186,9 +187,7 @@ impl Planner<'_> {
                 reason: e.to_string(),
             })?;
         self.knowledge
-            .kinematics
-            .inverse_nearest(pose, near)
-            .map(|s| s.joints)
+            .ik_same_branch(pose, near)
             .map_err(|e| PlanError::Unreachable {
                 waypoint,
                 reason: e.to_string(),
@@ -247,32 +246,80 @@ impl Planner<'_> {
         Ok(())
     }
 
-    /// The pick of `selection` starting from joints `start`: joint move to the approach pose,
-    /// fast then slow straight down to the grasp, close, lift.
+    /// Checks that the open fingers keep `transit_margin` from every part lying in the feeder
+    /// (`feeder`: estimated poses, the part to pick included) along a joint move.
+    fn check_fingers(
+        &self,
+        waypoint: &'static str,
+        from: &Joints,
+        to: &Joints,
+        feeder: &[(&PartGeometry, Isometry3<f64>)],
+    ) -> Result<(), PlanError> {
+        let k = self.knowledge;
+        let n = self.config.samples.max(1);
+        for i in 1..=n {
+            let s = i as f64 / n as f64;
+            let q: Joints = std::array::from_fn(|j| from[j] + s * (to[j] - from[j]));
+            let tcp = k.kinematics.forward_tcp(&q);
+            for (g, base_T_part) in feeder {
+                let d = k.finger_distance(&tcp, g.hull.as_ref(), base_T_part);
+                if d < self.config.transit_margin {
+                    return Err(PlanError::Collision {
+                        waypoint,
+                        what: format!("a finger too close to {} in the feeder", g.name),
+                        distance_mm: d * 1e3,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The pick of `selection` starting from joints `start`: one joint move to just above the
+    /// grasp when that path is checked clear of the table, the placed parts and every part in
+    /// the `feeder` (estimated poses, the one to pick included); otherwise a joint move to the
+    /// approach pose and fast straight down. Then slow to the grasp, close, lift.
     pub fn pick(
         &self,
         selection: &Selection,
         start: &Joints,
         placed: &[(&PartGeometry, Isometry3<f64>)],
+        feeder: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<Plan, PlanError> {
         let c = &self.config;
         let grasp = selection.base_T_grasp;
         let approach = raised(&grasp, c.clearance_height);
         let pre = raised(&grasp, c.slow_distance);
         let q_approach = self.ik("approach", &approach, start)?;
-        self.check_transit("approach", start, &q_approach, None, placed)?;
-        let q_pre = self.ik("pre-grasp", &pre, &q_approach)?;
+        let s = &self.speeds;
+        let direct = self.ik("pre-grasp", &pre, &q_approach).and_then(|q_pre| {
+            self.check_transit("pre-grasp", start, &q_pre, None, placed)?;
+            self.check_fingers("pre-grasp", start, &q_pre, feeder)?;
+            Ok(q_pre)
+        });
+        let (mut motions, q_pre) = match direct {
+            Ok(q_pre) => (vec![("approach", Motion::MoveJ(q_pre, s.joint))], q_pre),
+            Err(_) => {
+                self.check_transit("approach", start, &q_approach, None, placed)?;
+                let q_pre = self.ik("pre-grasp", &pre, &q_approach)?;
+                (
+                    vec![
+                        ("approach", Motion::MoveJ(q_approach, s.joint)),
+                        ("pre-grasp", Motion::MoveL(pre, s.fast)),
+                    ],
+                    q_pre,
+                )
+            }
+        };
         let q_grasp = self.ik("grasp", &grasp, &q_pre)?;
         self.check_arm("grasp", &q_grasp)?;
-        let s = &self.speeds;
+        motions.extend([
+            ("grasp", Motion::MoveL(grasp, s.slow)),
+            ("close", Motion::Close),
+            ("lift", Motion::MoveL(approach, s.fast)),
+        ]);
         Ok(Plan {
-            motions: vec![
-                ("approach", Motion::MoveJ(q_approach, s.joint)),
-                ("pre-grasp", Motion::MoveL(pre, s.fast)),
-                ("grasp", Motion::MoveL(grasp, s.slow)),
-                ("close", Motion::Close),
-                ("lift", Motion::MoveL(approach, s.fast)),
-            ],
+            motions,
             end_joints: q_approach,
         })
     }
@@ -299,25 +346,75 @@ impl Planner<'_> {
         // Back out along the insertion frame's z (out of the hole).
         let out = base_T_ins.rotation * nalgebra::Vector3::z();
         let along = |h: f64| Translation3::from(out * h) * insert;
-        let transfer = along(c.clearance_height);
-        let pre = along(c.slow_distance);
+        let engagement = engagement_depth(held, &base_T_target, placed);
+        let transfer = along(c.clearance_height.max(engagement + 2.0 * c.slow_distance));
+        // Slow from before the held part can first touch what it goes into (its engagement
+        // depth, from the shapes) to seated.
+        let pre = along(engagement + c.slow_distance);
         let q_transfer = self.ik("transfer", &transfer, start)?;
-        self.check_transit("transfer", start, &q_transfer, Some(held), placed)?;
-        let q_pre = self.ik("pre-insert", &pre, &q_transfer)?;
+        let s = &self.speeds;
+        // One joint move straight to the pre-insert pose when that path is checked clear (no
+        // stop above the target); otherwise transfer, then straight down.
+        let direct = self.ik("pre-insert", &pre, &q_transfer).and_then(|q_pre| {
+            self.check_transit("pre-insert", start, &q_pre, Some(held), placed)?;
+            Ok(q_pre)
+        });
+        let (mut motions, q_pre) = match direct {
+            Ok(q_pre) => (vec![("transfer", Motion::MoveJ(q_pre, s.joint))], q_pre),
+            Err(_) => {
+                self.check_transit("transfer", start, &q_transfer, Some(held), placed)?;
+                let q_pre = self.ik("pre-insert", &pre, &q_transfer)?;
+                (
+                    vec![
+                        ("transfer", Motion::MoveJ(q_transfer, s.joint)),
+                        ("pre-insert", Motion::MoveL(pre, s.fast)),
+                    ],
+                    q_pre,
+                )
+            }
+        };
         let q_insert = self.ik("insert", &insert, &q_pre)?;
         self.check_arm("insert", &q_insert)?;
-        let s = &self.speeds;
+        motions.extend([
+            ("insert", Motion::MoveL(insert, s.slow)),
+            ("release", Motion::Open),
+            ("retreat", Motion::MoveL(transfer, s.fast)),
+        ]);
         Ok(Plan {
-            motions: vec![
-                ("transfer", Motion::MoveJ(q_transfer, s.joint)),
-                ("pre-insert", Motion::MoveL(pre, s.fast)),
-                ("insert", Motion::MoveL(insert, s.slow)),
-                ("release", Motion::Open),
-                ("retreat", Motion::MoveL(transfer, s.fast)),
-            ],
+            motions,
             end_joints: q_transfer,
         })
     }
+}
+
+/// How far above seated the held part (`held.0` with `held.1` = tcp_T_part, seated at
+/// `base_T_target`) first reaches the top of the fixture or the placed parts: the depth it
+/// engages along the (vertical) insertion, metres; 0 when nothing is above its lowest point.
+#[allow(non_snake_case)]
+fn engagement_depth(
+    held: (&PartGeometry, &Isometry3<f64>),
+    base_T_target: &Isometry3<f64>,
+    placed: &[(&PartGeometry, Isometry3<f64>)],
+) -> f64 {
+    let low = |g: &PartGeometry, t: &Isometry3<f64>| {
+        g.mesh
+            .vertices
+            .iter()
+            .map(|p| (t * p).z)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let high = |g: &PartGeometry, t: &Isometry3<f64>| {
+        g.mesh
+            .vertices
+            .iter()
+            .map(|p| (t * p).z)
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    let bottom = low(held.0, base_T_target);
+    placed
+        .iter()
+        .map(|(g, t)| high(g, t) - bottom)
+        .fold(0.0, f64::max)
 }
 
 /// The estimated pose of a grasped part in the TCP frame: the pre-grasp estimate with the

@@ -6,9 +6,9 @@
 //! detection by a margin (parry distance against their convex hulls at the estimated poses).
 //! Qualified instances are ranked by perception confidence in bands of
 //! [`SelectionConfig::confidence_band`] (confidences within a band are equally trustworthy);
-//! ties are broken by the motion the pick and insertion need (the largest joint travel from home
-//! to the grasp plus from the grasp to the insertion, a proxy for their time), then by the
-//! estimated position (table x, then y), so the choice is deterministic.
+//! ties are broken by the motion the pick and insertion need (the largest joint travel from the
+//! arm's joints at selection to the grasp plus from the grasp to the insertion, a proxy for their
+//! time), then by the estimated position (table x, then y), so the choice is deterministic.
 
 use nalgebra::{Isometry3, Vector3};
 use perception::part::Catalog;
@@ -77,7 +77,8 @@ pub struct Selection {
     pub base_T_grasp: Isometry3<f64>,
     /// The part in the TCP frame as estimated at the grasp.
     pub tcp_T_part: Isometry3<f64>,
-    /// Largest joint travel home → grasp plus grasp → insertion, radians (the tie-breaker).
+    /// Largest joint travel from the arm's joints → grasp plus grasp → insertion, radians (the
+    /// tie-breaker).
     pub travel: f64,
 }
 
@@ -116,7 +117,9 @@ impl SelectionResult {
     }
 }
 
-/// Chooses the instance of step `step`'s part to pick among `detections`.
+/// Chooses the instance of step `step`'s part to pick among `detections`, for an arm at joints
+/// `home` (the grasp's jaw orientation, of the two the parallel jaws allow, is the one nearest
+/// the arm's current wrist yaw).
 #[allow(non_snake_case)]
 pub fn select(
     knowledge: &CellKnowledge,

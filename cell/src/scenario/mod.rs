@@ -131,3 +131,47 @@ impl Scenario {
         self.path.parent().unwrap_or(Path::new(".")).join(relative)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn nominal() -> (String, PathBuf) {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let text = std::fs::read_to_string(dir.join("usbc_nominal.toml")).expect("nominal");
+        (text, dir.join("policy_variant.toml"))
+    }
+
+    #[test]
+    fn insertion_attempts_default_from_the_policy_and_are_bounded_with_their_location() {
+        let (text, path) = nominal();
+        let s = Scenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            s.spec.policy.max_insertion_attempts,
+            DEFAULT_INSERTION_ATTEMPTS
+        );
+        let with = |n: u32| format!("{text}\n[policy]\nmax_insertion_attempts = {n}\n");
+        let s = Scenario::parse(&with(5), &path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(s.spec.policy.max_insertion_attempts, 5);
+        for bad in [0, MAX_INSERTION_ATTEMPTS + 1] {
+            let t = with(bad);
+            let err = Scenario::parse(&t, &path).expect_err("out of range");
+            let p = &err.0[0];
+            let line = t
+                .lines()
+                .position(|l| l.starts_with("max_insertion_attempts"))
+                .expect("written")
+                + 1;
+            assert_eq!((p.line, p.column), (line, 1), "{err}");
+            assert_eq!(p.key.as_deref(), Some("policy.max_insertion_attempts"));
+            assert!(p.message.contains("between 1 and"), "{err}");
+        }
+        // A typo is an unknown key, never a silent default.
+        let t = format!("{text}\n[policy]\nmax_insertion_attempt = 2\n");
+        assert!(Scenario::parse(&t, &path).is_err());
+        // And a negative shake time is refused where it is written.
+        let t = text.replace("shake_time = 1.5", "shake_time = -1.0");
+        let err = Scenario::parse(&t, &path).expect_err("negative shake time");
+        assert_eq!(err.0[0].key.as_deref(), Some("cell.feeder.shake_time"));
+    }
+}

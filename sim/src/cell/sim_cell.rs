@@ -130,6 +130,8 @@ pub struct SimCell {
     last_grasp: Option<Result<Grasp, GraspFailure>>,
     last_release: Option<ReleaseReport>,
     shakes: u32,
+    /// Clock time at which the parts of the last shake are at rest again.
+    feeder_rest_at: f64,
 }
 
 #[allow(non_snake_case)]
@@ -161,6 +163,7 @@ impl SimCell {
             last_grasp: None,
             last_release: None,
             shakes: 0,
+            feeder_rest_at: 0.0,
         };
         cell.refill()?;
         Ok(cell)
@@ -274,13 +277,26 @@ impl SimCell {
         Translation3::from(self.tcp_error) * self.model.kinematics.forward_tcp(&self.q)
     }
 
+    /// Clock time at which the parts of the last shake are at rest.
+    pub fn feeder_rest_at(&self) -> f64 {
+        self.feeder_rest_at
+    }
+
+    /// Waits (on the clock) until the parts of the last shake are at rest: a camera frame of the
+    /// feeder or a grasp in it is only meaningful then.
+    pub fn wait_for_feeder(&mut self) {
+        self.clock = self.clock.max(self.feeder_rest_at);
+    }
+
     /// Clears a protective stop (like the dashboard's `unlock protective stop`).
     pub fn unlock_protective_stop(&mut self) {
         self.safety = SafetyStatus::Normal;
     }
 
-    /// Shakes the feeder: every part in it is re-placed (re-sampled or re-dropped); the shake
-    /// and the parts settling take the feeder's `shake_time` on the clock.
+    /// Shakes the feeder: every part in it is re-placed (re-sampled or re-dropped). The feeder
+    /// runs on its own: the shake and the parts settling take the feeder's `shake_time`, during
+    /// which the arm may go on working elsewhere; the camera and the fingers wait for the parts
+    /// to rest ([`Self::wait_for_feeder`]).
     pub fn shake(&mut self) -> Result<(), CellError> {
         let wanted: Vec<(String, u32)> = self
             .feeder
@@ -288,7 +304,8 @@ impl SimCell {
             .map(|p| (p.part.clone(), p.instance))
             .collect();
         self.feeder = self.place(&wanted, &[])?;
-        self.clock += self.model.spec.feeder.shake_time;
+        self.feeder_rest_at =
+            self.feeder_rest_at.max(self.clock) + self.model.spec.feeder.shake_time;
         self.shakes += 1;
         Ok(())
     }
@@ -639,6 +656,7 @@ impl SimCell {
 
     /// Closes the gripper now (the `Robot::close_gripper` body); see [`Self::last_grasp`].
     pub fn close_gripper_sync(&mut self) {
+        self.wait_for_feeder();
         self.clock += ACTUATION_TIME;
         if !self.gripper_open {
             return;
