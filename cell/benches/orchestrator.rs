@@ -27,10 +27,18 @@ fn throughput(setup: &SimSetup, episodes: u32) {
     let wall = start.elapsed().as_secs_f64();
     let ok: Vec<_> = records.iter().filter(|r| r.success).collect();
     let mean_cycle = ok.iter().map(|r| r.cycle_time_s).sum::<f64>() / ok.len().max(1) as f64;
-    let max_cycle = ok.iter().map(|r| r.cycle_time_s).fold(0.0, f64::max);
+    let mut cycles: Vec<f64> = ok.iter().map(|r| r.cycle_time_s).collect();
+    cycles.sort_by(f64::total_cmp);
+    let max_cycle = cycles.last().copied().unwrap_or(0.0);
+    // Nearest-rank 95th percentile.
+    let p95 = cycles
+        .get(((0.95 * cycles.len() as f64).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(0.0);
     println!(
         "orchestrator: {episodes} episodes on {} threads in {wall:.2} s = {:.1} assemblies/s; \
-         success {}/{episodes} ({:.1} %); simulated cycle mean {mean_cycle:.2} s, max {max_cycle:.2} s",
+         success {}/{episodes} ({:.1} %); simulated cycle mean {mean_cycle:.2} s, \
+         p95 {p95:.2} s, max {max_cycle:.2} s",
         rayon::current_num_threads(),
         episodes as f64 / wall,
         ok.len(),

@@ -24,9 +24,10 @@ pub enum State {
     VerifyGrasp,
     /// Plan and check the insertion motion.
     PlanInsert,
-    /// Transfer, pre-insert, insert (slow), release.
+    /// Transfer, pre-insert, insert (slow); the fingers stay closed until Verify.
     Insert,
-    /// Check the insertion result and retreat.
+    /// Judge the insertion with the part still held when the cell can: lift clear and retry a
+    /// jam or miss (bounded), or release, retreat and record the result.
     Verify,
     /// Shake the feeder because nothing is pickable.
     Shake,

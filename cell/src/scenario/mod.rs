@@ -162,7 +162,9 @@ mod tests {
                 .position(|l| l.starts_with("max_insertion_attempts"))
                 .expect("written")
                 + 1;
-            assert_eq!((p.line, p.column), (line, 1), "{err}");
+            // Located at the offending value.
+            let column = "max_insertion_attempts = ".len() + 1;
+            assert_eq!((p.line, p.column), (line, column), "{err}");
             assert_eq!(p.key.as_deref(), Some("policy.max_insertion_attempts"));
             assert!(p.message.contains("between 1 and"), "{err}");
         }
