@@ -10,7 +10,10 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::part::{Catalog, PartRole, StablePose};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use robots::kinematics::to_ur_pose;
 use robots::robot::{LinearMotion, Robot, RobotError};
+use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel};
+use sim::cell::arm::SimArm;
 use sim::cell::geometry::PartGeometry;
 use sim::cell::gripper::{self, Finger, GraspCandidate, GraspFailure};
 use sim::cell::insertion::{Scorer, Verdict};
@@ -338,6 +341,47 @@ async fn the_robot_trait_checks_limits_and_the_table() {
     cell.unlock_protective_stop();
     let robot: &mut dyn Robot = &mut cell;
     robot.move_l(beside, slow).await.unwrap();
+}
+
+/// Behind the virtual controller (the arm-model seam), a move into the table protective-stops
+/// before the arm moves, as an in-process move does; a clear move runs.
+#[tokio::test]
+async fn the_arm_model_stops_a_path_into_the_table() {
+    let mut s = scenario();
+    s.cell.limits.workspace.min[2] = -0.05;
+    let m = CellModel::new(
+        &s.cell,
+        &s.assembly,
+        &zero_noise(),
+        &catalog(),
+        Scorer::Analytic,
+    )
+    .unwrap();
+    let mut cell = SimCell::new(m, 1, 0).unwrap();
+    let home = Robot::tcp_pose(&mut cell).await.unwrap();
+    let beside = Translation3::new(0.12, 0.0, 0.0) * home;
+    let mut below = beside;
+    below.translation.vector.z = -0.001;
+    let cell = Arc::new(std::sync::Mutex::new(cell));
+    let mut arm = SimArm::new(cell.clone());
+    let movel = |pose: &Isometry3<f64>| ArmCommand::MoveL {
+        pose: to_ur_pose(pose),
+        speed: 0.1,
+        accel: 0.5,
+    };
+    arm.command(movel(&beside)).unwrap();
+    while arm.is_moving() {
+        arm.step(0.002, 1.0).unwrap();
+    }
+    let q_beside = arm.state().q;
+    assert!(matches!(
+        arm.command(movel(&below)),
+        Err(ArmError::ProtectiveStop(_))
+    ));
+    assert!(!arm.is_moving(), "the arm must not start the move");
+    assert_eq!(arm.state().q, q_beside);
+    let status = cell.lock().unwrap().status_now();
+    assert!(!status.ready());
 }
 
 #[test]

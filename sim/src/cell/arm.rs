@@ -13,8 +13,11 @@ use robots::kinematics::Joints;
 use robots::robot::RobotError;
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 
+use robots::kinematics::from_ur_pose;
+
 use super::SimCell;
 use super::gripper::ACTUATION_TIME;
+use super::sim_cell::ControllerMove;
 
 /// The tool digital output pin that drives the gripper (closed when high), as
 /// `robots::ur_robot`'s default gripper configuration.
@@ -72,6 +75,14 @@ impl SimArm {
     }
 }
 
+/// A refused motion as the controller's arm-model error.
+fn arm_error(e: RobotError) -> ArmError {
+    match e {
+        RobotError::ProtectiveStop => ArmError::ProtectiveStop(e.to_string()),
+        _ => ArmError::Unreachable(e.to_string()),
+    }
+}
+
 fn lock(cell: &Arc<Mutex<SimCell>>) -> MutexGuard<'_, SimCell> {
     cell.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
@@ -79,10 +90,19 @@ fn lock(cell: &Arc<Mutex<SimCell>>) -> MutexGuard<'_, SimCell> {
 impl ArmModel for SimArm {
     fn command(&mut self, cmd: ArmCommand) -> Result<(), ArmError> {
         if let Some(e) = lock(&self.cell).status_now().safety.motion_error() {
-            return Err(match e {
-                RobotError::ProtectiveStop => ArmError::ProtectiveStop(e.to_string()),
-                _ => ArmError::Unreachable(e.to_string()),
-            });
+            return Err(arm_error(e));
+        }
+        // The same table check as an in-process move: a path into the table protective-stops
+        // before the arm moves.
+        let planned = match cmd {
+            ArmCommand::MoveJ { q, .. } => Some(ControllerMove::Joints(q)),
+            ArmCommand::MoveL { pose, .. } => Some(ControllerMove::Linear(from_ur_pose(&pose))),
+            _ => None,
+        };
+        if let Some(m) = planned {
+            lock(&self.cell)
+                .check_controller_move(m)
+                .map_err(arm_error)?;
         }
         self.arm.command(cmd)?;
         self.elapsed = 0.0;

@@ -24,6 +24,15 @@ use crate::config::{Destination, Placement};
 
 /// Samples along a motion's path checked for reachability and table clearance.
 const PATH_SAMPLES: usize = 12;
+
+/// A move a controller is about to run, for [`SimCell::check_controller_move`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum ControllerMove {
+    /// To these joints, joint-interpolated.
+    Joints(Joints),
+    /// To this TCP pose in the base frame, in a straight line.
+    Linear(Isometry3<f64>),
+}
 /// How far laterally from a target a held part may come down and still count as inserting
 /// (beyond it, it comes down beside the receiver), metres.
 const INSERTION_REACH: f64 = 0.01;
@@ -556,13 +565,7 @@ impl SimCell {
             &motion,
             PATH_SAMPLES,
         )?;
-        let poses: Vec<Isometry3<f64>> = (1..=PATH_SAMPLES)
-            .map(|k| {
-                let s = k as f64 / PATH_SAMPLES as f64;
-                let q: Joints = std::array::from_fn(|i| self.q[i] + s * (target[i] - self.q[i]));
-                self.model.kinematics.forward_tcp(&q)
-            })
-            .collect();
+        let poses = self.joint_path(&target);
         self.begin_motion();
         self.check_clearance(&poses)?;
         self.clock += move_j_time(&self.q, &target, &motion, &self.model.spec.limits);
@@ -580,19 +583,58 @@ impl SimCell {
         self.check_motion_allowed()?;
         self.model.spec.limits.check_move_l(&base_T_tcp, &motion)?;
         let start = self.model.kinematics.forward_tcp(&self.q);
-        let mut q = self.q;
-        let mut poses = Vec::with_capacity(PATH_SAMPLES);
-        for k in 1..=PATH_SAMPLES {
-            let pose = start.lerp_slerp(&base_T_tcp, k as f64 / PATH_SAMPLES as f64);
-            q = self.model.kinematics.inverse_nearest(&pose, &q)?.joints;
-            poses.push(pose);
-        }
+        let (poses, q) = self.linear_path(&base_T_tcp)?;
         self.begin_motion();
         self.check_clearance(&poses)?;
         self.clock += move_l_time(&start, &base_T_tcp, &motion, &self.model.spec.limits);
         self.q = q;
         self.end_motion();
         Ok(())
+    }
+
+    /// The TCP poses a joint move from the current joints to `target` is checked at.
+    fn joint_path(&self, target: &Joints) -> Vec<Isometry3<f64>> {
+        (1..=PATH_SAMPLES)
+            .map(|k| {
+                let s = k as f64 / PATH_SAMPLES as f64;
+                let q: Joints = std::array::from_fn(|i| self.q[i] + s * (target[i] - self.q[i]));
+                self.model.kinematics.forward_tcp(&q)
+            })
+            .collect()
+    }
+
+    /// The TCP poses a straight-line move to `base_T_tcp` is checked at, and the joints it ends
+    /// at (following the current IK branch).
+    #[allow(non_snake_case)]
+    fn linear_path(
+        &self,
+        base_T_tcp: &Isometry3<f64>,
+    ) -> Result<(Vec<Isometry3<f64>>, Joints), RobotError> {
+        let start = self.model.kinematics.forward_tcp(&self.q);
+        let mut q = self.q;
+        let mut poses = Vec::with_capacity(PATH_SAMPLES);
+        for k in 1..=PATH_SAMPLES {
+            let pose = start.lerp_slerp(base_T_tcp, k as f64 / PATH_SAMPLES as f64);
+            q = self.model.kinematics.inverse_nearest(&pose, &q)?.joints;
+            poses.push(pose);
+        }
+        Ok((poses, q))
+    }
+
+    /// For a controller about to start a move (the virtual UR's arm model): protective stop,
+    /// as the in-process move would, when its path puts the fingertips or the held part into
+    /// the table. `Ok` for a path that is clear.
+    #[allow(non_snake_case)]
+    pub(crate) fn check_controller_move(
+        &mut self,
+        target: ControllerMove,
+    ) -> Result<(), RobotError> {
+        let poses = match target {
+            ControllerMove::Joints(q) => self.joint_path(&q),
+            ControllerMove::Linear(base_T_tcp) => self.linear_path(&base_T_tcp)?.0,
+        };
+        self.begin_motion();
+        self.check_clearance(&poses)
     }
 
     fn begin_motion(&mut self) {
