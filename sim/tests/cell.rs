@@ -282,9 +282,8 @@ fn the_camera_sees_true_poses_from_the_true_camera() {
     }
 }
 
-#[tokio::test]
-async fn the_robot_trait_checks_limits_and_the_table() {
-    // A workspace box reaching below the table, so the table itself must stop the arm.
+/// A cell whose workspace box reaches below the table, so the table itself must stop the arm.
+fn cell_with_workspace_below_the_table() -> SimCell {
     let mut s = scenario();
     s.cell.limits.workspace.min[2] = -0.05;
     let m = CellModel::new(
@@ -295,7 +294,12 @@ async fn the_robot_trait_checks_limits_and_the_table() {
         Scorer::Analytic,
     )
     .unwrap();
-    let mut cell = SimCell::new(m, 1, 0).unwrap();
+    SimCell::new(m, 1, 0).unwrap()
+}
+
+#[tokio::test]
+async fn the_robot_trait_checks_limits_and_the_table() {
+    let mut cell = cell_with_workspace_below_the_table();
     let robot: &mut dyn Robot = &mut cell;
     let home = robot.tcp_pose().await.unwrap();
     let slow = LinearMotion {
@@ -347,17 +351,7 @@ async fn the_robot_trait_checks_limits_and_the_table() {
 /// before the arm moves, as an in-process move does; a clear move runs.
 #[tokio::test]
 async fn the_arm_model_stops_a_path_into_the_table() {
-    let mut s = scenario();
-    s.cell.limits.workspace.min[2] = -0.05;
-    let m = CellModel::new(
-        &s.cell,
-        &s.assembly,
-        &zero_noise(),
-        &catalog(),
-        Scorer::Analytic,
-    )
-    .unwrap();
-    let mut cell = SimCell::new(m, 1, 0).unwrap();
+    let mut cell = cell_with_workspace_below_the_table();
     let home = Robot::tcp_pose(&mut cell).await.unwrap();
     let beside = Translation3::new(0.12, 0.0, 0.0) * home;
     let mut below = beside;

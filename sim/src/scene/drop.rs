@@ -4,14 +4,14 @@
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rand::{Rng, RngExt};
 use rapier3d_f64::math::Vector;
-use rapier3d_f64::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
+use rapier3d_f64::prelude::{ColliderBuilder, RigidBodyBuilder};
 
 use super::PartModel;
 use crate::convert::{
     rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
     vector_from_vec,
 };
-use crate::stable_poses::drop::{CORRECTIVE_VELOCITY, TABLE_CONTACT_FREQUENCY, random_rotation};
+use crate::stable_poses::drop::{drop_world, random_rotation};
 
 /// A part resting in a scene.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,19 +57,8 @@ pub fn drop_parts(
     if !(half.is_finite() && half > 0.0) {
         return Err(DropError::BadRegion(half));
     }
-    let mut world = PhysicsWorld::new();
-    world.gravity = Vector::new(0.0, 0.0, -9.81);
-    world.integration_parameters.dt = DT;
-    world.integration_parameters.length_unit = 1e-3;
-    // As for the stable-pose drops: a stiff (400 Hz) table contact and a fast push-out, so parts
-    // rest at their geometric height instead of sinking into rapier's soft default contact.
-    world
-        .integration_parameters
-        .normalized_max_corrective_velocity = CORRECTIVE_VELOCITY;
-    world
-        .integration_parameters
-        .static_contact_softness
-        .natural_frequency = TABLE_CONTACT_FREQUENCY;
+    // As for the stable-pose drops: parts rest at their geometric height on a stiff table.
+    let mut world = drop_world(DT);
     let board = ColliderBuilder::cuboid(BOARD_HALF, BOARD_HALF, BOARD_THICKNESS / 2.0)
         .translation(Vector::new(0.0, 0.0, -BOARD_THICKNESS / 2.0))
         .friction(0.5)

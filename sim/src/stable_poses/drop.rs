@@ -72,14 +72,21 @@ pub struct DropOutcome {
     pub time: f64,
 }
 
-/// How fast penetrations are pushed out, in length units (mm) per second: 2 cm/s instead of
-/// rapier's 3 mm/s, so parts settle onto their geometric rest height instead of sinking into the
-/// contact's softness.
-pub(crate) const CORRECTIVE_VELOCITY: f64 = 20.0;
-
-/// Natural frequency of the table contact, Hz: rapier's default 60 Hz spring sags g/ω² ≈ 70 µm
-/// under gravity, more than the 10 µm a rest height must agree with geometry; 400 Hz sags 1.6 µm.
-pub(crate) const TABLE_CONTACT_FREQUENCY: f64 = 400.0;
+/// A world in metres with gravity for dropping millimetre parts onto a table: length unit 1 mm,
+/// a stiff table contact (400 Hz: rapier's default 60 Hz spring sags g/ω² ≈ 70 µm under gravity,
+/// more than the 10 µm a rest height must agree with geometry; 400 Hz sags 1.6 µm) and
+/// penetrations pushed out at up to 2 cm/s instead of 3 mm/s, so parts settle at their
+/// geometric rest height instead of sinking into the contact's softness.
+pub(crate) fn drop_world(dt: f64) -> PhysicsWorld {
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::Z * -9.81;
+    let p = &mut world.integration_parameters;
+    p.dt = dt;
+    p.length_unit = 1e-3;
+    p.normalized_max_corrective_velocity = 20.0;
+    p.static_contact_softness.natural_frequency = 400.0;
+    world
+}
 
 /// A uniformly distributed random rotation (Shoemake's method).
 pub fn random_rotation(rng: &mut impl rand::Rng) -> UnitQuaternion<f64> {
@@ -156,17 +163,7 @@ pub fn simulate_batch(
     first: usize,
     count: usize,
 ) -> Vec<DropOutcome> {
-    let mut world = PhysicsWorld::new();
-    world.gravity = Vector::Z * -9.81;
-    world.integration_parameters.dt = settings.dt;
-    world.integration_parameters.length_unit = 1e-3;
-    world
-        .integration_parameters
-        .normalized_max_corrective_velocity = CORRECTIVE_VELOCITY;
-    world
-        .integration_parameters
-        .static_contact_softness
-        .natural_frequency = TABLE_CONTACT_FREQUENCY;
+    let mut world = drop_world(settings.dt);
     let spacing = 3.0 * body.diameter + 0.01;
     let side = (count as f64).sqrt().ceil() as usize;
     let half = spacing * side as f64;
