@@ -1,7 +1,7 @@
 //! The UR dashboard server protocol (port 29999): one ASCII command line, one reply line.
 //! A typed client, and a line server used by the virtual controller.
 
-use crate::rtde::state::{RobotMode, SafetyMode};
+use crate::robot::{RobotMode, SafetyStatus};
 use std::io;
 use std::sync::Arc;
 use std::time::Duration;
@@ -47,6 +47,51 @@ pub enum DashboardError {
         /// The reply line.
         reply: String,
     },
+}
+
+/// The dashboard's word for a robot mode (the `robotmode` reply: `Robotmode: WORD`).
+pub fn robot_mode_word(mode: RobotMode) -> &'static str {
+    match mode {
+        RobotMode::NoController => "NO_CONTROLLER",
+        RobotMode::Disconnected => "DISCONNECTED",
+        RobotMode::ConfirmSafety => "CONFIRM_SAFETY",
+        RobotMode::Booting => "BOOTING",
+        RobotMode::PowerOff => "POWER_OFF",
+        RobotMode::PowerOn => "POWER_ON",
+        RobotMode::Idle => "IDLE",
+        RobotMode::Backdrive => "BACKDRIVE",
+        RobotMode::Running => "RUNNING",
+        RobotMode::UpdatingFirmware => "UPDATING_FIRMWARE",
+    }
+}
+
+/// The robot mode a dashboard word names; `None` for a word this crate does not know.
+pub fn parse_robot_mode(word: &str) -> Option<RobotMode> {
+    (-1..=8)
+        .filter_map(RobotMode::from_ur_code)
+        .find(|m| robot_mode_word(*m) == word)
+}
+
+/// The dashboard's word for a safety status (the `safetystatus` reply: `Safetystatus: WORD`).
+pub fn safety_status_word(safety: SafetyStatus) -> &'static str {
+    match safety {
+        SafetyStatus::Normal => "NORMAL",
+        SafetyStatus::Reduced => "REDUCED",
+        SafetyStatus::ProtectiveStop => "PROTECTIVE_STOP",
+        SafetyStatus::Recovery => "RECOVERY",
+        SafetyStatus::SafeguardStop => "SAFEGUARD_STOP",
+        SafetyStatus::SystemEmergencyStop => "SYSTEM_EMERGENCY_STOP",
+        SafetyStatus::RobotEmergencyStop => "ROBOT_EMERGENCY_STOP",
+        SafetyStatus::Violation => "VIOLATION",
+        SafetyStatus::Fault => "FAULT",
+    }
+}
+
+/// The safety status a dashboard word names; `None` for a word this crate does not know.
+pub fn parse_safety_status(word: &str) -> Option<SafetyStatus> {
+    (1..=9)
+        .filter_map(SafetyStatus::from_ur_code)
+        .find(|s| safety_status_word(*s) == word)
 }
 
 /// A connection to the dashboard server.
@@ -169,24 +214,26 @@ impl DashboardClient {
             .map(drop)
     }
 
-    /// `robotmode`.
+    /// `robotmode`; a mode word this crate does not know is an
+    /// [`DashboardError::UnexpectedReply`].
     pub async fn robot_mode(&mut self) -> Result<RobotMode, DashboardError> {
         let reply = self.command("robotmode").await?;
         reply
             .strip_prefix("Robotmode: ")
-            .and_then(|m| RobotMode::from_dashboard_name(m.trim()))
+            .and_then(|m| parse_robot_mode(m.trim()))
             .ok_or(DashboardError::UnexpectedReply {
                 command: "robotmode".into(),
                 reply,
             })
     }
 
-    /// `safetystatus`.
-    pub async fn safety_status(&mut self) -> Result<SafetyMode, DashboardError> {
+    /// `safetystatus`; a status word this crate does not know is an
+    /// [`DashboardError::UnexpectedReply`].
+    pub async fn safety_status(&mut self) -> Result<SafetyStatus, DashboardError> {
         let reply = self.command("safetystatus").await?;
         reply
             .strip_prefix("Safetystatus: ")
-            .and_then(|m| SafetyMode::from_dashboard_name(m.trim()))
+            .and_then(|m| parse_safety_status(m.trim()))
             .ok_or(DashboardError::UnexpectedReply {
                 command: "safetystatus".into(),
                 reply,
@@ -270,5 +317,34 @@ async fn serve_one(
             .get_mut()
             .write_all(format!("{reply}\n").as_bytes())
             .await?;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dashboard_words_round_trip() {
+        for code in -1..=8 {
+            let mode = RobotMode::from_ur_code(code).unwrap();
+            assert_eq!(parse_robot_mode(robot_mode_word(mode)), Some(mode));
+        }
+        for code in 1..=9 {
+            let safety = SafetyStatus::from_ur_code(code).unwrap();
+            assert_eq!(
+                parse_safety_status(safety_status_word(safety)),
+                Some(safety)
+            );
+        }
+        assert_eq!(robot_mode_word(RobotMode::PowerOff), "POWER_OFF");
+        assert_eq!(
+            safety_status_word(SafetyStatus::ProtectiveStop),
+            "PROTECTIVE_STOP"
+        );
+        for word in ["UNKNOWN", "running", "", "AUTOMATIC_MODE_SAFEGUARD_STOP"] {
+            assert_eq!(parse_robot_mode(word), None, "{word}");
+            assert_eq!(parse_safety_status(word), None, "{word}");
+        }
     }
 }

@@ -43,7 +43,8 @@ pub struct LinearMotion {
     pub acceleration: f64,
 }
 
-/// The arm's power and control state (UR `robot_mode`).
+/// The arm's power and control state (UR `robot_mode`): the one type for it, on RTDE, the
+/// dashboard (words in [`crate::dashboard`]) and the virtual controller alike.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RobotMode {
@@ -106,7 +107,8 @@ impl RobotMode {
     }
 }
 
-/// The arm's safety state (UR `safety_mode`).
+/// The arm's safety state (UR `safety_mode`): the one type for it, on RTDE, the dashboard
+/// (words in [`crate::dashboard`]) and the virtual controller alike.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SafetyStatus {

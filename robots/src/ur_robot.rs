@@ -152,9 +152,7 @@ fn register(state: &OutputState, reg: usize) -> i32 {
 /// The typed error for a state in which the arm must not (or cannot) move, if any.
 fn blocking_error(state: &OutputState) -> Option<RobotError> {
     let bits = state.i64("safety_status_bits").unwrap_or(0) as u32;
-    let safety = state
-        .i64("safety_mode")
-        .and_then(|c| SafetyStatus::from_ur_code(c as i32));
+    let safety = state.safety_mode();
     if bits & SAFETY_BIT_EMERGENCY_STOPPED != 0 {
         return Some(RobotError::EmergencyStop {
             safety: safety.unwrap_or(SafetyStatus::RobotEmergencyStop),
@@ -166,10 +164,7 @@ fn blocking_error(state: &OutputState) -> Option<RobotError> {
     if let Some(err) = safety.and_then(SafetyStatus::motion_error) {
         return Some(err);
     }
-    let mode = state
-        .i64("robot_mode")
-        .and_then(|c| RobotMode::from_ur_code(c as i32))
-        .unwrap_or(RobotMode::Disconnected);
+    let mode = state.robot_mode().unwrap_or(RobotMode::Disconnected);
     let running = state.runtime_state() == Some(RuntimeState::Playing);
     if mode != RobotMode::Running || !running {
         return Some(RobotError::NotReady {
@@ -521,14 +516,9 @@ impl Robot for UrRobot {
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
         Box::pin(async move {
             let state = self.state()?;
-            let mode = state
-                .i64("robot_mode")
-                .and_then(|c| RobotMode::from_ur_code(c as i32))
-                .unwrap_or(RobotMode::Disconnected);
-            let safety = state
-                .i64("safety_mode")
-                .and_then(|c| SafetyStatus::from_ur_code(c as i32))
-                .unwrap_or(SafetyStatus::Fault);
+            // A code this crate does not know reads as the most conservative state.
+            let mode = state.robot_mode().unwrap_or(RobotMode::Disconnected);
+            let safety = state.safety_mode().unwrap_or(SafetyStatus::Fault);
             Ok(RobotStatus {
                 mode,
                 safety,

@@ -5,10 +5,10 @@ use nalgebra::{Translation3, Vector3};
 use robots::dashboard::DashboardClient;
 use robots::kinematics::UrKinematics;
 use robots::program::{CELL_SCRIPT, layout as L};
-use robots::robot::{JointMotion, LinearMotion, Robot, RobotError};
+use robots::robot::{JointMotion, LinearMotion, Robot, RobotError, RobotMode, SafetyStatus};
 use robots::rtde::client::{Backoff, ClientConfig, ClientError, LinkStatus, RtdeClient};
 use robots::rtde::package::{Protocol, Reply, Request, split_frame};
-use robots::rtde::state::{RobotMode, RuntimeState, SafetyMode};
+use robots::rtde::state::RuntimeState;
 use robots::rtde::types::{Slot, Value};
 use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
@@ -113,7 +113,7 @@ async fn client_streams_at_500_hz_with_modes_exposed() {
     assert!(count > 150, "only {count} packages in 0.5 s");
     assert!(dt > 0.45, "controller time advanced {dt} s");
     assert_eq!(client.robot_mode(), Some(RobotMode::Running));
-    assert_eq!(client.safety_mode(), Some(SafetyMode::Normal));
+    assert_eq!(client.safety_mode(), Some(SafetyStatus::Normal));
     assert_eq!(client.runtime_state(), Some(RuntimeState::Stopped));
 }
 
@@ -342,7 +342,7 @@ async fn emergency_stop_and_program_stop_abort_with_typed_errors() {
     assert_eq!(dash.robot_mode().await.unwrap(), RobotMode::PowerOff);
     dash.power_on().await.unwrap();
     dash.brake_release().await.unwrap();
-    assert_eq!(dash.safety_status().await.unwrap(), SafetyMode::Normal);
+    assert_eq!(dash.safety_status().await.unwrap(), SafetyStatus::Normal);
     robot.start_program().await.unwrap();
 
     // The program stopping (dashboard stop from elsewhere) aborts a running move.
@@ -680,7 +680,7 @@ async fn dashboard_answers_like_a_ur_and_survives_bad_lines() {
     let serial = d.command("get serial number").await.unwrap();
     assert!(!serial.is_empty() && serial.bytes().all(|b| b.is_ascii_digit()));
     assert_eq!(d.robot_mode().await.unwrap(), RobotMode::Running);
-    assert_eq!(d.safety_status().await.unwrap(), SafetyMode::Normal);
+    assert_eq!(d.safety_status().await.unwrap(), SafetyStatus::Normal);
     assert!(
         d.command("programState")
             .await

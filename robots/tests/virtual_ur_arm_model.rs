@@ -6,9 +6,9 @@
 use nalgebra::{Isometry3, Translation3, Vector3};
 use robots::kinematics::{Joints, UrKinematics};
 use robots::program::layout as L;
-use robots::robot::{JointMotion, LinearMotion, Robot, RobotError};
+use robots::robot::{JointMotion, LinearMotion, Robot, RobotError, SafetyStatus};
 use robots::rtde::client::{ClientConfig, RtdeClient};
-use robots::rtde::state::{RuntimeState, SafetyMode};
+use robots::rtde::state::RuntimeState;
 use robots::rtde::types::Value;
 use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
@@ -302,7 +302,7 @@ async fn a_collision_reported_by_the_arm_model_is_a_protective_stop() {
     assert!(matches!(err, RobotError::ProtectiveStop), "{err:?}");
     assert_eq!(
         vur.controller.snapshot().safety_mode,
-        SafetyMode::ProtectiveStop
+        SafetyStatus::ProtectiveStop
     );
     assert_eq!(robot.joints().await.unwrap(), Q0, "the arm did not move");
     // Motion stays blocked until the stop is unlocked (after the controller's delay).

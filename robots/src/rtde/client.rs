@@ -6,8 +6,9 @@ use super::package::{
     CodecError, ControllerVersion, Protocol, Reply, Request, TYPE_DATA, slot_types,
 };
 use super::recipe::{Recipe, RecipeError};
-use super::state::{OutputState, RobotMode, RuntimeState, SafetyMode};
+use super::state::{OutputState, RuntimeState};
 use super::types::{Slot, Value};
+use crate::robot::{RobotMode, SafetyStatus};
 use std::io;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -409,13 +410,13 @@ impl RtdeClient {
         self.status.clone()
     }
 
-    /// `robot_mode` of the newest state (when in the output recipe).
+    /// `robot_mode` of the newest state (when in the output recipe and a known code).
     pub fn robot_mode(&self) -> Option<RobotMode> {
         self.latest()?.robot_mode()
     }
 
-    /// `safety_mode` of the newest state (when in the output recipe).
-    pub fn safety_mode(&self) -> Option<SafetyMode> {
+    /// `safety_mode` of the newest state (when in the output recipe and a known code).
+    pub fn safety_mode(&self) -> Option<SafetyStatus> {
         self.latest()?.safety_mode()
     }
 

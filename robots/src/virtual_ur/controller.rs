@@ -7,12 +7,14 @@ use super::programs::{
     set_digital_output,
 };
 use super::registers::{Registers, StandardIo};
+use crate::dashboard::{robot_mode_word, safety_status_word};
 use crate::program::{PROGRAM_NAME, UR_RTDE_PROGRAM_NAME, program_name};
+use crate::robot::{RobotMode, SafetyStatus};
 use crate::rtde::ControllerVersion;
 use crate::rtde::server::{ConnId, Controller, InputField, OutputField};
 use crate::rtde::state::{
-    ROBOT_BIT_PROGRAM_RUNNING, RobotMode, RuntimeState, SAFETY_BIT_EMERGENCY_STOPPED,
-    SAFETY_BIT_PROTECTIVE_STOPPED, SafetyMode,
+    ROBOT_BIT_PROGRAM_RUNNING, RuntimeState, SAFETY_BIT_EMERGENCY_STOPPED,
+    SAFETY_BIT_PROTECTIVE_STOPPED,
 };
 use crate::rtde::types::{DataType, Slot, Value};
 use crate::rtde::variables::{self, Register};
@@ -41,7 +43,7 @@ pub enum ControllerError {
         /// Robot mode.
         mode: RobotMode,
         /// Safety mode.
-        safety: SafetyMode,
+        safety: SafetyStatus,
     },
 }
 
@@ -57,7 +59,7 @@ pub struct Snapshot {
     /// Robot mode.
     pub robot_mode: RobotMode,
     /// Safety mode.
-    pub safety_mode: SafetyMode,
+    pub safety_mode: SafetyStatus,
     /// Program state.
     pub runtime_state: RuntimeState,
     /// Registers.
@@ -84,16 +86,17 @@ impl Snapshot {
     /// `safety_status_bits`.
     pub fn safety_status_bits(&self) -> u32 {
         match self.safety_mode {
-            SafetyMode::Normal => 1,
-            SafetyMode::Reduced => 1 << 1,
-            SafetyMode::ProtectiveStop => SAFETY_BIT_PROTECTIVE_STOPPED | (1 << 10),
-            SafetyMode::Recovery => 1 << 3,
-            SafetyMode::SafeguardStop => (1 << 4) | (1 << 10),
-            SafetyMode::SystemEmergencyStop => (1 << 5) | SAFETY_BIT_EMERGENCY_STOPPED | (1 << 10),
-            SafetyMode::RobotEmergencyStop => (1 << 6) | SAFETY_BIT_EMERGENCY_STOPPED | (1 << 10),
-            SafetyMode::Violation => (1 << 8) | (1 << 10),
-            SafetyMode::Fault => (1 << 9) | (1 << 10),
-            SafetyMode::Unknown(_) => 1 << 10,
+            SafetyStatus::Normal => 1,
+            SafetyStatus::Reduced => 1 << 1,
+            SafetyStatus::ProtectiveStop => SAFETY_BIT_PROTECTIVE_STOPPED | (1 << 10),
+            SafetyStatus::Recovery => 1 << 3,
+            SafetyStatus::SafeguardStop => (1 << 4) | (1 << 10),
+            SafetyStatus::SystemEmergencyStop => {
+                (1 << 5) | SAFETY_BIT_EMERGENCY_STOPPED | (1 << 10)
+            }
+            SafetyStatus::RobotEmergencyStop => (1 << 6) | SAFETY_BIT_EMERGENCY_STOPPED | (1 << 10),
+            SafetyStatus::Violation => (1 << 8) | (1 << 10),
+            SafetyStatus::Fault => (1 << 9) | (1 << 10),
         }
     }
 }
@@ -254,7 +257,7 @@ pub(crate) struct Core {
     pub cycle: u64,
     pub time: f64,
     pub robot_mode: RobotMode,
-    pub safety_mode: SafetyMode,
+    pub safety_mode: SafetyStatus,
     pub runtime_state: RuntimeState,
     pub regs: Registers,
     pub io: StandardIo,
@@ -291,7 +294,7 @@ impl VirtualController {
             cycle: 0,
             time: 0.0,
             robot_mode: RobotMode::Running,
-            safety_mode: SafetyMode::Normal,
+            safety_mode: SafetyStatus::Normal,
             runtime_state: RuntimeState::Stopped,
             regs: Registers::default(),
             io: StandardIo::default(),
@@ -340,7 +343,8 @@ impl VirtualController {
         let snapshot = {
             let mut guard = self.lock();
             let core = &mut *guard;
-            let can_move = core.robot_mode == RobotMode::Running && !core.safety_mode.is_stopped();
+            let can_move =
+                core.robot_mode == RobotMode::Running && core.safety_mode.allows_motion();
             let arm_error = if can_move {
                 core.arm.step(dt, core.io.speed_slider).err()
             } else {
@@ -381,7 +385,7 @@ impl VirtualController {
     }
 
     fn enter_protective_stop(core: &mut Core) {
-        core.safety_mode = SafetyMode::ProtectiveStop;
+        core.safety_mode = SafetyStatus::ProtectiveStop;
         core.protective_stop_at = Some(Instant::now());
         let _ = core.arm.command(ArmCommand::Halt);
         if let Some(program) = core.program.as_mut() {
@@ -406,7 +410,7 @@ impl VirtualController {
     /// Fault: an emergency stop (arm halts, program stops, power is cut).
     pub fn emergency_stop(&self) {
         let mut core = self.lock();
-        core.safety_mode = SafetyMode::RobotEmergencyStop;
+        core.safety_mode = SafetyStatus::RobotEmergencyStop;
         let _ = core.arm.command(ArmCommand::Halt);
         Self::stop_program(&mut core);
         core.robot_mode = RobotMode::PowerOff;
@@ -417,9 +421,9 @@ impl VirtualController {
         let mut core = self.lock();
         if matches!(
             core.safety_mode,
-            SafetyMode::RobotEmergencyStop | SafetyMode::SystemEmergencyStop
+            SafetyStatus::RobotEmergencyStop | SafetyStatus::SystemEmergencyStop
         ) {
-            core.safety_mode = SafetyMode::Normal;
+            core.safety_mode = SafetyStatus::Normal;
         }
     }
 
@@ -448,7 +452,7 @@ impl VirtualController {
     }
 
     fn start_program(core: &mut Core, name: &str) -> Result<(), ControllerError> {
-        if core.robot_mode != RobotMode::Running || core.safety_mode.is_stopped() {
+        if core.robot_mode != RobotMode::Running || !core.safety_mode.allows_motion() {
             return Err(ControllerError::NotReady {
                 mode: core.robot_mode,
                 safety: core.safety_mode,
@@ -520,9 +524,9 @@ impl VirtualController {
             "get serial number" => "20235500001".into(),
             "get robot model" => "UR5".into(),
             "is in remote control" => "true".into(),
-            "robotmode" => format!("Robotmode: {}", core.robot_mode.dashboard_name()),
-            "safetystatus" => format!("Safetystatus: {}", core.safety_mode.dashboard_name()),
-            "safetymode" => format!("Safetymode: {}", core.safety_mode.dashboard_name()),
+            "robotmode" => format!("Robotmode: {}", robot_mode_word(core.robot_mode)),
+            "safetystatus" => format!("Safetystatus: {}", safety_status_word(core.safety_mode)),
+            "safetymode" => format!("Safetymode: {}", safety_status_word(core.safety_mode)),
             "programstate" => match (&core.loaded, core.runtime_state) {
                 (Some(name), RuntimeState::Playing) => format!("PLAYING {name}"),
                 (Some(name), RuntimeState::Paused) => format!("PAUSED {name}"),
@@ -538,7 +542,7 @@ impl VirtualController {
                 None => "No program loaded".into(),
             },
             "power on" => {
-                if core.safety_mode.is_stopped() {
+                if !core.safety_mode.allows_motion() {
                     "Failed to execute: power on".into()
                 } else {
                     if core.robot_mode == RobotMode::PowerOff {
@@ -563,7 +567,7 @@ impl VirtualController {
             }
             "play" => {
                 if core.runtime_state == RuntimeState::Paused && core.program.is_some() {
-                    if core.safety_mode.is_stopped() {
+                    if !core.safety_mode.allows_motion() {
                         return "Failed to execute: Play".into();
                     }
                     let core = &mut *core;
@@ -607,7 +611,7 @@ impl VirtualController {
                 }
             }
             "unlock protective stop" => {
-                if core.safety_mode != SafetyMode::ProtectiveStop {
+                if core.safety_mode != SafetyStatus::ProtectiveStop {
                     return "Cannot unlock protective stop: robot is not protective stopped".into();
                 }
                 let waited = core
@@ -616,7 +620,7 @@ impl VirtualController {
                 if waited < self.unlock_delay {
                     return "Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective stop before unlocking".into();
                 }
-                core.safety_mode = SafetyMode::Normal;
+                core.safety_mode = SafetyStatus::Normal;
                 core.protective_stop_at = None;
                 "Protective stop releasing".into()
             }
@@ -717,8 +721,8 @@ impl Controller for VirtualController {
                     Quantity::ActualTcpSpeed | Quantity::TargetTcpSpeed => {
                         Value::Vector6d(a.tcp_speed)
                     }
-                    Quantity::RobotMode => Value::Int32(s.robot_mode.to_i32()),
-                    Quantity::SafetyMode => Value::Int32(s.safety_mode.to_i32()),
+                    Quantity::RobotMode => Value::Int32(s.robot_mode.ur_code()),
+                    Quantity::SafetyMode => Value::Int32(s.safety_mode.ur_code()),
                     Quantity::RuntimeState => Value::Uint32(s.runtime_state.to_u32()),
                     Quantity::RobotStatusBits => Value::Uint32(s.robot_status_bits()),
                     Quantity::SafetyStatusBits => Value::Uint32(s.safety_status_bits()),
