@@ -113,3 +113,32 @@ impl OutputState {
             .map(|v| RuntimeState::from_u32(v as u32))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rtde::types::DataType;
+
+    fn state(robot_mode: i32, safety_mode: i32) -> OutputState {
+        let names = vec!["robot_mode".to_owned(), "safety_mode".to_owned()];
+        OutputState {
+            recipe: Arc::new(Recipe::new(1, names, vec![DataType::Int32; 2])),
+            values: vec![Value::Int32(robot_mode), Value::Int32(safety_mode)],
+            received_at: Instant::now(),
+        }
+    }
+
+    #[test]
+    fn known_codes_decode_and_unknown_ones_read_as_none() {
+        let s = state(7, 3);
+        assert_eq!(s.robot_mode(), Some(RobotMode::Running));
+        assert_eq!(s.safety_mode(), Some(SafetyStatus::ProtectiveStop));
+        let s = state(42, 0);
+        assert_eq!(s.robot_mode(), None);
+        assert_eq!(s.safety_mode(), None);
+        let s = state(-1, 9);
+        assert_eq!(s.robot_mode(), Some(RobotMode::NoController));
+        assert_eq!(s.safety_mode(), Some(SafetyStatus::Fault));
+        assert_eq!(s.runtime_state(), None, "not in the recipe");
+    }
+}
