@@ -269,6 +269,28 @@ pub(crate) struct Core {
     pub text_log: Vec<String>,
 }
 
+impl Core {
+    /// Runs `f` on the loaded program, if any, with the I/O it acts on; `dt` and `arm_error` are
+    /// the control step's (0 and none for calls outside it).
+    fn with_program<R>(
+        &mut self,
+        dt: f64,
+        arm_error: Option<ArmError>,
+        f: impl FnOnce(&mut dyn Program, &mut ProgramIo<'_>) -> R,
+    ) -> Option<R> {
+        let program = self.program.as_deref_mut()?;
+        let mut io = ProgramIo {
+            regs: &mut self.regs,
+            io: &mut self.io,
+            arm: self.arm.as_mut(),
+            dt,
+            arm_error,
+            protective_stop: false,
+        };
+        Some(f(program, &mut io))
+    }
+}
+
 /// The virtual UR controller.
 pub struct VirtualController {
     core: Mutex<Core>,
@@ -356,20 +378,13 @@ impl VirtualController {
             // A collision reported by the arm model stops the arm like a real controller.
             let mut protective_stop = matches!(arm_error, Some(ArmError::ProtectiveStop(_)));
             if core.runtime_state == RuntimeState::Playing
-                && let Some(program) = core.program.as_mut()
+                && let Some((step, stop, name)) = core.with_program(dt, arm_error, |p, io| {
+                    (p.step(io), io.protective_stop, p.name())
+                })
             {
-                let mut io = ProgramIo {
-                    regs: &mut core.regs,
-                    io: &mut core.io,
-                    arm: core.arm.as_mut(),
-                    dt,
-                    arm_error,
-                    protective_stop: false,
-                };
-                let step = program.step(&mut io);
-                protective_stop |= io.protective_stop;
+                protective_stop |= stop;
                 if step == ProgramStep::Exit {
-                    tracing::info!(name = program.name(), "program finished");
+                    tracing::info!(name, "program finished");
                     core.program = None;
                     core.runtime_state = RuntimeState::Stopped;
                 }
@@ -388,16 +403,10 @@ impl VirtualController {
         core.safety_mode = SafetyStatus::ProtectiveStop;
         core.protective_stop_at = Some(Instant::now());
         let _ = core.arm.command(ArmCommand::Halt);
-        if let Some(program) = core.program.as_mut() {
-            let mut io = ProgramIo {
-                regs: &mut core.regs,
-                io: &mut core.io,
-                arm: core.arm.as_mut(),
-                dt: 0.0,
-                arm_error: None,
-                protective_stop: false,
-            };
-            program.interrupted(&mut io);
+        if core
+            .with_program(0.0, None, |p, io| p.interrupted(io))
+            .is_some()
+        {
             core.runtime_state = RuntimeState::Paused;
         }
     }
@@ -433,17 +442,7 @@ impl VirtualController {
     }
 
     fn stop_program(core: &mut Core) {
-        if let Some(program) = core.program.as_mut() {
-            let mut io = ProgramIo {
-                regs: &mut core.regs,
-                io: &mut core.io,
-                arm: core.arm.as_mut(),
-                dt: 0.0,
-                arm_error: None,
-                protective_stop: false,
-            };
-            program.interrupted(&mut io);
-        }
+        core.with_program(0.0, None, |p, io| p.interrupted(io));
         core.program = None;
         core.runtime_state = RuntimeState::Stopped;
         if core.arm.is_moving() {
@@ -458,22 +457,14 @@ impl VirtualController {
                 safety: core.safety_mode,
             });
         }
-        let mut program: Box<dyn Program> = match name {
+        let program: Box<dyn Program> = match name {
             PROGRAM_NAME => Box::new(CellProgram::new()),
             UR_RTDE_PROGRAM_NAME => Box::new(UrRtdeProgram::new()),
             other => return Err(ControllerError::UnknownProgram(other.to_owned())),
         };
         Self::stop_program(core);
-        let mut io = ProgramIo {
-            regs: &mut core.regs,
-            io: &mut core.io,
-            arm: core.arm.as_mut(),
-            dt: 0.0,
-            arm_error: None,
-            protective_stop: false,
-        };
-        program.start(&mut io);
         core.program = Some(program);
+        core.with_program(0.0, None, |p, io| p.start(io));
         core.runtime_state = RuntimeState::Playing;
         core.loaded = Some(name.to_owned());
         tracing::info!(name, "program started");
@@ -570,18 +561,7 @@ impl VirtualController {
                     if !core.safety_mode.allows_motion() {
                         return "Failed to execute: Play".into();
                     }
-                    let core = &mut *core;
-                    if let Some(p) = core.program.as_mut() {
-                        let mut io = ProgramIo {
-                            regs: &mut core.regs,
-                            io: &mut core.io,
-                            arm: core.arm.as_mut(),
-                            dt: 0.0,
-                            arm_error: None,
-                            protective_stop: false,
-                        };
-                        p.start(&mut io);
-                    }
+                    core.with_program(0.0, None, |p, io| p.start(io));
                     core.runtime_state = RuntimeState::Playing;
                     return "Starting program".into();
                 }
