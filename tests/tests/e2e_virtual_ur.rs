@@ -11,39 +11,24 @@ use std::time::Duration;
 
 use cell::episode::StepOutcome;
 use cell::orchestrator::{
-    EpisodeOutput, SimCellIo, State, keypoint_noise_for, run_episode, run_sim_episode,
+    EpisodeOutput, SimCellIo, State, connect_sim_over_rtde, keypoint_noise_for, run_episode,
+    run_sim_episode,
 };
 use nalgebra::Isometry3;
 use robots::kinematics::Joints;
 use robots::limits::Limits;
 use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
-use robots::ur_robot::{UrRobot, UrRobotConfig};
-use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
+use robots::ur_robot::UrRobot;
+use robots::virtual_ur::VirtualUr;
 use sim::cell::SimCell;
-use sim::cell::arm::SimArm;
 
 use e2e_support::{Setup, setup};
 
 async fn start(setup: &Setup, episode: u32) -> (VirtualUr, UrRobot, Arc<Mutex<SimCell>>) {
-    let cell = setup.cell(episode).unwrap();
-    let q0 = cell.lock().unwrap().joints_now();
-    let config = VirtualUrConfig {
-        initial_q: q0,
-        unlock_delay: Duration::from_millis(100),
-        ..VirtualUrConfig::ephemeral()
-    };
-    let vur = VirtualUr::start_with_arm(config, Box::new(SimArm::new(cell.clone())))
+    let s = connect_sim_over_rtde(setup, episode, Duration::from_millis(100))
         .await
         .unwrap();
-    let mut rc = UrRobotConfig::new("127.0.0.1");
-    rc.rtde_port = vur.rtde_addr().port();
-    rc.dashboard_port = vur.dashboard_addr().port();
-    rc.script_port = vur.script_addr().port();
-    rc.limits = setup.scenario.spec.cell.limits.clone();
-    rc.kinematics = setup.knowledge.kinematics.clone();
-    rc.command_timeout = Duration::from_secs(10);
-    let robot = UrRobot::connect(rc).await.unwrap();
-    (vur, robot, cell)
+    (s.controller, s.robot, s.cell)
 }
 
 async fn run_over_rtde(

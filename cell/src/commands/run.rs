@@ -148,7 +148,7 @@ pub enum EpisodeError {
     Setup(#[from] OrchestratorError),
     /// The episode over loopback RTDE could not run.
     #[error(transparent)]
-    OverRtde(#[from] super::virtual_ur::OverRtdeError),
+    OverRtde(#[from] cell::orchestrator::OverRtdeError),
     /// The real controller could not be reached or did not start our program.
     #[error("{robot}: {source}")]
     Robot {
@@ -264,7 +264,7 @@ pub fn execute_on(
     let outcome = run_episodes(&setup.scenario, &mut store, &options, |_, e| {
         let out = match (driver, &runtime) {
             (Driver::VirtualUr, Some(rt)) => {
-                rt.block_on(super::virtual_ur::sim_episode_over_rtde(&setup, e))?
+                rt.block_on(cell::orchestrator::sim_episode_over_rtde(&setup, e))?
             }
             (Driver::Production(p), Some(rt)) => rt.block_on(p.episode(&setup, e))?,
             _ => run_sim_episode_blocking(&setup, e)?,

@@ -37,6 +37,7 @@ mod cell_io;
 mod driver;
 mod events;
 mod geometry;
+mod over_rtde;
 mod perception;
 mod planning;
 mod production;
@@ -47,6 +48,7 @@ pub use cell_io::{CellIo, CellIoError, InsertionCheck, SharedSimRobot, SimCellIo
 pub use driver::EpisodeSettings;
 pub use events::{Event, EventLog};
 pub use geometry::{CellKnowledge, KnowledgeError, top_down};
+pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
 pub use perception::{
     DetectedPart, Frame, FrameContent, KeypointNoise, KeypointNoiseConfig, PartPerception,
     PerceptionError, TruePart,
