@@ -4,7 +4,8 @@
 //! accelerations, joint range) before anything is sent. Each command gets a fresh id, is written
 //! to the program's registers in one RTDE package, and is awaited with a timeout; a protective
 //! stop, an emergency stop or the program stopping aborts the wait with a typed error. While a
-//! safety stop is active no command is sent at all.
+//! safety stop is active no command is sent at all. A gripper command is done only after the
+//! program has slept the configured actuation time ([`UrRobotConfig::gripper_actuation_s`]).
 
 use crate::dashboard::{DashboardClient, DashboardError};
 use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
@@ -60,6 +61,24 @@ pub struct UrRobotConfig {
     pub gripper: GripperOutput,
     /// Output level that closes the gripper.
     pub gripper_close_level: bool,
+    /// Seconds the gripper needs to open or close: the program sleeps this long after setting
+    /// the output before it reports the gripper command done, so the arm does not move away
+    /// from a part the fingers still close on. Finite, 0 to [`MAX_GRIPPER_ACTUATION_S`].
+    pub gripper_actuation_s: f64,
+}
+
+/// Longest gripper actuation time a [`UrRobotConfig`] accepts (s): the program reads no command
+/// (a stop included) while it waits.
+pub const MAX_GRIPPER_ACTUATION_S: f64 = L::MAX_DO_WAIT_S;
+
+/// Why a [`UrRobotConfig`] is unusable.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UrConfigError {
+    /// The gripper actuation time is not a number, negative or too long.
+    #[error(
+        "gripper actuation time {0} s is not a finite time from 0 to {MAX_GRIPPER_ACTUATION_S} s"
+    )]
+    GripperActuation(f64),
 }
 
 impl UrRobotConfig {
@@ -78,7 +97,16 @@ impl UrRobotConfig {
             stall_timeout: Duration::from_millis(200),
             gripper: GripperOutput::Tool(0),
             gripper_close_level: true,
+            gripper_actuation_s: 0.25,
         }
+    }
+
+    /// Checks the values [`UrRobot::connect`] relies on (the limits are checked there too).
+    pub fn validate(&self) -> Result<(), UrConfigError> {
+        if !(0.0..=MAX_GRIPPER_ACTUATION_S).contains(&self.gripper_actuation_s) {
+            return Err(UrConfigError::GripperActuation(self.gripper_actuation_s));
+        }
+        Ok(())
     }
 }
 
@@ -109,6 +137,8 @@ struct Command {
     accel: f64,
     pin: i32,
     level: bool,
+    /// Seconds the program sleeps after a set-output command.
+    wait: f64,
 }
 
 /// A UR arm driven through our program.
@@ -191,6 +221,9 @@ impl UrRobot {
     /// Connects RTDE and the dashboard, uploads our program and waits until it runs.
     pub async fn connect(config: UrRobotConfig) -> Result<UrRobot, RobotError> {
         config.limits.validate().map_err(|e| RobotError::Rejected {
+            detail: e.to_string(),
+        })?;
+        config.validate().map_err(|e| RobotError::Rejected {
             detail: e.to_string(),
         })?;
         let outputs = output_names();
@@ -360,6 +393,7 @@ impl UrRobot {
             accel,
             pin,
             level,
+            wait,
         } = cmd;
         let state = self.state()?;
         if let Some(e) = blocking_error(&state) {
@@ -377,7 +411,12 @@ impl UrRobot {
             Value::Int32(i32::from(level)),
         ];
         values.extend(target.iter().map(|v| Value::Double(*v)));
-        values.extend([Value::Double(speed), Value::Double(accel), Value::Int32(id)]);
+        values.extend([
+            Value::Double(speed),
+            Value::Double(accel),
+            Value::Double(wait),
+            Value::Int32(id),
+        ]);
         self.rtde
             .send_inputs(0, &values)
             .await
@@ -400,6 +439,7 @@ impl UrRobot {
                 L::ERROR_UNKNOWN_COMMAND => "program did not understand the command",
                 L::ERROR_STOPPED => "interrupted by a stop",
                 L::ERROR_MOTION => "controller could not execute the motion",
+                L::ERROR_INVALID_WAIT => "program refused the output wait",
                 _ => "program reported an unknown error",
             };
             return Err(RobotError::Rejected {
@@ -419,6 +459,7 @@ impl UrRobot {
                 kind,
                 pin: i32::from(pin),
                 level,
+                wait: self.config.gripper_actuation_s,
                 ..Command::default()
             };
             self.run_command(cmd, "gripper").await

@@ -453,7 +453,13 @@ async fn program_watchdog_stops_the_arm_when_the_heartbeat_stops() {
         Value::Int32(0),
     ];
     values.extend(far.iter().map(|v| Value::Double(*v)));
-    values.extend([Value::Double(0.3), Value::Double(1.0), Value::Int32(1)]);
+    // Speed, acceleration, output wait (unused by a move), id.
+    values.extend([
+        Value::Double(0.3),
+        Value::Double(1.0),
+        Value::Double(0.0),
+        Value::Int32(1),
+    ]);
     client.send_inputs(0, &values).await.unwrap();
     tokio::time::sleep(Duration::from_millis(1200)).await;
     let s = client.latest().unwrap();

@@ -1,7 +1,8 @@
 //! The virtual controller and its arm model: every path that sets a digital output (our
 //! program's gripper command, RTDE input registers, the script port) reaches
-//! `ArmModel::digital_output` once per change; our program waits for the device's actuation
-//! time; a `KinematicArm` with a TCP reports and moves that TCP. Loopback only.
+//! `ArmModel::digital_output` once per change; our program waits the configured gripper
+//! actuation time (and refuses a bad one); a `KinematicArm` with a TCP reports and moves that TCP.
+//! Loopback only.
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use robots::kinematics::{Joints, UrKinematics};
@@ -10,7 +11,9 @@ use robots::robot::{JointMotion, LinearMotion, Robot, RobotError, SafetyStatus};
 use robots::rtde::client::{ClientConfig, RtdeClient};
 use robots::rtde::state::RuntimeState;
 use robots::rtde::types::Value;
-use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
+use robots::ur_robot::{
+    MAX_GRIPPER_ACTUATION_S, UrConfigError, UrRobot, UrRobotConfig, upload_script,
+};
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use std::f64::consts::FRAC_PI_2;
@@ -20,7 +23,10 @@ use std::time::{Duration, Instant};
 
 const Q0: Joints = [0.2, -1.4, 1.5, -1.7, -FRAC_PI_2, 0.3];
 const GRIPPER_PIN: u32 = 16;
+/// The recording arm's gripper stroke (the device's time, which the program cannot know).
 const STROKE_S: f64 = 0.3;
+/// Controller time a command takes beyond its wait: RTDE in and out, a few 2 ms cycles.
+const LATENCY_S: f64 = 0.15;
 
 type Log = Arc<Mutex<Vec<(u32, bool)>>>;
 
@@ -116,37 +122,173 @@ async fn wait_for(what: &str, cond: impl Fn() -> bool) {
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_gripper_command_reaches_the_arm_model_and_waits_for_the_stroke() {
-    let (vur, log) = start().await;
-    let mut robot = UrRobot::connect(robot_config(&vur)).await.unwrap();
-
+/// Controller seconds one gripper command takes.
+async fn timed_gripper(vur: &VirtualUr, robot: &mut UrRobot, close: bool) -> f64 {
     let t0 = vur.controller.snapshot().timestamp;
-    robot.close_gripper().await.unwrap();
-    let t1 = vur.controller.snapshot().timestamp;
+    if close {
+        robot.close_gripper().await.unwrap();
+    } else {
+        robot.open_gripper().await.unwrap();
+    }
+    vur.controller.snapshot().timestamp - t0
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time() {
+    let (vur, log) = start().await;
+    // A wait longer than the device's stroke, so that only the program's sleep explains it.
+    let wait = 0.45;
+    let mut robot = UrRobot::connect(UrRobotConfig {
+        gripper_actuation_s: wait,
+        ..robot_config(&vur)
+    })
+    .await
+    .unwrap();
+
+    let took = timed_gripper(&vur, &mut robot, true).await;
     assert_eq!(taken(&log), [(GRIPPER_PIN, true)]);
-    // The program reported done only after the stroke (controller time, 2 ms cycles).
-    assert!(t1 - t0 >= STROKE_S - 1e-9, "done after {} s", t1 - t0);
+    // The program reported done only after its sleep (controller time, 2 ms cycles).
+    assert!(
+        (wait - 1e-9..wait + LATENCY_S).contains(&took),
+        "done after {took} s"
+    );
     assert_eq!(vur.controller.snapshot().io.tool_do, 1);
 
     // Closing a closed gripper changes nothing: no call, though the program still waits.
-    robot.close_gripper().await.unwrap();
+    let took = timed_gripper(&vur, &mut robot, true).await;
     assert_eq!(taken(&log), []);
+    assert!(took >= wait - 1e-9, "done after {took} s");
 
-    robot.open_gripper().await.unwrap();
+    let took = timed_gripper(&vur, &mut robot, false).await;
     assert_eq!(taken(&log), [(GRIPPER_PIN, false)]);
+    assert!(took >= wait - 1e-9, "done after {took} s");
     assert_eq!(vur.controller.snapshot().io.tool_do, 0);
 
-    // A standard output (no actuation time) reaches the model too.
+    // The default configuration waits its 0.25 s.
+    drop(robot);
+    let config = robot_config(&vur);
+    assert_eq!(config.gripper_actuation_s, 0.25);
+    let mut robot = UrRobot::connect(config).await.unwrap();
+    let took = timed_gripper(&vur, &mut robot, true).await;
+    assert!(
+        (0.25 - 1e-9..0.25 + LATENCY_S).contains(&took),
+        "done after {took} s"
+    );
+    assert_eq!(taken(&log), [(GRIPPER_PIN, true)]);
+
+    // No wait: done at once, well before the device's stroke (the program cannot know it).
+    drop(robot);
+    let mut robot = UrRobot::connect(UrRobotConfig {
+        gripper_actuation_s: 0.0,
+        ..robot_config(&vur)
+    })
+    .await
+    .unwrap();
+    let took = timed_gripper(&vur, &mut robot, false).await;
+    assert!(took < LATENCY_S.min(STROKE_S), "done after {took} s");
+    assert_eq!(taken(&log), [(GRIPPER_PIN, false)]);
+
+    // A standard output reaches the model too.
     let mut config = robot_config(&vur);
     config.gripper = robots::ur_robot::GripperOutput::Standard(5);
     drop(robot);
     let mut robot = UrRobot::connect(config).await.unwrap();
-    robot.close_gripper().await.unwrap();
+    let took = timed_gripper(&vur, &mut robot, true).await;
+    assert!(took >= 0.25 - 1e-9, "done after {took} s");
     assert_eq!(taken(&log), [(5, true)]);
     let snap = vur.controller.snapshot();
     assert_eq!(snap.io.standard_do, 1 << 5);
     assert_eq!(snap.regs.output_int[L::ERROR_REG], L::ERROR_NONE);
+}
+
+#[test]
+fn the_gripper_actuation_time_is_validated() {
+    let mut config = UrRobotConfig::new("127.0.0.1");
+    assert_eq!(config.validate(), Ok(()));
+    for good in [0.0, 0.25, MAX_GRIPPER_ACTUATION_S] {
+        config.gripper_actuation_s = good;
+        assert_eq!(config.validate(), Ok(()), "{good}");
+    }
+    for bad in [
+        f64::NAN,
+        f64::INFINITY,
+        -0.01,
+        MAX_GRIPPER_ACTUATION_S + 0.01,
+    ] {
+        config.gripper_actuation_s = bad;
+        assert!(
+            matches!(config.validate(), Err(UrConfigError::GripperActuation(v)) if v.to_bits() == bad.to_bits()),
+            "{bad} accepted"
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_actuation_time_is_refused_by_connect_and_by_the_program() {
+    let (vur, log) = start().await;
+    // The client refuses it before uploading anything.
+    let err = UrRobot::connect(UrRobotConfig {
+        gripper_actuation_s: -0.5,
+        ..robot_config(&vur)
+    })
+    .await
+    .err()
+    .expect("connect accepted a negative actuation time");
+    assert!(matches!(err, RobotError::Rejected { .. }), "{err:?}");
+    assert_eq!(
+        vur.controller.snapshot().runtime_state,
+        RuntimeState::Stopped
+    );
+
+    // The program refuses a wait out of range (as the script does) and leaves the output.
+    let command: Vec<String> = L::command_recipe();
+    let command: Vec<&str> = command.iter().map(String::as_str).collect();
+    let heartbeat: Vec<String> = L::heartbeat_recipe();
+    let heartbeat: Vec<&str> = heartbeat.iter().map(String::as_str).collect();
+    let mut config = ClientConfig::new(vur.rtde_addr().to_string(), &["timestamp"])
+        .with_input_recipe(&command)
+        .with_input_recipe(&heartbeat);
+    config.outputs.extend(L::output_registers());
+    let client = RtdeClient::connect(config).await.unwrap();
+    upload_script(
+        &vur.script_addr().to_string(),
+        robots::program::CELL_SCRIPT,
+        Duration::from_secs(1),
+    )
+    .await
+    .unwrap();
+    wait_for("the program", || {
+        vur.controller.snapshot().runtime_state == RuntimeState::Playing
+    })
+    .await;
+    let register = |reg: usize| {
+        client
+            .latest()
+            .and_then(|s| s.i64(&format!("output_int_register_{reg}")))
+    };
+    for (id, wait) in [(1, f64::NAN), (2, -0.1), (3, L::MAX_DO_WAIT_S + 0.5)] {
+        client.send_inputs(1, &[Value::Int32(id)]).await.unwrap();
+        let mut values = vec![
+            Value::Int32(L::KIND_SET_TOOL_DO),
+            Value::Int32(0),
+            Value::Int32(1),
+        ];
+        values.extend([Value::Double(0.0); 8]);
+        values.extend([Value::Double(wait), Value::Int32(id)]);
+        client.send_inputs(0, &values).await.unwrap();
+        wait_for("the command to finish", || {
+            register(L::DONE_ID_REG) == Some(i64::from(id))
+        })
+        .await;
+        assert_eq!(register(L::STATUS_REG), Some(i64::from(L::STATUS_FAILED)));
+        assert_eq!(
+            register(L::ERROR_REG),
+            Some(i64::from(L::ERROR_INVALID_WAIT)),
+            "wait {wait}"
+        );
+    }
+    assert_eq!(taken(&log), []);
+    assert_eq!(vur.controller.snapshot().io.tool_do, 0);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

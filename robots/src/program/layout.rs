@@ -20,6 +20,9 @@ pub const TARGET_REG: usize = 24;
 pub const SPEED_REG: usize = 30;
 /// input_double: acceleration (rad/s² or m/s²).
 pub const ACCEL_REG: usize = 31;
+/// input_double: seconds the set-output commands sleep after setting the output (a gripper's
+/// stroke), before reporting done; 0 for no wait, at most [`MAX_DO_WAIT_S`].
+pub const DO_WAIT_REG: usize = 32;
 /// output_int: id of the newest command the program accepted.
 pub const ACCEPTED_ID_REG: usize = 24;
 /// output_int: id of the newest command that finished.
@@ -59,11 +62,17 @@ pub const ERROR_UNKNOWN_COMMAND: i32 = 2;
 pub const ERROR_STOPPED: i32 = 3;
 /// Error: the controller could not execute the motion (unreachable, singular, invalid).
 pub const ERROR_MOTION: i32 = 4;
+/// Error: the output wait (`DO_WAIT_REG`) was negative, not a number or over [`MAX_DO_WAIT_S`];
+/// the output was not changed.
+pub const ERROR_INVALID_WAIT: i32 = 5;
 
 /// Seconds without a heartbeat change before the watchdog stops the arm.
 pub const WATCHDOG_TIMEOUT_S: f64 = 0.5;
 /// Deceleration of stop commands and watchdog stops (rad/s²).
 pub const STOP_DECELERATION: f64 = 3.0;
+/// Longest wait after a set-output command the program accepts (s). The program reads no
+/// command while it sleeps, so a stop waits behind it.
+pub const MAX_DO_WAIT_S: f64 = 5.0;
 
 /// Every constant the script declares in its layout block, as (script name, value).
 pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
@@ -75,6 +84,7 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("TARGET_REG", TARGET_REG as f64),
     ("SPEED_REG", SPEED_REG as f64),
     ("ACCEL_REG", ACCEL_REG as f64),
+    ("DO_WAIT_REG", DO_WAIT_REG as f64),
     ("ACCEPTED_ID_REG", ACCEPTED_ID_REG as f64),
     ("DONE_ID_REG", DONE_ID_REG as f64),
     ("STATUS_REG", STATUS_REG as f64),
@@ -93,8 +103,10 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("ERROR_UNKNOWN_COMMAND", ERROR_UNKNOWN_COMMAND as f64),
     ("ERROR_STOPPED", ERROR_STOPPED as f64),
     ("ERROR_MOTION", ERROR_MOTION as f64),
+    ("ERROR_INVALID_WAIT", ERROR_INVALID_WAIT as f64),
     ("WATCHDOG_TIMEOUT", WATCHDOG_TIMEOUT_S),
     ("STOP_DECELERATION", STOP_DECELERATION),
+    ("MAX_DO_WAIT", MAX_DO_WAIT_S),
 ];
 
 /// Names of the input registers the client writes for a command, in recipe order.
@@ -107,6 +119,7 @@ pub fn command_recipe() -> Vec<String> {
     names.extend((0..6).map(|i| format!("input_double_register_{}", TARGET_REG + i)));
     names.push(format!("input_double_register_{SPEED_REG}"));
     names.push(format!("input_double_register_{ACCEL_REG}"));
+    names.push(format!("input_double_register_{DO_WAIT_REG}"));
     // The id goes last: the controller applies a package at once, so order is only cosmetic.
     names.push(format!("input_int_register_{CMD_ID_REG}"));
     names

@@ -111,9 +111,9 @@ pub trait ArmModel: Send + 'static {
     /// A digital output changed: standard 0–7, configurable 8–15, tool 16–17 (as
     /// `actual_digital_output_bits`). The controller calls it from every path that sets one.
     fn digital_output(&mut self, _pin: u32, _level: bool) {}
-    /// Seconds the device on output `pin` needs to act after a change (a gripper's stroke);
-    /// programs that set an output wait this long before reporting it done, as a UR program
-    /// with a `sleep` after `set_tool_digital_out` would.
+    /// Seconds the device on output `pin` needs to act after a change (a gripper's stroke).
+    /// Programs do not wait for it (a real one cannot know it): ours sleeps the wait its client
+    /// sends, and the controller warns when that is shorter than this.
     fn actuation_time(&self, _pin: u32) -> f64 {
         0.0
     }

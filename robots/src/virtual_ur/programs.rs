@@ -145,6 +145,7 @@ impl CellProgram {
         let accel = regs.input_double[L::ACCEL_REG];
         let pin = i64::from(regs.input_int[L::DO_PIN_REG]);
         let level = regs.input_int[L::DO_LEVEL_REG] != 0;
+        let wait = regs.input_double[L::DO_WAIT_REG];
         io.regs.output_int[L::ACCEPTED_ID_REG] = id;
         if self.watchdog_tripped {
             Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_WATCHDOG);
@@ -179,6 +180,11 @@ impl CellProgram {
                 Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
             }
             L::KIND_SET_STANDARD_DO | L::KIND_SET_TOOL_DO => {
+                // Like the script: a wait out of range (or NaN) fails before the output changes.
+                if !(0.0..=L::MAX_DO_WAIT_S).contains(&wait) {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_INVALID_WAIT);
+                    return;
+                }
                 let pin = if kind == L::KIND_SET_TOOL_DO {
                     pin + 16
                 } else {
@@ -190,9 +196,19 @@ impl CellProgram {
                     (0..=7).contains(&pin)
                 };
                 if in_range && io.set_digital_output(pin, level) {
-                    // The program sleeps while the device (a gripper) acts, then reports done.
-                    let wait = io.arm.actuation_time(pin as u32);
-                    if wait.is_finite() && wait > 0.0 {
+                    // The program sleeps the client's wait (as the script does), then reports
+                    // done. It cannot know the device: a wait shorter than the device's stroke
+                    // lets the next move start while the gripper still moves.
+                    let stroke = io.arm.actuation_time(pin as u32);
+                    if stroke.is_finite() && wait < stroke - 1e-9 {
+                        tracing::warn!(
+                            pin,
+                            wait,
+                            stroke,
+                            "cell_program: output wait shorter than the device's actuation time"
+                        );
+                    }
+                    if wait > 0.0 {
                         self.settling = Some((id, wait));
                         io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
                     } else {
