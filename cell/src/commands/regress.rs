@@ -9,7 +9,8 @@ use anyhow::{Context, bail};
 use cell::regress::{Baseline, compare};
 use cell::run::{LoadedScenario, Shard};
 
-use super::run::{execute, headline};
+use super::run::headline;
+use cell::run::execute;
 
 /// Arguments of `cell regress`.
 #[derive(Debug, clap::Args)]

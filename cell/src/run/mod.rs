@@ -2,15 +2,19 @@
 //! (`<root>/<scenario>/<shard>/episodes.jsonl`), sharded for external schedulers, merged back,
 //! and summarised.
 
+pub mod execute;
 pub mod header;
 pub mod merge;
+pub mod robot_target;
 pub mod runner;
 pub mod shard;
 pub mod store;
 pub mod summary;
 
+pub use execute::{Driver, EpisodeError, Executed, Production, execute, execute_on, production};
 pub use header::{ResultsHeader, sha256_hex};
 pub use merge::{MergeError, Merged, merge, write_results};
+pub use robot_target::RobotTarget;
 pub use runner::{LoadedScenario, RunError, RunOptions, RunOutcome, results_dir, run_episodes};
 pub use shard::{Shard, ShardParseError};
 pub use store::{RESULTS_FILE, Results, ResultsStore, StoreError, read_results};
