@@ -1,11 +1,19 @@
-//! `cell virtual-ur`: a simulated UR controller (RTDE, dashboard, script port) on loopback.
+//! `cell virtual-ur`: a simulated UR controller (RTDE, dashboard, script port) on loopback,
+//! backed by a kinematic UR5e or, with `--scenario`, by a scenario's simulated cell.
 
-use anyhow::Context;
-use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
+use std::f64::consts::FRAC_PI_2;
 use std::net::IpAddr;
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
+
+use anyhow::Context;
+use cell::orchestrator::SimSetup;
+use cell::scenario::Scenario;
+use robots::virtual_ur::arm::ArmModel;
+use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
+use sim::cell::arm::SimArm;
 
 /// Arguments of `cell virtual-ur`.
 #[derive(Debug, clap::Args)]
@@ -22,11 +30,22 @@ pub struct Args {
     /// Script port accepting URScript programs (0 picks a free one).
     #[arg(long, default_value_t = 30003)]
     pub script_port: u16,
-    /// Initial joint angles in radians, six comma-separated values.
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true,
-          default_values_t = [0.0, -std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2,
-                              -std::f64::consts::FRAC_PI_2, -std::f64::consts::FRAC_PI_2, 0.0])]
-    pub initial_q: Vec<f64>,
+    /// Initial joint angles in radians, six comma-separated values (default: the UR5e's
+    /// upright pose; a scenario's cell starts at its home).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_negative_numbers = true,
+        conflicts_with = "scenario"
+    )]
+    pub initial_q: Option<Vec<f64>>,
+    /// Serve this scenario's simulated cell (feeder, gripper on tool output 0, insertions,
+    /// table protective stops) instead of a bare kinematic arm, so ur_rtde programs can drive it.
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// With --scenario: which episode's world (feeder draw, error sources) to serve.
+    #[arg(long, default_value_t = 0, requires = "scenario")]
+    pub episode: u32,
     /// Seconds after a protective stop before `unlock protective stop` succeeds (5 on a real UR).
     #[arg(long, default_value_t = 5.0)]
     pub unlock_delay_s: f64,
@@ -37,11 +56,23 @@ pub struct Args {
 
 /// Runs the virtual controller until Ctrl-C (or `--duration-s`).
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let initial_q: [f64; 6] = args
-        .initial_q
-        .as_slice()
-        .try_into()
-        .context("--initial-q needs exactly six joint angles")?;
+    let cell = match &args.scenario {
+        Some(path) => {
+            let scenario = Scenario::load(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let name = scenario.spec.name.clone();
+            let setup = SimSetup::new(scenario)?;
+            Some((name, setup.cell(args.episode)?))
+        }
+        None => None,
+    };
+    let initial_q: [f64; 6] = match (&args.initial_q, &cell) {
+        (Some(q), _) => q
+            .as_slice()
+            .try_into()
+            .context("--initial-q needs exactly six joint angles")?,
+        (_, Some((_, c))) => c.lock().unwrap_or_else(|p| p.into_inner()).joints_now(),
+        (None, None) => [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0],
+    };
     anyhow::ensure!(
         initial_q.iter().all(|q| q.is_finite()),
         "--initial-q must be finite numbers"
@@ -61,11 +92,20 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     let runtime = tokio::runtime::Runtime::new().context("start the async runtime")?;
     runtime.block_on(async move {
-        let vur = VirtualUr::start(config)
-            .await
-            .context("bind the controller ports (another controller running?)")?;
+        let (vur, backing) = match cell {
+            Some((name, cell)) => {
+                let arm: Box<dyn ArmModel> = Box::new(SimArm::new(cell));
+                let what = format!("the simulated cell of {name}, episode {}", args.episode);
+                (VirtualUr::start_with_arm(config, arm).await, what)
+            }
+            None => (
+                VirtualUr::start(config).await,
+                "a kinematic UR5e".to_string(),
+            ),
+        };
+        let vur = vur.context("bind the controller ports (another controller running?)")?;
         println!(
-            "virtual UR5e running: RTDE {}, dashboard {}, script {} (Ctrl-C to stop)",
+            "virtual UR5e running ({backing}): RTDE {}, dashboard {}, script {} (Ctrl-C to stop)",
             vur.rtde_addr(),
             vur.dashboard_addr(),
             vur.script_addr()
