@@ -181,3 +181,53 @@ fn a_fixture_out_of_reach_and_a_feeder_over_the_fixture_are_rejected_with_their_
     assert_eq!(p.key.as_deref(), Some("cell.feeder"));
     assert_eq!(p.line, line_of(&text, "[cell.feeder]"));
 }
+
+#[test]
+fn a_negative_gripper_actuation_time_is_rejected_at_its_line() {
+    // Absent: the default 0.25 s.
+    let s = Scenario::load(&scenarios().join("usbc_nominal.toml")).unwrap();
+    assert_eq!(s.spec.cell.gripper.actuation_time, 0.25);
+    let with = |value: &str| {
+        nominal_text().replace(
+            "friction = 0.3\n",
+            &format!("friction = 0.3\nactuation_time = {value}\n"),
+        )
+    };
+    let text = with("0.5");
+    let path = variant("actuation_ok", &text);
+    let ok = Scenario::load(&path);
+    std::fs::remove_file(&path).ok();
+    assert_eq!(ok.unwrap().spec.cell.gripper.actuation_time, 0.5);
+
+    let text = with("-0.25");
+    let path = variant("actuation", &text);
+    let err = Scenario::load(&path).unwrap_err();
+    let out = Command::new(env!("CARGO_BIN_EXE_cell"))
+        .arg("check")
+        .arg(&path)
+        .output()
+        .unwrap();
+    std::fs::remove_file(&path).ok();
+    let p = err
+        .0
+        .iter()
+        .find(|p| p.key.as_deref() == Some("cell.gripper.actuation_time"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert_eq!(err.0.len(), 1, "{err}");
+    assert_eq!(p.line, line_of(&text, "actuation_time = -0.25"), "{err}");
+    assert_eq!(p.column, "actuation_time = ".len() + 1, "{err}");
+    assert!(p.message.contains("-0.25"), "{err}");
+    // The binary prints the same location and fails.
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let want = format!(
+        "{}:{}:{}:",
+        path.display(),
+        p.line,
+        "actuation_time = ".len() + 1
+    );
+    assert!(
+        stderr.contains(&want) && stderr.contains("actuation_time"),
+        "{stderr}"
+    );
+}

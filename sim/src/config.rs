@@ -151,10 +151,34 @@ pub struct GripperSpec {
     /// metres; the simulated cell's `flange_T_tcp` (default 0.15 m, a small parallel gripper).
     #[serde(default = "tcp_offset")]
     pub tcp_offset: f64,
+    /// Seconds the fingers take to open or to close (default
+    /// [`DEFAULT_GRIPPER_ACTUATION_TIME`]): added to the simulated clock per actuation, and the
+    /// wait our controller program sleeps after setting the gripper output. Finite, from 0 to
+    /// [`robots::ur_robot::MAX_GRIPPER_ACTUATION_S`].
+    #[serde(default = "actuation_time")]
+    pub actuation_time: f64,
+}
+
+/// Default gripper actuation time, s (a small electric parallel gripper).
+pub const DEFAULT_GRIPPER_ACTUATION_TIME: f64 = 0.25;
+
+impl GripperSpec {
+    /// Why `actuation_time` is unusable (not finite, negative, or longer than a real controller's
+    /// program may wait), or `None` when it is fine.
+    pub fn actuation_time_problem(&self) -> Option<String> {
+        let t = self.actuation_time;
+        let max = robots::ur_robot::MAX_GRIPPER_ACTUATION_S;
+        (!(t.is_finite() && (0.0..=max).contains(&t)))
+            .then(|| format!("actuation_time must be a finite time from 0 to {max} s, got {t}"))
+    }
 }
 
 fn tcp_offset() -> f64 {
     0.15
+}
+
+fn actuation_time() -> f64 {
+    DEFAULT_GRIPPER_ACTUATION_TIME
 }
 
 fn friction() -> f64 {

@@ -440,3 +440,79 @@ fn shaking_replaces_and_refill_restores_the_feeder() {
     assert_eq!(cell.feeder_parts().len(), 12);
     assert!(cell.feeder_parts().iter().any(|p| p.instance > 12));
 }
+
+/// `cell.gripper.actuation_time` is the gripper's one actuation time: at 0.5 s instead of the
+/// default 0.25 s, the same seed gives the same outcomes and the episode takes exactly 0.25 s
+/// longer per gripper open or close on the simulated clock; the arm model behind the virtual
+/// controller reports the same time for the gripper pin.
+#[test]
+fn the_gripper_actuation_time_is_the_scenarios_and_adds_per_actuation() {
+    let s = scenario();
+    assert_eq!(
+        s.cell.gripper.actuation_time,
+        sim::config::DEFAULT_GRIPPER_ACTUATION_TIME
+    );
+    assert_eq!(sim::config::DEFAULT_GRIPPER_ACTUATION_TIME, 0.25);
+    let cat = catalog();
+    let run = |actuation_time: f64, episode: u64| {
+        let mut spec = s.cell.clone();
+        spec.gripper.actuation_time = actuation_time;
+        let m = CellModel::new(&spec, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap();
+        let arm = SimArm::new(Arc::new(std::sync::Mutex::new(
+            SimCell::new(m.clone(), 11, episode).unwrap(),
+        )));
+        let pin = sim::cell::arm::TOOL_OUTPUT_BASE + sim::cell::arm::GRIPPER_TOOL_PIN;
+        assert_eq!(arm.actuation_time(pin), actuation_time);
+        assert_eq!(arm.actuation_time(pin + 1), 0.0);
+        let mut cell = SimCell::new(m, 11, episode).unwrap();
+        let summary = script::run_episode(&mut cell).unwrap();
+        (summary, cell.clock(), cell.gripper_actuations())
+    };
+    let mut seated = 0;
+    for episode in 0..3 {
+        let (base, base_clock, n) = run(0.25, episode);
+        let (slow, slow_clock, n_slow) = run(0.5, episode);
+        // Same outcomes: steps, grasp attempts, verdicts and causes.
+        assert_eq!(base.steps, slow.steps, "episode {episode}");
+        assert_eq!(base.success, slow.success);
+        assert_eq!(n, n_slow);
+        // A pick and a release at least per step tried.
+        assert!(n as usize >= 2 * base.steps.len(), "{n} actuations");
+        let extra = f64::from(n) * 0.25;
+        assert!(
+            (slow_clock - base_clock - extra).abs() < 1e-9,
+            "episode {episode}: {slow_clock} − {base_clock} ≠ {n} × 0.25 s"
+        );
+        assert!((slow.cycle_time - base.cycle_time - extra).abs() < 1e-9);
+        seated += usize::from(base.success);
+    }
+    // Whole assemblies among them (a grasp and a release per step), not only early failures.
+    assert!(seated > 0);
+}
+
+/// A negative, non-finite or over-long actuation time is refused with its key.
+#[test]
+fn a_bad_gripper_actuation_time_is_refused() {
+    let s = scenario();
+    let cat = catalog();
+    for bad in [
+        -0.1,
+        f64::NAN,
+        f64::INFINITY,
+        robots::ur_robot::MAX_GRIPPER_ACTUATION_S + 0.01,
+    ] {
+        let mut spec = s.cell.clone();
+        spec.gripper.actuation_time = bad;
+        assert!(spec.gripper.actuation_time_problem().is_some(), "{bad}");
+        let err = CellModel::new(&spec, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap_err();
+        assert!(
+            err.to_string().contains("cell.gripper.actuation_time"),
+            "{bad}: {err}"
+        );
+    }
+    for good in [0.0, 0.25, robots::ur_robot::MAX_GRIPPER_ACTUATION_S] {
+        let mut spec = s.cell.clone();
+        spec.gripper.actuation_time = good;
+        assert_eq!(spec.gripper.actuation_time_problem(), None, "{good}");
+    }
+}

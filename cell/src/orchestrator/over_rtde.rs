@@ -64,6 +64,7 @@ pub async fn connect_sim_over_rtde(
     rc.script_port = controller.script_addr().port();
     rc.limits = setup.scenario.spec.cell.limits.clone();
     rc.kinematics = setup.knowledge.kinematics.clone();
+    rc.gripper_actuation_s = setup.scenario.spec.cell.gripper.actuation_time;
     let robot = UrRobot::connect(rc).await?;
     Ok(SimOverRtde {
         controller,

@@ -182,6 +182,7 @@ impl Production {
         config.rtde_port = self.port;
         config.limits = setup.scenario.spec.cell.limits.clone();
         config.kinematics = setup.knowledge.kinematics.clone();
+        config.gripper_actuation_s = setup.scenario.spec.cell.gripper.actuation_time;
         let mut robot = UrRobot::connect(config).await.map_err(robot_err)?;
         let (mut io, mut perception) = self
             .side

@@ -90,6 +90,9 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         "finger_length",
     );
     non_negative(&mut issues, gp.key("friction"), g.friction, "friction");
+    if let Some(problem) = g.actuation_time_problem() {
+        issues.push((gp.key("actuation_time"), problem));
+    }
     let fp = cell.key("feeder");
     for i in 0..2 {
         positive(

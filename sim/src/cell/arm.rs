@@ -16,7 +16,6 @@ use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, Kinemati
 use robots::kinematics::from_ur_pose;
 
 use super::SimCell;
-use super::gripper::ACTUATION_TIME;
 use super::sim_cell::ControllerMove;
 
 /// The tool digital output pin that drives the gripper (closed when high), as
@@ -33,17 +32,20 @@ pub struct SimArm {
     arm: KinematicArm,
     elapsed: f64,
     was_moving: bool,
+    /// The scenario's gripper actuation time (`cell.gripper.actuation_time`), s.
+    actuation_time: f64,
 }
 
 impl SimArm {
     /// Wraps a shared cell; the arm starts at the cell's joints.
     pub fn new(cell: Arc<Mutex<SimCell>>) -> Self {
-        let (q, limits, kinematics) = {
+        let (q, limits, kinematics, actuation_time) = {
             let c = lock(&cell);
             (
                 c.joints_now(),
                 c.model().spec.limits.clone(),
                 c.model().kinematics.clone(),
+                c.model().spec.gripper.actuation_time,
             )
         };
         // The cell's kinematics carry its gripper TCP, so `actual_TCP_pose` and `movel`
@@ -58,6 +60,7 @@ impl SimArm {
             arm,
             elapsed: 0.0,
             was_moving: false,
+            actuation_time,
         }
     }
 
@@ -155,7 +158,7 @@ impl ArmModel for SimArm {
 
     fn actuation_time(&self, pin: u32) -> f64 {
         if pin == TOOL_OUTPUT_BASE + GRIPPER_TOOL_PIN {
-            ACTUATION_TIME
+            self.actuation_time
         } else {
             0.0
         }

@@ -30,8 +30,6 @@ use crate::convert::{pose_from_isometry, vec_from_vector};
 
 /// Grip force of the fingers, N (a small electric parallel gripper).
 pub const GRIP_FORCE: f64 = 20.0;
-/// Time to open or close the fingers, s.
-pub const ACTUATION_TIME: f64 = 0.25;
 /// Gravity, m/s².
 const G: f64 = 9.81;
 

@@ -95,7 +95,10 @@ impl CellModel {
         catalog: &Catalog,
         scorer: Scorer,
     ) -> Result<Arc<Self>, CellError> {
-        let problems = check_feasible(spec, steps, noise, catalog);
+        let mut problems = check_feasible(spec, steps, noise, catalog);
+        if let Some(problem) = spec.gripper.actuation_time_problem() {
+            problems.push(("cell.gripper.actuation_time".into(), problem));
+        }
         if !problems.is_empty() {
             return Err(CellError::Infeasible(problems));
         }

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::CellError;
 use super::feeder::{self, FeederPart};
-use super::gripper::{self, ACTUATION_TIME, Grasp, GraspCandidate, GraspFailure};
+use super::gripper::{self, Grasp, GraspCandidate, GraspFailure};
 use super::insertion::{
     InsertionCause, InsertionResult, Mating, ReceiverPart, Scorer, Verdict, analytic, contact,
 };
@@ -139,6 +139,8 @@ pub struct SimCell {
     last_grasp: Option<Result<Grasp, GraspFailure>>,
     last_release: Option<ReleaseReport>,
     shakes: u32,
+    /// Gripper opens and closes so far (each takes `cell.gripper.actuation_time`).
+    gripper_actuations: u32,
     /// Clock time at which the parts of the last shake are at rest again.
     feeder_rest_at: f64,
 }
@@ -172,6 +174,7 @@ impl SimCell {
             last_grasp: None,
             last_release: None,
             shakes: 0,
+            gripper_actuations: 0,
             feeder_rest_at: 0.0,
         };
         cell.refill()?;
@@ -272,6 +275,12 @@ impl SimCell {
     /// Shakes done so far this episode.
     pub fn shakes(&self) -> u32 {
         self.shakes
+    }
+
+    /// Gripper actuations (opens and closes, each `cell.gripper.actuation_time` on the clock)
+    /// so far this episode.
+    pub fn gripper_actuations(&self) -> u32 {
+        self.gripper_actuations
     }
 
     /// The true base-frame pose where step `step`'s part goes, as the world now is: on the
@@ -654,10 +663,16 @@ impl SimCell {
         }
     }
 
+    /// One gripper open or close on the clock.
+    fn actuate_gripper(&mut self) {
+        self.clock += self.model.spec.gripper.actuation_time;
+        self.gripper_actuations += 1;
+    }
+
     /// Opens the gripper now (the `Robot::open_gripper` body); a held part is released where it
     /// is and the release is reported.
     pub fn open_gripper_sync(&mut self) {
-        self.clock += ACTUATION_TIME;
+        self.actuate_gripper();
         self.gripper_open = true;
         // Released above its target: it falls in, scored from where it was let go.
         if self.held.as_ref().is_some_and(|h| h.inserted.is_none()) {
@@ -699,7 +714,7 @@ impl SimCell {
     /// Closes the gripper now (the `Robot::close_gripper` body); see [`Self::last_grasp`].
     pub fn close_gripper_sync(&mut self) {
         self.wait_for_feeder();
-        self.clock += ACTUATION_TIME;
+        self.actuate_gripper();
         if !self.gripper_open {
             return;
         }
