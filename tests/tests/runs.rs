@@ -34,7 +34,8 @@ fn unit(seed: u64, episode: u32, salt: u64) -> f64 {
 }
 
 /// A deterministic record for (scenario, episode): three steps, the second failing for about
-/// one episode in five with a named error source.
+/// one episode in five with a named error source after two insertions; about one seated step in
+/// four seats on its second insertion.
 fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
     let seed = s.spec.seed;
     let parts = ["main_shell", "insert_mold", "top_shell"];
@@ -56,7 +57,12 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
             part: (*part).into(),
             outcome,
             attempts: 1 + (mix(seed, episode, 10 + i as u64) % 2) as u32,
-            insertion_attempts: 1,
+            // A failed step used its second insertion; about one seated step in four needed one.
+            insertion_attempts: if failed {
+                2
+            } else {
+                1 + u32::from(mix(seed, episode, 80 + i as u64) % 4 == 0)
+            },
             shakes: (mix(seed, episode, 20 + i as u64) % 3) as u32,
             cause: failed.then(|| "lateral error beyond the chamfer".into()),
             sources: if failed {
@@ -420,4 +426,80 @@ fn summary_counts_match_the_records() {
     let cycle = s.cycle_time_s.unwrap();
     assert_eq!(cycle.n as u32, s.successes);
     assert!(cycle.min >= 12.0 && cycle.max <= 15.0 && cycle.min <= cycle.p50);
+    // Insertions: every reached step inserted, a seated step once or (after a retry) twice, a
+    // failed one twice, so mean = 1 + (seated after a retry + failed) / inserted.
+    for t in &s.steps {
+        assert_eq!(t.inserted, t.reached);
+        let failed = t.reached - t.seated;
+        let mean = t.mean_insertion_attempts.unwrap();
+        let expected = 1.0 + f64::from(t.seated_after_retry + failed) / f64::from(t.inserted);
+        assert!((mean - expected).abs() < 1e-12, "{t:?}");
+        // About a quarter of the seated steps needed a retry.
+        let share = f64::from(t.seated_after_retry) / f64::from(t.seated);
+        assert!((0.1..0.4).contains(&share), "{t:?}");
+    }
+    assert_eq!(s.steps[1].reached - s.steps[1].seated, s.failures);
+    // summary.json and the HTML report carry them.
+    let json = serde_json::to_value(&s).unwrap();
+    for (i, t) in s.steps.iter().enumerate() {
+        assert_eq!(
+            json["steps"][i]["mean_insertion_attempts"].as_f64(),
+            t.mean_insertion_attempts
+        );
+        assert_eq!(
+            json["steps"][i]["seated_after_retry"].as_u64(),
+            Some(u64::from(t.seated_after_retry))
+        );
+    }
+    let html = cell::report::render_html(&s, &records).unwrap();
+    assert!(html.contains("<th>insertions / inserted episode</th><th>seated after a retry</th>"));
+    for t in &s.steps {
+        let cells = format!(
+            "<td>{:.2}</td><td>{:.2}</td><td>{}</td><td>{}</td>",
+            t.mean_attempts,
+            t.mean_insertion_attempts.unwrap(),
+            t.seated_after_retry,
+            t.shakes
+        );
+        assert!(html.contains(&cells), "{cells} not in the report");
+    }
+}
+
+/// Results and summaries written before insertions were counted still load: their steps count
+/// no insertion, and the report shows dashes rather than zeros.
+#[test]
+fn results_and_summaries_from_before_insertion_counts_still_load() {
+    let l = nominal();
+    let old: BTreeMap<u32, EpisodeRecord> = (0..20)
+        .map(|e| {
+            let mut v = serde_json::to_value(record(&l.scenario, e)).unwrap();
+            for step in v["steps"].as_array_mut().unwrap() {
+                step.as_object_mut().unwrap().remove("insertion_attempts");
+            }
+            (e, serde_json::from_value(v).unwrap())
+        })
+        .collect();
+    let s = Summary::new(&l.header(Shard::ALL), old.values());
+    assert_eq!(s.episodes, 20);
+    for t in &s.steps {
+        assert!(t.reached > 0);
+        assert_eq!(t.inserted, 0);
+        assert_eq!(t.mean_insertion_attempts, None);
+        assert_eq!(t.seated_after_retry, 0);
+    }
+    let html = cell::report::render_html(&s, &old).unwrap();
+    assert!(html.contains(&format!(
+        "<td>{:.2}</td><td>–</td><td>–</td><td>{}</td>",
+        s.steps[0].mean_attempts, s.steps[0].shakes
+    )));
+    // A summary.json without the insertion fields reads back with none counted.
+    let mut v = serde_json::to_value(&s).unwrap();
+    for step in v["steps"].as_array_mut().unwrap() {
+        let step = step.as_object_mut().unwrap();
+        for key in ["inserted", "mean_insertion_attempts", "seated_after_retry"] {
+            assert!(step.remove(key).is_some(), "{key}");
+        }
+    }
+    let back: Summary = serde_json::from_value(v).unwrap();
+    assert_eq!(back, s);
 }

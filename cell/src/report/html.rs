@@ -81,7 +81,7 @@ pub fn render_html(
         wall / f64::from(s.episodes.max(1))
     );
 
-    h.push_str("<h2>Steps</h2>\n<table><tr><th class=l>step</th><th>reached</th><th>seated</th><th>jammed</th><th>missed</th><th>aborted</th><th>seated rate</th><th>95 % interval</th><th>attempts / episode</th><th>shakes</th><th>lateral error p50 / p95 (mm)</th><th>tilt p95 (°)</th></tr>\n");
+    h.push_str("<h2>Steps</h2>\n<table><tr><th class=l>step</th><th>reached</th><th>seated</th><th>jammed</th><th>missed</th><th>aborted</th><th>seated rate</th><th>95 % interval</th><th>attempts / episode</th><th>insertions / inserted episode</th><th>seated after a retry</th><th>shakes</th><th>lateral error p50 / p95 (mm)</th><th>tilt p95 (°)</th></tr>\n");
     for t in &s.steps {
         let (lat, tilt) = match &t.pose_error {
             Some(e) => (
@@ -90,9 +90,15 @@ pub fn render_html(
             ),
             None => ("–".into(), "–".into()),
         };
+        // No insertion counted (none reached insertion, or records from before insertions were
+        // counted): dashes, not zeros.
+        let (insertions, retried) = match t.mean_insertion_attempts {
+            Some(m) => (format!("{m:.2}"), t.seated_after_retry.to_string()),
+            None => ("–".into(), "–".into()),
+        };
         let _ = writeln!(
             h,
-            "<tr><td class=l>{}: {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} – {}</td><td>{:.2}</td><td>{}</td><td>{lat}</td><td>{tilt}</td></tr>",
+            "<tr><td class=l>{}: {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} – {}</td><td>{:.2}</td><td>{insertions}</td><td>{retried}</td><td>{}</td><td>{lat}</td><td>{tilt}</td></tr>",
             t.index,
             escape(&t.part),
             t.reached,

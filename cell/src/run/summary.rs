@@ -104,6 +104,17 @@ pub struct StepSummary {
     pub mean_attempts: f64,
     /// Feeder shakes over all episodes.
     pub shakes: u32,
+    /// Episodes in which the step inserted its part at least once (records written before
+    /// `insertion_attempts` was recorded count none).
+    #[serde(default)]
+    pub inserted: u32,
+    /// Mean insertions per episode that inserted (1 when every first insertion was final);
+    /// `None` when no episode inserted.
+    #[serde(default)]
+    pub mean_insertion_attempts: Option<f64>,
+    /// Episodes in which the step seated only after a retry (more than one insertion).
+    #[serde(default)]
+    pub seated_after_retry: u32,
     /// Pose error at insertion, when any insertion happened.
     pub pose_error: Option<PoseErrorStats>,
 }
@@ -310,6 +321,9 @@ struct StepAcc {
     outcomes: [u32; 4],
     attempts: u64,
     shakes: u32,
+    inserted: u32,
+    insertions: u64,
+    seated_after_retry: u32,
     lateral: Vec<f64>,
     tilt: Vec<f64>,
     yaw: Vec<f64>,
@@ -323,6 +337,9 @@ impl StepAcc {
             outcomes: [0; 4],
             attempts: 0,
             shakes: 0,
+            inserted: 0,
+            insertions: 0,
+            seated_after_retry: 0,
             lateral: Vec::new(),
             tilt: Vec::new(),
             yaw: Vec::new(),
@@ -333,6 +350,13 @@ impl StepAcc {
         self.outcomes[outcome_index(s.outcome)] += 1;
         self.attempts += u64::from(s.attempts);
         self.shakes += s.shakes;
+        if s.insertion_attempts > 0 {
+            self.inserted += 1;
+            self.insertions += u64::from(s.insertion_attempts);
+        }
+        if s.outcome == StepOutcome::Seated && s.insertion_attempts > 1 {
+            self.seated_after_retry += 1;
+        }
         if let Some(e) = &s.pose_error {
             self.lateral.push(e.dx_mm.hypot(e.dy_mm));
             self.tilt.push(e.tilt_deg);
@@ -371,6 +395,10 @@ impl StepAcc {
                 self.attempts as f64 / f64::from(reached)
             },
             shakes: self.shakes,
+            inserted: self.inserted,
+            mean_insertion_attempts: (self.inserted > 0)
+                .then(|| self.insertions as f64 / f64::from(self.inserted)),
+            seated_after_retry: self.seated_after_retry,
             pose_error,
         }
     }
