@@ -61,7 +61,7 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
             insertion_attempts: if failed {
                 2
             } else {
-                1 + u32::from(mix(seed, episode, 80 + i as u64) % 4 == 0)
+                1 + u32::from(mix(seed, episode, 80 + i as u64).is_multiple_of(4))
             },
             shakes: (mix(seed, episode, 20 + i as u64) % 3) as u32,
             cause: failed.then(|| "lateral error beyond the chamfer".into()),
