@@ -258,3 +258,46 @@ fn an_unreachable_target_is_refused_before_moving() {
     let cause = s.cause.unwrap();
     assert!(cause.contains("unreachable"), "{cause}");
 }
+
+/// `[simulation] insertion_scorer = "contact"` decides every insertion by the rapier contact
+/// simulation: the nominal cell still assembles, and each insertion costs the simulated time of
+/// the push, so an episode with the same steps takes longer than with the analytic scorer.
+#[test]
+fn the_contact_scorer_is_chosen_by_the_scenario() {
+    let analytic = setup(|_| {});
+    let contact = setup(|doc| {
+        doc["simulation"] = toml_edit::table();
+        doc["simulation"]["insertion_scorer"] = toml_edit::value("contact");
+    });
+    assert_eq!(
+        contact.scenario.spec.simulation.insertion_scorer,
+        Scorer::Contact
+    );
+    assert_eq!(contact.model.scorer, Scorer::Contact);
+    let (mut successes, mut longer) = (0, 0);
+    for e in 0..6u32 {
+        let a = run_sim_episode_blocking(&analytic, e).unwrap().record;
+        let c = run_sim_episode_blocking(&contact, e).unwrap().record;
+        successes += usize::from(c.success);
+        let same_path = |r: &cell::episode::EpisodeRecord| {
+            r.steps
+                .iter()
+                .map(|s| (s.outcome, s.attempts, s.insertion_attempts, s.shakes))
+                .collect::<Vec<_>>()
+        };
+        if a.success && c.success && same_path(&a) == same_path(&c) {
+            assert!(
+                c.cycle_time_s > a.cycle_time_s,
+                "episode {e}: contact {} s vs analytic {} s",
+                c.cycle_time_s,
+                a.cycle_time_s
+            );
+            longer += 1;
+        }
+    }
+    assert!(
+        successes >= 5,
+        "{successes} of 6 assembled with contact scoring"
+    );
+    assert!(longer >= 3, "only {longer} episodes comparable");
+}

@@ -67,7 +67,6 @@ use std::sync::{Arc, Mutex};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use robots::robot::Robot;
-use sim::cell::insertion::Scorer;
 use sim::cell::{CellModel, SimCell};
 
 use crate::episode::EpisodeRecord;
@@ -176,14 +175,11 @@ pub struct SimSetup {
 }
 
 impl SimSetup {
-    /// Builds the simulated cell model (analytic insertion scorer) and the planning model.
+    /// Builds the simulated cell model (with the scenario's insertion scorer) and the planning
+    /// model.
     pub fn new(scenario: Scenario) -> Result<Self, OrchestratorError> {
-        Self::with_scorer(scenario, Scorer::Analytic)
-    }
-
-    /// The same with a chosen insertion scorer.
-    pub fn with_scorer(scenario: Scenario, scorer: Scorer) -> Result<Self, OrchestratorError> {
         let s = &scenario.spec;
+        let scorer = s.simulation.insertion_scorer;
         let model = CellModel::new(&s.cell, &s.assembly, &s.noise, &scenario.catalog, scorer)?;
         let knowledge = CellKnowledge::new(&scenario)?;
         Ok(Self {

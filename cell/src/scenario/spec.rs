@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
+use sim::cell::insertion::Scorer;
 use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
 
 /// A whole scenario: the cell, the parts, perception, the assembly sequence and the noise models.
@@ -33,6 +34,20 @@ pub struct ScenarioSpec {
     /// Recovery bounds of the orchestrator.
     #[serde(default)]
     pub policy: PolicySpec,
+    /// How the simulated cell decides outcomes.
+    #[serde(default)]
+    pub simulation: SimulationSpec,
+}
+
+/// Simulation settings (`[simulation]`); a real controller ignores them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSpec {
+    /// Which scorer decides insertions: `analytic` (capture model, microseconds; the default)
+    /// or `contact` (rapier contact simulation of the real meshes, the reference; ~15 ms per
+    /// insertion). `cell scorers` measures how often they agree.
+    #[serde(default)]
+    pub insertion_scorer: Scorer,
 }
 
 /// The orchestrator's default insertion attempts per step (first try plus retries).
