@@ -85,11 +85,20 @@ pub enum Motion {
     Close,
 }
 
+/// A waypoint's name and its command.
+pub type NamedMotion = (&'static str, Motion);
+
+/// A held part: its shapes and its estimated `tcp_T_part`.
+type Held<'a> = (&'a PartGeometry, &'a Isometry3<f64>);
+
+/// Parts already in place (or lying in the feeder) with their poses in the base frame.
+type Placed<'a> = [(&'a PartGeometry, Isometry3<f64>)];
+
 /// A checked sequence of commands with a name for each.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Plan {
     /// (waypoint name, command), in order.
-    pub motions: Vec<(&'static str, Motion)>,
+    pub motions: Vec<NamedMotion>,
     /// Joints at the end of the plan.
     pub end_joints: Joints,
 }
@@ -214,7 +223,7 @@ impl Planner<'_> {
         waypoint: &'static str,
         from: &Joints,
         to: &Joints,
-        held: Option<(&PartGeometry, &Isometry3<f64>)>,
+        held: Option<Held<'_>>,
         placed: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<(), PlanError> {
         let k = self.knowledge;
@@ -275,6 +284,38 @@ impl Planner<'_> {
         Ok(())
     }
 
+    /// The motions from `start` to `pre`, the pose just above a goal, and the joints there: one
+    /// joint move straight to `pre` when that path is checked clear (plus `direct_check`), so the
+    /// arm does not stop above the goal; otherwise a joint move to `q_via` (higher, checked) and a
+    /// fast straight line down. `names` label the two motions.
+    fn down_to(
+        &self,
+        names: [&'static str; 2],
+        start: &Joints,
+        q_via: Joints,
+        pre: Isometry3<f64>,
+        (held, placed): (Option<Held<'_>>, &Placed<'_>),
+        direct_check: impl Fn(&Joints) -> Result<(), PlanError>,
+    ) -> Result<(Vec<NamedMotion>, Joints), PlanError> {
+        let [to_via, to_pre] = names;
+        let q_pre = self.ik(to_pre, &pre, &q_via)?;
+        let s = &self.speeds;
+        let direct = self
+            .check_transit(to_pre, start, &q_pre, held, placed)
+            .and_then(|()| direct_check(&q_pre));
+        if direct.is_ok() {
+            return Ok((vec![(to_via, Motion::MoveJ(q_pre, s.joint))], q_pre));
+        }
+        self.check_transit(to_via, start, &q_via, held, placed)?;
+        Ok((
+            vec![
+                (to_via, Motion::MoveJ(q_via, s.joint)),
+                (to_pre, Motion::MoveL(pre, s.fast)),
+            ],
+            q_pre,
+        ))
+    }
+
     /// The pick of `selection` starting from joints `start`: one joint move to just above the
     /// grasp when that path is checked clear of the table, the placed parts and every part in
     /// the `feeder` (estimated poses, the one to pick included); otherwise a joint move to the
@@ -292,25 +333,14 @@ impl Planner<'_> {
         let pre = raised(&grasp, c.slow_distance);
         let q_approach = self.ik("approach", &approach, start)?;
         let s = &self.speeds;
-        let direct = self.ik("pre-grasp", &pre, &q_approach).and_then(|q_pre| {
-            self.check_transit("pre-grasp", start, &q_pre, None, placed)?;
-            self.check_fingers("pre-grasp", start, &q_pre, feeder)?;
-            Ok(q_pre)
-        });
-        let (mut motions, q_pre) = match direct {
-            Ok(q_pre) => (vec![("approach", Motion::MoveJ(q_pre, s.joint))], q_pre),
-            Err(_) => {
-                self.check_transit("approach", start, &q_approach, None, placed)?;
-                let q_pre = self.ik("pre-grasp", &pre, &q_approach)?;
-                (
-                    vec![
-                        ("approach", Motion::MoveJ(q_approach, s.joint)),
-                        ("pre-grasp", Motion::MoveL(pre, s.fast)),
-                    ],
-                    q_pre,
-                )
-            }
-        };
+        let (mut motions, q_pre) = self.down_to(
+            ["approach", "pre-grasp"],
+            start,
+            q_approach,
+            pre,
+            (None, placed),
+            |q_pre| self.check_fingers("pre-grasp", start, q_pre, feeder),
+        )?;
         let q_grasp = self.ik("grasp", &grasp, &q_pre)?;
         self.check_arm("grasp", &q_grasp)?;
         motions.extend([
@@ -355,24 +385,14 @@ impl Planner<'_> {
         let s = &self.speeds;
         // One joint move straight to the pre-insert pose when that path is checked clear (no
         // stop above the target); otherwise transfer, then straight down.
-        let direct = self.ik("pre-insert", &pre, &q_transfer).and_then(|q_pre| {
-            self.check_transit("pre-insert", start, &q_pre, Some(held), placed)?;
-            Ok(q_pre)
-        });
-        let (mut motions, q_pre) = match direct {
-            Ok(q_pre) => (vec![("transfer", Motion::MoveJ(q_pre, s.joint))], q_pre),
-            Err(_) => {
-                self.check_transit("transfer", start, &q_transfer, Some(held), placed)?;
-                let q_pre = self.ik("pre-insert", &pre, &q_transfer)?;
-                (
-                    vec![
-                        ("transfer", Motion::MoveJ(q_transfer, s.joint)),
-                        ("pre-insert", Motion::MoveL(pre, s.fast)),
-                    ],
-                    q_pre,
-                )
-            }
-        };
+        let (mut motions, q_pre) = self.down_to(
+            ["transfer", "pre-insert"],
+            start,
+            q_transfer,
+            pre,
+            (Some(held), placed),
+            |_| Ok(()),
+        )?;
         let q_insert = self.ik("insert", &insert, &q_pre)?;
         self.check_arm("insert", &q_insert)?;
         motions.extend([
