@@ -7,61 +7,21 @@
 #![allow(missing_docs, non_snake_case)]
 
 use std::hint::black_box;
-use std::path::Path;
 use std::sync::Arc;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use nalgebra::{Isometry3, Vector2, Vector3};
-use perception::part::{Catalog, PartRole, StablePose};
+use nalgebra::{Isometry3, Vector2};
 use rayon::prelude::*;
 use sim::cad::usbc;
 use sim::cell::geometry::PartGeometry;
 use sim::cell::insertion::contact::{self, ContactSettings};
 use sim::cell::insertion::{Mating, ReceiverPart, Scorer};
 use sim::cell::{CellModel, SimCell, script};
-use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
-use sim::stable_poses::geometric_rest_height;
 
-#[derive(serde::Deserialize)]
-struct Scenario {
-    cell: CellSpec,
-    assembly: Vec<AssemblyStep>,
-    noise: NoiseSpec,
-}
+#[path = "../tests/support/mod.rs"]
+mod support;
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
-fn scenario() -> Scenario {
-    let text = std::fs::read_to_string(root().join("scenarios/usbc_nominal.toml")).unwrap();
-    toml::from_str(&text).unwrap()
-}
-
-/// The catalog, with upright/upside-down stable poses from geometry if it is not prepared yet.
-fn catalog() -> Catalog {
-    let mut catalog = Catalog::load(&root().join("scenarios/parts/usbc.toml")).unwrap();
-    for i in 0..catalog.parts.len() {
-        let part = &catalog.parts[i];
-        if part.role == PartRole::Fixture || !part.stable_poses.is_empty() {
-            continue;
-        }
-        let mesh = catalog.load_mesh(part).unwrap();
-        let mut poses = Vec::new();
-        for (name, up, probability) in [("+z", Vector3::z(), 0.7), ("-z", -Vector3::z(), 0.3)] {
-            let rotation = StablePose::canonical_rotation(&up);
-            poses.push(StablePose {
-                name: name.into(),
-                probability,
-                up_in_part: up.into(),
-                rotation: rotation.scaled_axis().into(),
-                rest_height: geometric_rest_height(&mesh, &rotation),
-            });
-        }
-        catalog.parts[i].stable_poses = poses;
-    }
-    catalog
-}
+use support::{catalog, scenario};
 
 fn episodes(c: &mut Criterion) {
     let s = scenario();

@@ -3,11 +3,9 @@
 
 #![allow(non_snake_case)]
 
-use std::path::Path;
 use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use perception::part::{Catalog, PartRole, StablePose};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use robots::kinematics::to_ur_pose;
@@ -18,50 +16,11 @@ use sim::cell::geometry::PartGeometry;
 use sim::cell::gripper::{self, Finger, GraspCandidate, GraspFailure};
 use sim::cell::insertion::{Scorer, Verdict};
 use sim::cell::{CellModel, SimCell, check_feasible, script};
-use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
-use sim::stable_poses::geometric_rest_height;
+use sim::config::NoiseSpec;
 
-#[derive(Clone, serde::Deserialize)]
-struct Scenario {
-    cell: CellSpec,
-    assembly: Vec<AssemblyStep>,
-    noise: NoiseSpec,
-}
+mod support;
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
-fn scenario() -> Scenario {
-    let text = std::fs::read_to_string(root().join("scenarios/usbc_nominal.toml")).unwrap();
-    toml::from_str(&text).unwrap()
-}
-
-/// The catalog; when `cell parts prepare` has not filled in the stable poses yet, the upright
-/// and upside-down classes are added from the mesh geometry so the feeder can be sampled.
-fn catalog() -> Catalog {
-    let mut catalog = Catalog::load(&root().join("scenarios/parts/usbc.toml")).unwrap();
-    for i in 0..catalog.parts.len() {
-        let part = &catalog.parts[i];
-        if part.role == PartRole::Fixture || !part.stable_poses.is_empty() {
-            continue;
-        }
-        let mesh = catalog.load_mesh(part).unwrap();
-        let mut poses = Vec::new();
-        for (name, up, probability) in [("+z", Vector3::z(), 0.7), ("-z", -Vector3::z(), 0.3)] {
-            let rotation = StablePose::canonical_rotation(&up);
-            poses.push(StablePose {
-                name: name.into(),
-                probability,
-                up_in_part: up.into(),
-                rotation: rotation.scaled_axis().into(),
-                rest_height: geometric_rest_height(&mesh, &rotation),
-            });
-        }
-        catalog.parts[i].stable_poses = poses;
-    }
-    catalog
-}
+use support::{Nominal as Scenario, catalog, scenario};
 
 fn model(noise: &NoiseSpec, scorer: Scorer) -> Arc<CellModel> {
     let s = scenario();

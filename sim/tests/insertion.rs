@@ -4,8 +4,6 @@
 
 #![allow(non_snake_case)]
 
-use std::path::Path;
-
 use nalgebra::{Isometry3, Vector2};
 use sim::cad::usbc;
 use sim::cell::geometry::PartGeometry;
@@ -14,15 +12,10 @@ use sim::cell::insertion::contact::{self, ContactSettings};
 use sim::cell::insertion::{Mating, ReceiverPart, Verdict, analytic};
 use sim::config::AssemblyStep;
 
-#[derive(serde::Deserialize)]
-struct Scenario {
-    assembly: Vec<AssemblyStep>,
-}
+mod support;
 
 fn steps() -> Vec<AssemblyStep> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
-    let text = std::fs::read_to_string(path).unwrap();
-    toml::from_str::<Scenario>(&text).unwrap().assembly
+    support::scenario().assembly
 }
 
 struct Parts {

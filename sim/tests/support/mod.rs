@@ -1,0 +1,36 @@
+//! The repository's nominal scenario (the parts of it the simulator reads) and its prepared part
+//! catalog, shared by the sim tests and benches.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use perception::part::Catalog;
+use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
+
+/// The simulator's share of a scenario file.
+#[derive(Clone, serde::Deserialize)]
+pub struct Nominal {
+    /// The cell.
+    pub cell: CellSpec,
+    /// The assembly steps.
+    pub assembly: Vec<AssemblyStep>,
+    /// The error sources.
+    pub noise: NoiseSpec,
+}
+
+/// The repository's `scenarios/` folder.
+pub fn scenarios() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
+}
+
+/// `scenarios/usbc_nominal.toml`.
+pub fn scenario() -> Nominal {
+    let text = std::fs::read_to_string(scenarios().join("usbc_nominal.toml")).unwrap();
+    toml::from_str(&text).unwrap()
+}
+
+/// `scenarios/parts/usbc.toml` (committed prepared: keypoints and stable poses).
+pub fn catalog() -> Catalog {
+    Catalog::load(&scenarios().join("parts/usbc.toml")).unwrap()
+}
