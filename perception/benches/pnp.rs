@@ -7,18 +7,9 @@ use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector2}
 use perception::Camera;
 use perception::pnp::solve_pnp;
 
+/// The stand-in shell's keypoints: eight near its box corners plus the centre, like the seed's.
 fn keypoints() -> Vec<Point3<f64>> {
-    vec![
-        Point3::new(-0.0044, -0.0045, -0.0015),
-        Point3::new(0.0044, -0.0043, -0.0014),
-        Point3::new(0.0042, 0.0045, -0.0015),
-        Point3::new(-0.0043, 0.0044, -0.0013),
-        Point3::new(-0.0040, -0.0041, 0.0015),
-        Point3::new(0.0041, -0.0044, 0.0015),
-        Point3::new(0.0044, 0.0040, 0.0012),
-        Point3::new(-0.0001, 0.0045, 0.0015),
-        Point3::origin(),
-    ]
+    perception::ablation::AblationPart::synthetic_shell().keypoints
 }
 
 fn bench(c: &mut Criterion) {

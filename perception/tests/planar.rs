@@ -38,18 +38,9 @@ fn camera_T_table() -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::from(-(r * Vector3::new(0.0, 0.05, 1.5))), r)
 }
 
+/// The stand-in shell's keypoints: eight near its box corners plus the centre, like the seed's.
 fn keypoints() -> Vec<Point3<f64>> {
-    vec![
-        Point3::new(-0.0044, -0.0045, -0.0015),
-        Point3::new(0.0044, -0.0043, -0.0014),
-        Point3::new(0.0042, 0.0045, -0.0015),
-        Point3::new(-0.0043, 0.0044, -0.0013),
-        Point3::new(-0.0040, -0.0041, 0.0015),
-        Point3::new(0.0041, -0.0044, 0.0015),
-        Point3::new(0.0044, 0.0040, 0.0012),
-        Point3::new(-0.0001, 0.0045, 0.0015),
-        Point3::origin(),
-    ]
+    perception::ablation::AblationPart::synthetic_shell().keypoints
 }
 
 fn random_tilt(rng: &mut ChaCha8Rng, degrees: f64) -> UnitQuaternion<f64> {

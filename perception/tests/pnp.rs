@@ -7,19 +7,9 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-/// Eight corners-ish of a 9 × 9 × 3 mm shell plus its centre, like the seed's keypoints.
+/// The stand-in shell's keypoints: eight near its box corners plus the centre, like the seed's.
 fn keypoints() -> Vec<Point3<f64>> {
-    vec![
-        Point3::new(-0.0044, -0.0045, -0.0015),
-        Point3::new(0.0044, -0.0043, -0.0014),
-        Point3::new(0.0042, 0.0045, -0.0015),
-        Point3::new(-0.0043, 0.0044, -0.0013),
-        Point3::new(-0.0040, -0.0041, 0.0015),
-        Point3::new(0.0041, -0.0044, 0.0015),
-        Point3::new(0.0044, 0.0040, 0.0012),
-        Point3::new(-0.0001, 0.0045, 0.0015),
-        Point3::origin(),
-    ]
+    perception::ablation::AblationPart::synthetic_shell().keypoints
 }
 
 /// A random pose of the part in front of the seed's camera at 1.4–1.9 m.
