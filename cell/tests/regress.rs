@@ -2,37 +2,11 @@
 //! passes against the committed baseline, flags a real drop (a noisier camera), refuses invalid
 //! scenarios before running, and sharded/resumed runs equal an uninterrupted one.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
+mod support;
 
-fn cell(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_cell"))
-        .args(args)
-        .output()
-        .expect("cell runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn nominal() -> String {
-    root()
-        .join("scenarios/usbc_nominal.toml")
-        .display()
-        .to_string()
-}
+use support::{cell, nominal, root, text};
 
 /// The nominal scenario copied to `dir` with absolute data paths and `edit` applied.
 fn variant(dir: &Path, edit: (&str, &str)) -> String {

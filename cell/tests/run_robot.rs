@@ -4,27 +4,11 @@
 //! connects; malformed robot values are refused with what was expected. Loopback only.
 
 use std::net::TcpListener;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn nominal() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml")
-}
+mod support;
 
-fn cell(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_cell"))
-        .args(args)
-        .output()
-        .expect("cell runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use support::{cell, nominal, text};
 
 /// The episode records of a results file (the header line skipped).
 fn records(dir: &Path) -> Vec<serde_json::Value> {
@@ -51,7 +35,7 @@ fn outcomes(r: &serde_json::Value) -> serde_json::Value {
 #[test]
 fn a_virtual_ur_run_matches_the_sim_run_and_writes_the_same_results() {
     let tmp = tempfile::tempdir().unwrap();
-    let scenario = nominal().display().to_string();
+    let scenario = nominal();
     let vur_out = tmp.path().join("vur");
     let sim_out = tmp.path().join("sim");
     let o = cell(&[
@@ -118,7 +102,7 @@ fn a_real_controller_without_the_opt_in_is_refused_before_connecting() {
     let robot = format!("ur://127.0.0.1:{port}");
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("runs");
-    let scenario = nominal().display().to_string();
+    let scenario = nominal();
     let o = cell(&[
         "run",
         &scenario,
@@ -186,7 +170,7 @@ fn a_real_controller_without_the_opt_in_is_refused_before_connecting() {
 
 #[test]
 fn malformed_robot_values_are_refused_with_what_was_expected() {
-    let scenario = nominal().display().to_string();
+    let scenario = nominal();
     for (bad, why) in [
         ("kuka", "unknown robot"),
         ("ur://", "no host"),

@@ -1,27 +1,25 @@
 //! `cell scorers`: the analytic and contact scorers compared on the nominal scenario's parts
 //! loaded from the catalog, through the real binary.
 
-use std::path::Path;
-use std::process::Command;
+mod support;
 
-fn cell() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_cell"))
-}
-
-fn nominal() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml")
-}
+use support::{cell, nominal};
 
 #[test]
 fn compares_every_step_and_writes_the_disagreements() {
     let out = std::env::temp_dir().join(format!("cell_scorers_{}.json", std::process::id()));
-    let run = cell()
-        .arg("scorers")
-        .arg(nominal())
-        .args(["--samples", "60", "--min-agreement", "0.8", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let out_arg = out.display().to_string();
+    let scenario = nominal();
+    let run = cell(&[
+        "scorers",
+        &scenario,
+        "--samples",
+        "60",
+        "--min-agreement",
+        "0.8",
+        "--out",
+        &out_arg,
+    ]);
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(
         run.status.success(),
@@ -54,12 +52,15 @@ fn compares_every_step_and_writes_the_disagreements() {
 
 #[test]
 fn a_minimum_above_the_measured_agreement_fails_and_bad_arguments_are_refused() {
-    let run = cell()
-        .arg("scorers")
-        .arg(nominal())
-        .args(["--samples", "30", "--min-agreement", "1.5"])
-        .output()
-        .unwrap();
+    let scenario = nominal();
+    let run = cell(&[
+        "scorers",
+        &scenario,
+        "--samples",
+        "30",
+        "--min-agreement",
+        "1.5",
+    ]);
     assert!(!run.status.success());
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(
@@ -67,11 +68,7 @@ fn a_minimum_above_the_measured_agreement_fails_and_bad_arguments_are_refused() 
         "{stderr}"
     );
 
-    let run = cell()
-        .arg("scorers")
-        .arg("no/such/scenario.toml")
-        .output()
-        .unwrap();
+    let run = cell(&["scorers", "no/such/scenario.toml"]);
     assert!(!run.status.success());
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(stderr.contains("no/such/scenario.toml"), "{stderr}");
