@@ -102,18 +102,14 @@ fn a_real_controller_without_the_opt_in_is_refused_before_connecting() {
     let robot = format!("ur://127.0.0.1:{port}");
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("runs");
-    let scenario = nominal();
-    let o = cell(&[
-        "run",
-        &scenario,
-        "--robot",
-        &robot,
-        "--episodes",
-        "1",
-        "--out",
-        &out_dir.display().to_string(),
-        "--quiet",
-    ]);
+    let (scenario, out) = (nominal(), out_dir.display().to_string());
+    // `cell run` on that controller with `extra` options.
+    let run_on = |extra: &[&str]| {
+        let mut args = vec!["run", &scenario, "--robot", &robot, "--out", &out];
+        args.extend_from_slice(extra);
+        cell(&args)
+    };
+    let o = run_on(&["--episodes", "1", "--quiet"]);
     assert!(!o.status.success());
     let t = text(&o);
     assert!(
@@ -126,18 +122,13 @@ fn a_real_controller_without_the_opt_in_is_refused_before_connecting() {
     let camera = tmp.path().join("camera");
     std::fs::create_dir(&camera).unwrap();
     std::fs::write(camera.join("frame-0001.png"), b"not looked at").unwrap();
-    let o = cell(&[
-        "run",
-        &scenario,
-        "--robot",
-        &robot,
+    let camera = camera.display().to_string();
+    let o = run_on(&[
         "--allow-motion",
         "--camera",
-        &camera.display().to_string(),
+        &camera,
         "--episodes",
         "1",
-        "--out",
-        &out_dir.display().to_string(),
         "--quiet",
     ]);
     assert!(!o.status.success());
@@ -148,15 +139,7 @@ fn a_real_controller_without_the_opt_in_is_refused_before_connecting() {
     );
 
     // The opt-in without a camera source is refused too.
-    let o = cell(&[
-        "run",
-        &scenario,
-        "--robot",
-        &robot,
-        "--allow-motion",
-        "--out",
-        &out_dir.display().to_string(),
-    ]);
+    let o = run_on(&["--allow-motion"]);
     assert!(!o.status.success());
     assert!(text(&o).contains("--camera"), "{}", text(&o));
 
