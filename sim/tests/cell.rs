@@ -37,24 +37,35 @@ fn zero_noise() -> NoiseSpec {
     }
 }
 
-#[test]
-fn a_grasp_beside_a_neighbour_fails_with_that_cause() {
-    let s = scenario();
-    let cat = catalog();
-    let shell = PartGeometry::from_catalog(&cat, "main_shell").unwrap();
+/// The main shell's shapes and its upright stable pose.
+fn upright_shell(cat: &perception::part::Catalog) -> (PartGeometry, perception::part::StablePose) {
+    let shell = PartGeometry::from_catalog(cat, "main_shell").unwrap();
     let upright = shell
         .stable_poses
         .iter()
         .find(|p| p.name == "+z")
         .unwrap()
         .clone();
-    let at = |x: f64, y: f64| upright.table_T_part(x, y, 0.0);
-    // TCP over the first shell at the grip height, z down, closing along the part's x (table x).
-    let tcp = Isometry3::from_parts(
+    (shell, upright)
+}
+
+/// The TCP over the table origin at the shell's grip height, z down, the fingers closing along
+/// table x.
+fn tcp_over_origin() -> Isometry3<f64> {
+    Isometry3::from_parts(
         Translation3::new(0.0, 0.0, 0.0022),
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2)
             * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-    );
+    )
+}
+
+#[test]
+fn a_grasp_beside_a_neighbour_fails_with_that_cause() {
+    let s = scenario();
+    let cat = catalog();
+    let (shell, upright) = upright_shell(&cat);
+    let at = |x: f64, y: f64| upright.table_T_part(x, y, 0.0);
+    let tcp = tcp_over_origin();
     let closing = tcp.rotation * Vector3::y();
     assert!(
         (closing.x.abs() - 1.0).abs() < 1e-9,
@@ -114,18 +125,8 @@ fn a_grasp_beside_a_neighbour_fails_with_that_cause() {
 fn a_part_wider_than_the_stroke_cannot_be_grasped() {
     let s = scenario();
     let cat = catalog();
-    let shell = PartGeometry::from_catalog(&cat, "main_shell").unwrap();
-    let upright = shell
-        .stable_poses
-        .iter()
-        .find(|p| p.name == "+z")
-        .unwrap()
-        .clone();
-    let tcp = Isometry3::from_parts(
-        Translation3::new(0.0, 0.0, 0.0022),
-        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2)
-            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-    );
+    let (shell, upright) = upright_shell(&cat);
+    let tcp = tcp_over_origin();
     let mut spec = s.cell.gripper.clone();
     spec.stroke = 0.008;
     let parts = [GraspCandidate {
