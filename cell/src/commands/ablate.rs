@@ -347,25 +347,13 @@ fn table(config: &AblationConfig, rows: &[AblationRow]) -> String {
     s
 }
 
-/// Registers the committed DejaVu Sans (free licence, cell/assets/fonts) as plotters' sans-serif
-/// font once: plotters is built with `ab_glyph`, not the fontconfig-based `ttf` feature.
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let bytes: &'static [u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
-        if plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_err() {
-            tracing::warn!("the bundled font could not be loaded; plot text will be missing");
-        }
-    });
-}
-
 fn plot_axis(
     path: &Path,
     config: &AblationConfig,
     rows: &[AblationRow],
     axis: NoiseAxis,
 ) -> anyhow::Result<()> {
-    register_font();
+    cell::report::plots::register_font();
     let size = (1800, 900);
     if path.extension().is_some_and(|e| e == "svg") {
         let root = SVGBackend::new(path, size).into_drawing_area();

@@ -26,7 +26,7 @@ const GREY: RGBColor = RGBColor(127, 127, 127);
 
 /// Registers the committed DejaVu Sans (cell/assets/fonts) as plotters' sans-serif font: with
 /// the `ab_glyph` feature plotters needs it to lay out text, even for SVG.
-fn register_font() {
+pub fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         let bytes: &'static [u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
