@@ -36,8 +36,11 @@ pub struct DropSettings {
     /// ... for this long, seconds. (A pose criterion, not a velocity one: contact solvers leave
     /// micro-jitter on flat faces whose velocity never quite reaches zero.)
     pub rest_time: f64,
-    /// Parts simulated side by side in one physics world (they never touch).
+    /// Parts simulated side by side in one physics world (rounded to whole crowds).
     pub batch: usize,
+    /// Parts dropped together onto one spot, free to collide and lean on each other: 1 drops
+    /// each part alone (the stable poses of a single part); more models a crowded feeder.
+    pub crowd: usize,
 }
 
 impl Default for DropSettings {
@@ -54,6 +57,7 @@ impl Default for DropSettings {
             rest_rotation: 2e-4,
             rest_time: 0.1,
             batch: 64,
+            crowd: 1,
         }
     }
 }
@@ -157,6 +161,13 @@ impl DropBody {
 }
 
 /// Simulates drops `first..first + count` of the sequence defined by `settings` in one world.
+///
+/// Drops are released in groups of [`DropSettings::crowd`] (by global index, so `first` should
+/// be a multiple of it): a group falls together onto one spot, its parts stacked at release so
+/// none overlap, and may come to rest touching or leaning on each other. Groups are far enough
+/// apart never to meet. A part counts as at rest once it has stayed still for
+/// [`DropSettings::rest_time`]; if a neighbour knocks it before its whole group rests, it is
+/// watched again.
 pub fn simulate_batch(
     body: &DropBody,
     settings: &DropSettings,
@@ -164,8 +175,21 @@ pub fn simulate_batch(
     count: usize,
 ) -> Vec<DropOutcome> {
     let mut world = drop_world(settings.dt);
-    let spacing = 3.0 * body.diameter + 0.01;
-    let side = (count as f64).sqrt().ceil() as usize;
+    let crowd = settings.crowd.max(1);
+    // Parts of a group are released over a square about as wide as the group lying side by side.
+    let scatter = if crowd > 1 {
+        0.5 * body.diameter * (crowd as f64).sqrt()
+    } else {
+        0.0
+    };
+    let spacing = 3.0 * body.diameter + 2.0 * scatter + 0.01;
+    let group_of = |k: usize| (first + k) / crowd - first / crowd;
+    let groups = if count == 0 {
+        0
+    } else {
+        group_of(count - 1) + 1
+    };
+    let side = (groups as f64).sqrt().ceil() as usize;
     let half = spacing * side as f64;
     let ground = ColliderBuilder::cuboid(half, half, 0.01)
         .translation(Vector::new(half / 2.0, half / 2.0, -0.01))
@@ -182,9 +206,24 @@ pub fn simulate_batch(
     for k in 0..count {
         let index = first + k;
         let rotation = stratified_rotation(index, shift);
-        let z = geometric_rest_height(&body.mesh, &rotation) + settings.drop_height;
-        let (i, j) = (k % side, k / side);
-        let centre = Vector3::new((i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing, z);
+        let g = group_of(k);
+        let in_group = index % crowd;
+        // Each part of a group starts one diameter (plus 0.5 mm) above the one before it.
+        let lift = in_group as f64 * (body.diameter + 5e-4);
+        let z = geometric_rest_height(&body.mesh, &rotation) + settings.drop_height + lift;
+        let mut offset = Vector3::zeros();
+        if crowd > 1 {
+            let mut rng = ChaCha8Rng::seed_from_u64(settings.seed);
+            rng.set_stream(1 + index as u64);
+            offset.x = rng.random_range(-scatter..=scatter);
+            offset.y = rng.random_range(-scatter..=scatter);
+        }
+        let (i, j) = (g % side, g / side);
+        let centre = Vector3::new(
+            (i as f64 + 0.5) * spacing + offset.x,
+            (j as f64 + 0.5) * spacing + offset.y,
+            z,
+        );
         let rb = RigidBodyBuilder::dynamic()
             .translation(vec_from_vector(&centre))
             .rotation(rot_from_unit_quaternion(&rotation).to_scaled_axis())
@@ -203,7 +242,12 @@ pub fn simulate_batch(
         handles.push(h);
     }
     let mut outcomes: Vec<Option<DropOutcome>> = vec![None; count];
+    let mut removed = vec![false; count];
     let mut calm = vec![0.0f64; count];
+    let mut restless = vec![0usize; groups];
+    for k in 0..count {
+        restless[group_of(k)] += 1;
+    }
     let mut anchor: Vec<(Vector, UnitQuaternion<f64>)> = handles
         .iter()
         .map(|h| {
@@ -213,13 +257,13 @@ pub fn simulate_batch(
             )
         })
         .collect();
-    let mut remaining = count;
+    let mut remaining = groups;
     let mut t = 0.0;
     while remaining > 0 && t < settings.max_time {
         world.step();
         t += settings.dt;
         for k in 0..count {
-            if outcomes[k].is_some() {
+            if removed[k] {
                 continue;
             }
             let rb = &world.bodies[handles[k]];
@@ -231,15 +275,24 @@ pub fn simulate_batch(
             } else {
                 calm[k] = 0.0;
                 anchor[k] = (p, q);
+                if outcomes[k].take().is_some() {
+                    restless[group_of(k)] += 1;
+                }
             }
-            if calm[k] >= settings.rest_time {
+            if calm[k] >= settings.rest_time && outcomes[k].is_none() {
                 outcomes[k] = Some(DropOutcome {
-                    rotation: unit_quaternion_from_rot(rb.rotation()),
-                    height: rb.translation().z,
+                    rotation: q,
+                    height: p.z,
                     settled: true,
                     time: t,
                 });
-                remaining -= 1;
+                restless[group_of(k)] -= 1;
+            }
+        }
+        // A group whose parts all rest leaves the world, so later steps cost less.
+        for k in 0..count {
+            if !removed[k] && restless[group_of(k)] == 0 {
+                removed[k] = true;
                 world.bodies.remove(
                     handles[k],
                     &mut world.islands,
@@ -251,6 +304,7 @@ pub fn simulate_batch(
                 );
             }
         }
+        remaining = restless.iter().filter(|&&r| r > 0).count();
     }
     outcomes
         .into_iter()
