@@ -174,8 +174,9 @@ fn name_uniquely(classes: &mut [PoseClass]) {
 pub const LEAN_HEIGHT: f64 = 50e-6;
 
 /// For each outcome, whether it came to rest on a neighbour (crowded drops) rather than on the
-/// table: it rests higher than its geometry allows by [`LEAN_HEIGHT`], or it settled tilted off
-/// every face of its convex hull by more than [`CLASS_ANGLE_RAD`].
+/// table: it rests higher than its geometry allows by [`LEAN_HEIGHT`], or it is tilted off
+/// every face of its convex hull by more than [`CLASS_ANGLE_RAD`] (a single part on a table
+/// always ends on a hull face).
 pub fn leaning(outcomes: &[DropOutcome], mesh: &TriMesh) -> Vec<bool> {
     let faces = hull_up_directions(mesh);
     outcomes.iter().map(|o| leans(o, mesh, &faces)).collect()
@@ -185,7 +186,7 @@ fn leans(o: &DropOutcome, mesh: &TriMesh, faces: &[Vector3<f64>]) -> bool {
     let raised = o.height - geometric_rest_height(mesh, &o.rotation) > LEAN_HEIGHT;
     let up = o.rotation.inverse() * Vector3::z();
     let off_faces = faces.iter().all(|f| f.angle(&up) > CLASS_ANGLE_RAD);
-    raised || (o.settled && off_faces)
+    raised || off_faces
 }
 
 /// For each face of the mesh's convex hull, the table-up direction (in the part frame) of the
