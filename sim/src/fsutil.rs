@@ -69,7 +69,13 @@ mod tests {
         assert!(blocked.join("inner").exists());
         let temporaries = std::fs::read_dir(dir.path())
             .unwrap()
-            .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with(".tmp"))
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .ends_with(".tmp")
+            })
             .count();
         assert_eq!(temporaries, 0);
         // A missing folder is an error, not a panic.

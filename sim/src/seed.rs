@@ -44,7 +44,10 @@ mod tests {
         for seed in 0..4 {
             for index in 0..16 {
                 for stream in 0..6 {
-                    assert!(seen.insert(draw(seed, index, stream)), "{seed} {index} {stream}");
+                    assert!(
+                        seen.insert(draw(seed, index, stream)),
+                        "{seed} {index} {stream}"
+                    );
                 }
             }
         }

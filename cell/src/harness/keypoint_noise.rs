@@ -11,8 +11,10 @@ use perception::part::{Catalog, PartRole};
 use perception::planar::{PlanarConfig, PlanarRefiner};
 use perception::pnp::solve_pnp;
 use perception::symmetry::symmetry_group;
-use rand::{Rng, RngExt, SeedableRng};
+use rand::{Rng, RngExt};
 use rand_chacha::ChaCha8Rng;
+use sim::cell::noise::PERCEPTION_STREAM;
+use sim::seed::stream_rng;
 
 use super::HarnessError;
 use crate::scenario::{PerceptionMode, Scenario};
@@ -233,20 +235,8 @@ fn pixel_rms(
     (sum / model.len().max(1) as f64).sqrt()
 }
 
-/// The seed of one of an episode's random streams (SplitMix64 of seed, episode and stream).
-pub fn stream_seed(seed: u64, episode: u32, stream: u64) -> u64 {
-    let mut z = seed
-        ^ (u64::from(episode)).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ stream.wrapping_mul(0xD1B5_4A32_D192_ED03);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// Stream id of the perception noise.
-const PERCEPTION_STREAM: u64 = 0x5045_5243;
-
-/// The scenario's keypoint-noise perception for `episode`, with its own seeded stream.
+/// The scenario's keypoint-noise perception for `episode`, on the episode's perception stream
+/// (`sim::seed::stream_rng`, stream `sim::cell::noise::PERCEPTION_STREAM`).
 pub fn keypoint_noise_for(
     scenario: &Scenario,
     episode: u32,
@@ -255,8 +245,7 @@ pub fn keypoint_noise_for(
     if p.mode != PerceptionMode::KeypointNoise {
         return Err(HarnessError::ModeUnavailable(p.mode));
     }
-    let rng =
-        ChaCha8Rng::seed_from_u64(stream_seed(scenario.spec.seed, episode, PERCEPTION_STREAM));
+    let rng = stream_rng(scenario.spec.seed, u64::from(episode), PERCEPTION_STREAM);
     Ok(KeypointNoise::new(
         &scenario.catalog,
         scenario.spec.cell.base_T_table.isometry(),

@@ -24,7 +24,7 @@ mod over_rtde;
 mod sim_io;
 mod verdict;
 
-pub use keypoint_noise::{KeypointNoise, KeypointNoiseConfig, keypoint_noise_for, stream_seed};
+pub use keypoint_noise::{KeypointNoise, KeypointNoiseConfig, keypoint_noise_for};
 pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
 pub use sim_io::SimCellIo;
 pub use verdict::{check_of, source_name};
@@ -33,9 +33,7 @@ use std::sync::{Arc, Mutex};
 
 use sim::cell::{CellModel, SimCell};
 
-use crate::orchestrator::{
-    EpisodeOutput, KnowledgeError, PerceptionError, Setup, run_episode,
-};
+use crate::orchestrator::{EpisodeOutput, KnowledgeError, PerceptionError, Setup, run_episode};
 use crate::scenario::{PerceptionMode, Scenario};
 
 /// Why a simulated episode could not be set up (nothing ran).

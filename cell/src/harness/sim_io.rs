@@ -35,8 +35,7 @@ impl CellIo for SimCell {
     }
 
     fn shake_feeder(&mut self) -> Result<(), CellIoError> {
-        self.shake()
-            .map_err(|e| CellIoError::Feeder(e.to_string()))
+        self.shake().map_err(|e| CellIoError::Feeder(e.to_string()))
     }
 
     fn part_in_gripper(&mut self) -> Option<bool> {
@@ -98,7 +97,9 @@ impl SimCellIo {
     }
 
     fn lock(&self) -> MutexGuard<'_, SimCell> {
-        self.cell.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        self.cell
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 }
 

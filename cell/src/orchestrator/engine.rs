@@ -119,7 +119,10 @@ impl<'a> Engine<'a> {
             state = next;
         }
         let success = self.records.len() == self.steps()
-            && self.records.iter().all(|r| r.outcome == StepOutcome::Seated);
+            && self
+                .records
+                .iter()
+                .all(|r| r.outcome == StepOutcome::Seated);
         let record = EpisodeRecord {
             version: RECORD_VERSION,
             scenario: self.ctx.scenario.to_string(),
@@ -270,12 +273,7 @@ impl<'a> Engine<'a> {
                 } else {
                     FEEDER_EXHAUSTED
                 };
-                Ok(self.finish_step(
-                    StepOutcome::Aborted,
-                    Some(cause),
-                    vec![source.into()],
-                    None,
-                ))
+                Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![source.into()], None))
             }
         }
     }
@@ -472,7 +470,11 @@ impl<'a> Engine<'a> {
     /// estimate moves up by it (the next insertion goes that much deeper); and a search offset
     /// (lateral for a miss, yaw for a jam, since a real cell measures neither error directly)
     /// is tried, a different one each attempt.
-    async fn retry_insertion(&mut self, state: State, check: InsertionCheck) -> Result<State, Stop> {
+    async fn retry_insertion(
+        &mut self,
+        state: State,
+        check: InsertionCheck,
+    ) -> Result<State, Stop> {
         let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
             .into_iter()
             .filter(|(_, m)| *m != Motion::Open)

@@ -7,11 +7,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::{
-    LoadedScenario, ResultsStore, RobotTarget, RunError, RunOptions, RunOutcome, Shard,
-    StoreError, Summary, results_dir, run_episodes,
+    LoadedScenario, ResultsStore, RobotTarget, RunError, RunOptions, RunOutcome, Shard, StoreError,
+    Summary, results_dir, run_episodes,
 };
 use crate::episode::EpisodeRecord;
-use crate::harness::{HarnessError, OverRtdeError, SimSetup, run_sim_episode_blocking, sim_episode_over_rtde};
+use crate::harness::{
+    HarnessError, OverRtdeError, SimSetup, run_sim_episode_blocking, sim_episode_over_rtde,
+};
 use crate::orchestrator::{
     EpisodeOutput, KnowledgeError, PartPerception, ProductionCellIo, ProductionError,
     ProductionOptions, Setup, SplitCell, preflight, run_episode,
@@ -158,7 +160,9 @@ impl<'d> Runner<'d> {
             Driver::Sim => Runner::Sim(SimSetup::new(scenario.clone())?),
             Driver::VirtualUr => Runner::VirtualUr(SimSetup::new(scenario.clone())?, runtime()?),
             // A real controller gets no simulated cell: only the engine's planning model.
-            Driver::Production(p) => Runner::Production(p, Setup::new(scenario.clone())?, runtime()?),
+            Driver::Production(p) => {
+                Runner::Production(p, Setup::new(scenario.clone())?, runtime()?)
+            }
         })
     }
 
@@ -259,10 +263,10 @@ impl Production {
             .unwrap_or_else(|p| p.into_inner())
             .take()
             .ok_or_else(|| {
-                robot_err(robots::robot::RobotError::Rejected {
-                    detail: "the camera source serves one episode at a time".into(),
-                })
-            })?;
+            robot_err(robots::robot::RobotError::Rejected {
+                detail: "the camera source serves one episode at a time".into(),
+            })
+        })?;
         let mut workcell = SplitCell {
             robot: &mut robot,
             io: &mut io,

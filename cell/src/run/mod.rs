@@ -12,8 +12,8 @@ pub mod store;
 pub mod summary;
 
 pub use execute::{
-    Driver, EpisodeError, ExecuteError, Executed, Production, ProductionRefusal, execute, execute_on,
-    production,
+    Driver, EpisodeError, ExecuteError, Executed, Production, ProductionRefusal, execute,
+    execute_on, production,
 };
 pub use header::{ResultsHeader, sha256_hex};
 pub use merge::{MergeError, Merged, merge, write_results};
