@@ -9,7 +9,7 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use anyhow::Context;
-use cell::orchestrator::SimSetup;
+use cell::harness::SimSetup;
 use cell::scenario::Scenario;
 use robots::virtual_ur::arm::ArmModel;
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
