@@ -4,7 +4,7 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::mesh_repair::{edge_uses, find, union};
+use super::mesh_repair::{Edge, EdgeUses, edge_uses, find, union};
 
 /// A connected group of open edges: where a mesh is open, in the mesh's own unit (metres once
 /// loaded), shown in millimetres.
@@ -177,7 +177,7 @@ impl TriMesh {
                 }
             }
         }
-        let mut open: Vec<((u32, u32), (usize, usize))> = edge_uses(&self.triangles)
+        let mut open: Vec<(Edge, EdgeUses)> = edge_uses(&self.triangles)
             .into_iter()
             .filter(|(_, (f, b))| f != b)
             .collect();
@@ -194,7 +194,7 @@ impl TriMesh {
     }
 
     /// Groups open edges into connected regions (edges sharing a vertex), largest first.
-    fn open_regions(&self, open: &[((u32, u32), (usize, usize))]) -> Vec<OpenRegion> {
+    fn open_regions(&self, open: &[(Edge, EdgeUses)]) -> Vec<OpenRegion> {
         let mut parent: Vec<u32> = (0..self.vertices.len() as u32).collect();
         for &((a, b), _) in open {
             union(&mut parent, a, b);
@@ -221,7 +221,7 @@ impl TriMesh {
             .into_iter()
             .filter_map(|r| by_root.remove(&r))
             .collect();
-        regions.sort_by(|a, b| b.edges.cmp(&a.edges));
+        regions.sort_by_key(|r| std::cmp::Reverse(r.edges));
         regions
     }
 

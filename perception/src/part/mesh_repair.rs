@@ -332,9 +332,14 @@ impl TriMesh {
     }
 }
 
-/// How often each undirected edge (low index, high index) is used low→high and high→low.
-pub(crate) fn edge_uses(triangles: &[[u32; 3]]) -> HashMap<(u32, u32), (usize, usize)> {
-    let mut count: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
+/// An undirected edge as (low vertex index, high vertex index).
+pub(crate) type Edge = (u32, u32);
+/// How often an edge is used low→high and high→low.
+pub(crate) type EdgeUses = (usize, usize);
+
+/// How often each undirected edge is used in each direction.
+pub(crate) fn edge_uses(triangles: &[[u32; 3]]) -> HashMap<Edge, EdgeUses> {
+    let mut count: HashMap<Edge, EdgeUses> = HashMap::new();
     for t in triangles {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
