@@ -137,8 +137,9 @@ async fn ur_rtde_receive_control_and_io_interfaces_drive_the_virtual_controller(
     // servoJ tracks the streamed targets; speedJ moves joint 1 at the commanded speed.
     let sj = step("servoJ");
     let (q, last, start) = (f64s(&sj["q"]), f64s(&sj["last_target"]), f64s(&sj["start"]));
-    // servoStop decelerates at 4 rad/s² from the tracking speed (≤ 0.6 rad/s even when
-    // targets arrive in bursts), so the arm ends at or shortly past the last target.
+    // servoStop is `stopl(a)` in ur_rtde's script: the TCP decelerates at 4 m/s² along its
+    // tangent from the tracking speed, so the arm ends at or shortly past the last target, and
+    // the other joints move only by that short straight stop.
     assert!(
         q[0] > last[0] - 1e-3 && q[0] < last[0] + 0.05,
         "servoJ ended at {} for last target {}",
@@ -146,8 +147,8 @@ async fn ur_rtde_receive_control_and_io_interfaces_drive_the_virtual_controller(
         last[0]
     );
     assert!(
-        max_abs_diff(&q[1..], &start[1..]) < 1e-9,
-        "only joint 1 moved"
+        max_abs_diff(&q[1..], &start[1..]) < 5e-3,
+        "only joint 1 moved (beyond the tool-space stop): {q:?} from {start:?}"
     );
     assert!(q[0] - start[0] > 0.09, "servoJ moved joint 1 by 0.1 rad");
     let sp = step("speedJ");

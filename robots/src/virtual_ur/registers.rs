@@ -80,3 +80,15 @@ impl StandardIo {
         true
     }
 }
+
+/// The active payload as set by `set_payload` / `set_target_payload` (and streamed as
+/// `payload`, `payload_cog`, `payload_inertia`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Payload {
+    /// Mass (kg).
+    pub mass: f64,
+    /// Centre of gravity in the flange frame (m).
+    pub cog: [f64; 3],
+    /// Inertia (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) at the centre of gravity (kg m²).
+    pub inertia: [f64; 6],
+}
