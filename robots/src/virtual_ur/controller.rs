@@ -140,6 +140,8 @@ enum Quantity {
     InputBitsHigh,
     OutputBitsLow,
     OutputBitsHigh,
+    AnalogOut0,
+    AnalogOut1,
     Payload,
     PayloadCog,
     PayloadInertia,
@@ -175,6 +177,8 @@ const QUANTITIES: &[(&str, Quantity)] = &[
     ("input_bit_registers32_to_63", Quantity::InputBitsHigh),
     ("output_bit_registers0_to_31", Quantity::OutputBitsLow),
     ("output_bit_registers32_to_63", Quantity::OutputBitsHigh),
+    ("standard_analog_output0", Quantity::AnalogOut0),
+    ("standard_analog_output1", Quantity::AnalogOut1),
     ("payload", Quantity::Payload),
     ("payload_cog", Quantity::PayloadCog),
     ("payload_inertia", Quantity::PayloadInertia),
@@ -822,6 +826,8 @@ impl Controller for VirtualController {
                     Quantity::InputBitsHigh => Value::Uint32((s.regs.input_bits >> 32) as u32),
                     Quantity::OutputBitsLow => Value::Uint32(s.regs.output_bits as u32),
                     Quantity::OutputBitsHigh => Value::Uint32((s.regs.output_bits >> 32) as u32),
+                    Quantity::AnalogOut0 => Value::Double(s.io.analog_out[0]),
+                    Quantity::AnalogOut1 => Value::Double(s.io.analog_out[1]),
                     Quantity::Payload => Value::Double(s.payload.mass),
                     Quantity::PayloadCog => Value::Vector3d(s.payload.cog),
                     Quantity::PayloadInertia => Value::Vector6d(s.payload.inertia),
@@ -879,6 +885,13 @@ impl Controller for VirtualController {
                 .position(|(n, _)| *n == name)
                 .and_then(|i| named.get(i).copied().flatten())
         };
+        if get("external_force_torque").is_some() && core.program.is_some() {
+            // ur_rtde's setExternalForceTorque: the model has no force control to feed.
+            let e = "virtual-ur: external_force_torque input is not simulated (no force control)";
+            tracing::warn!("{e}");
+            core.log(e.into());
+            Self::stop_program(&mut core);
+        }
         let masked = |old: u8, mask: Option<Value>, value: Option<Value>| match (mask, value) {
             (Some(Value::Uint8(m)), Some(Value::Uint8(v))) => (old & !m) | (v & m),
             _ => old,
@@ -908,6 +921,20 @@ impl Controller for VirtualController {
             && f.is_finite()
         {
             io.speed_slider = f.clamp(0.0, 1.0);
+        }
+        if let Some(Value::Uint8(mask)) = get("standard_analog_output_mask") {
+            let domain = match get("standard_analog_output_type") {
+                Some(Value::Uint8(t)) => t,
+                _ => 0,
+            };
+            for i in 0..2 {
+                if mask >> i & 1 == 1
+                    && let Some(Value::Double(ratio)) =
+                        get(["standard_analog_output_0", "standard_analog_output_1"][i])
+                {
+                    io.set_analog_output(i, ratio, domain >> i & 1 == 1);
+                }
+            }
         }
         if let Some(Value::Uint32(bits)) = get("input_bit_registers0_to_31") {
             core.regs.input_bits = (core.regs.input_bits & !0xffff_ffff) | u128::from(bits);

@@ -137,6 +137,9 @@ pub struct UrRtdeProgram {
     /// The jog frame's rotation, fixed when jogging starts.
     jog_frame: Option<UnitQuaternion<f64>>,
     history: VecDeque<Joints>,
+    /// The command id the register held when the program started: left by a client whose
+    /// program ended, it is not run again until the client writes the register.
+    stale: Option<i32>,
 }
 
 const READY: i32 = 1;
@@ -503,6 +506,7 @@ impl Program for UrRtdeProgram {
         self.executing = false;
         self.waiting_for_motion = false;
         self.jog_frame = None;
+        self.stale = Some(io.regs.input_int[0]).filter(|c| *c != 0);
         self.write_async(io.regs, false, false);
         io.regs.output_int[0] = READY;
     }
@@ -530,10 +534,15 @@ impl Program for UrRtdeProgram {
             self.waiting_for_motion = false;
             io.regs.output_int[0] = DONE;
         }
-        let cmd = io.regs.input_int[0];
-        // getActualToolFlangePose is realtime in the script but ur_rtde waits for "done" after
-        // it; answering it as a regular command gives ur_rtde its value instead of a timeout.
-        if REALTIME.contains(&cmd) && cmd != GET_ACTUAL_TOOL_FLANGE_POSE {
+        let mut cmd = io.regs.input_int[0];
+        if self.stale.is_some() {
+            if self.stale == Some(cmd) {
+                cmd = 0;
+            } else {
+                self.stale = None;
+            }
+        }
+        if REALTIME.contains(&cmd) {
             if let Err(e) = self.realtime(io, cmd) {
                 io.runtime_error = Some(e);
                 return ProgramStep::Exit;
