@@ -738,12 +738,13 @@ mod ur_rtde_handshake {
     use robots::virtual_ur::arm::KinematicArm;
     use robots::virtual_ur::controller::VirtualController;
     use robots::virtual_ur::ur_rtde_program::ur_rtde_cmd as cmd;
+    use std::f64::consts::FRAC_PI_2;
     use std::time::Duration;
 
     /// Commands ur_rtde sends without waiting for "done" (and without clearing the register).
     const CLIENT_REALTIME: [i32; 8] = [11, 24, 12, 9, 10, 6, 38, 25];
     const CLIENT_REALTIME_MORE: [i32; 2] = [26, 27];
-    pub const HOME: Joints = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0];
+    pub const HOME: Joints = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0];
     const CONN: ConnId = 7;
     pub const DT: f64 = 0.002;
 
@@ -944,7 +945,7 @@ mod ur_rtde_handshake {
 use robots::virtual_ur::ur_rtde_program::ur_rtde_cmd as urcmd;
 use ur_rtde_handshake::{HOME, UrRtde, angle, dist, max_diff as diff, offset};
 
-const TARGET_Q: [f64; 6] = [0.4, -1.3, 1.4, -1.6, -1.5708, 0.2];
+const TARGET_Q: [f64; 6] = [0.4, -1.3, 1.4, -1.6, -FRAC_PI_2, 0.2];
 
 #[test]
 fn issue15_item1_a_move_after_a_realtime_query_runs() {
@@ -1137,7 +1138,7 @@ fn issue15_item6_an_unreachable_move_l_fails_without_moving() {
 #[test]
 fn issue15_item7_joint_limits_are_enforced() {
     let mut u = UrRtde::start();
-    let beyond = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 6.5];
+    let beyond = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 6.5];
     assert!(!u.move_j(beyond), "moveJ beyond ±2π is refused");
     assert_eq!(u.q(), HOME);
     assert!(
@@ -1147,7 +1148,7 @@ fn issue15_item7_joint_limits_are_enforced() {
     );
     // speedJ into the limit: the arm protective-stops at the limit, never beyond.
     let mut u = UrRtde::start();
-    let near = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 6.2];
+    let near = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 6.2];
     assert!(u.move_j(near));
     assert!(u.speed_j([0.0, 0.0, 0.0, 0.0, 0.0, 1.0], 4.0));
     u.seconds(1.0);

@@ -309,9 +309,9 @@ impl UrRtdeProgram {
                     regs.input_double[2],
                     regs.input_double[3],
                 ];
-                if !(mass.is_finite() && (0.0..=MAX_PAYLOAD_KG).contains(&mass))
-                    || !cog.iter().all(|c| c.is_finite())
-                {
+                let valid =
+                    (0.0..=MAX_PAYLOAD_KG).contains(&mass) && cog.iter().all(|c| c.is_finite());
+                if !valid {
                     return Err(format!(
                         "set_payload: mass {mass} kg outside 0..{MAX_PAYLOAD_KG} kg or cog not finite"
                     ));
