@@ -126,6 +126,9 @@ async fn ur_rtde_conformance_suite_passes_with_no_silent_success() {
         .iter()
         .find(|l| l["summary"] == true)
         .unwrap_or_else(|| panic!("no summary\n{}", report()));
+    for l in &lines {
+        println!("{l}");
+    }
     assert_eq!(
         summary["untested"],
         serde_json::json!([]),

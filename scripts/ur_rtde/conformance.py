@@ -109,6 +109,14 @@ def settle(t=0.05):
     time.sleep(t)
 
 
+def wait_for(cond, within=1.0):
+    """Polls `cond` until true (the receive side lags the controller by a few packages)."""
+    deadline = time.time() + within
+    while not cond() and time.time() < deadline:
+        time.sleep(0.005)
+    return cond()
+
+
 def dist3(a, b):
     return math.sqrt(sum((a[i] - b[i]) ** 2 for i in range(3)))
 
@@ -217,8 +225,10 @@ def main():
         travelled = dist3(after, before)
         off = math.hypot(after[0] - start[0], after[1] - start[1])
         check(abs(speed - 0.25) < 0.01, f"cruise speed {speed}")
-        # Measured from the receive side: a few 2 ms packages of slack each way.
-        check(travelled < 0.0156 + 0.006, f"travelled {travelled} m")
+        # Measured from the receive side, whose sample before the stop may lag by up to 50 ms
+        # on a loaded machine (12.5 mm at 0.25 m/s); the exact bound is checked cycle by cycle
+        # in robots/tests/rtde_virtual_ur.rs (issue15_item9).
+        check(travelled < 0.0156 + 0.0125, f"travelled {travelled} m")
         check(off < 1e-5, f"left the line by {off} m")
         return {"speed": speed, "travelled": travelled, "elapsed": elapsed}
 
@@ -480,6 +490,23 @@ def main():
         check(c.reconnect(), "reconnect")
         check(c.isConnected() and c.isProgramRunning(), "running again")
 
+    @case("a new control interface after a client left without stopScript connects at once",
+          "isProgramRunning")
+    def second_client():
+        check(c.speedJ([0.1, 0, 0, 0, 0, 0], 1.0, 0.0), "speedJ")
+        c.disconnect()  # no stopScript: the program and the speedJ keep running, as on a UR
+        settle(0.2)
+        check(abs(r.getActualQd()[0] - 0.1) < 1e-9, "speedJ continues without its client")
+        t0 = time.time()
+        c2 = rtde_control.RTDEControlInterface(HOST)  # sends stopScript, then dashboard stop
+        elapsed = time.time() - t0
+        check(c2.isProgramRunning(), "second client's script runs")
+        check(at_rest(), "the old program's speedJ ended with it")
+        c2.disconnect()
+        check(c.reconnect(), "first client back")
+        restart()
+        return {"connect_s": elapsed}
+
     # ---------------- unsupported: loud failures ----------------
     def loud(name, call):
         @case(f"unsupported {name} fails loudly", name)
@@ -579,12 +606,16 @@ def main():
     def recording():
         path = os.path.join(tempfile.gettempdir(), f"conformance_{os.getpid()}.csv")
         check(r.startFileRecording(path), "start")
-        time.sleep(0.3)
+        time.sleep(0.5)
         check(r.stopFileRecording(), "stop")
         with open(path) as fh:
             rows = fh.read().splitlines()
         os.unlink(path)
-        check(len(rows) > 50, f"{len(rows)} rows")
+        # ur_rtde records what its receive thread saw: fewer rows than packages on a loaded host.
+        check(len(rows) > 20, f"{len(rows)} rows")
+        stamps = [float(row.split(",")[0]) for row in rows[1:]]
+        check(all(b >= a for a, b in zip(stamps, stamps[1:])) and stamps[-1] - stamps[0] > 0.3,
+              f"timestamps {stamps[0]}..{stamps[-1]}")
 
     @case("receive: constant values of quantities the model does not simulate", *CONSTANT_RECEIVE)
     def constants():
@@ -599,28 +630,28 @@ def main():
         check(io.setStandardDigitalOut(7, True), "standard 7")
         check(io.setConfigurableDigitalOut(2, True), "configurable 2")
         check(io.setToolDigitalOut(1, True), "tool 1")
-        settle()
+        want = (1 << 7) | (1 << 10) | (1 << 17)
+        wait_for(lambda: r.getActualDigitalOutputBits() == want)
         bits = r.getActualDigitalOutputBits()
         check(bits == (1 << 7) | (1 << 10) | (1 << 17), f"bits {bits:#x}")
         check(r.getDigitalOutState(7) and not r.getDigitalOutState(6), "state 7")
         for f, pin in ((io.setStandardDigitalOut, 7), (io.setConfigurableDigitalOut, 2), (io.setToolDigitalOut, 1)):
             check(f(pin, False), "clear")
-        settle()
-        check(r.getActualDigitalOutputBits() == 0, "all low")
+        check(wait_for(lambda: r.getActualDigitalOutputBits() == 0), "all low")
 
     @case("io: analog outputs in voltage and current domains", "setAnalogOutputVoltage",
           "setAnalogOutputCurrent", "getStandardAnalogOutput0", "getStandardAnalogOutput1")
     def analog():
         check(io.setAnalogOutputVoltage(0, 0.5), "voltage")
         check(io.setAnalogOutputCurrent(1, 0.25), "current")
-        settle()
+        wait_for(lambda: abs(r.getStandardAnalogOutput1() - 0.008) < 1e-9)
         check(abs(r.getStandardAnalogOutput0() - 5.0) < 1e-9, f"AO0 {r.getStandardAnalogOutput0()}")
         check(abs(r.getStandardAnalogOutput1() - 0.008) < 1e-9, f"AO1 {r.getStandardAnalogOutput1()}")
 
     @case("io: speed slider scales the motion", "setSpeedSlider")
     def slider():
         check(io.setSpeedSlider(0.5), "slider")
-        settle()
+        wait_for(lambda: r.getTargetSpeedFraction() == 0.5)
         check(r.getTargetSpeedFraction() == 0.5, "fraction")
         check(c.speedJ([0.2, 0, 0, 0, 0, 0], 2.0, 0.0), "speedJ")
         settle(0.4)
