@@ -8,6 +8,7 @@ use parry3d_f64::math::Vector as DVec3;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
+use super::instance_grid::InstanceGrid;
 use super::{Appearance, TagBoard};
 
 /// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
@@ -138,6 +139,10 @@ pub struct RenderScene {
     /// Uniform ambient (sky) radiance per channel.
     pub ambient: [f64; 3],
     bounds: Vec<(Point3<f64>, Point3<f64>)>,
+    /// `part_T_table` of each instance, inverted once instead of per ray.
+    inverses: Vec<Isometry3<f64>>,
+    /// The instances binned over the table (up to 64 instances; beyond, every one is tested).
+    grid: Option<InstanceGrid>,
 }
 
 impl RenderScene {
@@ -149,7 +154,9 @@ impl RenderScene {
         lights: Vec<PointLight>,
         ambient: [f64; 3],
     ) -> Self {
-        let bounds = instances.iter().map(world_aabb).collect();
+        let bounds: Vec<_> = instances.iter().map(world_aabb).collect();
+        let grid = InstanceGrid::new(&bounds);
+        let inverses = instances.iter().map(|i| i.table_T_part.inverse()).collect();
         Self {
             instances,
             board,
@@ -157,6 +164,8 @@ impl RenderScene {
             lights,
             ambient,
             bounds,
+            inverses,
+            grid,
         }
     }
 
@@ -165,11 +174,25 @@ impl RenderScene {
         self.bounds[i]
     }
 
+    /// The instances a ray may hit before `max_t`, in ascending order.
+    fn candidates(
+        &self,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> impl Iterator<Item = usize> + use<> {
+        let (mask, all) = match &self.grid {
+            Some(g) => (g.candidates(o, d, max_t), 0),
+            None => (0, self.instances.len()),
+        };
+        (0..all).chain(Bits(mask))
+    }
+
     /// Nearest hit of a unit ray from `o` along `d` before `max_t`.
     pub fn intersect(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut limit = max_t;
-        for i in 0..self.instances.len() {
+        for i in self.candidates(o, d, max_t) {
             if let Some(hit) = self.intersect_instance(i, o, d, limit) {
                 limit = hit.t;
                 best = Some(hit);
@@ -214,7 +237,7 @@ impl RenderScene {
             return None;
         }
         let inst = &self.instances[i];
-        let inv = inst.table_T_part.inverse();
+        let inv = &self.inverses[i];
         let (t, n) = inst.mesh.cast(&(inv * o), &(inv * d), max_t)?;
         let mut normal = inst.table_T_part * n;
         if normal.dot(d) > 0.0 {
@@ -229,10 +252,11 @@ impl RenderScene {
 
     /// Whether anything blocks the unit ray from `o` along `d` before `max_t` (shadow rays).
     pub fn occluded(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> bool {
-        for (i, inst) in self.instances.iter().enumerate() {
+        for i in self.candidates(o, d, max_t) {
+            let inst = &self.instances[i];
             let (lo, hi) = self.bounds[i];
             if slab(&lo, &hi, o, d).is_some_and(|e| e < max_t) {
-                let inv = inst.table_T_part.inverse();
+                let inv = &self.inverses[i];
                 if inst.mesh.hits(&(inv * o), &(inv * d), max_t) {
                     return true;
                 }
@@ -244,6 +268,22 @@ impl RenderScene {
             return true;
         }
         false
+    }
+}
+
+/// The set bits of a mask, lowest first.
+struct Bits(u64);
+
+impl Iterator for Bits {
+    type Item = usize;
+
+    fn next(&mut self) -> Option<usize> {
+        if self.0 == 0 {
+            return None;
+        }
+        let i = self.0.trailing_zeros() as usize;
+        self.0 &= self.0 - 1;
+        Some(i)
     }
 }
 

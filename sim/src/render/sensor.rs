@@ -109,8 +109,16 @@ impl SensorModel {
     }
 }
 
-/// Linear value (0–1) to an 8-bit sRGB code.
+/// Linear value (0–1) to an 8-bit sRGB code: the number of code thresholds at or below `x`, the
+/// same code as [`encode_srgb_exact`] without a `powf` per channel.
 fn encode_srgb(x: f64) -> u8 {
+    static THRESHOLDS: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    let t = THRESHOLDS.get_or_init(|| (1..=255).map(srgb_threshold).collect());
+    t.partition_point(|&t| t <= x) as u8
+}
+
+/// The sRGB transfer function, linear 0–1 to the nearest 8-bit code.
+fn encode_srgb_exact(x: f64) -> u8 {
     let x = x.clamp(0.0, 1.0);
     let s = if x <= 0.003_130_8 {
         12.92 * x
@@ -118,6 +126,21 @@ fn encode_srgb(x: f64) -> u8 {
         1.055 * x.powf(1.0 / 2.4) - 0.055
     };
     (s * 255.0 + 0.5).floor() as u8
+}
+
+/// The smallest non-negative linear value whose code is at least `code` (bisection over the
+/// ordered bit patterns of positive doubles, so exact).
+fn srgb_threshold(code: u8) -> f64 {
+    let (mut lo, mut hi) = (0u64, 1f64.to_bits());
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if encode_srgb_exact(f64::from_bits(mid)) >= code {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    f64::from_bits(lo)
 }
 
 /// Separable Gaussian blur with clamped edges.
@@ -151,4 +174,18 @@ fn gaussian_blur(src: &[[f64; 3]], w: usize, h: usize, sigma: f64) -> Vec<[f64; 
         dst
     };
     pass(&pass(src, true), false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_threshold_encoder_matches_the_transfer_function() {
+        for i in 0..=200_000 {
+            let x = i as f64 / 180_000.0 - 0.05;
+            assert_eq!(encode_srgb(x), encode_srgb_exact(x), "at {x}");
+        }
+        assert_eq!(encode_srgb(f64::NAN), 0);
+    }
 }

@@ -181,6 +181,41 @@ pub fn dress_scene(
     })
 }
 
+/// The renderer's view of parts at rest in the cell under its fixed, nominal conditions: nominal
+/// materials, the default tag board, a mid-grey table, two point lights above the board and a dim
+/// ambient. Simulated runs render their captures of this (see [`crate::render::capture`]).
+pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene {
+    let instances = parts
+        .iter()
+        .map(|p| Instance {
+            mesh: models[p.model].render_mesh.clone(),
+            table_T_part: p.table_T_part,
+            appearance: models[p.model].appearance(),
+        })
+        .collect();
+    let board = TagBoard::default();
+    let table = Table {
+        height: -board.thickness,
+        appearance: Appearance {
+            base_color: [0.3, 0.29, 0.27],
+            metallic: 0.0,
+            roughness: 0.7,
+            specular: 0.04,
+        },
+    };
+    let lights = vec![
+        PointLight {
+            position: Point3::new(0.45, 0.3, 1.2),
+            intensity: [1.1; 3],
+        },
+        PointLight {
+            position: Point3::new(-0.4, -0.25, 1.0),
+            intensity: [0.8; 3],
+        },
+    ];
+    RenderScene::new(instances, Some(board), Some(table), lights, [0.08; 3])
+}
+
 /// The OpenCV camera pose at `eye` looking at `target`, its x axis as close as possible to
 /// `x_hint`, then turned by `roll` about the optical axis.
 pub fn look_at(
