@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::Context;
 use perception::part::{Catalog, PartRole};
 use sim::dataset::{DatasetConfig, generate};
-use sim::scene::PartModel;
+use sim::scene::{PartModel, Randomisation};
 
 /// Arguments of `cell dataset`.
 #[derive(Debug, clap::Args)]
@@ -48,12 +48,28 @@ pub struct Args {
     /// Downscaling of overview images relative to the full camera.
     #[arg(long, default_value_t = 0.4)]
     pub overview_scale: f64,
+    /// Domain-randomisation ranges (TOML; every key optional, defaults documented in
+    /// `sim::scene::Randomisation`), e.g. `exposure = { lo = 0.9, hi = 1.1 }`.
+    #[arg(long)]
+    pub randomisation: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Reads and checks a randomisation file: syntax errors carry line and column, bad ranges their
+/// key.
+fn load_randomisation(path: &std::path::Path) -> anyhow::Result<Randomisation> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let rand: Randomisation = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+    rand.validate()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(rand)
 }
 
 /// Loads the parts and writes the dataset.
@@ -84,6 +100,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     cfg.render.supersampling = args.supersampling;
     cfg.overview_scale = args.overview_scale;
     cfg.progress = !args.quiet;
+    if let Some(path) = &args.randomisation {
+        cfg.randomisation = load_randomisation(path)?;
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
         .build()

@@ -153,7 +153,7 @@ pub(crate) fn write_crop_group(
             full.as_ref(),
         );
         let image = scene
-            .sensor
+            .metered_sensor(&out)
             .capture(&out, &mut rng)
             .map_err(|e| DatasetError::Config(e.to_string()))?;
         let id = (target + 1) as u16;

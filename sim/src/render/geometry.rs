@@ -17,6 +17,8 @@ pub struct RenderMesh {
     mesh: ParryMesh,
     lo: Point3<f64>,
     hi: Point3<f64>,
+    /// Per triangle: whether it shows the instance's accent material (e.g. gold pins).
+    accent: Vec<bool>,
 }
 
 impl std::fmt::Debug for RenderMesh {
@@ -44,7 +46,19 @@ impl RenderMesh {
             mesh: parry,
             lo,
             hi,
+            accent: Vec::new(),
         })
+    }
+
+    /// Marks the triangles (by index) that show the instance's accent material.
+    pub fn with_accent(mut self, accent: Vec<bool>) -> Self {
+        self.accent = accent;
+        self
+    }
+
+    /// Number of triangles with the accent material.
+    pub fn accent_triangles(&self) -> usize {
+        self.accent.iter().filter(|a| **a).count()
     }
 
     /// Corners of the part-frame bounding box.
@@ -52,8 +66,13 @@ impl RenderMesh {
         (self.lo, self.hi)
     }
 
-    /// First hit of a part-frame ray: distance and part-frame unit normal.
-    fn cast(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> Option<(f64, Vector3<f64>)> {
+    /// First hit of a part-frame ray: distance, part-frame unit normal, accent material.
+    fn cast(
+        &self,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> Option<(f64, Vector3<f64>, bool)> {
         let ray = Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z));
         let hit = self
             .mesh
@@ -63,7 +82,12 @@ impl RenderMesh {
             .triangle(hit.subshape)
             .normal()
             .unwrap_or(hit.normal);
-        Some((hit.time_of_impact, Vector3::new(n.x, n.y, n.z)))
+        let accent = self
+            .accent
+            .get(hit.subshape as usize)
+            .copied()
+            .unwrap_or(false);
+        Some((hit.time_of_impact, Vector3::new(n.x, n.y, n.z), accent))
     }
 
     /// Whether a part-frame ray hits the mesh before `max_t`.
@@ -83,6 +107,25 @@ pub struct Instance {
     pub table_T_part: Isometry3<f64>,
     /// How its surface looks.
     pub appearance: Appearance,
+    /// How the mesh's accent triangles look (gold pins on the insert); `None` for the main one.
+    pub accent: Option<Appearance>,
+}
+
+impl Instance {
+    /// A part of one material at a pose.
+    #[allow(non_snake_case)]
+    pub fn new(
+        mesh: Arc<RenderMesh>,
+        table_T_part: Isometry3<f64>,
+        appearance: Appearance,
+    ) -> Self {
+        Self {
+            mesh,
+            table_T_part,
+            appearance,
+            accent: None,
+        }
+    }
 }
 
 /// The table under the board: an infinite plane at z = `height` in the table frame.
@@ -101,6 +144,9 @@ pub struct PointLight {
     pub position: Point3<f64>,
     /// Radiant intensity per channel (linear RGB, W/sr-like units: irradiance at 1 m).
     pub intensity: [f64; 3],
+    /// Radius of the emitting sphere, metres (0 for a point): softens shadows and widens
+    /// highlights.
+    pub radius: f64,
 }
 
 /// What a ray hit.
@@ -123,6 +169,8 @@ pub struct Hit {
     pub normal: Vector3<f64>,
     /// The surface.
     pub kind: SurfaceKind,
+    /// Whether a part's accent triangle was hit (its instance's accent material).
+    pub accent: bool,
 }
 
 /// Everything the renderer draws, in the table frame (z up, board top at z = 0).
@@ -206,6 +254,7 @@ impl RenderScene {
                 t,
                 normal: n,
                 kind: SurfaceKind::Board,
+                accent: false,
             });
         }
         if let Some(table) = &self.table
@@ -217,6 +266,7 @@ impl RenderScene {
                     t,
                     normal: Vector3::new(0.0, 0.0, -d.z.signum()),
                     kind: SurfaceKind::Table,
+                    accent: false,
                 });
             }
         }
@@ -238,7 +288,7 @@ impl RenderScene {
         }
         let inst = &self.instances[i];
         let inv = &self.inverses[i];
-        let (t, n) = inst.mesh.cast(&(inv * o), &(inv * d), max_t)?;
+        let (t, n, accent) = inst.mesh.cast(&(inv * o), &(inv * d), max_t)?;
         let mut normal = inst.table_T_part * n;
         if normal.dot(d) > 0.0 {
             normal = -normal;
@@ -247,6 +297,7 @@ impl RenderScene {
             t,
             normal,
             kind: SurfaceKind::Part(i),
+            accent,
         })
     }
 

@@ -9,6 +9,9 @@ use nalgebra::{Point3, Vector3};
 /// Cells along the longer side of the instances' box.
 const CELLS: f64 = 32.0;
 
+/// Up to this many instances, a ray that enters the shared box tests each one directly.
+const FEW: u32 = 4;
+
 /// Slack added around a ray segment's footprint, metres, against rounding at cell borders.
 const SLACK: f64 = 1e-7;
 
@@ -21,6 +24,8 @@ pub(crate) struct InstanceGrid {
     nx: usize,
     ny: usize,
     masks: Vec<u64>,
+    /// Every instance, for scenes too small for the grid to pay off.
+    all: u64,
 }
 
 impl InstanceGrid {
@@ -47,6 +52,7 @@ impl InstanceGrid {
             nx,
             ny,
             masks: vec![0; nx * ny],
+            all: u64::MAX >> (64 - bounds.len()),
         };
         for (i, (blo, bhi)) in bounds.iter().enumerate() {
             let (x0, x1, y0, y1) = grid.cells(blo.x, bhi.x, blo.y, bhi.y);
@@ -87,6 +93,9 @@ impl InstanceGrid {
         };
         if t0 >= max_t {
             return 0;
+        }
+        if self.all.count_ones() <= FEW {
+            return self.all;
         }
         let t1 = t1.min(max_t);
         let (a, b) = (o + d * t0, o + d * t1);

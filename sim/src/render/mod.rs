@@ -8,6 +8,7 @@ mod appearance;
 mod capture;
 mod geometry;
 mod instance_grid;
+mod kernels;
 mod output;
 mod renderer;
 mod sensor;
@@ -20,4 +21,4 @@ pub use geometry::{Hit, Instance, PointLight, RenderMesh, RenderScene, SurfaceKi
 pub use output::{InstanceMask, RenderOutput, Window};
 pub use renderer::{RenderSettings, instance_mask, render};
 pub use sensor::{SensorError, SensorModel};
-pub use tag_board::TagBoard;
+pub use tag_board::{BoardMark, TagBoard};

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::geometry::SurfaceKind;
 use super::shading::{ambient, brdf_cos};
-use super::{Appearance, Hit, InstanceMask, RenderOutput, RenderScene, Window};
+use super::{Appearance, BoardMark, Hit, InstanceMask, RenderOutput, RenderScene, Window};
 
 /// How to render.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -37,6 +37,9 @@ impl Default for RenderSettings {
 /// Offset of shadow-ray origins along the normal, metres (well below the parts' 0.1 mm features).
 const SHADOW_BIAS: f64 = 1e-7;
 
+/// Edge class of the first part (see [`CentreSample::surface`]).
+const FIRST_PART_CLASS: u32 = 6;
+
 /// Rows rendered together by one task: small enough to spread a crop over the cores, large
 /// enough that the one-row border shared with neighbouring bands costs little.
 const BAND_ROWS: usize = 16;
@@ -56,7 +59,8 @@ struct CentreSample {
     depth: f64,
     /// 0 or instance + 1.
     visible: u16,
-    /// Surface class: 0 nothing (or no ray), 1 table, 2 board white, 3 board black, 4 + i part i.
+    /// Surface class: 0 nothing (or no ray), 1 table, 2 board white, 3 board black, 4 dust,
+    /// 5 scratch, 6 + 2i part i, 7 + 2i part i's accent material.
     surface: u32,
     /// Bit k set when light k reaches the point.
     lit: u32,
@@ -197,17 +201,16 @@ impl Tracer<'_> {
         let Some(hit) = self.scene.intersect(&self.origin, &d, f64::INFINITY) else {
             return CentreSample::MISS;
         };
-        let (rgb, lit, a) = shade(self.scene, &self.origin, &d, &hit, self.shadows);
-        let (surface, visible) = match hit.kind {
-            SurfaceKind::Part(i) => (4 + i as u32, (i + 1) as u16),
-            SurfaceKind::Table => (1, 0),
-            SurfaceKind::Board => (if a.is_black { 3 } else { 2 }, 0),
+        let (rgb, lit, surface) = shade(self.scene, &self.origin, &d, &hit, self.shadows);
+        let visible = match hit.kind {
+            SurfaceKind::Part(i) => (i + 1) as u16,
+            SurfaceKind::Table | SurfaceKind::Board => 0,
         };
         CentreSample {
             rgb: [rgb[0] as f32, rgb[1] as f32, rgb[2] as f32],
             depth: hit.t * dc.z,
             visible,
-            surface,
+            surface: surface.class,
             lit,
             normal: [
                 hit.normal.x as f32,
@@ -242,40 +245,69 @@ impl Tracer<'_> {
     }
 }
 
-/// The surface at a hit point: its appearance, and whether it is the board's black print.
+/// The surface at a hit point: its appearance, its class for edge detection (see
+/// [`CentreSample::surface`]) and its brushing direction.
 struct Surface {
     appearance: Appearance,
-    is_black: bool,
+    class: u32,
+    tangent: Option<Vector3<f64>>,
 }
 
 /// Appearance of the surface at a hit point.
 fn surface_at(scene: &RenderScene, hit: &Hit, p: &Point3<f64>) -> Surface {
-    let appearance = match hit.kind {
-        SurfaceKind::Part(i) => scene.instances[i].appearance,
+    let (appearance, class, tangent) = match hit.kind {
+        SurfaceKind::Part(i) => {
+            let inst = &scene.instances[i];
+            let appearance = match (hit.accent, inst.accent) {
+                (true, Some(a)) => a,
+                _ => inst.appearance,
+            };
+            let tangent = inst.table_T_part.rotation * Vector3::x();
+            (
+                appearance,
+                FIRST_PART_CLASS + 2 * i as u32 + u32::from(hit.accent),
+                Some(tangent),
+            )
+        }
         SurfaceKind::Board => match &scene.board {
             Some(b) if hit.normal.z > 0.5 => {
-                let is_black = b.is_black(p.x, p.y);
-                return Surface {
-                    appearance: if is_black { b.black } else { b.white },
-                    is_black,
+                let (appearance, mark) = b.surface_at(p.x, p.y);
+                let class = match mark {
+                    BoardMark::White => 2,
+                    BoardMark::Black => 3,
+                    BoardMark::Dust => 4,
+                    BoardMark::Scratch => 5,
                 };
+                (appearance, class, None)
             }
-            Some(b) => b.white,
-            None => Appearance::for_material(perception::part::Material::Aluminium),
+            Some(b) => (b.white, 2, None),
+            None => (
+                Appearance::for_material(perception::part::Material::Aluminium),
+                2,
+                None,
+            ),
         },
-        SurfaceKind::Table => scene
-            .table
-            .map(|t| t.appearance)
-            .unwrap_or_else(|| Appearance::for_material(perception::part::Material::DarkPlastic)),
+        SurfaceKind::Table => (
+            scene.table.map(|t| t.appearance).unwrap_or_else(|| {
+                Appearance::for_material(perception::part::Material::DarkPlastic)
+            }),
+            1,
+            None,
+        ),
     };
     Surface {
         appearance,
-        is_black: false,
+        class,
+        tangent,
     }
 }
 
 /// Radiance leaving the hit surface towards the camera, the lights that reach it (bit k for
 /// light k) and the surface.
+///
+/// A light with a radius is sampled at one point of its sphere per shading point, chosen by a
+/// hash of the point's coordinates: penumbrae come out as deterministic noise that the edge
+/// supersampling averages.
 fn shade(
     scene: &RenderScene,
     o: &Point3<f64>,
@@ -301,10 +333,20 @@ fn shade(
         if n.dot(&l) <= 0.0 {
             continue;
         }
-        if shadows && scene.occluded(&start, &l, dist) {
-            continue;
+        if shadows {
+            let target = if light.radius > 0.0 {
+                light.position + sphere_point(&p, k) * light.radius
+            } else {
+                light.position
+            };
+            let ts = target - start;
+            let ds = ts.norm();
+            if ds > 0.0 && scene.occluded(&start, &(ts / ds), ds) {
+                continue;
+            }
         }
-        let f = brdf_cos(&a, &n, &v, &l);
+        let spread = light.radius / dist;
+        let f = brdf_cos(&a, &n, &v, &l, surface.tangent.as_ref(), spread);
         let inv2 = 1.0 / (dist * dist);
         for ch in 0..3 {
             c[ch] += f[ch] * light.intensity[ch] * inv2;
@@ -312,6 +354,26 @@ fn shade(
         lit |= 1 << (k % 32);
     }
     (c, lit, surface)
+}
+
+/// A point in the unit ball chosen by a hash of a shading point and a light number.
+fn sphere_point(p: &Point3<f64>, light: usize) -> Vector3<f64> {
+    let mut z = p.x.to_bits() ^ p.y.to_bits().rotate_left(21) ^ p.z.to_bits().rotate_left(42);
+    z ^= (light as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    let mut next = || {
+        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut x = z;
+        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        x ^= x >> 31;
+        (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    loop {
+        let q = Vector3::new(next(), next(), next());
+        if q.norm_squared() <= 1.0 {
+            return q;
+        }
+    }
 }
 
 /// The full (unoccluded) silhouette of instance `i` over the window of a render `out` made with
