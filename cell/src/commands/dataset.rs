@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use perception::part::{Catalog, PartRole};
-use sim::dataset::{DatasetConfig, generate};
+use sim::dataset::{DatasetConfig, generate, write_preview};
 use sim::scene::{PartModel, Randomisation};
 
 /// Arguments of `cell dataset`.
@@ -52,6 +52,10 @@ pub struct Args {
     /// `sim::scene::Randomisation`), e.g. `exposure = { lo = 0.9, hi = 1.1 }`.
     #[arg(long)]
     pub randomisation: Option<PathBuf>,
+    /// Also write a contact sheet (PNG) of the first training crops of each part and two
+    /// randomised feeder captures, to judge the randomisation at a glance.
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -109,13 +113,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         .context("starting worker threads")?;
     let start = Instant::now();
     let summary = pool.install(|| generate(&cfg, &models))?;
+    let elapsed = start.elapsed().as_secs_f64();
+    if let Some(path) = &args.preview {
+        let rows = cfg.crops_train.min(6);
+        pool.install(|| write_preview(&cfg, &models, rows, path))?;
+        println!("{}: contact sheet", path.display());
+    }
     println!(
         "{}: {} overview images and {} crop drops rendered, {} items already complete, {:.1} s",
         args.out.display(),
         summary.overviews_rendered,
         summary.crop_groups_rendered,
         summary.skipped,
-        start.elapsed().as_secs_f64()
+        elapsed
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -61,6 +61,10 @@ pub(crate) fn disk_kernel(radius: f64) -> Kernel {
             }
         }
     }
+    // A disk smaller than the sub-samples' spacing covers none of them: it is the identity.
+    if k.is_empty() {
+        k.push((0, 0, 1.0));
+    }
     normalised(k)
 }
 
@@ -209,7 +213,13 @@ mod tests {
 
     #[test]
     fn kernels_keep_brightness_and_jpeg_quality_orders_the_error() {
-        for k in [disk_kernel(0.6), disk_kernel(2.5), line_kernel(3.0, 0.7)] {
+        for k in [
+            disk_kernel(0.001),
+            disk_kernel(0.6),
+            disk_kernel(2.5),
+            line_kernel(0.001, 0.3),
+            line_kernel(3.0, 0.7),
+        ] {
             let sum: f64 = k.iter().map(|t| t.2).sum();
             assert!((sum - 1.0).abs() < 1e-12);
         }

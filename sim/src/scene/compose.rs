@@ -3,7 +3,9 @@
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
 
-use super::{DropError, PartModel, PlacedPart, Randomisation, RandomisationError, drop_parts};
+use super::{
+    DropError, PartModel, PlacedPart, Randomisation, RandomisationError, Range, drop_parts,
+};
 use crate::render::{
     Appearance, Instance, PointLight, RenderOutput, RenderScene, SensorModel, Table, TagBoard,
 };
@@ -62,17 +64,20 @@ pub struct SampledScene {
     pub overexposure: f64,
 }
 
-/// Metering target: the parts' highlights stay below this share of full scale ...
+/// Metering target: the parts' pixels stay below this share of full scale ...
 pub const METER_TARGET: f64 = 0.9;
-/// ... in all but this share of their pixels.
-pub const METER_SHARE: f64 = 0.002;
+/// ... in all but this share of them (specular glints of a small light on a mirror-like facet
+/// may clip: metering on every glint would leave the rest of the image black) ...
+pub const METER_SHARE: f64 = 0.005;
+/// ... and metering lowers the drawn exposure by at most this factor.
+pub const METER_FLOOR: f64 = 0.15;
 
 impl SampledScene {
     /// The sensor for a render of this scene: highlight-priority metering on the parts
     /// ([`SensorModel::metered`]), then the randomised over-exposure, if drawn.
     pub fn metered_sensor(&self, out: &RenderOutput) -> SensorModel {
         let mut s = self.sensor.metered(out, METER_TARGET, METER_SHARE);
-        s.exposure *= self.overexposure;
+        s.exposure = s.exposure.max(self.sensor.exposure * METER_FLOOR) * self.overexposure;
         s
     }
 }
@@ -221,10 +226,17 @@ pub fn dress_scene(
 
 /// A material with randomised tint and roughness, and brushing when it is a metal.
 fn randomised(a: Appearance, rand: &Randomisation, rng: &mut impl Rng) -> Appearance {
+    // Brightness from the range, and a hue shift of at most a fifth of its spread: colour casts
+    // of plated metal and moulded plastic are subtle.
+    let brightness = rand.material_tint.sample(rng);
+    let hue = Range::new(
+        1.0 - (rand.material_tint.hi - rand.material_tint.lo) / 10.0,
+        1.0 + (rand.material_tint.hi - rand.material_tint.lo) / 10.0,
+    );
     let tint = [
-        rand.material_tint.sample(rng),
-        rand.material_tint.sample(rng),
-        rand.material_tint.sample(rng),
+        brightness * hue.sample(rng),
+        brightness * hue.sample(rng),
+        brightness * hue.sample(rng),
     ];
     let mut a = a.tinted(tint, a.roughness * rand.roughness_scale.sample(rng));
     if a.metallic > 0.5 {

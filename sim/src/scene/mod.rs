@@ -10,8 +10,8 @@ mod model;
 mod randomisation;
 
 pub use compose::{
-    METER_SHARE, METER_TARGET, SampledScene, SceneError, SceneRequest, dress_scene, look_at,
-    nominal_scene, sample_scene,
+    METER_FLOOR, METER_SHARE, METER_TARGET, SampledScene, SceneError, SceneRequest, dress_scene,
+    look_at, nominal_scene, sample_scene,
 };
 pub use drop::{DropError, PlacedPart, drop_parts};
 pub use labels::{InstanceLabel, keypoint_vectors, label_instance, label_instances};

@@ -102,7 +102,8 @@ pub struct Randomisation {
     pub ambient: Range,
     /// Grey albedo of the table under the board.
     pub table_albedo: Range,
-    /// Per-channel multiplier of a material's base colour.
+    /// Multiplier of a material's base colour (brightness; each channel also shifts by up to a
+    /// tenth of the range's spread, a subtle colour cast).
     pub material_tint: Range,
     /// Multiplier of a material's nominal roughness.
     pub roughness_scale: Range,
