@@ -142,24 +142,24 @@ fn bench(c: &mut Criterion) {
         shot_noise: 0.001,
         ..SensorModel::default()
     };
-    both(
-        c,
-        &format!("feeder_{}x{}_12_parts", window.width, window.height),
-        20,
-        || {
-            let mut rng = ChaCha8Rng::seed_from_u64(9);
-            capture(
-                &feeder,
-                &camera,
-                &pose,
-                window,
-                &run_settings,
-                &sensor,
-                &mut rng,
-            )
-            .expect("capture");
-        },
-    );
+    for ss in [2, 1] {
+        let settings = RenderSettings {
+            supersampling: ss,
+            ..run_settings
+        };
+        both(
+            c,
+            &format!("feeder_{}x{}_12_parts_ss{ss}", window.width, window.height),
+            20,
+            || {
+                let mut rng = ChaCha8Rng::seed_from_u64(9);
+                capture(
+                    &feeder, &camera, &pose, window, &settings, &sensor, &mut rng,
+                )
+                .expect("capture");
+            },
+        );
+    }
 
     both(c, "drop_6_parts", 10, || {
         scene(&models, vec![2, 2, 2]);

@@ -67,22 +67,13 @@ impl InstanceGrid {
 
     /// Inclusive cell ranges covering the table rectangle [x0, x1] × [y0, y1].
     fn cells(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> (usize, usize, usize, usize) {
-        let ix = |x: f64| {
-            ((x - self.lo.x) / self.cell)
-                .floor()
-                .clamp(0.0, (self.nx - 1) as f64)
+        // Truncation equals floor for the non-negative values kept (no libm call); NaN gives 0.
+        let index = |v: f64, n: usize| {
+            if v > 0.0 { (v as usize).min(n - 1) } else { 0 }
         };
-        let iy = |y: f64| {
-            ((y - self.lo.y) / self.cell)
-                .floor()
-                .clamp(0.0, (self.ny - 1) as f64)
-        };
-        (
-            ix(x0) as usize,
-            ix(x1) as usize,
-            iy(y0) as usize,
-            iy(y1) as usize,
-        )
+        let ix = |x: f64| index((x - self.lo.x) / self.cell, self.nx);
+        let iy = |y: f64| index((y - self.lo.y) / self.cell, self.ny);
+        (ix(x0), ix(x1), iy(y0), iy(y1))
     }
 
     /// The instances whose boxes the ray from `o` along `d` may enter before `max_t`, bit i for

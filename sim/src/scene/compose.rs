@@ -246,8 +246,8 @@ fn randomised(a: Appearance, rand: &Randomisation, rng: &mut impl Rng) -> Appear
 }
 
 /// The renderer's view of parts at rest in the cell under its fixed, nominal conditions: nominal
-/// materials, the default tag board, a mid-grey table, two point lights above the board and a dim
-/// ambient. Simulated runs render their captures of this (see [`crate::render::capture`]).
+/// materials, the default tag board, a mid-grey table, two point lights (hard shadows) above the
+/// board and a dim ambient. Simulated runs render their captures of this (see [`crate::render::capture`]).
 pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene {
     let instances = parts
         .iter()
@@ -273,12 +273,12 @@ pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene 
         PointLight {
             position: Point3::new(0.45, 0.3, 1.2),
             intensity: [1.1; 3],
-            radius: 0.05,
+            radius: 0.0,
         },
         PointLight {
             position: Point3::new(-0.4, -0.25, 1.0),
             intensity: [0.8; 3],
-            radius: 0.05,
+            radius: 0.0,
         },
     ];
     RenderScene::new(instances, Some(board), Some(table), lights, [0.08; 3])
