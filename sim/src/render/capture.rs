@@ -49,7 +49,7 @@ pub fn window_covering(
     let y0 = (v0 - REGION_MARGIN_PX).floor().clamp(0.0, h);
     let x1 = (u1 + REGION_MARGIN_PX).ceil().clamp(0.0, w - 1.0) + 1.0;
     let y1 = (v1 + REGION_MARGIN_PX).ceil().clamp(0.0, h - 1.0) + 1.0;
-    (x1 > x0 && y1 > y0).then(|| Window {
+    (x1 > x0 && y1 > y0).then_some(Window {
         x0: x0 as u32,
         y0: y0 as u32,
         width: (x1 - x0) as u32,

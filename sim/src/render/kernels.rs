@@ -129,6 +129,8 @@ const CHROMA_Q: [f64; 64] = [
 /// with the standard tables scaled for `quality` (1–100, the IJG scaling) and transformed back,
 /// giving the blocking and ringing of a JPEG at that quality (no chroma subsampling, no entropy
 /// coding: those do not change pixels).
+// The three colour planes are read and written together, pixel by pixel.
+#[allow(clippy::needless_range_loop)]
 pub(crate) fn jpeg_like(img: &mut RgbImage, quality: f64) {
     let q = quality.clamp(1.0, 100.0);
     let scale = if q < 50.0 {
