@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use perception::part::{Catalog, LengthUnit, TriMesh, write_obj};
 use sim::dataset::{BopDataset, CropLabel, DatasetConfig, DatasetError, generate};
 use sim::render::RenderSettings;
-use sim::scene::{PartModel, RandomisationError, Range};
+use sim::scene::{PartModel, Randomisation, RandomisationError, Range};
 
 /// A box mesh (metres) with outward triangles.
 fn cuboid(sx: f64, sy: f64, sz: f64) -> TriMesh {
@@ -237,5 +237,75 @@ fn bad_input_is_a_clear_error_and_leaves_nothing_half_written() {
         if k.extension().is_some_and(|e| e == "json") {
             serde_json::from_slice::<serde_json::Value>(bytes).unwrap();
         }
+    }
+}
+
+#[test]
+fn randomisation_files_override_defaults_and_bad_ranges_name_their_key() {
+    // A partial file keeps every other default.
+    let r: Randomisation = toml::from_str(
+        "exposure = { lo = 0.9, hi = 1.1 }\njpeg_probability = 0.0\nlight_size = { lo = 0.05, hi = 0.05 }\n",
+    )
+    .unwrap();
+    r.validate().unwrap();
+    assert_eq!(r.exposure, Range::new(0.9, 1.1));
+    assert_eq!(r.jpeg_probability, 0.0);
+    assert_eq!(r.dust, Randomisation::default().dust);
+
+    // Unknown keys are refused with their line and column.
+    let err = toml::from_str::<Randomisation>("exposure = { lo = 0.9, hi = 1.1 }\nexposre = 3\n")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("exposre") && err.contains("line 2"), "{err}");
+
+    // Inverted, non-finite, empty and out-of-domain ranges name the key.
+    let cases: Vec<(Randomisation, &str)> = vec![
+        (
+            Randomisation {
+                light_size: Range::new(0.2, 0.1),
+                ..Randomisation::default()
+            },
+            "light_size",
+        ),
+        (
+            Randomisation {
+                defocus_radius: Range::new(0.0, f64::NAN),
+                ..Randomisation::default()
+            },
+            "defocus_radius",
+        ),
+        (
+            Randomisation {
+                jpeg_probability: 1.5,
+                ..Randomisation::default()
+            },
+            "jpeg_probability",
+        ),
+        (
+            Randomisation {
+                jpeg_quality: Range::new(0.0, 90.0),
+                ..Randomisation::default()
+            },
+            "jpeg_quality",
+        ),
+        (
+            Randomisation {
+                overexposure: Range::new(0.5, 2.0),
+                ..Randomisation::default()
+            },
+            "overexposure",
+        ),
+        (
+            Randomisation {
+                lights: Range::new(0.0, 0.0),
+                ambient: Range::new(0.0, 0.0),
+                ..Randomisation::default()
+            },
+            "lights",
+        ),
+    ];
+    for (r, key) in cases {
+        let err = r.validate().unwrap_err();
+        assert!(err.to_string().contains(key), "{key}: {err}");
     }
 }

@@ -30,20 +30,22 @@ fn lights() -> Vec<PointLight> {
         PointLight {
             position: Point3::new(0.3, 0.2, 1.0),
             intensity: [2.0; 3],
+            radius: 0.0,
         },
         PointLight {
             position: Point3::new(-0.4, 0.1, 0.8),
             intensity: [1.0; 3],
+            radius: 0.0,
         },
     ]
 }
 
 fn part_scene(mesh: &TriMesh, pose: Isometry3<f64>, board: bool) -> RenderScene {
-    let inst = Instance {
-        mesh: Arc::new(RenderMesh::new(mesh).unwrap()),
-        table_T_part: pose,
-        appearance: Appearance::for_material(Material::Metal),
-    };
+    let inst = Instance::new(
+        Arc::new(RenderMesh::new(mesh).unwrap()),
+        pose,
+        Appearance::for_material(Material::Metal),
+    );
     RenderScene::new(
         vec![inst],
         board.then(TagBoard::default),
@@ -256,6 +258,7 @@ fn shadows_darken_the_board_under_a_part() {
     scene.lights = vec![PointLight {
         position: Point3::new(0.0, 0.0, 1.0),
         intensity: [2.0; 3],
+        radius: 0.0,
     }];
     // Look from the side so the shadow under the floating cube is visible next to it.
     let cam_pose = super_look(Point3::new(0.25, 0.0, 0.3), Point3::origin());

@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use anyhow::Context;
 use perception::part::{Catalog, PartRole};
-use sim::dataset::{DatasetConfig, generate};
-use sim::scene::PartModel;
+use sim::dataset::{DatasetConfig, generate, write_preview};
+use sim::scene::{PartModel, Randomisation};
 
 /// Arguments of `cell dataset`.
 #[derive(Debug, clap::Args)]
@@ -48,12 +48,32 @@ pub struct Args {
     /// Downscaling of overview images relative to the full camera.
     #[arg(long, default_value_t = 0.4)]
     pub overview_scale: f64,
+    /// Domain-randomisation ranges (TOML; every key optional, defaults documented in
+    /// `sim::scene::Randomisation`), e.g. `exposure = { lo = 0.9, hi = 1.1 }`.
+    #[arg(long)]
+    pub randomisation: Option<PathBuf>,
+    /// Also write a contact sheet (PNG) of the first training crops of each part and two
+    /// randomised feeder captures, to judge the randomisation at a glance.
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Reads and checks a randomisation file: syntax errors carry line and column, bad ranges their
+/// key.
+fn load_randomisation(path: &std::path::Path) -> anyhow::Result<Randomisation> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let rand: Randomisation = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+    rand.validate()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(rand)
 }
 
 /// Loads the parts and writes the dataset.
@@ -84,19 +104,28 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     cfg.render.supersampling = args.supersampling;
     cfg.overview_scale = args.overview_scale;
     cfg.progress = !args.quiet;
+    if let Some(path) = &args.randomisation {
+        cfg.randomisation = load_randomisation(path)?;
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("starting worker threads")?;
     let start = Instant::now();
     let summary = pool.install(|| generate(&cfg, &models))?;
+    let elapsed = start.elapsed().as_secs_f64();
+    if let Some(path) = &args.preview {
+        let rows = cfg.crops_train.min(6);
+        pool.install(|| write_preview(&cfg, &models, rows, path))?;
+        println!("{}: contact sheet", path.display());
+    }
     println!(
         "{}: {} overview images and {} crop drops rendered, {} items already complete, {:.1} s",
         args.out.display(),
         summary.overviews_rendered,
         summary.crop_groups_rendered,
         summary.skipped,
-        start.elapsed().as_secs_f64()
+        elapsed
     );
     Ok(ExitCode::SUCCESS)
 }

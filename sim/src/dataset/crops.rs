@@ -12,8 +12,8 @@ use super::bop::{pose_to_bop, row_major};
 use super::config::item_seed;
 use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
-use crate::render::{Window, render};
-use crate::scene::{PartModel, SceneRequest, dress_scene, drop_parts, label_instances};
+use crate::render::{RenderSettings, Window, instance_mask, render};
+use crate::scene::{PartModel, SceneRequest, dress_scene, drop_parts, label_instance};
 
 /// Labels of one crop (crops/PART/SPLIT/NNNNNN.json); units mm and px, OpenCV camera frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -122,23 +122,38 @@ pub(crate) fn write_crop_group(
             c.y + rng.random_range(-jitter..=jitter),
         );
         let window = Window::centred(u, v, cfg.crop_size, cfg.camera.width, cfg.camera.height);
+        // Only the target's full silhouette is used: the other parts' masks are not rendered.
+        let settings = RenderSettings {
+            full_masks: false,
+            ..cfg.render
+        };
         let out = render(
             &scene.render,
             &cfg.camera,
             &scene.table_T_camera,
             window,
-            &cfg.render,
+            &settings,
         );
-        let labels = label_instances(
+        let full = cfg.render.full_masks.then(|| {
+            instance_mask(
+                &scene.render,
+                target,
+                &cfg.camera,
+                &scene.table_T_camera,
+                &out,
+            )
+        });
+        let label = &label_instance(
+            target,
             &scene.parts,
             models,
             &cfg.camera,
             &scene.table_T_camera,
             &out,
+            full.as_ref(),
         );
-        let label = &labels[target];
         let image = scene
-            .sensor
+            .metered_sensor(&out)
             .capture(&out, &mut rng)
             .map_err(|e| DatasetError::Config(e.to_string()))?;
         let id = (target + 1) as u16;

@@ -2,7 +2,8 @@
 
 use std::path::Path;
 
-use image::{ImageEncoder, codecs::png::PngEncoder};
+use image::ImageEncoder;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 
 use super::DatasetError;
 use crate::fsutil::write_atomic;
@@ -21,7 +22,8 @@ pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(
     write_bytes(path, &text)
 }
 
-/// Encodes and writes a PNG atomically (8-bit RGB, 8-bit grey or 16-bit grey).
+/// Encodes and writes a PNG atomically (8-bit RGB, 8-bit grey or 16-bit grey), at the fast
+/// compression level (fdeflate): a few percent larger files for several times less CPU.
 pub(crate) fn write_png(
     path: &Path,
     bytes: &[u8],
@@ -30,7 +32,7 @@ pub(crate) fn write_png(
     color: image::ExtendedColorType,
 ) -> Result<(), DatasetError> {
     let mut buf = Vec::new();
-    PngEncoder::new(&mut buf)
+    PngEncoder::new_with_quality(&mut buf, CompressionType::Fast, FilterType::Adaptive)
         .write_image(bytes, width, height, color)
         .map_err(|e| DatasetError::Image {
             path: path.into(),

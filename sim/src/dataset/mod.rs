@@ -11,6 +11,7 @@ mod error;
 mod files;
 mod generate;
 mod overview;
+mod preview;
 mod reader;
 
 pub use bop::{BopCamera, GtInfo, GtPose, ModelInfo, SceneCamera, pose_from_bop, write_models};
@@ -18,4 +19,5 @@ pub use config::{DatasetConfig, Split};
 pub use crops::CropLabel;
 pub use error::DatasetError;
 pub use generate::{GenerateSummary, generate};
+pub use preview::write_preview;
 pub use reader::{BopDataset, BopImage, BopScene};

@@ -85,7 +85,7 @@ pub(crate) fn write_overview(
     );
     let labels = label_instances(&scene.parts, models, &camera, &scene.table_T_camera, &out);
     let image = scene
-        .sensor
+        .metered_sensor(&out)
         .capture(&out, &mut rng)
         .map_err(|e| DatasetError::Config(e.to_string()))?;
 

@@ -8,6 +8,7 @@ use parry3d_f64::math::Vector as DVec3;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
+use super::instance_grid::InstanceGrid;
 use super::{Appearance, TagBoard};
 
 /// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
@@ -16,6 +17,8 @@ pub struct RenderMesh {
     mesh: ParryMesh,
     lo: Point3<f64>,
     hi: Point3<f64>,
+    /// Per triangle: whether it shows the instance's accent material (e.g. gold pins).
+    accent: Vec<bool>,
 }
 
 impl std::fmt::Debug for RenderMesh {
@@ -43,7 +46,19 @@ impl RenderMesh {
             mesh: parry,
             lo,
             hi,
+            accent: Vec::new(),
         })
+    }
+
+    /// Marks the triangles (by index) that show the instance's accent material.
+    pub fn with_accent(mut self, accent: Vec<bool>) -> Self {
+        self.accent = accent;
+        self
+    }
+
+    /// Number of triangles with the accent material.
+    pub fn accent_triangles(&self) -> usize {
+        self.accent.iter().filter(|a| **a).count()
     }
 
     /// Corners of the part-frame bounding box.
@@ -51,8 +66,13 @@ impl RenderMesh {
         (self.lo, self.hi)
     }
 
-    /// First hit of a part-frame ray: distance and part-frame unit normal.
-    fn cast(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> Option<(f64, Vector3<f64>)> {
+    /// First hit of a part-frame ray: distance, part-frame unit normal, accent material.
+    fn cast(
+        &self,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> Option<(f64, Vector3<f64>, bool)> {
         let ray = Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z));
         let hit = self
             .mesh
@@ -62,7 +82,12 @@ impl RenderMesh {
             .triangle(hit.subshape)
             .normal()
             .unwrap_or(hit.normal);
-        Some((hit.time_of_impact, Vector3::new(n.x, n.y, n.z)))
+        let accent = self
+            .accent
+            .get(hit.subshape as usize)
+            .copied()
+            .unwrap_or(false);
+        Some((hit.time_of_impact, Vector3::new(n.x, n.y, n.z), accent))
     }
 
     /// Whether a part-frame ray hits the mesh before `max_t`.
@@ -82,6 +107,25 @@ pub struct Instance {
     pub table_T_part: Isometry3<f64>,
     /// How its surface looks.
     pub appearance: Appearance,
+    /// How the mesh's accent triangles look (gold pins on the insert); `None` for the main one.
+    pub accent: Option<Appearance>,
+}
+
+impl Instance {
+    /// A part of one material at a pose.
+    #[allow(non_snake_case)]
+    pub fn new(
+        mesh: Arc<RenderMesh>,
+        table_T_part: Isometry3<f64>,
+        appearance: Appearance,
+    ) -> Self {
+        Self {
+            mesh,
+            table_T_part,
+            appearance,
+            accent: None,
+        }
+    }
 }
 
 /// The table under the board: an infinite plane at z = `height` in the table frame.
@@ -100,6 +144,9 @@ pub struct PointLight {
     pub position: Point3<f64>,
     /// Radiant intensity per channel (linear RGB, W/sr-like units: irradiance at 1 m).
     pub intensity: [f64; 3],
+    /// Radius of the emitting sphere, metres (0 for a point): softens shadows and widens
+    /// highlights.
+    pub radius: f64,
 }
 
 /// What a ray hit.
@@ -122,6 +169,8 @@ pub struct Hit {
     pub normal: Vector3<f64>,
     /// The surface.
     pub kind: SurfaceKind,
+    /// Whether a part's accent triangle was hit (its instance's accent material).
+    pub accent: bool,
 }
 
 /// Everything the renderer draws, in the table frame (z up, board top at z = 0).
@@ -138,6 +187,10 @@ pub struct RenderScene {
     /// Uniform ambient (sky) radiance per channel.
     pub ambient: [f64; 3],
     bounds: Vec<(Point3<f64>, Point3<f64>)>,
+    /// `part_T_table` of each instance, inverted once instead of per ray.
+    inverses: Vec<Isometry3<f64>>,
+    /// The instances binned over the table (up to 64 instances; beyond, every one is tested).
+    grid: Option<InstanceGrid>,
 }
 
 impl RenderScene {
@@ -149,7 +202,9 @@ impl RenderScene {
         lights: Vec<PointLight>,
         ambient: [f64; 3],
     ) -> Self {
-        let bounds = instances.iter().map(world_aabb).collect();
+        let bounds: Vec<_> = instances.iter().map(world_aabb).collect();
+        let grid = InstanceGrid::new(&bounds);
+        let inverses = instances.iter().map(|i| i.table_T_part.inverse()).collect();
         Self {
             instances,
             board,
@@ -157,6 +212,8 @@ impl RenderScene {
             lights,
             ambient,
             bounds,
+            inverses,
+            grid,
         }
     }
 
@@ -165,11 +222,25 @@ impl RenderScene {
         self.bounds[i]
     }
 
+    /// The instances a ray may hit before `max_t`, in ascending order.
+    fn candidates(
+        &self,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> impl Iterator<Item = usize> + use<> {
+        let (mask, all) = match &self.grid {
+            Some(g) => (g.candidates(o, d, max_t), 0),
+            None => (0, self.instances.len()),
+        };
+        (0..all).chain(Bits(mask))
+    }
+
     /// Nearest hit of a unit ray from `o` along `d` before `max_t`.
     pub fn intersect(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut limit = max_t;
-        for i in 0..self.instances.len() {
+        for i in self.candidates(o, d, max_t) {
             if let Some(hit) = self.intersect_instance(i, o, d, limit) {
                 limit = hit.t;
                 best = Some(hit);
@@ -183,6 +254,7 @@ impl RenderScene {
                 t,
                 normal: n,
                 kind: SurfaceKind::Board,
+                accent: false,
             });
         }
         if let Some(table) = &self.table
@@ -194,6 +266,7 @@ impl RenderScene {
                     t,
                     normal: Vector3::new(0.0, 0.0, -d.z.signum()),
                     kind: SurfaceKind::Table,
+                    accent: false,
                 });
             }
         }
@@ -214,8 +287,8 @@ impl RenderScene {
             return None;
         }
         let inst = &self.instances[i];
-        let inv = inst.table_T_part.inverse();
-        let (t, n) = inst.mesh.cast(&(inv * o), &(inv * d), max_t)?;
+        let inv = &self.inverses[i];
+        let (t, n, accent) = inst.mesh.cast(&(inv * o), &(inv * d), max_t)?;
         let mut normal = inst.table_T_part * n;
         if normal.dot(d) > 0.0 {
             normal = -normal;
@@ -224,15 +297,17 @@ impl RenderScene {
             t,
             normal,
             kind: SurfaceKind::Part(i),
+            accent,
         })
     }
 
     /// Whether anything blocks the unit ray from `o` along `d` before `max_t` (shadow rays).
     pub fn occluded(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> bool {
-        for (i, inst) in self.instances.iter().enumerate() {
+        for i in self.candidates(o, d, max_t) {
+            let inst = &self.instances[i];
             let (lo, hi) = self.bounds[i];
             if slab(&lo, &hi, o, d).is_some_and(|e| e < max_t) {
-                let inv = inst.table_T_part.inverse();
+                let inv = &self.inverses[i];
                 if inst.mesh.hits(&(inv * o), &(inv * d), max_t) {
                     return true;
                 }
@@ -244,6 +319,22 @@ impl RenderScene {
             return true;
         }
         false
+    }
+}
+
+/// The set bits of a mask, lowest first.
+struct Bits(u64);
+
+impl Iterator for Bits {
+    type Item = usize;
+
+    fn next(&mut self) -> Option<usize> {
+        if self.0 == 0 {
+            return None;
+        }
+        let i = self.0.trailing_zeros() as usize;
+        self.0 &= self.0 - 1;
+        Some(i)
     }
 }
 

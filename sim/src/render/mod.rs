@@ -5,7 +5,10 @@
 #![allow(non_snake_case)]
 
 mod appearance;
+mod capture;
 mod geometry;
+mod instance_grid;
+mod kernels;
 mod output;
 mod renderer;
 mod sensor;
@@ -13,8 +16,9 @@ mod shading;
 mod tag_board;
 
 pub use appearance::Appearance;
+pub use capture::{Capture, capture, window_covering};
 pub use geometry::{Hit, Instance, PointLight, RenderMesh, RenderScene, SurfaceKind, Table};
 pub use output::{InstanceMask, RenderOutput, Window};
-pub use renderer::{RenderSettings, render};
+pub use renderer::{RenderSettings, instance_mask, render};
 pub use sensor::{SensorError, SensorModel};
-pub use tag_board::TagBoard;
+pub use tag_board::{BoardMark, TagBoard};

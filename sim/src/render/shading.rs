@@ -9,11 +9,17 @@ use super::Appearance;
 
 /// Reflected radiance factor f_r · cos θ_l for unit normal `n`, unit direction to the viewer `v`
 /// and unit direction to the light `l`, per linear RGB channel.
+///
+/// `tangent` is the brushing direction for anisotropic appearances (Burley's aspect ratio on the
+/// GGX distribution). `spread` is the light's angular radius as seen from the point (radius /
+/// distance): a sphere light widens the lobe to α + spread / 2 with the energy kept (Karis).
 pub(crate) fn brdf_cos(
     a: &Appearance,
     n: &Vector3<f64>,
     v: &Vector3<f64>,
     l: &Vector3<f64>,
+    tangent: Option<&Vector3<f64>>,
+    spread: f64,
 ) -> [f64; 3] {
     let nl = n.dot(l);
     let nv = n.dot(v).max(1e-4);
@@ -24,9 +30,27 @@ pub(crate) fn brdf_cos(
     let nh = n.dot(&h).max(0.0);
     let vh = v.dot(&h).max(0.0);
     let alpha = (a.roughness * a.roughness).max(1e-4);
+    let widened = (alpha + spread / 2.0).min(1.0);
+    let energy = (alpha / widened).powi(2);
     let a2 = alpha * alpha;
-    let denom = nh * nh * (a2 - 1.0) + 1.0;
-    let d = a2 / (PI * denom * denom);
+    let d = match tangent {
+        Some(t) if a.anisotropy > 0.0 => {
+            let aspect = (1.0 - 0.9 * a.anisotropy.min(1.0)).sqrt();
+            let (ax, ay) = (widened / aspect, widened * aspect);
+            let t = (t - n * n.dot(t))
+                .try_normalize(1e-12)
+                .unwrap_or_else(|| n.cross(v));
+            let b = n.cross(&t);
+            let (ht, hb) = (h.dot(&t) / ax, h.dot(&b) / ay);
+            let k = ht * ht + hb * hb + nh * nh;
+            1.0 / (PI * ax * ay * k * k)
+        }
+        _ => {
+            let w2 = widened * widened;
+            let denom = nh * nh * (w2 - 1.0) + 1.0;
+            w2 / (PI * denom * denom)
+        }
+    } * energy;
     let lambda_v = nl * (nv * nv * (1.0 - a2) + a2).sqrt();
     let lambda_l = nv * (nl * nl * (1.0 - a2) + a2).sqrt();
     let vis = 0.5 / (lambda_v + lambda_l).max(1e-12);

@@ -26,6 +26,28 @@ pub struct TagBoard {
     pub white: Appearance,
     /// Appearance of the black print.
     pub black: Appearance,
+    /// Amplitude of the smooth albedo variation of the print (0 for a uniform print; 0.1 is
+    /// ±10 % over a few millimetres).
+    pub grain: f64,
+    /// Dust specks (0.04–0.12 mm, light grey) per square centimetre.
+    pub dust: f64,
+    /// Scratches through the print (3–8 mm long, bare aluminium) per 100 cm².
+    pub scratches: f64,
+    /// Seed of the grain, dust and scratch pattern.
+    pub texture_seed: u64,
+}
+
+/// What the board shows at a point of its top face.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoardMark {
+    /// The white print.
+    White,
+    /// The black print of a tag.
+    Black,
+    /// A dust speck.
+    Dust,
+    /// A scratch through the print.
+    Scratch,
 }
 
 impl Default for TagBoard {
@@ -43,7 +65,12 @@ impl Default for TagBoard {
                 metallic: 0.0,
                 roughness: 0.55,
                 specular: 0.04,
+                anisotropy: 0.0,
             },
+            grain: 0.0,
+            dust: 0.0,
+            scratches: 0.0,
+            texture_seed: 0,
         }
     }
 }
@@ -90,12 +117,124 @@ impl TagBoard {
 
     /// The appearance at board point (x, y) of the top face.
     pub fn appearance_at(&self, x: f64, y: f64) -> Appearance {
-        if self.is_black(x, y) {
-            self.black
-        } else {
-            self.white
-        }
+        self.surface_at(x, y).0
     }
+
+    /// The appearance and the mark at board point (x, y) of the top face: print, grain, dust
+    /// and scratches.
+    pub fn surface_at(&self, x: f64, y: f64) -> (Appearance, BoardMark) {
+        if self.scratches > 0.0 && self.on_scratch(x, y) {
+            return (SCRATCH, BoardMark::Scratch);
+        }
+        if self.dust > 0.0 && self.on_dust(x, y) {
+            return (DUST, BoardMark::Dust);
+        }
+        let (mut a, mark) = if self.is_black(x, y) {
+            (self.black, BoardMark::Black)
+        } else {
+            (self.white, BoardMark::White)
+        };
+        if self.grain > 0.0 {
+            let g =
+                1.0 + self.grain * (2.0 * self.value_noise(x / GRAIN_CELL, y / GRAIN_CELL) - 1.0);
+            a.base_color = a.base_color.map(|c| (c * g).clamp(0.0, 1.0));
+        }
+        (a, mark)
+    }
+
+    /// Smooth noise in [0, 1]: bilinear interpolation of hashed lattice values.
+    fn value_noise(&self, x: f64, y: f64) -> f64 {
+        let (fx, fy) = (x.floor(), y.floor());
+        let (tx, ty) = (x - fx, y - fy);
+        let (sx, sy) = (tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty));
+        let at = |i: f64, j: f64| unit(hash3(self.texture_seed, i as i64, j as i64, 1));
+        let top = at(fx, fy) * (1.0 - sx) + at(fx + 1.0, fy) * sx;
+        let bottom = at(fx, fy + 1.0) * (1.0 - sx) + at(fx + 1.0, fy + 1.0) * sx;
+        top * (1.0 - sy) + bottom * sy
+    }
+
+    /// Whether (x, y) lies on a dust speck: at most one per 1 mm cell, at a hashed place.
+    fn on_dust(&self, x: f64, y: f64) -> bool {
+        let (i, j) = ((x / DUST_CELL).floor(), (y / DUST_CELL).floor());
+        let h = hash3(self.texture_seed, i as i64, j as i64, 2);
+        // Specks per cell = specks per cm² × cell area in cm².
+        if unit(h) >= self.dust * (DUST_CELL * 100.0).powi(2) {
+            return false;
+        }
+        let cx = (i + unit(h.rotate_left(21))) * DUST_CELL;
+        let cy = (j + unit(h.rotate_left(42))) * DUST_CELL;
+        let r = 4e-5 + 8e-5 * unit(h.rotate_left(11));
+        (x - cx).powi(2) + (y - cy).powi(2) < r * r
+    }
+
+    /// Whether (x, y) lies on a scratch: at most one per 1 cm cell (checked with its neighbours,
+    /// as scratches cross cell borders), a hashed segment.
+    fn on_scratch(&self, x: f64, y: f64) -> bool {
+        let (i0, j0) = ((x / SCRATCH_CELL).floor(), (y / SCRATCH_CELL).floor());
+        for dj in -1..=1 {
+            for di in -1..=1 {
+                let (i, j) = (i0 + di as f64, j0 + dj as f64);
+                let h = hash3(self.texture_seed, i as i64, j as i64, 3);
+                if unit(h) >= self.scratches / 100.0 * (SCRATCH_CELL * 100.0).powi(2) {
+                    continue;
+                }
+                let cx = (i + unit(h.rotate_left(13))) * SCRATCH_CELL;
+                let cy = (j + unit(h.rotate_left(26))) * SCRATCH_CELL;
+                let angle = unit(h.rotate_left(39)) * std::f64::consts::PI;
+                let half = (3e-3 + 5e-3 * unit(h.rotate_left(52))) / 2.0;
+                let width = 2e-5 + 3e-5 * unit(h.rotate_left(7));
+                let (dx, dy) = (x - cx, y - cy);
+                let along = dx * angle.cos() + dy * angle.sin();
+                let across = -dx * angle.sin() + dy * angle.cos();
+                if along.abs() <= half && across.abs() <= width / 2.0 {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+/// Lattice spacing of the print's albedo grain, metres.
+const GRAIN_CELL: f64 = 3e-3;
+/// Cell of the dust pattern, metres.
+const DUST_CELL: f64 = 1e-3;
+/// Cell of the scratch pattern, metres.
+const SCRATCH_CELL: f64 = 1e-2;
+
+/// A dust speck: light grey, matte.
+const DUST: Appearance = Appearance {
+    base_color: [0.55, 0.54, 0.5],
+    metallic: 0.0,
+    roughness: 0.9,
+    specular: 0.04,
+    anisotropy: 0.0,
+};
+
+/// Bare aluminium where a scratch cut through the print.
+const SCRATCH: Appearance = Appearance {
+    base_color: [0.91, 0.92, 0.92],
+    metallic: 1.0,
+    roughness: 0.3,
+    specular: 0.04,
+    anisotropy: 0.0,
+};
+
+/// A splitmix64 hash of a seed, two lattice coordinates and a stream tag.
+fn hash3(seed: u64, i: i64, j: i64, tag: u64) -> u64 {
+    let mut z = seed ^ tag.wrapping_mul(0xD6E8_FEB8_6659_FD93);
+    for v in [i as u64, j as u64] {
+        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15).wrapping_add(v);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+    }
+    z
+}
+
+/// The top 53 bits of a hash as a number in [0, 1).
+fn unit(h: u64) -> f64 {
+    (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// Bit `bit` (0–35) of tag `id`'s data pattern: a fixed integer hash (splitmix64).

@@ -3,8 +3,12 @@
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
 
-use super::{DropError, PartModel, PlacedPart, Randomisation, RandomisationError, drop_parts};
-use crate::render::{Appearance, Instance, PointLight, RenderScene, SensorModel, Table, TagBoard};
+use super::{
+    DropError, PartModel, PlacedPart, Randomisation, RandomisationError, Range, drop_parts,
+};
+use crate::render::{
+    Appearance, Instance, PointLight, RenderOutput, RenderScene, SensorModel, Table, TagBoard,
+};
 
 /// Why a scene could not be sampled.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -54,8 +58,28 @@ pub struct SampledScene {
     /// Camera pose in the table frame.
     #[allow(non_snake_case)]
     pub table_T_camera: Isometry3<f64>,
-    /// Sensor settings.
+    /// Sensor settings (before metering; see [`SampledScene::metered_sensor`]).
     pub sensor: SensorModel,
+    /// Exposure multiplier applied after metering: 1, or the randomised over-exposure.
+    pub overexposure: f64,
+}
+
+/// Metering target: the parts' pixels stay below this share of full scale ...
+pub const METER_TARGET: f64 = 0.9;
+/// ... in all but this share of them (specular glints of a small light on a mirror-like facet
+/// may clip: metering on every glint would leave the rest of the image black) ...
+pub const METER_SHARE: f64 = 0.005;
+/// ... and metering lowers the drawn exposure by at most this factor.
+pub const METER_FLOOR: f64 = 0.15;
+
+impl SampledScene {
+    /// The sensor for a render of this scene: highlight-priority metering on the parts
+    /// ([`SensorModel::metered`]), then the randomised over-exposure, if drawn.
+    pub fn metered_sensor(&self, out: &RenderOutput) -> SensorModel {
+        let mut s = self.sensor.metered(out, METER_TARGET, METER_SHARE);
+        s.exposure = s.exposure.max(self.sensor.exposure * METER_FLOOR) * self.overexposure;
+        s
+    }
 }
 
 /// Samples a scene: drops the parts, then draws lights, materials, camera and sensor.
@@ -95,16 +119,12 @@ pub fn dress_scene(
 ) -> Result<SampledScene, SceneError> {
     rand.validate()?;
 
-    let tints: Vec<Appearance> = models
+    let looks: Vec<(Appearance, Option<Appearance>)> = models
         .iter()
         .map(|m| {
-            let a = m.appearance();
-            let tint = [
-                rand.material_tint.sample(rng),
-                rand.material_tint.sample(rng),
-                rand.material_tint.sample(rng),
-            ];
-            a.tinted(tint, a.roughness * rand.roughness_scale.sample(rng))
+            let main = randomised(m.appearance(), rand, rng);
+            let accent = m.accent_appearance().map(|a| randomised(a, rand, rng));
+            (main, accent)
         })
         .collect();
     let instances = parts
@@ -112,12 +132,18 @@ pub fn dress_scene(
         .map(|p| Instance {
             mesh: models[p.model].render_mesh.clone(),
             table_T_part: p.table_T_part,
-            appearance: tints[p.model],
+            appearance: looks[p.model].0,
+            accent: looks[p.model].1,
         })
         .collect();
     let mut board = TagBoard::default();
     let board_tint = rand.material_tint.sample(rng);
     board.white = board.white.tinted([board_tint; 3], board.white.roughness);
+    board.black.base_color = [rand.board_black.sample(rng); 3];
+    board.grain = rand.board_grain.sample(rng);
+    board.dust = rand.dust.sample(rng);
+    board.scratches = rand.scratches.sample(rng);
+    board.texture_seed = rng.random();
     let grey = rand.table_albedo.sample(rng);
     let table = Table {
         height: -board.thickness,
@@ -126,6 +152,7 @@ pub fn dress_scene(
             metallic: 0.0,
             roughness: 0.7,
             specular: 0.04,
+            anisotropy: 0.0,
         },
     };
     let n_lights = rand.lights.sample(rng).round().max(0.0) as usize;
@@ -142,6 +169,7 @@ pub fn dress_scene(
                     i * rand.light_tint.sample(rng),
                     i * rand.light_tint.sample(rng),
                 ],
+                radius: rand.light_size.sample(rng),
             }
         })
         .collect();
@@ -167,18 +195,93 @@ pub fn dress_scene(
         );
     let roll = rand.camera_roll.sample(rng);
     let table_T_camera = look_at(&eye, &aim, &(nominal.rotation * Vector3::x()), roll);
+    let overexposure = if rng.random_range(0.0..1.0) < rand.overexposure_probability {
+        rand.overexposure.sample(rng)
+    } else {
+        1.0
+    };
     let sensor = SensorModel {
         exposure: rand.exposure.sample(rng),
         blur_sigma: rand.blur_sigma.sample(rng),
         read_noise: rand.read_noise.sample(rng),
         shot_noise: rand.shot_noise.sample(rng),
+        gain: rand.gain.sample(rng),
+        defocus_radius: rand.defocus_radius.sample(rng),
+        motion_length: rand.motion_length.sample(rng),
+        motion_angle: rng.random_range(0.0..std::f64::consts::PI),
+        jpeg_quality: if rng.random_range(0.0..1.0) < rand.jpeg_probability {
+            rand.jpeg_quality.sample(rng).round()
+        } else {
+            0.0
+        },
     };
     Ok(SampledScene {
         parts,
         render,
         table_T_camera,
         sensor,
+        overexposure,
     })
+}
+
+/// A material with randomised tint and roughness, and brushing when it is a metal.
+fn randomised(a: Appearance, rand: &Randomisation, rng: &mut impl Rng) -> Appearance {
+    // Brightness from the range, and a hue shift of at most a fifth of its spread: colour casts
+    // of plated metal and moulded plastic are subtle.
+    let brightness = rand.material_tint.sample(rng);
+    let hue = Range::new(
+        1.0 - (rand.material_tint.hi - rand.material_tint.lo) / 10.0,
+        1.0 + (rand.material_tint.hi - rand.material_tint.lo) / 10.0,
+    );
+    let tint = [
+        brightness * hue.sample(rng),
+        brightness * hue.sample(rng),
+        brightness * hue.sample(rng),
+    ];
+    let mut a = a.tinted(tint, a.roughness * rand.roughness_scale.sample(rng));
+    if a.metallic > 0.5 {
+        a.anisotropy = rand.metal_anisotropy.sample(rng);
+    }
+    a
+}
+
+/// The renderer's view of parts at rest in the cell under its fixed, nominal conditions: nominal
+/// materials, the default tag board, a mid-grey table, two point lights (hard shadows) above the
+/// board and a dim ambient. Simulated runs render their captures of this (see [`crate::render::capture`]).
+pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene {
+    let instances = parts
+        .iter()
+        .map(|p| Instance {
+            mesh: models[p.model].render_mesh.clone(),
+            table_T_part: p.table_T_part,
+            appearance: models[p.model].appearance(),
+            accent: models[p.model].accent_appearance(),
+        })
+        .collect();
+    let board = TagBoard::default();
+    let table = Table {
+        height: -board.thickness,
+        appearance: Appearance {
+            base_color: [0.3, 0.29, 0.27],
+            metallic: 0.0,
+            roughness: 0.7,
+            specular: 0.04,
+            anisotropy: 0.0,
+        },
+    };
+    let lights = vec![
+        PointLight {
+            position: Point3::new(0.45, 0.3, 1.2),
+            intensity: [1.1; 3],
+            radius: 0.0,
+        },
+        PointLight {
+            position: Point3::new(-0.4, -0.25, 1.0),
+            intensity: [0.8; 3],
+            radius: 0.0,
+        },
+    ];
+    RenderScene::new(instances, Some(board), Some(table), lights, [0.08; 3])
 }
 
 /// The OpenCV camera pose at `eye` looking at `target`, its x axis as close as possible to

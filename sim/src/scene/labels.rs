@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, Point2};
 use perception::camera::Camera;
 
 use super::{PartModel, PlacedPart};
-use crate::render::RenderOutput;
+use crate::render::{InstanceMask, RenderOutput};
 
 /// Labels of one instance, in the coordinates of the rendered window (its top-left pixel is 0, 0).
 #[derive(Debug, Clone, PartialEq)]
@@ -41,61 +41,82 @@ pub fn label_instances(
     table_T_camera: &Isometry3<f64>,
     out: &RenderOutput,
 ) -> Vec<InstanceLabel> {
-    let camera_T_table = table_T_camera.inverse();
-    let w = out.window;
-    parts
-        .iter()
-        .enumerate()
-        .map(|(i, part)| {
-            let model = &models[part.model];
-            let camera_T_part = camera_T_table * part.table_T_part;
-            let keypoints = model
-                .keypoints
-                .iter()
-                .map(|k| match camera.project(&(camera_T_part * k)) {
-                    Ok(p) => Point2::new(p.x - w.x0 as f64, p.y - w.y0 as f64),
-                    Err(_) => Point2::new(f64::NAN, f64::NAN),
-                })
-                .collect();
-            let id = (i + 1) as u16;
-            let mut vis = BoxAcc::default();
-            for (idx, v) in out.visible.iter().enumerate() {
-                if *v == id {
-                    vis.add(idx % w.width as usize, idx / w.width as usize);
-                }
-            }
-            let all = match out.full_masks.get(i) {
-                Some(mask) => {
-                    let mut acc = BoxAcc::default();
-                    let mw = mask.window;
-                    for (idx, b) in mask.bits.iter().enumerate() {
-                        if *b {
-                            let x = (mw.x0 - w.x0) as usize + idx % mw.width as usize;
-                            let y = (mw.y0 - w.y0) as usize + idx / mw.width as usize;
-                            acc.add(x, y);
-                        }
-                    }
-                    acc
-                }
-                None => vis,
-            };
-            InstanceLabel {
-                instance: i,
-                obj_id: model.obj_id,
-                camera_T_part,
-                keypoints,
-                px_count_all: all.count,
-                px_count_visib: vis.count,
-                visib_fract: if all.count > 0 {
-                    vis.count as f64 / all.count as f64
-                } else {
-                    0.0
-                },
-                bbox_obj: all.bbox(),
-                bbox_visib: vis.bbox(),
-            }
+    (0..parts.len())
+        .map(|i| {
+            label_instance(
+                i,
+                parts,
+                models,
+                camera,
+                table_T_camera,
+                out,
+                out.full_masks.get(i),
+            )
         })
         .collect()
+}
+
+/// Labels instance `i` of a render alone, with its full silhouette `full` (from
+/// [`crate::render::instance_mask`]) when known: a crop needs only its target's labels and mask.
+#[allow(non_snake_case)]
+pub fn label_instance(
+    i: usize,
+    parts: &[PlacedPart],
+    models: &[PartModel],
+    camera: &Camera,
+    table_T_camera: &Isometry3<f64>,
+    out: &RenderOutput,
+    full: Option<&InstanceMask>,
+) -> InstanceLabel {
+    let w = out.window;
+    let part = &parts[i];
+    let model = &models[part.model];
+    let camera_T_part = table_T_camera.inverse() * part.table_T_part;
+    let keypoints = model
+        .keypoints
+        .iter()
+        .map(|k| match camera.project(&(camera_T_part * k)) {
+            Ok(p) => Point2::new(p.x - w.x0 as f64, p.y - w.y0 as f64),
+            Err(_) => Point2::new(f64::NAN, f64::NAN),
+        })
+        .collect();
+    let id = (i + 1) as u16;
+    let mut vis = BoxAcc::default();
+    for (idx, v) in out.visible.iter().enumerate() {
+        if *v == id {
+            vis.add(idx % w.width as usize, idx / w.width as usize);
+        }
+    }
+    let all = match full {
+        Some(mask) => {
+            let mut acc = BoxAcc::default();
+            let mw = mask.window;
+            for (idx, b) in mask.bits.iter().enumerate() {
+                if *b {
+                    let x = (mw.x0 - w.x0) as usize + idx % mw.width as usize;
+                    let y = (mw.y0 - w.y0) as usize + idx / mw.width as usize;
+                    acc.add(x, y);
+                }
+            }
+            acc
+        }
+        None => vis,
+    };
+    InstanceLabel {
+        instance: i,
+        obj_id: model.obj_id,
+        camera_T_part,
+        keypoints,
+        px_count_all: all.count,
+        px_count_visib: vis.count,
+        visib_fract: if all.count > 0 {
+            vis.count as f64 / all.count as f64
+        } else {
+            0.0
+        },
+        bbox_obj: all.bbox(),
+        bbox_visib: vis.bbox(),
+    }
 }
 
 /// Running pixel count and bounding box.

@@ -9,8 +9,11 @@ mod labels;
 mod model;
 mod randomisation;
 
-pub use compose::{SampledScene, SceneError, SceneRequest, dress_scene, look_at, sample_scene};
+pub use compose::{
+    METER_FLOOR, METER_SHARE, METER_TARGET, SampledScene, SceneError, SceneRequest, dress_scene,
+    look_at, nominal_scene, sample_scene,
+};
 pub use drop::{DropError, PlacedPart, drop_parts};
-pub use labels::{InstanceLabel, keypoint_vectors, label_instances};
+pub use labels::{InstanceLabel, keypoint_vectors, label_instance, label_instances};
 pub use model::{PartModel, PartModelError};
 pub use randomisation::{Randomisation, RandomisationError, Range};

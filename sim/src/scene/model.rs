@@ -33,6 +33,8 @@ pub struct PartModel {
     pub keypoints: Vec<Point3<f64>>,
     /// Surface class.
     pub material: Material,
+    /// Material of the mesh's accent triangles (the insert's gold pins), if it has any.
+    pub accent: Option<Material>,
     /// Density, kg/m³.
     pub density: f64,
     /// The catalog entry.
@@ -43,8 +45,15 @@ impl PartModel {
     /// Builds a model from a mesh and a catalog entry; keypoints come from the catalog when it is
     /// prepared, otherwise they are computed as `cell parts prepare` does (FPS from the centre).
     pub fn new(spec: &PartSpec, mesh: TriMesh, obj_id: u32) -> Result<Self, PartModelError> {
-        let render_mesh =
-            RenderMesh::new(&mesh).ok_or_else(|| PartModelError::EmptyMesh(spec.name.clone()))?;
+        let flags = if spec.material == Material::DarkPlastic {
+            pin_triangles(&mesh)
+        } else {
+            Vec::new()
+        };
+        let accent = flags.iter().any(|f| *f).then_some(Material::Gold);
+        let render_mesh = RenderMesh::new(&mesh)
+            .ok_or_else(|| PartModelError::EmptyMesh(spec.name.clone()))?
+            .with_accent(flags);
         let keypoints = if spec.keypoints.len() == 9 {
             spec.keypoint_points()
         } else {
@@ -61,6 +70,7 @@ impl PartModel {
             render_mesh: Arc::new(render_mesh),
             keypoints,
             material: spec.material,
+            accent,
             density: spec.density(),
             spec: spec.clone(),
             mesh,
@@ -85,6 +95,11 @@ impl PartModel {
         Appearance::for_material(self.material)
     }
 
+    /// Nominal appearance of the accent triangles, if any.
+    pub fn accent_appearance(&self) -> Option<Appearance> {
+        self.accent.map(Appearance::for_material)
+    }
+
     /// Diameter (largest vertex-to-vertex distance), metres, as BOP defines it.
     pub fn diameter(&self) -> f64 {
         let v = &self.mesh.vertices;
@@ -96,4 +111,43 @@ impl PartModel {
         }
         best.sqrt()
     }
+}
+
+/// The contact pins of a moulded part: triangles standing above its highest large upward face
+/// (a face level holding at least a tenth of the footprint). The insert's pins rise 0.1–0.2 mm
+/// above its tongue; a part without pins has none.
+fn pin_triangles(mesh: &TriMesh) -> Vec<bool> {
+    let (lo, hi) = mesh.aabb();
+    let footprint = (hi.x - lo.x) * (hi.y - lo.y);
+    let tri = |t: &[u32; 3]| t.map(|i| mesh.vertices[i as usize]);
+    // Upward faces: summed area per height level (0.1 µm bins).
+    let mut levels: Vec<(f64, f64)> = Vec::new();
+    for t in &mesh.triangles {
+        let [a, b, c] = tri(t);
+        let n = (b - a).cross(&(c - a));
+        let area = n.norm() / 2.0;
+        if area <= 0.0 || n.z / (2.0 * area) < 0.99 {
+            continue;
+        }
+        let z = (a.z + b.z + c.z) / 3.0;
+        match levels.iter_mut().find(|(lz, _)| (lz - z).abs() < 1e-7) {
+            Some(level) => level.1 += area,
+            None => levels.push((z, area)),
+        }
+    }
+    let Some(top) = levels
+        .iter()
+        .filter(|(_, area)| *area >= 0.1 * footprint)
+        .map(|(z, _)| *z)
+        .reduce(f64::max)
+    else {
+        return vec![false; mesh.triangles.len()];
+    };
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = tri(t);
+            (a.z + b.z + c.z) / 3.0 > top + 1e-7
+        })
+        .collect()
 }
