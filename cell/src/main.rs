@@ -10,12 +10,23 @@ use clap::{Parser, Subcommand};
 /// A scenario file describes a whole cell: camera, flexible feeder, UR arm, gripper, fixture, the
 /// part catalog and the assembly steps. Typical flow:
 ///
-///   cell parts prepare scenarios/parts/usbc.toml   # keypoints, mass, stable poses (physics)
 ///   cell check scenarios/usbc_nominal.toml         # validate a scenario before running it
+///   cell run scenarios/usbc_nominal.toml           # run its episodes; summary.json, report.html
+///   cell replay runs/usbc-nominal/all --episode 3  # one episode again: timeline and pictures
+///   cell regress scenarios/usbc_nominal.toml --baseline scenarios/baselines   # gate a change
+///   cell parts prepare scenarios/parts/usbc.toml   # after changing a part: keypoints, mass,
+///                                                  # stable poses (physics)
 ///
 /// Every command prints what it measured; files it writes are written atomically.
 #[derive(Debug, Parser)]
-#[command(name = "cell", version, about, long_about, propagate_version = true)]
+#[command(
+    name = "cell",
+    version,
+    about,
+    long_about,
+    verbatim_doc_comment,
+    propagate_version = true
+)]
 struct Cli {
     /// Log filter, e.g. "info" or "sim=debug" (also read from RUST_LOG).
     #[arg(long, global = true, default_value = "warn")]
@@ -77,7 +88,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", commands::error_text(&e));
             std::process::ExitCode::FAILURE
         }
     }

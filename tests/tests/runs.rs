@@ -368,7 +368,7 @@ fn records_that_do_not_belong_are_rejected() {
     let (mut store, _) =
         ResultsStore::open(tmp.path(), l.header(Shard::new(1, 2).unwrap())).unwrap();
     let err = store.append(record(&l.scenario, 4)).unwrap_err();
-    assert!(err.to_string().contains("not in shard 1/2"), "{err}");
+    assert!(err.to_string().contains("not in shard 2/2"), "{err}");
     store.append(record(&l.scenario, 5)).unwrap();
     assert!(store.append(record(&l.scenario, 5)).is_err());
     let wrong = |s: &Scenario, e: u32| record(s, e + 1);

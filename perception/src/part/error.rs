@@ -70,4 +70,21 @@ pub enum PartError {
         /// What was wrong and what was expected.
         message: String,
     },
+    /// A part's mesh could not be loaded: located at the catalog's `mesh` key, with the mesh
+    /// file's own error (its path and why: not found, or where it fails to parse).
+    #[error("{catalog}:{line}:{column}: part \"{part}\": mesh = {mesh:?}: {error}")]
+    Mesh {
+        /// The catalog file.
+        catalog: PathBuf,
+        /// 1-based line of the part's `mesh` key.
+        line: usize,
+        /// 1-based column of its value.
+        column: usize,
+        /// The part.
+        part: String,
+        /// The `mesh` value as written.
+        mesh: PathBuf,
+        /// What loading the mesh file said.
+        error: Box<PartError>,
+    },
 }
