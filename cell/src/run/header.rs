@@ -11,7 +11,7 @@ use crate::episode::RECORD_VERSION;
 pub const RESULTS_FORMAT: &str = "cell-episodes";
 
 /// Header line of `episodes.jsonl`.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ResultsHeader {
     /// Always [`RESULTS_FORMAT`].
@@ -30,6 +30,14 @@ pub struct ResultsHeader {
     /// `--robot` names it); files written before robots were recorded read as [`SIM_ROBOT`].
     #[serde(default = "sim_robot")]
     pub robot: String,
+    /// Each assembly step's lateral capture band (clearance / 2 + lead-in), millimetres, for
+    /// reports; derived from the scenario file the hash names, so not compared between files.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub capture_mm: Vec<f64>,
+    /// The scenario file the run read (absolute), so `cell replay` can find it; not compared
+    /// between files (the hash is).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario_file: Option<std::path::PathBuf>,
 }
 
 /// The robot of the in-process simulation, `--robot`'s default.
@@ -50,6 +58,8 @@ impl ResultsHeader {
             scenario_sha256: sha256_hex(scenario_file),
             shard,
             robot: SIM_ROBOT.into(),
+            capture_mm: Vec::new(),
+            scenario_file: None,
         }
     }
 

@@ -71,7 +71,15 @@ impl LoadedScenario {
     /// The results header of this scenario for `shard`.
     pub fn header(&self, shard: Shard) -> ResultsHeader {
         let spec = &self.scenario.spec;
-        ResultsHeader::new(&spec.name, spec.seed, &self.bytes, shard)
+        ResultsHeader {
+            capture_mm: spec
+                .assembly
+                .iter()
+                .map(|s| (s.clearance / 2.0 + s.lead_in) * 1e3)
+                .collect(),
+            scenario_file: std::path::absolute(&self.scenario.path).ok(),
+            ..ResultsHeader::new(&spec.name, spec.seed, &self.bytes, shard)
+        }
     }
 }
 
