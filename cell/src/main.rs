@@ -56,6 +56,9 @@ enum Command {
     /// behind a loopback virtual UR over RTDE (`--robot virtual-ur`), or a real controller
     /// (`--robot ur://HOST`, after the production pre-flight).
     Run(commands::run::Args),
+    /// Re-run one stored episode of a simulated run from its seed: its event timeline, a check
+    /// against the stored record, and pictures of its failure.
+    Replay(commands::replay::Args),
     /// Combine shard results (`cell run --shard I/N`) into one results set and report.
     Merge(commands::merge::Args),
     /// Success-rate regression gate: run scenarios and compare with their baselines
@@ -82,6 +85,7 @@ fn main() -> std::process::ExitCode {
         Command::Dataset(args) => commands::dataset::run(args),
         Command::Run(args) => commands::run::run(args),
         Command::Merge(args) => commands::merge::run(args),
+        Command::Replay(args) => commands::replay::run(args),
         Command::Regress(args) => commands::regress::run(args),
         Command::Scorers(args) => commands::scorers::run(args),
     };

@@ -272,3 +272,15 @@ fn results_of_another_robot_are_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn help_shows_the_typical_flow_one_command_a_line() {
+    let o = cell(&["--help"]);
+    let t = text(&o);
+    for command in ["cell check ", "cell run ", "cell replay ", "cell regress "] {
+        assert!(
+            t.lines().any(|l| l.trim_start().starts_with(command)),
+            "{command} not on a line of its own:\n{t}"
+        );
+    }
+}

@@ -41,11 +41,18 @@ fn a_noisy_run_reports_mechanisms_and_links_every_failed_episode_to_its_events()
         &scenario.display().to_string(),
         "--episodes",
         "40",
+        "--pictures",
+        "2",
         "--out",
         &out,
         "--quiet",
     ]);
     std::fs::remove_file(&scenario).ok();
+    assert!(
+        text(&o).contains("pictures of 2 failed episodes"),
+        "{}",
+        text(&o)
+    );
     assert!(o.status.success(), "{}", text(&o));
     let dir = tmp.path().join("usbc-nominal/all");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();

@@ -7,6 +7,7 @@ pub mod dataset;
 pub mod merge;
 pub mod parts;
 pub mod regress;
+pub mod replay;
 pub mod run;
 pub mod scorers;
 pub mod virtual_ur;

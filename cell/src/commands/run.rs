@@ -46,6 +46,48 @@ pub struct Args {
     /// --robot ur://HOST).
     #[arg(long)]
     pub camera: Option<PathBuf>,
+    /// Failed episodes to draw pictures of (the failing insertion from two views with its
+    /// capture band, and the feeder), linked from the report; 0 for none.
+    #[arg(long, default_value_t = 20)]
+    pub pictures: usize,
+}
+
+/// Draws the pictures of the first `limit` failed episodes of a simulated run into
+/// `dir/pictures` and rewrites the report so it shows them; returns how many episodes.
+fn draw_failures(
+    loaded: &LoadedScenario,
+    dir: &std::path::Path,
+    episodes: u32,
+    limit: usize,
+) -> anyhow::Result<usize> {
+    use cell::report::pictures::failure_pictures;
+    let results = cell::run::read_results(&dir.join(cell::run::RESULTS_FILE))?;
+    let records: std::collections::BTreeMap<u32, cell::episode::EpisodeRecord> = results
+        .records
+        .range(..episodes)
+        .map(|(k, v)| (*k, v.clone()))
+        .collect();
+    let failed: Vec<&cell::episode::EpisodeRecord> = records
+        .values()
+        .filter(|r| !r.success)
+        .take(limit)
+        .collect();
+    if failed.is_empty() {
+        return Ok(0);
+    }
+    let setup = cell::orchestrator::SimSetup::new(loaded.scenario.clone())?;
+    let pictures = dir.join(cell::report::PICTURES_DIR);
+    for r in &failed {
+        let feeder = setup
+            .cell(r.episode)?
+            .lock()
+            .map(|c| c.feeder_parts().to_vec())
+            .unwrap_or_default();
+        failure_pictures(&loaded.scenario, r, Some(&feeder), &pictures)?;
+    }
+    let summary = Summary::new(&results.header, records.values());
+    cell::report::write_report(dir, &summary, &records)?;
+    Ok(failed.len())
 }
 
 /// `n` and a noun, singular for one: "1 episode", "3 episodes".
@@ -102,6 +144,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         !args.quiet,
         &driver,
     )?;
+    let drawn = if args.pictures > 0 && matches!(args.robot, RobotTarget::Sim) {
+        draw_failures(&loaded, &done.dir, episodes, args.pictures)?
+    } else {
+        0
+    };
     println!("{}", headline(&done.summary));
     for t in &done.summary.steps {
         println!(
@@ -134,6 +181,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         done.dir.join(cell::run::RESULTS_FILE).display(),
         done.report.html.display()
     );
+    if drawn > 0 {
+        println!(
+            "pictures of {} in {}",
+            count(drawn, "failed episode"),
+            done.dir.join(cell::report::PICTURES_DIR).display()
+        );
+    }
     if o.beyond > 0 {
         eprintln!(
             "note: {} holds {} more from an earlier, longer run; summary.json and report.html \

@@ -3,6 +3,7 @@
 //! (`events/`) and pictures (`pictures/`) where they exist.
 
 pub mod html;
+pub mod pictures;
 pub mod plots;
 
 use std::collections::BTreeMap;
