@@ -107,10 +107,13 @@ fn detail(pattern: &str, rows: &[Vec<f64>]) -> String {
 
 type Key = (Option<String>, Option<usize>, String);
 
+/// The failures of one mechanism: outcome, cause patterns seen, each cause's numbers, episodes.
+type Group = (Option<StepOutcome>, Vec<String>, Vec<Vec<f64>>, Vec<u32>);
+
 /// Failed episodes grouped by (part, outcome, mechanism).
 #[derive(Default)]
 pub struct Mechanisms {
-    groups: BTreeMap<Key, (Option<StepOutcome>, Vec<String>, Vec<Vec<f64>>, Vec<u32>)>,
+    groups: BTreeMap<Key, Group>,
 }
 
 impl Mechanisms {

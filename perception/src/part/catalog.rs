@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{LengthUnit, PartError, StablePose, TriMesh, load_mesh};
+use super::{LengthUnit, MeshAt, PartError, StablePose, TriMesh, load_mesh};
 
 /// A part set: the parts of one product, read from a catalog file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -263,14 +263,14 @@ impl Catalog {
             let (line, column) = index
                 .and_then(|i| self.mesh_locations.get(i).copied())
                 .unwrap_or((1, 1));
-            PartError::Mesh {
+            PartError::Mesh(Box::new(MeshAt {
                 catalog: self.file.clone(),
                 line,
                 column,
                 part: part.name.clone(),
                 mesh: part.mesh.clone(),
-                error: Box::new(error),
-            }
+                error,
+            }))
         })
     }
 }

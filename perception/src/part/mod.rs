@@ -9,7 +9,7 @@ mod mesh_io;
 mod stable_pose;
 
 pub use catalog::{Catalog, Grasp, Material, PartRole, PartSpec, Symmetry, line_column};
-pub use error::PartError;
+pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
 pub use mesh::{MeshDefect, TriMesh};
 pub use mesh_io::{LengthUnit, load_mesh, write_obj};
