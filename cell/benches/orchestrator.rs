@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use cell::orchestrator::{SimSetup, run_sim_episode_blocking};
+use cell::harness::{SimSetup, run_sim_episode_blocking};
 use cell::scenario::Scenario;
 use criterion::{Criterion, criterion_group, criterion_main};
 use rayon::prelude::*;

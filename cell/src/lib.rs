@@ -1,7 +1,10 @@
-//! The cell orchestrator library: scenario files, part preparation, runs, reports and the
-//! regression gate. The `cell` binary is a thin command-line layer over it.
+//! The cell orchestrator library: scenario files, part preparation, the orchestrator engine
+//! (`orchestrator`), the simulation harness that puts it in front of the simulated cell
+//! (`harness`), runs, reports and the regression gate. The `cell` binary is a thin
+//! command-line layer over it.
 
 pub mod episode;
+pub mod harness;
 pub mod orchestrator;
 pub mod prepare;
 pub mod regress;

@@ -6,7 +6,8 @@ use std::path::Path;
 use indicatif::ProgressBar;
 use nalgebra::Point3;
 use perception::part::{
-    Catalog, PartRole, PartSpec, StablePose, farthest_point_sample, sample_surface,
+    Catalog, MeshRepairs, PartRole, PartSpec, StablePose, farthest_point_sample,
+    load_mesh_repaired, sample_surface,
 };
 use sim::stable_poses::{DropSettings, StablePoseReport, stable_poses};
 use toml_edit::{Array, ArrayOfTables, DocumentMut, Item, Table, value};
@@ -27,6 +28,8 @@ pub struct PreparedPart {
     pub keypoints: Vec<Point3<f64>>,
     /// The drop statistics and classes.
     pub report: StablePoseReport,
+    /// What loading repaired in the mesh file (warn the user about each).
+    pub repairs: MeshRepairs,
 }
 
 /// Errors of `prepare`.
@@ -61,7 +64,7 @@ pub fn prepare_part(
     settings: &DropSettings,
     progress: Option<&ProgressBar>,
 ) -> Result<PreparedPart, PrepareError> {
-    let mesh = catalog.load_mesh(part)?;
+    let (mesh, repairs) = load_mesh_repaired(&catalog.mesh_path(part), part.unit)?;
     let report = stable_poses(&mesh, part.density(), settings, progress);
     Ok(PreparedPart {
         name: part.name.clone(),
@@ -69,6 +72,7 @@ pub fn prepare_part(
         center_of_mass: report.center_of_mass,
         keypoints: keypoints(&mesh, settings.seed),
         report,
+        repairs,
     })
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use cell::orchestrator::SimSetup;
+use cell::harness::SimSetup;
 use cell::scenario::Scenario;
 use robots::robot::{JointMotion, Robot};
 use robots::ur_robot::{UrRobot, UrRobotConfig};

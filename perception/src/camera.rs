@@ -256,17 +256,6 @@ impl Camera {
         Ok(self.normalized_to_pixel(self.distortion.apply(ideal)))
     }
 
-    /// Projects a camera-frame point with no distortion (the ideal pinhole image).
-    pub fn project_ideal(&self, p: &Point3<f64>) -> Result<Point2<f64>, CameraError> {
-        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
-            return Err(CameraError::NonFinite("point to project"));
-        }
-        if p.z <= 0.0 {
-            return Err(CameraError::BehindCamera { z: p.z });
-        }
-        Ok(self.normalized_to_pixel(Vector2::new(p.x / p.z, p.y / p.z)))
-    }
-
     /// The ideal (undistorted) normalised coordinates (x/z, y/z) seen at a pixel.
     pub fn unproject(&self, pixel: Point2<f64>) -> Result<Vector2<f64>, CameraError> {
         if !(pixel.x.is_finite() && pixel.y.is_finite()) {
@@ -278,11 +267,6 @@ impl Camera {
                 u: pixel.x,
                 v: pixel.y,
             })
-    }
-
-    /// The undistorted pixel: where the ideal pinhole camera would have imaged the same ray.
-    pub fn undistort_pixel(&self, pixel: Point2<f64>) -> Result<Point2<f64>, CameraError> {
-        Ok(self.normalized_to_pixel(self.unproject(pixel)?))
     }
 
     /// Unit direction, in the camera frame, of the ray seen at a pixel.

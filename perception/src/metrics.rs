@@ -205,11 +205,6 @@ impl Summary {
             max: v[v.len() - 1],
         }
     }
-
-    /// "mean ± std", with `digits` decimals.
-    pub fn mean_std(&self, digits: usize) -> String {
-        format!("{:.*} ± {:.*}", digits, self.mean, digits, self.std)
-    }
 }
 
 /// Linear-interpolated percentile of sorted values.

@@ -44,8 +44,107 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// ur_rtde 1.6.5 always uses the default ports: one test at a time holds them.
+static DEFAULT_PORTS: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// Runs a script from `scripts/ur_rtde` against 127.0.0.1; its JSON lines on stdout.
+async fn run_script(name: &str, limit: Duration) -> (std::process::Output, Vec<Json>) {
+    let python = provision_python();
+    let mut child = tokio::process::Command::new(&python)
+        .arg(repo_root().join("scripts/ur_rtde").join(name))
+        .arg("127.0.0.1")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .kill_on_drop(true)
+        .spawn()
+        .expect("run python");
+    let (mut so, mut se) = (child.stdout.take().unwrap(), child.stderr.take().unwrap());
+    let read = tokio::spawn(async move {
+        use tokio::io::AsyncReadExt;
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let _ = tokio::join!(so.read_to_end(&mut a), se.read_to_end(&mut b));
+        (a, b)
+    });
+    let status = match tokio::time::timeout(limit, child.wait()).await {
+        Ok(status) => status.expect("wait for python"),
+        Err(_) => {
+            child.kill().await.expect("kill python");
+            let (a, _) = read.await.expect("read output");
+            panic!(
+                "{name} did not finish within {limit:?}; its output:\n{}",
+                String::from_utf8_lossy(&a)
+            );
+        }
+    };
+    let (stdout, stderr) = read.await.expect("read output");
+    let out = std::process::Output {
+        status,
+        stdout,
+        stderr,
+    };
+    let lines = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    (out, lines)
+}
+
+/// The conformance suite (`scripts/ur_rtde/conformance.py`): every public method of ur_rtde
+/// 1.6.5's control, receive and IO interfaces either has its effect on the arm or the I/O, or
+/// is a listed unsupported method that fails loudly (never True without the effect).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ur_rtde_conformance_suite_passes_with_no_silent_success() {
+    let _ports = DEFAULT_PORTS.lock().await;
+    let vur = VirtualUr::start(VirtualUrConfig {
+        unlock_delay: Duration::from_millis(300),
+        ..VirtualUrConfig::default()
+    })
+    .await
+    .expect("bind 127.0.0.1:30004/29999/30003");
+    let (out, lines) = run_script("conformance.py", Duration::from_secs(150)).await;
+    let report = || {
+        format!(
+            "stdout:\n{}\nstderr (tail):\n{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .rev()
+                .take(30)
+                .collect::<Vec<_>>()
+                .join("\n")
+        )
+    };
+    let failed: Vec<&Json> = lines.iter().filter(|l| l["ok"] == false).collect();
+    assert!(
+        failed.is_empty(),
+        "failed cases: {failed:#?}\n{}\ncontroller messages:\n{}",
+        report(),
+        vur.controller.messages().join("\n")
+    );
+    let summary = lines
+        .iter()
+        .find(|l| l["summary"] == true)
+        .unwrap_or_else(|| panic!("no summary\n{}", report()));
+    for l in &lines {
+        println!("{l}");
+    }
+    assert_eq!(
+        summary["untested"],
+        serde_json::json!([]),
+        "methods neither tested nor listed as unsupported"
+    );
+    assert!(summary["cases"].as_u64().unwrap_or(0) >= 60, "{summary}");
+    assert!(out.status.success(), "{}", report());
+    // setInputIntRegister / setInputDoubleRegister reached the controller's registers.
+    let regs = vur.controller.snapshot().regs.clone();
+    assert_eq!(regs.input_int[18], 4242);
+    assert_eq!(regs.input_double[19], 3.25);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ur_rtde_receive_control_and_io_interfaces_drive_the_virtual_controller() {
+    let _ports = DEFAULT_PORTS.lock().await;
     let python = provision_python();
     let vur = VirtualUr::start(VirtualUrConfig::default())
         .await
@@ -137,8 +236,9 @@ async fn ur_rtde_receive_control_and_io_interfaces_drive_the_virtual_controller(
     // servoJ tracks the streamed targets; speedJ moves joint 1 at the commanded speed.
     let sj = step("servoJ");
     let (q, last, start) = (f64s(&sj["q"]), f64s(&sj["last_target"]), f64s(&sj["start"]));
-    // servoStop decelerates at 4 rad/s² from the tracking speed (≤ 0.6 rad/s even when
-    // targets arrive in bursts), so the arm ends at or shortly past the last target.
+    // servoStop is `stopl(a)` in ur_rtde's script: the TCP decelerates at 4 m/s² along its
+    // tangent from the tracking speed, so the arm ends at or shortly past the last target, and
+    // the other joints move only by that short straight stop.
     assert!(
         q[0] > last[0] - 1e-3 && q[0] < last[0] + 0.05,
         "servoJ ended at {} for last target {}",
@@ -146,8 +246,8 @@ async fn ur_rtde_receive_control_and_io_interfaces_drive_the_virtual_controller(
         last[0]
     );
     assert!(
-        max_abs_diff(&q[1..], &start[1..]) < 1e-9,
-        "only joint 1 moved"
+        max_abs_diff(&q[1..], &start[1..]) < 5e-3,
+        "only joint 1 moved (beyond the tool-space stop): {q:?} from {start:?}"
     );
     assert!(q[0] - start[0] > 0.09, "servoJ moved joint 1 by 0.1 rad");
     let sp = step("speedJ");

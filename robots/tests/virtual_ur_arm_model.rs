@@ -61,6 +61,9 @@ impl ArmModel for Recording {
     fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError> {
         self.arm.inverse(pose, near)
     }
+    fn kinematics(&self) -> &UrKinematics {
+        self.arm.kinematics()
+    }
     fn digital_output(&mut self, pin: u32, level: bool) {
         self.log.lock().unwrap().push((pin, level));
     }

@@ -16,12 +16,12 @@ use sim::cad::usbc;
 use sim::cell::geometry::PartGeometry;
 use sim::cell::insertion::contact::{self, ContactSettings};
 use sim::cell::insertion::{Mating, ReceiverPart, Scorer};
-use sim::cell::{CellModel, SimCell, script};
+use sim::cell::{CellModel, SimCell};
 
 #[path = "../tests/support/mod.rs"]
 mod support;
 
-use support::{catalog, scenario};
+use support::{catalog, scenario, script};
 
 fn episodes(c: &mut Criterion) {
     let s = scenario();

@@ -29,14 +29,6 @@ impl PoseSpec {
         )
     }
 
-    /// The pose of an isometry (rotation vector with angle in [0, π]).
-    pub fn from_isometry(iso: &Isometry3<f64>) -> Self {
-        Self {
-            translation: iso.translation.vector.into(),
-            rotation: iso.rotation.scaled_axis().into(),
-        }
-    }
-
     /// Whether every number is finite.
     pub fn is_finite(&self) -> bool {
         self.translation

@@ -8,4 +8,5 @@ pub mod dataset;
 pub mod fsutil;
 pub mod render;
 pub mod scene;
+pub mod seed;
 pub mod stable_poses;

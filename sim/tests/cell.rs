@@ -15,12 +15,12 @@ use sim::cell::arm::SimArm;
 use sim::cell::geometry::PartGeometry;
 use sim::cell::gripper::{self, Finger, GraspCandidate, GraspFailure};
 use sim::cell::insertion::{Scorer, Verdict};
-use sim::cell::{CellModel, SimCell, check_feasible, script};
+use sim::cell::{CellModel, SimCell, check_feasible};
 use sim::config::NoiseSpec;
 
 mod support;
 
-use support::{Nominal as Scenario, catalog, scenario};
+use support::{Nominal as Scenario, catalog, scenario, script};
 
 fn model(noise: &NoiseSpec, scorer: Scorer) -> Arc<CellModel> {
     let s = scenario();

@@ -5,7 +5,8 @@
 mod e2e_support;
 
 use cell::episode::StepOutcome;
-use cell::orchestrator::{SimSetup, State, run_sim_episode_blocking};
+use cell::harness::{SimSetup, run_sim_episode_blocking};
+use cell::orchestrator::State;
 use rayon::prelude::*;
 use sim::cell::CellModel;
 use sim::cell::insertion::Scorer;
@@ -116,26 +117,24 @@ fn an_empty_feeder_shakes_the_bounded_number_of_times_then_aborts() {
     // A scenario file cannot ask for an empty feeder (validation refuses it), so the simulated
     // cell is built with no main shell in it: the feeder ran empty.
     let base = setup(|_| {});
-    let mut spec = base.scenario.spec.clone();
+    let mut spec = base.scenario().spec.clone();
     spec.cell.feeder.parts.insert("main_shell".into(), 0);
     let model = CellModel::new(
         &spec.cell,
         &spec.assembly,
         &spec.noise,
-        &base.scenario.catalog,
+        &base.scenario().catalog,
         Scorer::Analytic,
     )
     .unwrap();
     let setup = SimSetup {
-        scenario: base.scenario.clone(),
+        engine: base.engine.clone(),
         model,
-        knowledge: base.knowledge.clone(),
-        settings: base.settings.clone(),
     };
     let s = first_step(&setup);
     assert_eq!(s.outcome, StepOutcome::Aborted);
     assert_eq!(s.attempts, 0);
-    assert_eq!(s.shakes, setup.scenario.spec.cell.feeder.max_shakes);
+    assert_eq!(s.shakes, setup.scenario().spec.cell.feeder.max_shakes);
     let cause = s.cause.unwrap();
     assert!(cause.contains("no usable main_shell"), "{cause}");
     // The error budget names the cause.
@@ -270,7 +269,7 @@ fn the_contact_scorer_is_chosen_by_the_scenario() {
         doc["simulation"]["insertion_scorer"] = toml_edit::value("contact");
     });
     assert_eq!(
-        contact.scenario.spec.simulation.insertion_scorer,
+        contact.scenario().spec.simulation.insertion_scorer,
         Scorer::Contact
     );
     assert_eq!(contact.model.scorer, Scorer::Contact);

@@ -10,10 +10,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use cell::episode::StepOutcome;
-use cell::orchestrator::{
-    EpisodeOutput, SimCellIo, State, connect_sim_over_rtde, keypoint_noise_for, run_episode,
-    run_sim_episode,
-};
+use cell::harness::{SimCellIo, connect_sim_over_rtde, keypoint_noise_for, run_sim_episode};
+use cell::orchestrator::{EpisodeOutput, SplitCell, State, run_episode};
 use nalgebra::Isometry3;
 use robots::kinematics::Joints;
 use robots::limits::Limits;
@@ -38,17 +36,9 @@ async fn run_over_rtde(
     episode: u32,
 ) -> EpisodeOutput {
     let mut io = SimCellIo::new(cell);
-    let mut perception = keypoint_noise_for(&setup.scenario, episode).unwrap();
-    run_episode(
-        &setup.scenario,
-        &setup.knowledge,
-        episode,
-        robot,
-        &mut io,
-        &mut perception,
-        &setup.settings,
-    )
-    .await
+    let mut perception = keypoint_noise_for(setup.scenario(), episode).unwrap();
+    let mut cell = SplitCell { robot, io: &mut io };
+    run_episode(setup.engine.context(episode), &mut cell, &mut perception).await
 }
 
 /// A robot that counts the moves it passes on.

@@ -111,12 +111,9 @@ fn equal_rate_passes_and_real_drop_is_flagged() {
     assert!(compare(&base, &exact(180, 200), 0.1).regressed());
 }
 
-/// SplitMix64 of (stream, index).
+/// A fixed pseudo-random function of (stream, index): the project's one seed splitter.
 fn mix(stream: u64, i: u64) -> u64 {
-    let mut z = stream.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ i.wrapping_mul(0xD1B5_4A32_D192_ED03);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    sim::seed::split_seed(stream, i)
 }
 
 /// `n` Bernoulli(`rate`) episodes from stream `stream`.

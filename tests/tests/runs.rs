@@ -21,12 +21,9 @@ fn nominal() -> LoadedScenario {
         .expect("the nominal scenario is valid")
 }
 
-/// SplitMix64: a fixed pseudo-random function of (seed, episode, salt).
+/// A fixed pseudo-random function of (seed, episode, salt): the project's one seed splitter.
 fn mix(seed: u64, episode: u32, salt: u64) -> u64 {
-    let mut z = seed ^ (u64::from(episode) << 20) ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    sim::seed::split_seed(sim::seed::split_seed(seed, salt), u64::from(episode))
 }
 
 fn unit(seed: u64, episode: u32, salt: u64) -> f64 {

@@ -150,11 +150,11 @@ fn noise_levels(max: f64, step: f64) -> anyhow::Result<Vec<f64>> {
     Ok((0..=n).map(|i| i as f64 * step).collect())
 }
 
+/// Writes `text` through the one atomic writer (synced file and directory), naming the file on
+/// failure.
 fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
+    sim::fsutil::write_atomic(path, text.as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 fn summary_csv(rows: &[AblationRow]) -> String {

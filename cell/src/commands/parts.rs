@@ -29,6 +29,13 @@ pub struct PrepareArgs {
     /// Seed of the drop orientations (the same seed reproduces the table).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Height of each part's lowest point above the table at release, metres.
+    #[arg(long, default_value_t = DropSettings::default().drop_height)]
+    pub drop_height: f64,
+    /// Parts dropped together onto one spot (1: each alone). A crowded feeder settles
+    /// differently: parts that come to rest on a neighbour are counted apart.
+    #[arg(long, default_value_t = 1)]
+    pub crowd: usize,
 }
 
 /// Arguments of `cell parts cad`.
@@ -56,9 +63,20 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.drops == 0 {
         anyhow::bail!("--drops must be at least 1");
     }
+    if !(args.drop_height.is_finite() && (0.0..=1.0).contains(&args.drop_height)) {
+        anyhow::bail!(
+            "--drop-height must be between 0 and 1 m, got {}",
+            args.drop_height
+        );
+    }
+    if args.crowd == 0 || args.crowd > 1000 {
+        anyhow::bail!("--crowd must be between 1 and 1000, got {}", args.crowd);
+    }
     let settings = DropSettings {
         drops: args.drops,
         seed: args.seed,
+        drop_height: args.drop_height,
+        crowd: args.crowd,
         ..DropSettings::default()
     };
     let bar = ProgressBar::new(0).with_style(
@@ -80,23 +98,37 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     );
     for p in &prepared {
         let r = &p.report;
+        for w in p.repairs.warnings() {
+            eprintln!("warning: {}: {w}", p.name);
+        }
+        for n in p.repairs.notes() {
+            eprintln!("note: {}: {n}", p.name);
+        }
+        let share = |n: usize| 100.0 * n as f64 / r.drops.max(1) as f64;
         println!(
-            "\n{}: mass {:.3} g, centre of mass ({:.3}, {:.3}, {:.3}) mm, {} still jittering at the time limit, {} in rare classes",
+            "\n{}: mass {:.3} g, centre of mass ({:.3}, {:.3}, {:.3}) mm; {} drops, {:.1} % at rest \
+             (mean {:.3} s), {:.1} % still jittering at the {} s limit, {:.1} % leaning on a \
+             neighbour, {:.1} % in rare classes",
             p.name,
             p.mass * 1e3,
             p.center_of_mass.x * 1e3,
             p.center_of_mass.y * 1e3,
             p.center_of_mass.z * 1e3,
-            r.unsettled,
-            r.rare
+            r.drops,
+            100.0 - share(r.unsettled),
+            r.mean_rest_time,
+            share(r.unsettled),
+            settings.max_time,
+            share(r.leaning),
+            share(r.rare)
         );
         println!(
-            "  {:<10} {:>8} {:>14} {:>18} {:>10}",
-            "class", "prob %", "rest height mm", "physics-geom µm", "spread °"
+            "  {:<12} {:>8} {:>14} {:>18} {:>10} {:>10}",
+            "class", "prob %", "rest height mm", "physics-geom µm", "spread °", "jittering"
         );
         for c in &r.classes {
             println!(
-                "  {:<10} {:>8.2} {:>14.4} {:>18.3} {:>10.3} {:>10}",
+                "  {:<12} {:>8.2} {:>14.4} {:>18.3} {:>10.3} {:>10}",
                 c.pose.name,
                 c.pose.probability * 100.0,
                 c.pose.rest_height * 1e3,

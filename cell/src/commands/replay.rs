@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use cell::episode::EpisodeRecord;
-use cell::orchestrator::{SimSetup, run_sim_episode_blocking};
+use cell::harness::{SimSetup, run_sim_episode_blocking};
 use cell::report::pictures::failure_pictures;
 use cell::report::{PICTURES_DIR, html::seconds_text};
 use cell::run::{LoadedScenario, RESULTS_FILE, read_results};

@@ -75,7 +75,7 @@ fn draw_failures(
     if failed.is_empty() {
         return Ok(0);
     }
-    let setup = cell::orchestrator::SimSetup::new(loaded.scenario.clone())?;
+    let setup = cell::harness::SimSetup::new(loaded.scenario.clone())?;
     let pictures = dir.join(cell::report::PICTURES_DIR);
     for r in &failed {
         let feeder = setup

@@ -1,5 +1,13 @@
 //! `cell virtual-ur`: a simulated UR controller (RTDE, dashboard, script port) on loopback,
 //! backed by a kinematic UR5e or, with `--scenario`, by a scenario's simulated cell.
+//!
+//! ur_rtde's control script runs natively: every call either has the effect it has on a UR, or
+//! fails loudly (the program stops with a runtime error; ur_rtde returns False or raises). The
+//! conformance suite `scripts/ur_rtde/conformance.py` lists the methods that are not simulated.
+//! As on a UR, a `speedJ`/`speedL` keeps going when its client dies without `stopScript`
+//! unless the client armed the RTDE watchdog (`setWatchdog(f)` with `kickWatchdog()` in its
+//! loop, or `rtde_set_watchdog` in a URCap program): after 1/f s without an update of
+//! `input_int_register_0` the program stops and the arm decelerates to rest.
 
 use std::f64::consts::FRAC_PI_2;
 use std::net::IpAddr;
@@ -9,7 +17,7 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use anyhow::Context;
-use cell::orchestrator::SimSetup;
+use cell::harness::SimSetup;
 use cell::scenario::Scenario;
 use robots::virtual_ur::arm::ArmModel;
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};

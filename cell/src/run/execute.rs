@@ -1,31 +1,32 @@
 //! Executing a run on a robot: the results store, one episode after another (in parallel in
 //! simulation), the event files, then the summary and report; and the checked set-up for a real
-//! controller.
+//! controller. Only the simulated drivers build the simulation harness; a production run builds
+//! the engine's [`Setup`] alone.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-
 use super::{
-    LoadedScenario, ResultsStore, RobotTarget, RunOptions, RunOutcome, Shard, Summary, results_dir,
-    run_episodes,
+    LoadedScenario, ResultsStore, RobotTarget, RunError, RunOptions, RunOutcome, Shard, StoreError,
+    Summary, results_dir, run_episodes,
 };
 use crate::episode::EpisodeRecord;
-use crate::orchestrator::{
-    EpisodeOutput, OrchestratorError, OverRtdeError, PartPerception, ProductionCellIo,
-    ProductionError, ProductionOptions, SimSetup, preflight, run_episode, run_sim_episode_blocking,
-    sim_episode_over_rtde,
+use crate::harness::{
+    HarnessError, OverRtdeError, SimSetup, run_sim_episode_blocking, sim_episode_over_rtde,
 };
-use crate::report::{ReportFiles, write_report};
+use crate::orchestrator::{
+    EpisodeOutput, KnowledgeError, PartPerception, ProductionCellIo, ProductionError,
+    ProductionOptions, Setup, SplitCell, preflight, run_episode,
+};
+use crate::report::{ReportError, ReportFiles, write_report};
 use crate::scenario::{PerceptionMode, Scenario};
 
-/// What can stop one simulated episode from producing a record.
+/// What can stop one episode from producing a record.
 #[derive(Debug, thiserror::Error)]
 pub enum EpisodeError {
     /// The simulated cell or perception could not be set up.
     #[error(transparent)]
-    Setup(#[from] OrchestratorError),
+    Setup(#[from] HarnessError),
     /// The episode over loopback RTDE could not run.
     #[error(transparent)]
     OverRtde(#[from] OverRtdeError),
@@ -44,6 +45,53 @@ pub enum EpisodeError {
         path: PathBuf,
         /// The failure.
         source: std::io::Error,
+    },
+}
+
+/// Why a run stopped before its summary and report were written.
+#[derive(Debug, thiserror::Error)]
+pub enum ExecuteError {
+    /// The results file refused the run.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// The simulated cell could not be built.
+    #[error(transparent)]
+    Harness(#[from] HarnessError),
+    /// The planning model could not be built.
+    #[error(transparent)]
+    Knowledge(#[from] KnowledgeError),
+    /// The events folder could not be created.
+    #[error("creating {}: {source}", path.display())]
+    Events {
+        /// The folder.
+        path: PathBuf,
+        /// The failure.
+        source: std::io::Error,
+    },
+    /// The async runtime for a controller could not start.
+    #[error("starting the async runtime: {0}")]
+    Runtime(std::io::Error),
+    /// An episode could not run or be stored.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// The report could not be written.
+    #[error(transparent)]
+    Report(#[from] ReportError),
+}
+
+/// Why a real-controller run is refused before anything connects.
+#[derive(Debug, thiserror::Error)]
+pub enum ProductionRefusal {
+    /// The target is not a real controller.
+    #[error("{0} is not a real controller")]
+    NotAController(RobotTarget),
+    /// A check failed.
+    #[error("refusing to run on {robot}: {why}")]
+    Refused {
+        /// The controller.
+        robot: RobotTarget,
+        /// What is missing or wrong.
+        why: String,
     },
 }
 
@@ -99,8 +147,44 @@ pub fn execute(
     episodes: u32,
     jobs: usize,
     progress: bool,
-) -> anyhow::Result<Executed> {
+) -> Result<Executed, ExecuteError> {
     execute_on(loaded, root, shard, episodes, jobs, progress, &Driver::Sim)
+}
+
+/// What a driver runs episodes with: the simulation harness, or (for a real controller) the
+/// engine's set-up alone; controllers get an async runtime.
+enum Runner<'d> {
+    Sim(SimSetup),
+    VirtualUr(SimSetup, tokio::runtime::Runtime),
+    Production(&'d Production, Setup, tokio::runtime::Runtime),
+}
+
+impl<'d> Runner<'d> {
+    fn new(driver: &'d Driver, scenario: &Scenario) -> Result<Self, ExecuteError> {
+        let runtime = || {
+            tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .map_err(ExecuteError::Runtime)
+        };
+        Ok(match driver {
+            Driver::Sim => Runner::Sim(SimSetup::new(scenario.clone())?),
+            Driver::VirtualUr => Runner::VirtualUr(SimSetup::new(scenario.clone())?, runtime()?),
+            // A real controller gets no simulated cell: only the engine's planning model.
+            Driver::Production(p) => {
+                Runner::Production(p, Setup::new(scenario.clone())?, runtime()?)
+            }
+        })
+    }
+
+    fn episode(&self, e: u32) -> Result<EpisodeOutput, EpisodeError> {
+        Ok(match self {
+            Runner::Sim(sim) => run_sim_episode_blocking(sim, e)?,
+            Runner::VirtualUr(sim, rt) => rt.block_on(sim_episode_over_rtde(sim, e))?,
+            Runner::Production(p, setup, rt) => rt.block_on(p.episode(setup, e))?,
+        })
+    }
 }
 
 /// [`execute`] on any [`Driver`]: the same results store, event files, summary and report.
@@ -112,7 +196,7 @@ pub fn execute_on(
     jobs: usize,
     progress: bool,
     driver: &Driver,
-) -> anyhow::Result<Executed> {
+) -> Result<Executed, ExecuteError> {
     let name = &loaded.scenario.spec.name;
     let dir = results_dir(root, name, shard);
     let header = loaded.header(shard).with_robot(driver.robot());
@@ -131,35 +215,23 @@ pub fn execute_on(
             opened.present
         );
     }
-    let setup = SimSetup::new(loaded.scenario.clone())?;
+    let runner = Runner::new(driver, &loaded.scenario)?;
     let events = dir.join("events");
-    std::fs::create_dir_all(&events)?;
-    // Episodes on a controller run one at a time: it drives one arm, in real time.
-    let jobs = match driver {
-        Driver::Sim => jobs,
-        Driver::VirtualUr | Driver::Production(_) => 1,
-    };
+    std::fs::create_dir_all(&events).map_err(|source| ExecuteError::Events {
+        path: events.clone(),
+        source,
+    })?;
     let options = RunOptions {
         episodes,
-        jobs,
+        // Episodes on a controller run one at a time: it drives one arm, in real time.
+        jobs: match runner {
+            Runner::Sim(_) => jobs,
+            Runner::VirtualUr(..) | Runner::Production(..) => 1,
+        },
         progress,
     };
-    let runtime = match driver {
-        Driver::Sim => None,
-        Driver::VirtualUr | Driver::Production(_) => Some(
-            tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .context("start the async runtime")?,
-        ),
-    };
-    let outcome = run_episodes(&setup.scenario, &mut store, &options, |_, e| {
-        let out = match (driver, &runtime) {
-            (Driver::VirtualUr, Some(rt)) => rt.block_on(sim_episode_over_rtde(&setup, e))?,
-            (Driver::Production(p), Some(rt)) => rt.block_on(p.episode(&setup, e))?,
-            _ => run_sim_episode_blocking(&setup, e)?,
-        };
+    let outcome = run_episodes(&loaded.scenario, &mut store, &options, |_, e| {
+        let out = runner.episode(e)?;
         let path = events.join(format!("episode-{e:06}.jsonl"));
         let mut bytes = Vec::new();
         out.events
@@ -185,17 +257,18 @@ pub fn execute_on(
 
 impl Production {
     /// Runs one episode on the real controller: connects, runs, disconnects.
-    async fn episode(&self, setup: &SimSetup, e: u32) -> Result<EpisodeOutput, EpisodeError> {
+    async fn episode(&self, setup: &Setup, e: u32) -> Result<EpisodeOutput, EpisodeError> {
         use robots::ur_robot::{UrRobot, UrRobotConfig};
         let robot_err = |source| EpisodeError::Robot {
             robot: self.robot.to_string(),
             source,
         };
+        let cell = &setup.scenario.spec.cell;
         let mut config = UrRobotConfig::new(self.host.clone());
         config.rtde_port = self.port;
-        config.limits = setup.scenario.spec.cell.limits.clone();
+        config.limits = cell.limits.clone();
         config.kinematics = setup.knowledge.kinematics.clone();
-        config.gripper_actuation_s = setup.scenario.spec.cell.gripper.actuation_time;
+        config.gripper_actuation_s = cell.gripper.actuation_time;
         let mut robot = UrRobot::connect(config).await.map_err(robot_err)?;
         let (mut io, mut perception) = self
             .side
@@ -207,16 +280,11 @@ impl Production {
                 detail: "the camera source serves one episode at a time".into(),
             })
         })?;
-        let out = run_episode(
-            &setup.scenario,
-            &setup.knowledge,
-            e,
-            &mut robot,
-            &mut io,
-            perception.as_mut(),
-            &setup.settings,
-        )
-        .await;
+        let mut workcell = SplitCell {
+            robot: &mut robot,
+            io: &mut io,
+        };
+        let out = run_episode(setup.context(e), &mut workcell, perception.as_mut()).await;
         *self.side.lock().unwrap_or_else(|p| p.into_inner()) = Some((io, perception));
         Ok(out)
     }
@@ -230,11 +298,14 @@ pub fn production(
     robot: &RobotTarget,
     allow_motion: bool,
     camera: Option<&Path>,
-) -> anyhow::Result<Driver> {
+) -> Result<Driver, ProductionRefusal> {
     let RobotTarget::Ur { host, port } = robot else {
-        anyhow::bail!("{robot} is not a real controller");
+        return Err(ProductionRefusal::NotAController(robot.clone()));
     };
-    let refuse = |why: String| anyhow::anyhow!("refusing to run on {robot}: {why}");
+    let refuse = |why: String| ProductionRefusal::Refused {
+        robot: robot.clone(),
+        why,
+    };
     if allow_motion && camera.is_none() {
         return Err(refuse(
             "a production run needs --camera IMAGE_OR_FOLDER (the camera source)".into(),
@@ -271,9 +342,71 @@ pub fn production(
 }
 
 /// The perception that reads camera images for `scenario`'s mode.
-fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, OrchestratorError> {
+fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, ProductionError> {
     // No learned models are trained yet: the learned mode is refused here, before connecting.
-    Err(OrchestratorError::ModeUnavailable(
-        scenario.spec.perception.mode,
-    ))
+    Err(ProductionError::Unavailable(scenario.spec.perception.mode))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::orchestrator::{DetectedPart, Frame, ImageSource, PerceptionError};
+
+    /// Stands in for the learned perception, which has no trained models yet; the guarded run
+    /// never gets as far as perceiving.
+    struct NoModels;
+
+    impl PartPerception for NoModels {
+        fn perceive(&mut self, _frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
+            Err(PerceptionError::Settings("no trained models".into()))
+        }
+    }
+
+    /// A production run builds no simulated cell: with a cell the simulator cannot model (its
+    /// feeder 5 m out of reach) the run still reaches the controller, and fails only because
+    /// nothing listens there.
+    #[test]
+    fn a_production_run_builds_no_simulated_cell() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
+        let mut loaded = LoadedScenario::load(&path).unwrap();
+        loaded.scenario.spec.cell.feeder.center = [5.0, 5.0];
+        assert!(
+            SimSetup::new(loaded.scenario.clone()).is_err(),
+            "the simulator must refuse this cell for the test to mean anything"
+        );
+        // A loopback port with nothing listening.
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .unwrap()
+            .port();
+        let images = tempfile::tempdir().unwrap();
+        std::fs::write(images.path().join("frame.png"), b"not decoded").unwrap();
+        let robot = RobotTarget::Ur {
+            host: "127.0.0.1".into(),
+            port,
+        };
+        let driver = Driver::Production(Box::new(Production {
+            robot: robot.clone(),
+            host: "127.0.0.1".into(),
+            port,
+            side: std::sync::Mutex::new(Some((
+                ProductionCellIo::new(
+                    loaded.scenario.clone(),
+                    ImageSource::open(images.path()).unwrap(),
+                ),
+                Box::new(NoModels),
+            ))),
+        }));
+        let out = tempfile::tempdir().unwrap();
+        let err = execute_on(&loaded, out.path(), Shard::ALL, 1, 1, false, &driver)
+            .err()
+            .expect("nothing listens on the controller's port");
+        match &err {
+            ExecuteError::Run(RunError::Episode { episode: 0, source }) => {
+                let text = source.to_string();
+                assert!(text.starts_with(&robot.to_string()), "{text}");
+            }
+            other => panic!("expected the controller connection to fail, got: {other}"),
+        }
+    }
 }

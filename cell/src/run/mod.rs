@@ -12,7 +12,10 @@ pub mod shard;
 pub mod store;
 pub mod summary;
 
-pub use execute::{Driver, EpisodeError, Executed, Production, execute, execute_on, production};
+pub use execute::{
+    Driver, EpisodeError, ExecuteError, Executed, Production, ProductionRefusal, execute,
+    execute_on, production,
+};
 pub use header::{ResultsHeader, sha256_hex};
 pub use merge::{MergeError, Merged, merge, write_results};
 pub use robot_target::RobotTarget;

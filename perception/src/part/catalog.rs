@@ -245,11 +245,6 @@ impl Catalog {
         self.parts.iter().find(|p| p.name == name)
     }
 
-    /// The part playing this role.
-    pub fn by_role(&self, role: PartRole) -> Option<&PartSpec> {
-        self.parts.iter().find(|p| p.role == role)
-    }
-
     /// Absolute path of a part's mesh file.
     pub fn mesh_path(&self, part: &PartSpec) -> PathBuf {
         self.dir.join(&part.mesh)

@@ -4,6 +4,48 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
+use super::mesh_repair::{Edge, EdgeUses, edge_uses, find, union};
+
+/// A connected group of open edges: where a mesh is open, in the mesh's own unit (metres once
+/// loaded), shown in millimetres.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OpenRegion {
+    /// Open edges in the group.
+    pub edges: usize,
+    /// Lower corner of the group's bounding box.
+    pub min: Point3<f64>,
+    /// Upper corner of the group's bounding box.
+    pub max: Point3<f64>,
+    /// One of its open edges.
+    pub example: (Point3<f64>, Point3<f64>),
+}
+
+impl OpenRegion {
+    /// Centre of the group's bounding box.
+    pub fn centre(&self) -> Point3<f64> {
+        nalgebra::center(&self.min, &self.max)
+    }
+}
+
+impl std::fmt::Display for OpenRegion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mm = |p: Point3<f64>| format!("({:.4}, {:.4}, {:.4})", p.x * 1e3, p.y * 1e3, p.z * 1e3);
+        let size = (self.max - self.min) * 1e3;
+        write!(
+            f,
+            "{} edge{} around {} mm spanning {:.4} × {:.4} × {:.4} mm, e.g. from {} to {} mm",
+            self.edges,
+            if self.edges == 1 { "" } else { "s" },
+            mm(self.centre()),
+            size.x,
+            size.y,
+            size.z,
+            mm(self.example.0),
+            mm(self.example.1)
+        )
+    }
+}
+
 /// A triangle mesh in metres, counter-clockwise triangles seen from outside.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TriMesh {
@@ -26,21 +68,24 @@ pub enum MeshDefect {
         /// Number of vertices.
         count: usize,
     },
-    /// An edge is used a different number of times in each direction: a hole or a flipped triangle.
+    /// Edges are used a different number of times in each direction: holes (boundary edges) or
+    /// flipped triangles (an edge used twice the same way), located so the user can find them.
     #[error(
-        "edge between ({:.5}, {:.5}, {:.5}) and ({:.5}, {:.5}, {:.5}) m is open or inconsistently \
-         oriented ({forward} uses one way, {backward} the other)",
-        a.x, a.y, a.z, b.x, b.y, b.z
+        "{} open edges ({boundary} on a boundary, {misoriented} between inconsistently oriented \
+         triangles) in {} place{}: {}",
+        boundary + misoriented,
+        regions.len(),
+        if regions.len() == 1 { "" } else { "s" },
+        regions.iter().take(3).map(ToString::to_string).collect::<Vec<_>>().join("; ")
     )]
-    OpenEdge {
-        /// One end of the edge.
-        a: Point3<f64>,
-        /// The other end.
-        b: Point3<f64>,
-        /// Triangles using it from a to b.
-        forward: usize,
-        /// Triangles using it from b to a.
-        backward: usize,
+    Open {
+        /// Edges used an odd number of times: the rim of a hole.
+        boundary: usize,
+        /// Edges used an even number of times but not equally in each direction: a flipped
+        /// triangle.
+        misoriented: usize,
+        /// Connected groups of open edges, the largest first.
+        regions: Vec<OpenRegion>,
     },
     /// A vertex coordinate is NaN or infinite.
     #[error("vertex {0} has a non-finite coordinate")]
@@ -111,8 +156,8 @@ impl TriMesh {
 
     /// Checks that the surface is closed: every edge is used equally often in both directions.
     ///
-    /// Solids built from touching closed pieces (a shell on a plate) pass; holes and flipped
-    /// triangles do not.
+    /// Solids built from touching closed pieces (a shell on a plate, several bodies, edges shared
+    /// by four triangles) pass; holes and flipped triangles do not, and the error locates them.
     pub fn check_closed(&self) -> Result<(), MeshDefect> {
         if let Some(i) = self
             .vertices
@@ -121,7 +166,6 @@ impl TriMesh {
         {
             return Err(MeshDefect::NonFinite(i));
         }
-        let mut count: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
         for (ti, t) in self.triangles.iter().enumerate() {
             for &index in t {
                 if index as usize >= self.vertices.len() {
@@ -132,26 +176,53 @@ impl TriMesh {
                     });
                 }
             }
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                if a < b {
-                    count.entry((a, b)).or_default().0 += 1;
-                } else {
-                    count.entry((b, a)).or_default().1 += 1;
-                }
-            }
         }
-        let mut open: Vec<_> = count.into_iter().filter(|(_, (f, b))| f != b).collect();
+        let mut open: Vec<(Edge, EdgeUses)> = edge_uses(&self.triangles)
+            .into_iter()
+            .filter(|(_, (f, b))| f != b)
+            .collect();
+        if open.is_empty() {
+            return Ok(());
+        }
         open.sort_unstable();
-        match open.first() {
-            None => Ok(()),
-            Some(&((a, b), (forward, backward))) => Err(MeshDefect::OpenEdge {
-                a: self.vertices[a as usize],
-                b: self.vertices[b as usize],
-                forward,
-                backward,
-            }),
+        let boundary = open.iter().filter(|(_, (f, b))| (f + b) % 2 == 1).count();
+        Err(MeshDefect::Open {
+            boundary,
+            misoriented: open.len() - boundary,
+            regions: self.open_regions(&open),
+        })
+    }
+
+    /// Groups open edges into connected regions (edges sharing a vertex), largest first.
+    fn open_regions(&self, open: &[(Edge, EdgeUses)]) -> Vec<OpenRegion> {
+        let mut parent: Vec<u32> = (0..self.vertices.len() as u32).collect();
+        for &((a, b), _) in open {
+            union(&mut parent, a, b);
         }
+        let mut by_root: HashMap<u32, OpenRegion> = HashMap::new();
+        let mut order = Vec::new();
+        for &((a, b), _) in open {
+            let root = find(&mut parent, a);
+            let (pa, pb) = (self.vertices[a as usize], self.vertices[b as usize]);
+            let region = by_root.entry(root).or_insert_with(|| {
+                order.push(root);
+                OpenRegion {
+                    edges: 0,
+                    min: pa.inf(&pb),
+                    max: pa.sup(&pb),
+                    example: (pa, pb),
+                }
+            });
+            region.edges += 1;
+            region.min = region.min.inf(&pa.inf(&pb));
+            region.max = region.max.sup(&pa.sup(&pb));
+        }
+        let mut regions: Vec<OpenRegion> = order
+            .into_iter()
+            .filter_map(|r| by_root.remove(&r))
+            .collect();
+        regions.sort_by_key(|r| std::cmp::Reverse(r.edges));
+        regions
     }
 
     /// Axis-aligned bounding box as (min, max) corners.
@@ -251,7 +322,7 @@ pub(crate) mod tests {
     fn removing_a_triangle_opens_the_mesh() {
         let mut c = cube(0.01);
         c.triangles.pop();
-        assert!(matches!(c.check_closed(), Err(MeshDefect::OpenEdge { .. })));
+        assert!(matches!(c.check_closed(), Err(MeshDefect::Open { .. })));
     }
 
     #[test]

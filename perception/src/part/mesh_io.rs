@@ -7,7 +7,7 @@ use std::path::Path;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
-use super::{PartError, TriMesh};
+use super::{MeshRepairs, PartError, TriMesh};
 
 /// The length unit a mesh file's numbers are in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -42,8 +42,18 @@ const PLAUSIBLE_SIZE_M: (f64, f64) = (0.5e-3, 1.5);
 /// Loads a closed mesh from an `.obj`, `.stl` or `.ply` file, converting `unit` to metres.
 ///
 /// Fails with the file named when it is missing, unparsable, empty, not closed, or when its size
-/// is implausible for the unit (a 9 mm part read as 9 m).
+/// is implausible for the unit (a 9 mm part read as 9 m). Export defects are repaired first
+/// (see [`load_mesh_repaired`]).
 pub fn load_mesh(path: &Path, unit: LengthUnit) -> Result<TriMesh, PartError> {
+    load_mesh_repaired(path, unit).map(|(mesh, _)| mesh)
+}
+
+/// As [`load_mesh`], and says what [`TriMesh::repair`] fixed (welded vertices, dropped
+/// zero-area triangles, ...) so the caller can warn about it.
+pub fn load_mesh_repaired(
+    path: &Path,
+    unit: LengthUnit,
+) -> Result<(TriMesh, MeshRepairs), PartError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -58,13 +68,14 @@ pub fn load_mesh(path: &Path, unit: LengthUnit) -> Result<TriMesh, PartError> {
     if raw.triangles.is_empty() {
         return Err(PartError::Empty { path: path.into() });
     }
-    let mesh = raw.scaled(unit.to_metres());
+    let mut mesh = raw.scaled(unit.to_metres());
     check_size(path, &mesh, unit)?;
+    let repairs = mesh.repair();
     mesh.check_closed().map_err(|defect| PartError::NotClosed {
         path: path.into(),
         defect,
     })?;
-    Ok(mesh)
+    Ok((mesh, repairs))
 }
 
 fn check_size(path: &Path, mesh: &TriMesh, unit: LengthUnit) -> Result<(), PartError> {

@@ -6,11 +6,13 @@ mod error;
 mod keypoints;
 mod mesh;
 mod mesh_io;
+mod mesh_repair;
 mod stable_pose;
 
 pub use catalog::{Catalog, Grasp, Material, PartRole, PartSpec, Symmetry, line_column};
 pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
-pub use mesh::{MeshDefect, TriMesh};
-pub use mesh_io::{LengthUnit, load_mesh, write_obj};
+pub use mesh::{MeshDefect, OpenRegion, TriMesh};
+pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};
+pub use mesh_repair::{MeshRepairs, WELD_TOLERANCE_REL};
 pub use stable_pose::StablePose;

@@ -44,16 +44,38 @@ impl StablePose {
         })
     }
 
-    /// A short name for the resting direction: "+x" … "-z" when it is within 1° of a part axis.
-    pub fn name_for(up_in_part: &Vector3<f64>, index: usize) -> String {
-        let axes = [("x", 0), ("y", 1), ("z", 2)];
-        for (axis, i) in axes {
-            let c = up_in_part[i];
-            if c.abs() > 1f64.to_radians().cos() {
-                return format!("{}{axis}", if c > 0.0 { '+' } else { '-' });
-            }
+    /// A short name for the resting direction, from the direction alone (so it stays the same
+    /// across seeds and drop counts): "+x" … "-z" within 1° of a part axis, otherwise the nearest
+    /// axis, "~", the axis it tilts toward and the tilt in degrees, e.g. "-x~+z2.1".
+    pub fn name_for(up_in_part: &Vector3<f64>) -> String {
+        let letter = |i: usize| ["x", "y", "z"][i];
+        let signed = |i: usize| {
+            format!(
+                "{}{}",
+                if up_in_part[i] < 0.0 { '-' } else { '+' },
+                letter(i)
+            )
+        };
+        let by_size = {
+            let mut axes = [0, 1, 2];
+            axes.sort_by(|&a, &b| up_in_part[b].abs().total_cmp(&up_in_part[a].abs()));
+            axes
+        };
+        let (main, toward) = (by_size[0], by_size[1]);
+        let norm = up_in_part.norm();
+        let tilt = if norm > 0.0 {
+            (up_in_part[main].abs() / norm)
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        } else {
+            0.0
+        };
+        if tilt < 1.0 {
+            signed(main)
+        } else {
+            format!("{}~{}{tilt:.1}", signed(main), signed(toward))
         }
-        format!("oblique{index}")
     }
 }
 
@@ -72,10 +94,18 @@ mod tests {
             let r = StablePose::canonical_rotation(&up);
             assert!((r * up - Vector3::z()).norm() < 1e-12);
         }
-        assert_eq!(StablePose::name_for(&-Vector3::z(), 0), "-z");
+        assert_eq!(StablePose::name_for(&-Vector3::z()), "-z");
         assert_eq!(
-            StablePose::name_for(&Vector3::new(0.5, 0.0, 0.8).normalize(), 3),
-            "oblique3"
+            StablePose::name_for(&Vector3::new(0.0, 0.0153, 0.99988).normalize()),
+            "+z"
+        );
+        assert_eq!(
+            StablePose::name_for(&Vector3::new(-0.999314835, 0.0, 0.037011625)),
+            "-x~+z2.1"
+        );
+        assert_eq!(
+            StablePose::name_for(&Vector3::new(0.0, -0.651847488, 0.758350085)),
+            "+z~-y40.7"
         );
     }
 }

@@ -121,24 +121,6 @@ pub fn solve_pnp(
     )
 }
 
-/// [`solve_pnp`] on undistorted normalised image coordinates (x/z, y/z); `fx`, `fy` scale the
-/// residuals to pixels so that covariances in pixels apply.
-pub fn solve_pnp_normalized(
-    fx: f64,
-    fy: f64,
-    model: &[Point3<f64>],
-    normalized: &[Point2<f64>],
-    covariances: Option<&[Matrix2<f64>]>,
-) -> Result<PnpSolution, PnpError> {
-    solve(
-        &PixelScale::ideal(fx, fy),
-        model,
-        normalized,
-        normalized,
-        covariances,
-    )
-}
-
 fn solve(
     scale: &PixelScale,
     model: &[Point3<f64>],

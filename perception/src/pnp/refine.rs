@@ -33,15 +33,6 @@ impl PixelScale {
         }
     }
 
-    /// Focal lengths without distortion (observations already undistorted).
-    pub fn ideal(fx: f64, fy: f64) -> Self {
-        Self {
-            fx,
-            fy,
-            distortion: Distortion::NONE,
-        }
-    }
-
     /// Pixel residual of camera-frame point `c` against distorted normalised observation `o`.
     fn residual(&self, c: &Vector3<f64>, o: &Point2<f64>) -> Vector2<f64> {
         let d = self.distortion.apply(Vector2::new(c.x / c.z, c.y / c.z));

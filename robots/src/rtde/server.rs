@@ -426,7 +426,10 @@ impl<C: Controller> Connection<C> {
                     .write_inputs(self.id, &setup.fields, &self.values);
                 Ok(())
             }
-            Err(e) => self.text(1, &e.to_string()),
+            Err(e) => {
+                tracing::warn!(conn = self.id, recipe_id, error = %e, "input data package refused");
+                self.text(1, &e.to_string())
+            }
         }
     }
 }

@@ -2,7 +2,7 @@
 //! and a kinematic joint-space model with velocity and acceleration limits stepped at 500 Hz.
 
 use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 use thiserror::Error;
 
 /// Joint and TCP state of the arm (SI units; poses as UR pose vectors in the base frame).
@@ -61,8 +61,23 @@ pub enum ArmCommand {
         /// Time to reach it.
         time: f64,
     },
+    /// Tool-space velocity control (`speedl`): the TCP moves with twist `xd` (linear m/s, then
+    /// angular rad/s, base frame), reached with `accel` (m/s² and rad/s²). The joint speeds are
+    /// recomputed from the Jacobian every cycle, so the TCP holds its line.
+    SpeedL {
+        /// Target twist.
+        xd: [f64; 6],
+        /// Acceleration (m/s², and rad/s² for the rotation).
+        accel: f64,
+    },
     /// Decelerate to rest at `decel` (rad/s² of the fastest joint).
     Stop {
+        /// Deceleration.
+        decel: f64,
+    },
+    /// Decelerate to rest in tool space (`stopl`): the TCP keeps its direction and slows at
+    /// `decel` (m/s², and rad/s² for the rotation).
+    StopL {
         /// Deceleration.
         decel: f64,
     },
@@ -83,6 +98,23 @@ pub enum ArmError {
     /// stop, as a real controller does.
     #[error("protective stop: {0}")]
     ProtectiveStop(String),
+    /// A joint target lies outside the joint position limits (a UR refuses it).
+    #[error(
+        "joint {joint} target {value:.4} rad is outside its limits [{lower:.4}, {upper:.4}] rad"
+    )]
+    JointLimit {
+        /// Joint index (0 = base).
+        joint: usize,
+        /// The refused value.
+        value: f64,
+        /// Lower limit.
+        lower: f64,
+        /// Upper limit.
+        upper: f64,
+    },
+    /// The model cannot do this exactly, so it refuses.
+    #[error("not simulated by this arm model: {0}")]
+    Unsupported(&'static str),
     /// A straight-line move would need joint speeds over the limit (singularity).
     #[error("straight-line move passes a singularity (joint {joint} would need {speed:.2} rad/s)")]
     Singularity {
@@ -108,6 +140,14 @@ pub trait ArmModel: Send + 'static {
     fn forward(&self, q: &Joints) -> [f64; 6];
     /// Inverse kinematics nearest `near`.
     fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError>;
+    /// The kinematic model (its `flange_T_tcp` is the active TCP, its joint limits the
+    /// controller's): forward and inverse kinematics with other TCPs, Jacobians, limit checks.
+    fn kinematics(&self) -> &UrKinematics;
+    /// Sets the active TCP (`set_tcp`). Models that cannot change their tool refuse.
+    #[allow(non_snake_case)]
+    fn set_tcp(&mut self, _flange_T_tcp: Isometry3<f64>) -> Result<(), ArmError> {
+        Err(ArmError::Unsupported("set_tcp"))
+    }
     /// A digital output changed: standard 0–7, configurable 8–15, tool 16–17 (as
     /// `actual_digital_output_bits`). The controller calls it from every path that sets one.
     fn digital_output(&mut self, _pin: u32, _level: bool) {}
@@ -203,6 +243,32 @@ enum Motion {
     Stopping {
         decel: f64,
     },
+    /// Resolved-rate tool-space motion (speedl, stopl): `reference` is the integrated TCP pose
+    /// the arm tracks, `twist` the current TCP twist, ramped towards `target` at `accel`.
+    Cartesian {
+        reference: Isometry3<f64>,
+        twist: Vector6<f64>,
+        target: Vector6<f64>,
+        accel: f64,
+    },
+}
+
+/// Moves `v` towards `target` by at most `step` (vector norm).
+fn approach(v: &Vector3<f64>, target: &Vector3<f64>, step: f64) -> Vector3<f64> {
+    let d = target - v;
+    let n = d.norm();
+    if n <= step {
+        *target
+    } else {
+        v + d * (step / n)
+    }
+}
+
+/// The pose error from `current` to `reference`: translation, then rotation vector (base frame).
+fn pose_error(reference: &Isometry3<f64>, current: &Isometry3<f64>) -> Vector6<f64> {
+    let dp = reference.translation.vector - current.translation.vector;
+    let dr = (reference.rotation * current.rotation.inverse()).scaled_axis();
+    Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
 }
 
 /// Kinematic UR arm: perfect tracking of joint-space and straight-line trajectories, joint speeds
@@ -253,6 +319,129 @@ impl KinematicArm {
         &self.kinematics
     }
 
+    /// Refuses joints outside the kinematics' joint limits.
+    fn check_limits(&self, q: &Joints) -> Result<(), ArmError> {
+        let limits = &self.kinematics.joint_limits;
+        match limits.first_violation(q) {
+            Some((joint, value)) => Err(ArmError::JointLimit {
+                joint,
+                value,
+                lower: limits.lower[joint],
+                upper: limits.upper[joint],
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Moves to `q` unless that leaves the joint limits: then the arm halts and reports a
+    /// protective stop, as a UR does when a joint reaches its position limit.
+    fn advance(&mut self, q: Joints, dt: f64) -> Result<(), ArmError> {
+        if let Err(e) = self.check_limits(&q) {
+            self.halt();
+            return Err(ArmError::ProtectiveStop(format!(
+                "position limit reached: {e}"
+            )));
+        }
+        self.set_q(q, dt);
+        Ok(())
+    }
+
+    fn halt(&mut self) {
+        self.motion = Motion::Idle;
+        self.qd = [0.0; 6];
+        self.qdd = [0.0; 6];
+    }
+
+    /// The TCP twist (linear, angular; base frame) of the current joint speeds.
+    fn twist(&self) -> Vector6<f64> {
+        self.kinematics.jacobian(&self.q) * Vector6::from_column_slice(&self.qd)
+    }
+
+    /// The reference pose and twist a tool-space motion starts from: the running one's, or the
+    /// arm's present pose and twist.
+    fn cartesian_start(&self) -> (Isometry3<f64>, Vector6<f64>) {
+        match &self.motion {
+            Motion::Cartesian {
+                reference, twist, ..
+            } => (*reference, *twist),
+            // Along a straight-line move: the path's pose and velocity at this instant.
+            Motion::Linear {
+                start,
+                end,
+                profile,
+                t,
+            } => {
+                let (s, v, _) = profile.at(*t);
+                let reference = start.lerp_slerp(end, s / profile.length);
+                let linear =
+                    (end.translation.vector - start.translation.vector) * (v / profile.length);
+                let angular =
+                    (end.rotation * start.rotation.inverse()).scaled_axis() * (v / profile.length);
+                let twist = Vector6::new(
+                    linear.x, linear.y, linear.z, angular.x, angular.y, angular.z,
+                );
+                (reference, twist)
+            }
+            _ => (self.kinematics.forward_tcp(&self.q), self.twist()),
+        }
+    }
+
+    /// One resolved-rate cycle: ramp the twist, advance the reference pose, and move the joints
+    /// by the Jacobian's solution for the twist that reaches the reference in this cycle.
+    fn cartesian_step(
+        &mut self,
+        (mut reference, twist, target, accel): (Isometry3<f64>, Vector6<f64>, Vector6<f64>, f64),
+        dt: f64,
+        scaled: f64,
+    ) -> Result<(), ArmError> {
+        let step = accel * scaled;
+        let lin = approach(
+            &twist.fixed_rows::<3>(0).into_owned(),
+            &target.fixed_rows::<3>(0).into_owned(),
+            step,
+        );
+        let ang = approach(
+            &twist.fixed_rows::<3>(3).into_owned(),
+            &target.fixed_rows::<3>(3).into_owned(),
+            step,
+        );
+        reference.translation = Translation3::from(reference.translation.vector + lin * scaled);
+        reference.rotation = UnitQuaternion::from_scaled_axis(ang * scaled) * reference.rotation;
+        let current = self.kinematics.forward_tcp(&self.q);
+        let wanted = pose_error(&reference, &current) / dt;
+        let qd = match self.kinematics.joint_speeds_for_twist(&self.q, &wanted) {
+            Ok(qd) => qd,
+            Err(e) => {
+                self.halt();
+                return Err(ArmError::Unreachable(e.to_string()));
+            }
+        };
+        if let Some((joint, speed)) = qd
+            .iter()
+            .map(|v| v.abs())
+            .enumerate()
+            .find(|(_, v)| *v > self.max_joint_speed * 1.5)
+        {
+            self.halt();
+            return Err(ArmError::Singularity { joint, speed });
+        }
+        let q = std::array::from_fn(|i| self.q[i] + qd[i] * dt);
+        self.advance(q, dt)?;
+        let twist = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
+        self.motion = if twist.norm() == 0.0 && target.norm() == 0.0 {
+            self.qd = [0.0; 6];
+            Motion::Idle
+        } else {
+            Motion::Cartesian {
+                reference,
+                twist,
+                target,
+                accel,
+            }
+        };
+        Ok(())
+    }
+
     fn set_q(&mut self, q: Joints, dt: f64) {
         let qd: Joints = std::array::from_fn(|i| (q[i] - self.q[i]) / dt);
         self.qdd = std::array::from_fn(|i| (qd[i] - self.qd[i]) / dt);
@@ -280,6 +469,7 @@ impl ArmModel for KinematicArm {
                 if !finite(&q) {
                     return Err(ArmError::InvalidParameter("joint target"));
                 }
+                self.check_limits(&q)?;
                 let speed = positive(speed, "speed")?.min(self.max_joint_speed);
                 let accel = positive(accel, "acceleration")?.min(self.max_joint_accel);
                 let delta: Joints = std::array::from_fn(|i| q[i] - self.q[i]);
@@ -332,12 +522,46 @@ impl ArmModel for KinematicArm {
                 if !finite(&q) {
                     return Err(ArmError::InvalidParameter("servo target"));
                 }
+                self.check_limits(&q)?;
                 let time = positive(time, "servo time")?;
                 Motion::Servo { target: q, time }
+            }
+            ArmCommand::SpeedL { xd, accel } => {
+                if !finite(&xd) {
+                    return Err(ArmError::InvalidParameter("tool speed"));
+                }
+                let accel = positive(accel, "acceleration")?.min(self.max_tool_accel);
+                let mut target = Vector6::from_column_slice(&xd);
+                let linear = target.fixed_rows::<3>(0).norm();
+                if linear > self.max_tool_speed {
+                    let k = self.max_tool_speed / linear;
+                    target.fixed_rows_mut::<3>(0).scale_mut(k);
+                }
+                let (reference, twist) = self.cartesian_start();
+                Motion::Cartesian {
+                    reference,
+                    twist,
+                    target,
+                    accel,
+                }
             }
             ArmCommand::Stop { decel } => Motion::Stopping {
                 decel: positive(decel, "deceleration")?.min(self.max_joint_accel * 2.0),
             },
+            ArmCommand::StopL { decel } => {
+                let accel = positive(decel, "deceleration")?;
+                if matches!(self.motion, Motion::Idle) {
+                    Motion::Idle
+                } else {
+                    let (reference, twist) = self.cartesian_start();
+                    Motion::Cartesian {
+                        reference,
+                        twist,
+                        target: Vector6::zeros(),
+                        accel,
+                    }
+                }
+            }
             ArmCommand::Halt => {
                 self.qd = [0.0; 6];
                 self.qdd = [0.0; 6];
@@ -349,6 +573,15 @@ impl ArmModel for KinematicArm {
 
     fn step(&mut self, dt: f64, speed_fraction: f64) -> Result<(), ArmError> {
         let scaled = dt * speed_fraction.clamp(0.0, 1.0);
+        if let Motion::Cartesian {
+            reference,
+            twist,
+            target,
+            accel,
+        } = self.motion
+        {
+            return self.cartesian_step((reference, twist, target, accel), dt, scaled);
+        }
         match &mut self.motion {
             Motion::Idle => {
                 self.qd = [0.0; 6];
@@ -417,7 +650,7 @@ impl ArmModel for KinematicArm {
                     self.qd[i] + dv
                 });
                 let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
-                self.set_q(q, dt);
+                self.advance(q, dt)?;
             }
             Motion::Servo { target, time } => {
                 // Reach the target in `time` where the limits allow; never pass it.
@@ -436,8 +669,9 @@ impl ArmModel for KinematicArm {
                     }
                 });
                 let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
-                self.set_q(q, dt);
+                self.advance(q, dt)?;
             }
+            Motion::Cartesian { .. } => {}
             Motion::Stopping { decel } => {
                 let peak = self.qd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
                 if peak <= *decel * dt {
@@ -447,7 +681,7 @@ impl ArmModel for KinematicArm {
                     let k = (peak - *decel * dt) / peak;
                     let next: Joints = self.qd.map(|v| v * k);
                     let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
-                    self.set_q(q, dt);
+                    self.advance(q, dt)?;
                 }
             }
         }
@@ -496,5 +730,18 @@ impl ArmModel for KinematicArm {
             .inverse_nearest(&from_ur_pose(pose), near)
             .map(|s| s.joints)
             .map_err(|e| ArmError::Unreachable(e.to_string()))
+    }
+
+    fn kinematics(&self) -> &UrKinematics {
+        &self.kinematics
+    }
+
+    #[allow(non_snake_case)]
+    fn set_tcp(&mut self, flange_T_tcp: Isometry3<f64>) -> Result<(), ArmError> {
+        if self.is_moving() {
+            return Err(ArmError::InvalidParameter("set_tcp while the arm moves"));
+        }
+        self.kinematics.flange_T_tcp = flange_T_tcp;
+        Ok(())
     }
 }

@@ -6,7 +6,7 @@ use super::programs::{
     CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram, notify_output_changes,
     set_digital_output,
 };
-use super::registers::{Registers, StandardIo};
+use super::registers::{Payload, Registers, StandardIo};
 use crate::dashboard::{robot_mode_word, safety_status_word};
 use crate::program::{PROGRAM_NAME, UR_RTDE_PROGRAM_NAME, program_name};
 use crate::robot::{RobotMode, SafetyStatus};
@@ -24,6 +24,12 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 use tokio::sync::watch;
+
+/// Joint deceleration (rad/s²) when a program stops or pauses with the arm moving.
+pub const PROGRAM_STOP_DECELERATION: f64 = 3.0;
+
+/// Messages kept by [`VirtualController::messages`].
+pub const MAX_TEXT_LOG: usize = 64;
 
 /// Why a program upload or a dashboard action was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -66,6 +72,10 @@ pub struct Snapshot {
     pub regs: Registers,
     /// Digital I/O and speed slider.
     pub io: StandardIo,
+    /// The active payload.
+    pub payload: Payload,
+    /// The active TCP in the flange frame (UR pose vector).
+    pub tcp_offset: [f64; 6],
 }
 
 impl Snapshot {
@@ -130,6 +140,12 @@ enum Quantity {
     InputBitsHigh,
     OutputBitsLow,
     OutputBitsHigh,
+    AnalogOut0,
+    AnalogOut1,
+    Payload,
+    PayloadCog,
+    PayloadInertia,
+    TcpOffset,
 }
 
 const QUANTITIES: &[(&str, Quantity)] = &[
@@ -161,6 +177,12 @@ const QUANTITIES: &[(&str, Quantity)] = &[
     ("input_bit_registers32_to_63", Quantity::InputBitsHigh),
     ("output_bit_registers0_to_31", Quantity::OutputBitsLow),
     ("output_bit_registers32_to_63", Quantity::OutputBitsHigh),
+    ("standard_analog_output0", Quantity::AnalogOut0),
+    ("standard_analog_output1", Quantity::AnalogOut1),
+    ("payload", Quantity::Payload),
+    ("payload_cog", Quantity::PayloadCog),
+    ("payload_inertia", Quantity::PayloadInertia),
+    ("tcp_offset", Quantity::TcpOffset),
 ];
 
 // Output key kinds (high 16 bits) and input key kinds.
@@ -267,9 +289,38 @@ pub(crate) struct Core {
     pub loaded: Option<String>,
     pub protective_stop_at: Option<Instant>,
     pub text_log: Vec<String>,
+    pub payload: Payload,
+    /// The RTDE watchdog the running program armed: minimum period between updates of
+    /// `input_int_register_0` (s) and the controller time of the last update.
+    pub watchdog: Option<Watchdog>,
+}
+
+/// An armed RTDE watchdog (`rtde_set_watchdog(..., "stop")`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Watchdog {
+    /// Longest allowed gap between input updates (s).
+    pub period: f64,
+    /// Controller time of the last update (s).
+    pub last: f64,
+}
+
+/// Output of one program call.
+struct ProgramCall<R> {
+    result: R,
+    protective_stop: bool,
+    runtime_error: Option<String>,
+    watchdog: Option<f64>,
 }
 
 impl Core {
+    /// Records a message for clients, keeping the newest [`MAX_TEXT_LOG`].
+    fn log(&mut self, message: String) {
+        if self.text_log.len() >= MAX_TEXT_LOG {
+            self.text_log.remove(0);
+        }
+        self.text_log.push(message);
+    }
+
     /// Runs `f` on the loaded program, if any, with the I/O it acts on; `dt` and `arm_error` are
     /// the control step's (0 and none for calls outside it).
     fn with_program<R>(
@@ -278,6 +329,16 @@ impl Core {
         arm_error: Option<ArmError>,
         f: impl FnOnce(&mut dyn Program, &mut ProgramIo<'_>) -> R,
     ) -> Option<R> {
+        self.call_program(dt, arm_error, f).map(|c| c.result)
+    }
+
+    /// As [`Core::with_program`], also returning what the program asked of the controller.
+    fn call_program<R>(
+        &mut self,
+        dt: f64,
+        arm_error: Option<ArmError>,
+        f: impl FnOnce(&mut dyn Program, &mut ProgramIo<'_>) -> R,
+    ) -> Option<ProgramCall<R>> {
         let program = self.program.as_deref_mut()?;
         let mut io = ProgramIo {
             regs: &mut self.regs,
@@ -286,8 +347,17 @@ impl Core {
             dt,
             arm_error,
             protective_stop: false,
+            runtime_error: None,
+            watchdog: None,
+            payload: &mut self.payload,
         };
-        Some(f(program, &mut io))
+        let result = f(program, &mut io);
+        Some(ProgramCall {
+            result,
+            protective_stop: io.protective_stop,
+            runtime_error: io.runtime_error,
+            watchdog: io.watchdog,
+        })
     }
 }
 
@@ -325,6 +395,8 @@ impl VirtualController {
             loaded: None,
             protective_stop_at: None,
             text_log: Vec::new(),
+            payload: Payload::default(),
+            watchdog: None,
         };
         let snapshot = Arc::new(Self::snapshot_of(&core));
         VirtualController {
@@ -351,6 +423,8 @@ impl VirtualController {
             runtime_state: core.runtime_state,
             regs: core.regs.clone(),
             io: core.io,
+            payload: core.payload,
+            tcp_offset: crate::kinematics::to_ur_pose(&core.arm.kinematics().flange_T_tcp),
         }
     }
 
@@ -378,16 +452,37 @@ impl VirtualController {
             // A collision reported by the arm model stops the arm like a real controller.
             let mut protective_stop = matches!(arm_error, Some(ArmError::ProtectiveStop(_)));
             if core.runtime_state == RuntimeState::Playing
-                && let Some((step, stop, name)) = core.with_program(dt, arm_error, |p, io| {
-                    (p.step(io), io.protective_stop, p.name())
-                })
+                && let Some(call) = core.call_program(dt, arm_error, |p, io| (p.step(io), p.name()))
             {
-                protective_stop |= stop;
-                if step == ProgramStep::Exit {
-                    tracing::info!(name, "program finished");
-                    core.program = None;
-                    core.runtime_state = RuntimeState::Stopped;
+                let (step, name) = call.result;
+                protective_stop |= call.protective_stop;
+                if let Some(frequency) = call.watchdog {
+                    core.watchdog = Some(Watchdog {
+                        period: 1.0 / frequency,
+                        last: core.time,
+                    });
                 }
+                if let Some(e) = call.runtime_error {
+                    tracing::warn!(name, error = %e, "program stopped by a runtime error");
+                    core.log(e);
+                    Self::stop_program(core);
+                } else if step == ProgramStep::Exit {
+                    tracing::info!(name, "program finished");
+                    Self::stop_program(core);
+                }
+            }
+            if core.runtime_state == RuntimeState::Playing
+                && let Some(w) = core.watchdog
+                && core.time - w.last > w.period + 1e-9
+            {
+                let e = format!(
+                    "RTDE watchdog: input_int_register_0 not updated for {:.3} s (limit {:.3} s): program stopped",
+                    core.time - w.last,
+                    w.period
+                );
+                tracing::warn!("{e}");
+                core.log(e);
+                Self::stop_program(core);
             }
             if protective_stop {
                 Self::enter_protective_stop(core);
@@ -436,17 +531,28 @@ impl VirtualController {
         }
     }
 
+    /// Messages the controller logged for clients (runtime errors, refused programs), oldest
+    /// first; the newest [`MAX_TEXT_LOG`] are kept.
+    pub fn messages(&self) -> Vec<String> {
+        self.lock().text_log.clone()
+    }
+
     /// Fault: refuse (or accept again) uploaded programs.
     pub fn refuse_programs(&self, refuse: bool) {
         self.refuse_programs.store(refuse, Ordering::Relaxed);
     }
 
+    /// Ends the program (if any): motion it started decelerates to rest, as when a UR program
+    /// stops, and its watchdog is removed.
     fn stop_program(core: &mut Core) {
         core.with_program(0.0, None, |p, io| p.interrupted(io));
         core.program = None;
+        core.watchdog = None;
         core.runtime_state = RuntimeState::Stopped;
         if core.arm.is_moving() {
-            let _ = core.arm.command(ArmCommand::Stop { decel: 3.0 });
+            let _ = core.arm.command(ArmCommand::Stop {
+                decel: PROGRAM_STOP_DECELERATION,
+            });
         }
     }
 
@@ -497,7 +603,7 @@ impl VirtualController {
         let mut core = self.lock();
         let result = Self::start_program(&mut core, name);
         if let Err(e) = &result {
-            core.text_log.push(e.to_string());
+            core.log(e.to_string());
         }
         result
     }
@@ -573,18 +679,17 @@ impl VirtualController {
                     Err(_) => "Failed to execute: Play".into(),
                 }
             }
+            // A controller answers "Stopped" whether or not a program was running.
             "stop" => {
-                if core.program.is_some() {
-                    Self::stop_program(&mut core);
-                    "Stopped".into()
-                } else {
-                    "Failed to execute: Stop".into()
-                }
+                Self::stop_program(&mut core);
+                "Stopped".into()
             }
             "pause" => {
                 if core.runtime_state == RuntimeState::Playing {
                     core.runtime_state = RuntimeState::Paused;
-                    let _ = core.arm.command(ArmCommand::Stop { decel: 3.0 });
+                    let _ = core.arm.command(ArmCommand::Stop {
+                        decel: PROGRAM_STOP_DECELERATION,
+                    });
                     "Pausing program".into()
                 } else {
                     "Failed to execute: Pause".into()
@@ -721,6 +826,12 @@ impl Controller for VirtualController {
                     Quantity::InputBitsHigh => Value::Uint32((s.regs.input_bits >> 32) as u32),
                     Quantity::OutputBitsLow => Value::Uint32(s.regs.output_bits as u32),
                     Quantity::OutputBitsHigh => Value::Uint32((s.regs.output_bits >> 32) as u32),
+                    Quantity::AnalogOut0 => Value::Double(s.io.analog_out[0]),
+                    Quantity::AnalogOut1 => Value::Double(s.io.analog_out[1]),
+                    Quantity::Payload => Value::Double(s.payload.mass),
+                    Quantity::PayloadCog => Value::Vector3d(s.payload.cog),
+                    Quantity::PayloadInertia => Value::Vector6d(s.payload.inertia),
+                    Quantity::TcpOffset => Value::Vector6d(s.tcp_offset),
                 }
             }
         }
@@ -748,6 +859,12 @@ impl Controller for VirtualController {
 
     fn write_inputs(&self, _conn: ConnId, fields: &[InputField], values: &[Value]) {
         let mut core = self.lock();
+        if fields.iter().any(|f| f.key == key(K_IN_INT, 0)) {
+            let now = core.time;
+            if let Some(w) = core.watchdog.as_mut() {
+                w.last = now;
+            }
+        }
         let mut named: [Option<Value>; 16] = [None; 16];
         for (f, v) in fields.iter().zip(values) {
             let index = (f.key & 0xffff) as usize;
@@ -768,6 +885,13 @@ impl Controller for VirtualController {
                 .position(|(n, _)| *n == name)
                 .and_then(|i| named.get(i).copied().flatten())
         };
+        if get("external_force_torque").is_some() && core.program.is_some() {
+            // ur_rtde's setExternalForceTorque: the model has no force control to feed.
+            let e = "virtual-ur: external_force_torque input is not simulated (no force control)";
+            tracing::warn!("{e}");
+            core.log(e.into());
+            Self::stop_program(&mut core);
+        }
         let masked = |old: u8, mask: Option<Value>, value: Option<Value>| match (mask, value) {
             (Some(Value::Uint8(m)), Some(Value::Uint8(v))) => (old & !m) | (v & m),
             _ => old,
@@ -797,6 +921,20 @@ impl Controller for VirtualController {
             && f.is_finite()
         {
             io.speed_slider = f.clamp(0.0, 1.0);
+        }
+        if let Some(Value::Uint8(mask)) = get("standard_analog_output_mask") {
+            let domain = match get("standard_analog_output_type") {
+                Some(Value::Uint8(t)) => t,
+                _ => 0,
+            };
+            for i in 0..2 {
+                if mask >> i & 1 == 1
+                    && let Some(Value::Double(ratio)) =
+                        get(["standard_analog_output_0", "standard_analog_output_1"][i])
+                {
+                    io.set_analog_output(i, ratio, domain >> i & 1 == 1);
+                }
+            }
         }
         if let Some(Value::Uint32(bits)) = get("input_bit_registers0_to_31") {
             core.regs.input_bits = (core.regs.input_bits & !0xffff_ffff) | u128::from(bits);

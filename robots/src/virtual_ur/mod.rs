@@ -10,6 +10,7 @@ pub mod controller;
 pub mod programs;
 pub mod registers;
 pub mod script_port;
+pub mod ur_rtde_program;
 
 use crate::kinematics::Joints;
 use crate::rtde::ControllerVersion;

@@ -3,8 +3,10 @@
 //! script is recognised by its `def` name and its register protocol is executed here.
 
 use super::arm::{ArmCommand, ArmError, ArmModel};
-use super::registers::{Registers, StandardIo};
+use super::registers::{Payload, Registers, StandardIo};
 use crate::program::layout as L;
+
+pub use super::ur_rtde_program::{UrRtdeProgram, ur_rtde_cmd};
 
 /// What a program touches in one control cycle.
 pub struct ProgramIo<'a> {
@@ -20,6 +22,14 @@ pub struct ProgramIo<'a> {
     pub arm_error: Option<ArmError>,
     /// Set by the program to trigger a protective stop.
     pub protective_stop: bool,
+    /// Set by the program when a statement fails at run time: the controller stops the program
+    /// (and the arm) and reports the message, as a UR does on a runtime exception.
+    pub runtime_error: Option<String>,
+    /// Set by the program to arm the RTDE watchdog (`rtde_set_watchdog`): minimum input
+    /// frequency (Hz) on `input_int_register_0`; the program stops when inputs stay away longer.
+    pub watchdog: Option<f64>,
+    /// The active payload (`set_payload`, `set_target_payload`).
+    pub payload: &'a mut Payload,
 }
 
 impl ProgramIo<'_> {
@@ -301,253 +311,6 @@ impl Program for CellProgram {
         }
         if let Some((id, _)) = self.pending.take() {
             Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
-        }
-    }
-}
-
-/// SDU ur_rtde command ids handled by [`UrRtdeProgram`].
-pub mod ur_rtde_cmd {
-    /// moveJ.
-    pub const MOVE_J: i32 = 1;
-    /// moveJ_IK.
-    pub const MOVE_J_IK: i32 = 2;
-    /// moveL.
-    pub const MOVE_L: i32 = 3;
-    /// moveL_FK.
-    pub const MOVE_L_FK: i32 = 4;
-    /// speedJ.
-    pub const SPEED_J: i32 = 9;
-    /// speedL.
-    pub const SPEED_L: i32 = 10;
-    /// servoJ.
-    pub const SERVO_J: i32 = 11;
-    /// setStandardDigitalOut.
-    pub const SET_STD_DIGITAL_OUT: i32 = 13;
-    /// setToolDigitalOut.
-    pub const SET_TOOL_DIGITAL_OUT: i32 = 14;
-    /// speedStop.
-    pub const SPEED_STOP: i32 = 15;
-    /// servoStop.
-    pub const SERVO_STOP: i32 = 16;
-    /// protectiveStop.
-    pub const PROTECTIVE_STOP: i32 = 31;
-    /// stopL.
-    pub const STOP_L: i32 = 33;
-    /// stopJ.
-    pub const STOP_J: i32 = 34;
-    /// watchdog kick.
-    pub const WATCHDOG: i32 = 99;
-    /// stopScript.
-    pub const STOP_SCRIPT: i32 = 255;
-}
-
-/// SDU ur_rtde's control script (`rtde_control`), executed natively: registers 0–23.
-#[derive(Debug, Default)]
-pub struct UrRtdeProgram {
-    executing: bool,
-    waiting_for_motion: bool,
-    async_running: bool,
-    async_writes: i32,
-    async_op: i32,
-}
-
-const READY: i32 = 1;
-const DONE: i32 = 2;
-
-impl UrRtdeProgram {
-    /// A fresh program.
-    pub fn new() -> UrRtdeProgram {
-        UrRtdeProgram::default()
-    }
-
-    /// Mirrors `write_async_progress_register` of the script (output_int_register_2).
-    fn write_async(&mut self, regs: &mut Registers, running: bool, started: bool) {
-        self.async_writes = (self.async_writes + 1) % 128;
-        if started {
-            self.async_op = (self.async_op + 1) % 128;
-        }
-        let mut v = self.async_writes * 65536 + self.async_op * 16_777_216;
-        if running {
-            v += 32768;
-        }
-        regs.output_int[2] = v;
-        self.async_running = running;
-    }
-
-    fn vector(regs: &Registers, first: usize) -> [f64; 6] {
-        std::array::from_fn(|i| regs.input_double[first + i])
-    }
-
-    /// Starts a move; returns whether the caller must wait for it (synchronous move).
-    fn start_move(&mut self, io: &mut ProgramIo<'_>, cmd: ArmCommand) -> bool {
-        let asynchronous = io.regs.input_int[1] != 0;
-        if let Err(e) = io.arm.command(cmd) {
-            tracing::warn!(error = %e, "rtde_control: motion refused");
-            io.protective_stop |= matches!(e, ArmError::ProtectiveStop(_));
-            return false;
-        }
-        if asynchronous {
-            self.write_async(io.regs, true, true);
-            false
-        } else {
-            true
-        }
-    }
-
-    /// Runs one command; returns `None` for stopScript, else whether to wait for motion.
-    fn process(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> Option<bool> {
-        use ur_rtde_cmd::*;
-        let regs = &*io.regs;
-        let target = Self::vector(regs, 0);
-        let (speed, accel) = (regs.input_double[6], regs.input_double[7]);
-        let wait = match cmd {
-            MOVE_J => self.start_move(
-                io,
-                ArmCommand::MoveJ {
-                    q: target,
-                    speed,
-                    accel,
-                },
-            ),
-            MOVE_J_IK => match io.arm.inverse(&target, &io.arm.state().q) {
-                Ok(q) => self.start_move(io, ArmCommand::MoveJ { q, speed, accel }),
-                Err(e) => {
-                    tracing::warn!(error = %e, "rtde_control: moveJ_IK target unreachable");
-                    false
-                }
-            },
-            MOVE_L => self.start_move(
-                io,
-                ArmCommand::MoveL {
-                    pose: target,
-                    speed,
-                    accel,
-                },
-            ),
-            MOVE_L_FK => {
-                let pose = io.arm.forward(&target);
-                self.start_move(io, ArmCommand::MoveL { pose, speed, accel })
-            }
-            SET_STD_DIGITAL_OUT | SET_TOOL_DIGITAL_OUT => {
-                let offset = if cmd == SET_TOOL_DIGITAL_OUT { 16 } else { 0 };
-                let pin = i64::from(regs.input_int[1]) + offset;
-                let level = regs.input_int[2] != 0;
-                io.set_digital_output(pin, level);
-                false
-            }
-            STOP_L | STOP_J | SPEED_STOP | SERVO_STOP => {
-                let decel = regs.input_double[0];
-                let decel = if decel.is_finite() && decel > 0.0 {
-                    decel
-                } else {
-                    L::STOP_DECELERATION
-                };
-                let asynchronous = (cmd == STOP_L || cmd == STOP_J) && regs.input_int[1] != 0;
-                let _ = io.arm.command(ArmCommand::Stop { decel });
-                if self.async_running {
-                    self.write_async(io.regs, false, false);
-                }
-                !asynchronous
-            }
-            PROTECTIVE_STOP => {
-                io.protective_stop = true;
-                false
-            }
-            STOP_SCRIPT => return None,
-            WATCHDOG => false,
-            other => {
-                tracing::warn!(cmd = other, "rtde_control: command not simulated");
-                false
-            }
-        };
-        Some(wait)
-    }
-
-    /// Realtime commands (processed every cycle, answered with ready).
-    fn realtime(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> bool {
-        use ur_rtde_cmd::*;
-        let regs = &*io.regs;
-        let target = Self::vector(regs, 0);
-        let result = match cmd {
-            SPEED_J => io.arm.command(ArmCommand::SpeedJ {
-                qd: target,
-                accel: regs.input_double[6],
-            }),
-            SPEED_L => {
-                let q = io.arm.state().q;
-                let pose = io.arm.forward(&q);
-                let h = 0.01;
-                let ahead = std::array::from_fn(|i| pose[i] + target[i] * h);
-                match io.arm.inverse(&ahead, &q) {
-                    Ok(q2) => io.arm.command(ArmCommand::SpeedJ {
-                        qd: std::array::from_fn(|i| (q2[i] - q[i]) / h),
-                        accel: regs.input_double[6].max(1.0),
-                    }),
-                    Err(e) => Err(e),
-                }
-            }
-            SERVO_J => io.arm.command(ArmCommand::ServoJ {
-                q: target,
-                time: regs.input_double[8],
-            }),
-            _ => return false,
-        };
-        if let Err(e) = result {
-            tracing::debug!(error = %e, "rtde_control: realtime command refused");
-        }
-        true
-    }
-}
-
-impl Program for UrRtdeProgram {
-    fn name(&self) -> &'static str {
-        crate::program::UR_RTDE_PROGRAM_NAME
-    }
-
-    fn start(&mut self, io: &mut ProgramIo<'_>) {
-        self.executing = false;
-        self.waiting_for_motion = false;
-        self.write_async(io.regs, false, false);
-        io.regs.output_int[0] = READY;
-    }
-
-    fn step(&mut self, io: &mut ProgramIo<'_>) -> ProgramStep {
-        if self.async_running && !io.arm.is_moving() {
-            self.write_async(io.regs, false, false);
-        }
-        if self.waiting_for_motion {
-            if io.arm.is_moving() && io.arm_error.is_none() {
-                return ProgramStep::Continue;
-            }
-            self.waiting_for_motion = false;
-            io.regs.output_int[0] = DONE;
-        }
-        let cmd = io.regs.input_int[0];
-        if self.realtime(io, cmd) {
-            io.regs.output_int[0] = READY;
-            return ProgramStep::Continue;
-        }
-        if cmd == 0 {
-            self.executing = false;
-            io.regs.output_int[0] = READY;
-        } else if !self.executing {
-            self.executing = true;
-            match self.process(io, cmd) {
-                None => return ProgramStep::Exit,
-                Some(true) => self.waiting_for_motion = true,
-                Some(false) => io.regs.output_int[0] = DONE,
-            }
-        }
-        ProgramStep::Continue
-    }
-
-    fn interrupted(&mut self, io: &mut ProgramIo<'_>) {
-        if self.waiting_for_motion {
-            self.waiting_for_motion = false;
-            io.regs.output_int[0] = DONE;
-        }
-        if self.async_running {
-            self.write_async(io.regs, false, false);
         }
     }
 }

@@ -43,6 +43,9 @@ pub struct StandardIo {
     pub tool_do: u8,
     /// Speed slider fraction 0–1.
     pub speed_slider: f64,
+    /// Standard analog outputs 0–1 as `standard_analog_output0/1` report them: volts in the
+    /// voltage domain (0–10 V), amperes in the current domain (4–20 mA).
+    pub analog_out: [f64; 2],
 }
 
 impl Default for StandardIo {
@@ -52,6 +55,7 @@ impl Default for StandardIo {
             configurable_do: 0,
             tool_do: 0,
             speed_slider: 1.0,
+            analog_out: [0.004; 2],
         }
     }
 }
@@ -62,6 +66,15 @@ impl StandardIo {
         u64::from(self.standard_do)
             | (u64::from(self.configurable_do) << 8)
             | (u64::from(self.tool_do & 0b11) << 16)
+    }
+
+    /// Sets analog output `i` from a ratio 0–1 (clamped) in the voltage (0–10 V) or current
+    /// (4–20 mA) domain, as `standard_analog_output_N` with `standard_analog_output_type`.
+    pub fn set_analog_output(&mut self, i: usize, ratio: f64, voltage: bool) {
+        if i < 2 && ratio.is_finite() {
+            let r = ratio.clamp(0.0, 1.0);
+            self.analog_out[i] = if voltage { 10.0 * r } else { 0.004 + 0.016 * r };
+        }
     }
 
     /// Sets one standard (0–7), configurable (8–15) or tool (16–17) output; false if no such pin.
@@ -79,4 +92,16 @@ impl StandardIo {
         }
         true
     }
+}
+
+/// The active payload as set by `set_payload` / `set_target_payload` (and streamed as
+/// `payload`, `payload_cog`, `payload_inertia`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Payload {
+    /// Mass (kg).
+    pub mass: f64,
+    /// Centre of gravity in the flange frame (m).
+    pub cog: [f64; 3],
+    /// Inertia (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) at the centre of gravity (kg m²).
+    pub inertia: [f64; 6],
 }

@@ -9,7 +9,7 @@
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use robots::kinematics::Joints;
+use robots::kinematics::{Joints, UrKinematics};
 use robots::robot::RobotError;
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 
@@ -148,6 +148,10 @@ impl ArmModel for SimArm {
 
     fn inverse(&self, pose: &[f64; 6], near: &Joints) -> Result<Joints, ArmError> {
         self.arm.inverse(pose, near)
+    }
+
+    fn kinematics(&self) -> &UrKinematics {
+        self.arm.kinematics()
     }
 
     fn digital_output(&mut self, pin: u32, level: bool) {

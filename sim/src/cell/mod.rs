@@ -49,7 +49,6 @@ pub mod model;
 pub mod motion;
 pub mod noise;
 pub mod pieces;
-pub mod script;
 mod sim_cell;
 
 pub use error::CellError;

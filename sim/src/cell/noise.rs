@@ -1,7 +1,7 @@
 //! Error sources: per-episode random streams and the named errors a failure is attributed to.
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
@@ -22,6 +22,19 @@ pub fn gauss3(rng: &mut (impl Rng + ?Sized), sigma: f64) -> Vector3<f64> {
     Vector3::new(gauss(rng, sigma), gauss(rng, sigma), gauss(rng, sigma))
 }
 
+/// The ChaCha stream ids of an episode's random streams ([`crate::seed::stream_rng`]), listed
+/// together so no two uses share one: feeder placement and shakes.
+pub const FEEDER_STREAM: u64 = 1;
+/// Camera calibration error.
+pub const CALIBRATION_STREAM: u64 = 2;
+/// Robot repeatability.
+pub const ROBOT_STREAM: u64 = 3;
+/// Grasp residuals.
+pub const GRASP_STREAM: u64 = 4;
+/// Perception noise, drawn outside the simulated cell by the orchestrator's keypoint-noise
+/// perception.
+pub const PERCEPTION_STREAM: u64 = 5;
+
 /// Independent random streams of one episode, so a change in one (more feeder parts, another
 /// motion) does not shift the others, and any episode replays alone from (seed, index).
 #[derive(Debug, Clone)]
@@ -39,25 +52,14 @@ pub struct EpisodeStreams {
 impl EpisodeStreams {
     /// The streams of episode `index` of a run seeded with `seed`.
     pub fn new(seed: u64, index: u64) -> Self {
-        let make = |stream: u64| {
-            let mut rng = ChaCha8Rng::seed_from_u64(splitmix(seed ^ splitmix(index)));
-            rng.set_stream(stream);
-            rng
-        };
+        let make = |stream: u64| crate::seed::stream_rng(seed, index, stream);
         Self {
-            feeder: make(1),
-            calibration: make(2),
-            robot: make(3),
-            grasp: make(4),
+            feeder: make(FEEDER_STREAM),
+            calibration: make(CALIBRATION_STREAM),
+            robot: make(ROBOT_STREAM),
+            grasp: make(GRASP_STREAM),
         }
     }
-}
-
-fn splitmix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
 }
 
 /// The true camera pose: the nominal (calibrated) pose perturbed by the calibration error.

@@ -23,16 +23,21 @@ pub struct PoseClass {
     pub spread: f64,
 }
 
-/// Clusters outcomes by resting face; classes with fewer than `min_count` drops are left out
-/// (their drops still count in the denominator). Drops still jittering in place at the time limit
+/// Clusters outcomes by resting face; classes with fewer than `min_count` drops and drops
+/// resting on a neighbour ([`leaning`]) are left out (their drops still count in the
+/// denominator). Drops still jittering in place at the time limit
 /// count by their face; only settled drops enter the physics-vs-geometry height comparison.
 /// Most probable first; ties by direction.
 pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Vec<PoseClass> {
-    let settled: Vec<&DropOutcome> = outcomes.iter().collect();
-    let total = settled.len().max(1) as f64;
+    let total = outcomes.len().max(1) as f64;
+    let faces = hull_up_directions(mesh);
+    let on_table: Vec<&DropOutcome> = outcomes
+        .iter()
+        .filter(|o| !leans(o, mesh, &faces))
+        .collect();
     // Greedy leader clustering in drop order (deterministic), then one re-assignment pass to the
     // nearest final centre, so the result does not depend on which member came first.
-    let ups: Vec<Vector3<f64>> = settled
+    let ups: Vec<Vector3<f64>> = on_table
         .iter()
         .map(|o| o.rotation.inverse() * Vector3::z())
         .collect();
@@ -55,7 +60,6 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
     }
     // A resting class is a face of the convex hull: snap each centre to the nearest hull face's
     // inward normal, so canonical rotations and rest heights are exact, not averaged jitter.
-    let faces = hull_up_directions(mesh);
     for c in centres.iter_mut() {
         if let Some(f) = faces.iter().max_by(|a, b| a.dot(c).total_cmp(&b.dot(c)))
             && f.angle(c) < CLASS_ANGLE_RAD
@@ -63,6 +67,7 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
             *c = *f;
         }
     }
+    let centres = merge_close(centres, &ups);
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); centres.len()];
     for (i, up) in ups.iter().enumerate() {
         members[nearest(&centres, up)].push(i);
@@ -76,9 +81,9 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
             let rest_height = geometric_rest_height(mesh, &rotation);
             let max_height_error = m
                 .iter()
-                .filter(|&&i| settled[i].settled)
+                .filter(|&&i| on_table[i].settled)
                 .map(|&i| {
-                    (settled[i].height - geometric_rest_height(mesh, &settled[i].rotation)).abs()
+                    (on_table[i].height - geometric_rest_height(mesh, &on_table[i].rotation)).abs()
                 })
                 .fold(0.0, f64::max);
             let spread = m.iter().map(|&i| ups[i].angle(centre)).fold(0.0, f64::max);
@@ -91,7 +96,7 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
                     rest_height: round(rest_height),
                 },
                 count: m.len(),
-                jittering: m.iter().filter(|&&i| !settled[i].settled).count(),
+                jittering: m.iter().filter(|&&i| !on_table[i].settled).count(),
                 max_height_error,
                 spread,
             }
@@ -105,11 +110,83 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
                 .unwrap_or(std::cmp::Ordering::Equal)
         })
     });
-    for (i, c) in classes.iter_mut().enumerate() {
-        c.pose.name = StablePose::name_for(&Vector3::from(c.pose.up_in_part), i);
+    for c in classes.iter_mut() {
         c.pose.probability = round(c.pose.probability);
     }
+    name_uniquely(&mut classes);
     classes
+}
+
+/// Merges centres within [`CLASS_ANGLE_RAD`] of each other (the mean shift and the snap onto
+/// nearly coplanar hull faces can bring two within a fraction of a degree), keeping the one
+/// nearest to more rest directions.
+fn merge_close(centres: Vec<Vector3<f64>>, ups: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
+    let mut counts = vec![0usize; centres.len()];
+    for up in ups {
+        counts[nearest(&centres, up)] += 1;
+    }
+    let mut order: Vec<usize> = (0..centres.len()).collect();
+    order.sort_by(|&a, &b| counts[b].cmp(&counts[a]).then(a.cmp(&b)));
+    let mut kept: Vec<Vector3<f64>> = Vec::with_capacity(centres.len());
+    for i in order {
+        if kept.iter().all(|k| k.angle(&centres[i]) >= CLASS_ANGLE_RAD) {
+            kept.push(centres[i]);
+        }
+    }
+    kept
+}
+
+/// Names each class from its direction ([`StablePose::name_for`]); where two directions get the
+/// same name, the one with the lexicographically larger direction gets "#2" (then "#3", ...),
+/// so names are unique and do not depend on the drops' order or the classes' probabilities.
+fn name_uniquely(classes: &mut [PoseClass]) {
+    let mut order: Vec<usize> = (0..classes.len()).collect();
+    let key = |c: &PoseClass| {
+        (
+            StablePose::name_for(&Vector3::from(c.pose.up_in_part)),
+            c.pose.up_in_part,
+        )
+    };
+    order.sort_by(|&a, &b| {
+        let (na, ua) = key(&classes[a]);
+        let (nb, ub) = key(&classes[b]);
+        na.cmp(&nb)
+            .then_with(|| ua.partial_cmp(&ub).unwrap_or(std::cmp::Ordering::Equal))
+    });
+    let mut previous: Option<(String, usize)> = None;
+    for i in order {
+        let name = key(&classes[i]).0;
+        let n = match &previous {
+            Some((p, n)) if *p == name => n + 1,
+            _ => 1,
+        };
+        classes[i].pose.name = if n == 1 {
+            name.clone()
+        } else {
+            format!("{name}#{n}")
+        };
+        previous = Some((name, n));
+    }
+}
+
+/// A part resting this much higher than its lowest point allows lies on a neighbour, metres:
+/// far above the contact's micrometres of play, far below any part's wall thickness.
+pub const LEAN_HEIGHT: f64 = 50e-6;
+
+/// For each outcome, whether it came to rest on a neighbour (crowded drops) rather than on the
+/// table: it rests higher than its geometry allows by [`LEAN_HEIGHT`], or it is tilted off
+/// every face of its convex hull by more than [`CLASS_ANGLE_RAD`] (a single part on a table
+/// always ends on a hull face).
+pub fn leaning(outcomes: &[DropOutcome], mesh: &TriMesh) -> Vec<bool> {
+    let faces = hull_up_directions(mesh);
+    outcomes.iter().map(|o| leans(o, mesh, &faces)).collect()
+}
+
+fn leans(o: &DropOutcome, mesh: &TriMesh, faces: &[Vector3<f64>]) -> bool {
+    let raised = o.height - geometric_rest_height(mesh, &o.rotation) > LEAN_HEIGHT;
+    let up = o.rotation.inverse() * Vector3::z();
+    let off_faces = faces.iter().all(|f| f.angle(&up) > CLASS_ANGLE_RAD);
+    raised || off_faces
 }
 
 /// For each face of the mesh's convex hull, the table-up direction (in the part frame) of the

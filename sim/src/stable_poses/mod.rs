@@ -4,7 +4,7 @@
 mod cluster;
 pub(crate) mod drop;
 
-pub use cluster::{CLASS_ANGLE_RAD, PoseClass, cluster};
+pub use cluster::{CLASS_ANGLE_RAD, LEAN_HEIGHT, PoseClass, cluster, leaning};
 pub use drop::{
     DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch,
     stratified_rotation,
@@ -23,7 +23,10 @@ pub struct StablePoseReport {
     pub drops: usize,
     /// Drops still jittering in place at the time limit (classified by their face all the same).
     pub unsettled: usize,
-    /// Settled drops in classes too rare to keep.
+    /// Drops that came to rest on a neighbour rather than flat on the table (crowded drops
+    /// only); left out of the classes, counted in their denominator.
+    pub leaning: usize,
+    /// Drops in classes too rare to keep.
     pub rare: usize,
     /// Mass in kg, from the mesh and density.
     pub mass: f64,
@@ -44,7 +47,8 @@ pub fn stable_poses(
     progress: Option<&ProgressBar>,
 ) -> StablePoseReport {
     let body = DropBody::new(mesh, density);
-    let batch = settings.batch.max(1);
+    let crowd = settings.crowd.max(1);
+    let batch = (settings.batch.max(1) / crowd).max(1) * crowd;
     let starts: Vec<usize> = (0..settings.drops).step_by(batch).collect();
     let outcomes: Vec<DropOutcome> = starts
         .par_iter()
@@ -60,6 +64,7 @@ pub fn stable_poses(
     let min_count = (settings.drops / 1000).max(2);
     let classes = cluster(&outcomes, mesh, min_count);
     let classified: usize = classes.iter().map(|c| c.count).sum();
+    let leaning = leaning(&outcomes, mesh).iter().filter(|&&l| l).count();
     let settled = outcomes.len();
     let jittering = outcomes.iter().filter(|o| !o.settled).count();
     let (mass, center_of_mass) = body.mass_and_com();
@@ -67,7 +72,8 @@ pub fn stable_poses(
         classes,
         drops: outcomes.len(),
         unsettled: jittering,
-        rare: settled - classified,
+        leaning,
+        rare: settled - classified - leaning,
         mass,
         center_of_mass,
         mean_rest_time: outcomes

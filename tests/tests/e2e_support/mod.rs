@@ -6,7 +6,7 @@
 use std::ops::Deref;
 use std::path::{Path, PathBuf};
 
-use cell::orchestrator::SimSetup;
+use cell::harness::SimSetup;
 use cell::scenario::Scenario;
 use tempfile::TempDir;
 

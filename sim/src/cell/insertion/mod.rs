@@ -101,13 +101,6 @@ pub struct PoseError {
     pub yaw: f64,
 }
 
-impl PoseError {
-    /// Largest lateral offset on one axis of the insertion frame.
-    pub fn lateral_max(&self) -> f64 {
-        self.lateral.x.abs().max(self.lateral.y.abs())
-    }
-}
-
 /// The result of one insertion.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[allow(non_snake_case)]

@@ -1,15 +1,17 @@
-//! A scripted pick-and-insert episode with perception excluded: part poses come from what the
-//! camera sees mapped through the calibrated (nominal) camera pose, so calibration error, robot
-//! repeatability and grasp residuals act, but no pose estimator does. Benchmarks and tests use it;
-//! the orchestrator (the `cell` crate) is the production driver.
+//! A scripted pick-and-insert episode with perception excluded, for the sim crate's own tests
+//! and benches (which cannot use the orchestrator in the `cell` crate above them): part poses
+//! come from what the camera sees mapped through the calibrated (nominal) camera pose, so
+//! calibration error, robot repeatability and grasp residuals act, but no pose estimator does.
+//! It is test support, not library code: the orchestrator engine is the only driver the crates
+//! ship.
 
 use nalgebra::{Isometry3, Translation3};
 use robots::robot::{LinearMotion, RobotError};
 use serde::{Deserialize, Serialize};
 
-use super::SimCell;
-use super::error::CellError;
-use super::insertion::{InsertionCause, Verdict};
+use sim::cell::SimCell;
+use sim::cell::error::CellError;
+use sim::cell::insertion::{InsertionCause, Verdict};
 
 /// Clearance above a part or target for approach moves, metres.
 const APPROACH: f64 = 0.02;

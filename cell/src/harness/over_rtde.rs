@@ -13,14 +13,15 @@ use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use sim::cell::SimCell;
 use sim::cell::arm::SimArm;
 
-use super::{EpisodeOutput, OrchestratorError, SimCellIo, SimSetup, keypoint_noise_for};
+use super::{HarnessError, SimCellIo, SimSetup, keypoint_noise_for};
+use crate::orchestrator::{EpisodeOutput, SplitCell, run_episode};
 
 /// Why an episode over loopback RTDE could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum OverRtdeError {
     /// The simulated cell or perception could not be set up.
     #[error(transparent)]
-    Setup(#[from] OrchestratorError),
+    Setup(#[from] HarnessError),
     /// The virtual controller could not bind its loopback ports.
     #[error("virtual controller on 127.0.0.1: {0}")]
     Bind(#[from] std::io::Error),
@@ -62,9 +63,9 @@ pub async fn connect_sim_over_rtde(
     rc.rtde_port = controller.rtde_addr().port();
     rc.dashboard_port = controller.dashboard_addr().port();
     rc.script_port = controller.script_addr().port();
-    rc.limits = setup.scenario.spec.cell.limits.clone();
-    rc.kinematics = setup.knowledge.kinematics.clone();
-    rc.gripper_actuation_s = setup.scenario.spec.cell.gripper.actuation_time;
+    rc.limits = setup.scenario().spec.cell.limits.clone();
+    rc.kinematics = setup.engine.knowledge.kinematics.clone();
+    rc.gripper_actuation_s = setup.scenario().spec.cell.gripper.actuation_time;
     let robot = UrRobot::connect(rc).await?;
     Ok(SimOverRtde {
         controller,
@@ -78,23 +79,18 @@ pub async fn sim_episode_over_rtde(
     setup: &SimSetup,
     episode: u32,
 ) -> Result<EpisodeOutput, OverRtdeError> {
-    let mut perception = keypoint_noise_for(&setup.scenario, episode)?;
+    let mut perception = keypoint_noise_for(setup.scenario(), episode)?;
     let SimOverRtde {
         controller,
         mut robot,
         cell,
     } = connect_sim_over_rtde(setup, episode, VirtualUrConfig::default().unlock_delay).await?;
     let mut io = SimCellIo::new(cell);
-    let out = super::run_episode(
-        &setup.scenario,
-        &setup.knowledge,
-        episode,
-        &mut robot,
-        &mut io,
-        &mut perception,
-        &setup.settings,
-    )
-    .await;
+    let mut cell = SplitCell {
+        robot: &mut robot,
+        io: &mut io,
+    };
+    let out = run_episode(setup.engine.context(episode), &mut cell, &mut perception).await;
     drop(robot);
     drop(controller);
     Ok(out)

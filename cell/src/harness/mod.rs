@@ -1,0 +1,120 @@
+//! The simulation harness: everything that puts the orchestrator engine (`crate::orchestrator`)
+//! in front of the simulated cell instead of a real one. A production run builds none of it.
+//!
+//! - [`SimSetup::new`] once per scenario: the engine's [`Setup`] and the simulator's
+//!   [`CellModel`] (with the scenario's insertion scorer).
+//! - [`run_sim_episode`] (async) or [`run_sim_episode_blocking`] (a current-thread tokio runtime
+//!   built for the call: use it from rayon workers) runs one episode in process: the
+//!   [`SimCell`] is the engine's whole [`Workcell`] (`sim_io`), perception is
+//!   [`KeypointNoise`] (`keypoint_noise`). Same (scenario, episode) → same record.
+//! - [`sim_episode_over_rtde`] runs it through the production client instead: the cell behind
+//!   a virtual UR controller on loopback, `UrRobot` over RTDE, [`SimCellIo`] for the side
+//!   channels (`over_rtde`).
+//! - `verdict`: the simulated cell's insertion reports as the engine's [`InsertionCheck`]s.
+//!
+//! All randomness is seeded from (scenario seed, episode): any episode replays alone.
+//!
+//! [`InsertionCheck`]: crate::orchestrator::InsertionCheck
+//! [`Workcell`]: crate::orchestrator::Workcell
+
+#![allow(non_snake_case)]
+
+mod keypoint_noise;
+mod over_rtde;
+mod sim_io;
+mod verdict;
+
+pub use keypoint_noise::{KeypointNoise, KeypointNoiseConfig, keypoint_noise_for};
+pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
+pub use sim_io::SimCellIo;
+pub use verdict::{check_of, source_name};
+
+use std::sync::{Arc, Mutex};
+
+use sim::cell::{CellModel, SimCell};
+
+use crate::orchestrator::{EpisodeOutput, KnowledgeError, PerceptionError, Setup, run_episode};
+use crate::scenario::{PerceptionMode, Scenario};
+
+/// Why a simulated episode could not be set up (nothing ran).
+#[derive(Debug, thiserror::Error)]
+pub enum HarnessError {
+    /// The simulated cell could not be built.
+    #[error("simulated cell: {0}")]
+    Cell(#[from] sim::cell::CellError),
+    /// The planning model could not be built.
+    #[error(transparent)]
+    Knowledge(#[from] KnowledgeError),
+    /// Perception could not be set up.
+    #[error(transparent)]
+    Perception(#[from] PerceptionError),
+    /// The scenario asks for a perception mode the simulation cannot provide.
+    #[error("perception mode {0:?} is not available yet (no trained models)")]
+    ModeUnavailable(PerceptionMode),
+    /// No tokio runtime could be built.
+    #[error("tokio runtime: {0}")]
+    Runtime(String),
+}
+
+/// What stays the same across a scenario's simulated episodes.
+pub struct SimSetup {
+    /// What the engine needs: scenario, planning model, policies.
+    pub engine: Setup,
+    /// The simulator's cell model.
+    pub model: Arc<CellModel>,
+}
+
+impl SimSetup {
+    /// Builds the simulated cell model (with the scenario's insertion scorer) and the engine's
+    /// set-up.
+    pub fn new(scenario: Scenario) -> Result<Self, HarnessError> {
+        let s = &scenario.spec;
+        let scorer = s.simulation.insertion_scorer;
+        let model = CellModel::new(&s.cell, &s.assembly, &s.noise, &scenario.catalog, scorer)?;
+        Ok(Self {
+            engine: Setup::new(scenario)?,
+            model,
+        })
+    }
+
+    /// The scenario.
+    pub fn scenario(&self) -> &Scenario {
+        &self.engine.scenario
+    }
+
+    /// A fresh simulated cell for `episode`.
+    pub fn sim_cell(&self, episode: u32) -> Result<SimCell, HarnessError> {
+        Ok(SimCell::new(
+            self.model.clone(),
+            self.engine.scenario.spec.seed,
+            u64::from(episode),
+        )?)
+    }
+
+    /// A fresh simulated cell for `episode`, shared with a virtual controller that moves it.
+    pub fn cell(&self, episode: u32) -> Result<Arc<Mutex<SimCell>>, HarnessError> {
+        Ok(Arc::new(Mutex::new(self.sim_cell(episode)?)))
+    }
+}
+
+/// Runs `episode` in the in-process simulated cell.
+pub async fn run_sim_episode(
+    setup: &SimSetup,
+    episode: u32,
+) -> Result<EpisodeOutput, HarnessError> {
+    let mut cell = setup.sim_cell(episode)?;
+    let mut perception = keypoint_noise_for(setup.scenario(), episode)?;
+    Ok(run_episode(setup.engine.context(episode), &mut cell, &mut perception).await)
+}
+
+/// [`run_sim_episode`] on a current-thread tokio runtime built for the call (for rayon workers).
+pub fn run_sim_episode_blocking(
+    setup: &SimSetup,
+    episode: u32,
+) -> Result<EpisodeOutput, HarnessError> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()
+        .map_err(|e| HarnessError::Runtime(e.to_string()))?;
+    rt.block_on(run_sim_episode(setup, episode))
+}

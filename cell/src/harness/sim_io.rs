@@ -1,0 +1,135 @@
+//! The simulated cell as the engine's cell: its camera, feeder and verdicts as [`CellIo`], and the
+//! whole cell as a [`Workcell`] whose arm is the cell's own `impl Robot for SimCell` (the one
+//! `Robot` implementation of the simulated cell). [`SimCellIo`] reads the same side channels from
+//! a cell shared with the virtual UR controller, whose arm model drives it over RTDE.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use nalgebra::Isometry3;
+use robots::robot::Robot;
+use sim::cell::SimCell;
+
+use super::verdict::check_of;
+use crate::episode::StepOutcome;
+use crate::orchestrator::{
+    CellIo, CellIoError, Frame, FrameContent, InsertionCheck, TruePart, Workcell,
+};
+
+impl CellIo for SimCell {
+    fn capture(&mut self) -> Result<Frame, CellIoError> {
+        self.wait_for_feeder();
+        let parts = self
+            .camera_view()
+            .into_iter()
+            .map(|p| TruePart {
+                instance: p.instance,
+                part: p.part,
+                camera_T_part: p.camera_T_part,
+            })
+            .collect();
+        Ok(Frame {
+            camera: self.model().spec.camera.intrinsics,
+            base_T_camera: self.base_T_camera_nominal(),
+            content: FrameContent::Simulated(parts),
+        })
+    }
+
+    fn shake_feeder(&mut self) -> Result<(), CellIoError> {
+        self.shake().map_err(|e| CellIoError::Feeder(e.to_string()))
+    }
+
+    fn part_in_gripper(&mut self) -> Option<bool> {
+        Some(self.held().is_some())
+    }
+
+    fn insertion_check(&mut self) -> Option<InsertionCheck> {
+        self.last_release().map(check_of)
+    }
+
+    fn seating_check(&mut self) -> Option<InsertionCheck> {
+        self.held()?;
+        Some(match self.held_insertion() {
+            Some(r) => check_of(&r),
+            // Held but never came down into the target: it stopped on whatever it met first.
+            None => InsertionCheck {
+                outcome: StepOutcome::Missed,
+                cause: Some("the part did not enter the target".into()),
+                sources: vec![],
+                pose_error: None,
+                stop_height: None,
+            },
+        })
+    }
+
+    fn clock(&self) -> f64 {
+        SimCell::clock(self)
+    }
+
+    #[allow(non_snake_case)]
+    fn true_table_T_part(&self, instance: u32) -> Option<Isometry3<f64>> {
+        self.feeder_parts()
+            .iter()
+            .find(|p| p.instance == instance)
+            .map(|p| p.table_T_part)
+    }
+}
+
+impl Workcell for SimCell {
+    fn robot(&mut self) -> &mut dyn Robot {
+        self
+    }
+
+    fn io(&mut self) -> &mut dyn CellIo {
+        self
+    }
+}
+
+/// The side channels of a simulated cell shared with the virtual UR controller (which moves its
+/// arm): each call locks the cell and asks its [`CellIo`].
+pub struct SimCellIo {
+    cell: Arc<Mutex<SimCell>>,
+}
+
+impl SimCellIo {
+    /// Side channels of a shared simulated cell.
+    pub fn new(cell: Arc<Mutex<SimCell>>) -> Self {
+        Self { cell }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, SimCell> {
+        self.cell
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
+impl CellIo for SimCellIo {
+    fn capture(&mut self) -> Result<Frame, CellIoError> {
+        self.lock().capture()
+    }
+
+    fn shake_feeder(&mut self) -> Result<(), CellIoError> {
+        self.lock().shake_feeder()
+    }
+
+    fn part_in_gripper(&mut self) -> Option<bool> {
+        self.lock().part_in_gripper()
+    }
+
+    fn insertion_check(&mut self) -> Option<InsertionCheck> {
+        self.lock().insertion_check()
+    }
+
+    fn seating_check(&mut self) -> Option<InsertionCheck> {
+        self.lock().seating_check()
+    }
+
+    fn clock(&self) -> f64 {
+        CellIo::clock(&*self.lock())
+    }
+
+    #[allow(non_snake_case)]
+    fn true_table_T_part(&self, instance: u32) -> Option<Isometry3<f64>> {
+        self.lock().true_table_T_part(instance)
+    }
+}

@@ -1,0 +1,84 @@
+//! The simulated cell's verdicts in the engine's terms: step outcomes, cause texts, and the
+//! scenario parameter names of the error sources a failure is blamed on.
+
+use sim::cell::ReleaseReport;
+use sim::cell::insertion::{InsertionCause, Verdict};
+use sim::cell::noise::ErrorSource;
+
+use crate::episode::{PoseError, StepOutcome};
+use crate::orchestrator::InsertionCheck;
+
+/// The scenario parameter name of a simulated error source.
+pub fn source_name(s: ErrorSource) -> &'static str {
+    match s {
+        ErrorSource::RobotRepeatability => "robot_repeatability",
+        ErrorSource::CameraCalibration => "calibration_translation",
+        ErrorSource::GraspResidual => "grasp_offset",
+        ErrorSource::PerceptionAndPlanning => "perception",
+    }
+}
+
+fn cause_text(c: &InsertionCause) -> Option<String> {
+    Some(match c {
+        InsertionCause::None => return None,
+        InsertionCause::LateralBeyondCapture { offset, capture } => format!(
+            "lateral offset {:.3} mm beyond the {:.3} mm capture band",
+            offset * 1e3,
+            capture * 1e3
+        ),
+        InsertionCause::TiltBeyondJam { tilt, jam_angle } => format!(
+            "tilt {:.2}° beyond the {:.2}° jam angle",
+            tilt.to_degrees(),
+            jam_angle.to_degrees()
+        ),
+        InsertionCause::YawBeyondClearance { yaw, limit } => format!(
+            "yaw {:.2}° beyond the {:.2}° the clearance allows",
+            yaw.to_degrees(),
+            limit.to_degrees()
+        ),
+        InsertionCause::StoppedShort { height } => {
+            format!("stopped {:.3} mm short of seated", height * 1e3)
+        }
+        InsertionCause::OutOfTolerance { lateral, tilt } => format!(
+            "fully down but out of tolerance: {:.3} mm lateral, {:.2}° tilt",
+            lateral * 1e3,
+            tilt.to_degrees()
+        ),
+        InsertionCause::ReleasedAwayFromTarget => "released away from the target".into(),
+    })
+}
+
+/// What a release (or held-insertion) report of the simulated cell says, in the engine's terms.
+pub fn check_of(r: &ReleaseReport) -> InsertionCheck {
+    let outcome = match r.verdict {
+        Verdict::Seated => StepOutcome::Seated,
+        Verdict::Jammed => StepOutcome::Jammed,
+        Verdict::Missed => StepOutcome::Missed,
+    };
+    let mut sources = Vec::new();
+    if outcome != StepOutcome::Seated
+        && let Some(b) = &r.budget
+    {
+        let mut shares = b.shares.clone();
+        shares.sort_by(|a, b| b.1.total_cmp(&a.1));
+        sources = shares
+            .iter()
+            .filter(|(_, s)| *s >= 0.2)
+            .map(|(s, _)| source_name(*s).to_string())
+            .collect();
+    }
+    let pose_error = r.insertion.as_ref().map(|i| PoseError {
+        dx_mm: i.start.lateral.x * 1e3,
+        dy_mm: i.start.lateral.y * 1e3,
+        depth_mm: i.end.height * 1e3,
+        tilt_deg: i.start.tilt.to_degrees(),
+        yaw_deg: i.start.yaw.to_degrees(),
+    });
+    InsertionCheck {
+        outcome,
+        cause: cause_text(&r.cause),
+        sources,
+        pose_error,
+        stop_height: r.insertion.as_ref().map(|i| i.end.height),
+    }
+}

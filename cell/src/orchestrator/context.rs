@@ -1,0 +1,101 @@
+//! What an episode runs under: the policies ([`EpisodeSettings`]), what stays the same across a
+//! scenario's episodes ([`Setup`]) and one episode's read-only view of it ([`EpisodeContext`]),
+//! passed to the engine as one value.
+
+use std::sync::Arc;
+
+use perception::part::Catalog;
+use robots::kinematics::Joints;
+
+use super::geometry::{CellKnowledge, KnowledgeError};
+use super::planning::PlanningConfig;
+use super::selection::SelectionConfig;
+use super::state::Timeouts;
+use crate::scenario::Scenario;
+
+/// Policies and tuning of an episode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeSettings {
+    /// Bounds of every state.
+    pub timeouts: Timeouts,
+    /// Instance selection.
+    pub selection: SelectionConfig,
+    /// Motion planning.
+    pub planning: PlanningConfig,
+    /// Pick attempts per step (a failed grasp re-perceives and retries).
+    pub max_grasp_attempts: u32,
+    /// Home joints; the robot's joints at the start when `None`.
+    pub home: Option<Joints>,
+}
+
+impl Default for EpisodeSettings {
+    fn default() -> Self {
+        Self {
+            timeouts: Timeouts::default(),
+            selection: SelectionConfig::default(),
+            planning: PlanningConfig::default(),
+            max_grasp_attempts: 3,
+            home: None,
+        }
+    }
+}
+
+/// What stays the same across a scenario's episodes on any cell: the scenario, the planner's
+/// model of the cell and the policies. Building it touches no robot and no simulator.
+#[derive(Clone)]
+pub struct Setup {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// The planner's model of the cell.
+    pub knowledge: Arc<CellKnowledge>,
+    /// Policies.
+    pub settings: EpisodeSettings,
+}
+
+impl Setup {
+    /// Builds the planning model of `scenario`, with the default policies.
+    pub fn new(scenario: Scenario) -> Result<Self, KnowledgeError> {
+        let knowledge = CellKnowledge::new(&scenario)?;
+        Ok(Self {
+            scenario,
+            knowledge,
+            settings: EpisodeSettings::default(),
+        })
+    }
+
+    /// The context of `episode`.
+    pub fn context(&self, episode: u32) -> EpisodeContext<'_> {
+        let spec = &self.scenario.spec;
+        EpisodeContext {
+            scenario: &spec.name,
+            seed: spec.seed,
+            episode,
+            catalog: &self.scenario.catalog,
+            knowledge: &self.knowledge,
+            settings: &self.settings,
+            max_shakes: spec.cell.feeder.max_shakes,
+            max_insertion_attempts: spec.policy.max_insertion_attempts.max(1),
+        }
+    }
+}
+
+/// One episode's read-only context: which episode, and everything the engine plans with.
+#[derive(Clone, Copy)]
+pub struct EpisodeContext<'a> {
+    /// Scenario name (for the record).
+    pub scenario: &'a str,
+    /// Scenario seed (for the record).
+    pub seed: u64,
+    /// Episode index.
+    pub episode: u32,
+    /// The part catalog.
+    pub catalog: &'a Catalog,
+    /// The planner's model of the cell.
+    pub knowledge: &'a CellKnowledge,
+    /// Policies.
+    pub settings: &'a EpisodeSettings,
+    /// Feeder shakes allowed per step (`cell.feeder.max_shakes`).
+    pub max_shakes: u32,
+    /// Insertions allowed per step, at least 1 (`policy.max_insertion_attempts`).
+    pub max_insertion_attempts: u32,
+}

@@ -1,0 +1,700 @@
+//! The engine: the state machine that runs every assembly step of one episode on a
+//! [`Workcell`], one method per [`State`].
+
+use std::time::Duration;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
+use robots::kinematics::Joints;
+use robots::robot::RobotError;
+use sim::cell::geometry::PartGeometry;
+
+use super::cell_io::{CellIo, InsertionCheck, Workcell};
+use super::context::EpisodeContext;
+use super::events::EventLog;
+use super::geometry::CellKnowledge;
+use super::perception::{DetectedPart, PartPerception};
+use super::planning::{Motion, Planner, Speeds, grasped_offset};
+use super::selection::{Rejection, Selection, select};
+use super::state::State;
+use super::step::StepState;
+use crate::episode::{EpisodeRecord, PoseError, RECORD_VERSION, StepOutcome};
+
+/// Error-budget name of a step given up because the feeder held none of its part.
+pub const FEEDER_EXHAUSTED: &str = "feeder.parts";
+/// Error-budget name of a step given up because the camera detected no part at all (pointed
+/// away from the feeder, or nothing in view).
+pub const CAMERA_SAW_NOTHING: &str = "camera.view";
+/// Error-budget name of a step given up after `max_shakes` shakes left no usable instance.
+pub const FEEDER_SHAKE_BOUND: &str = "feeder.max_shakes";
+
+/// Why the state machine stopped the episode early.
+enum Stop {
+    /// A robot command failed.
+    Robot(State, RobotError),
+    /// A state overran its bound.
+    Timeout(State, Duration),
+}
+
+impl Stop {
+    fn text(&self) -> String {
+        match self {
+            Stop::Robot(s, e) => format!("{s:?}: {e}"),
+            Stop::Timeout(s, d) => format!("{s:?} timed out after {d:?}"),
+        }
+    }
+}
+
+/// One episode in progress: its context, the cell and perception it drives, and its state.
+pub(super) struct Engine<'a> {
+    ctx: EpisodeContext<'a>,
+    cell: &'a mut dyn Workcell,
+    perception: &'a mut dyn PartPerception,
+    log: EventLog,
+    /// Home joints, fixed by the Home state.
+    home: Joints,
+    /// Clock when homing ended: the assembly cycle starts there.
+    cycle_start: f64,
+    /// Index of the assembly step in progress.
+    index: usize,
+    /// The state of that step.
+    step: StepState,
+    /// Shakes started for the next step while this one inserts.
+    shakes_ahead: u32,
+    /// Records of the steps finished.
+    records: Vec<crate::episode::StepRecord>,
+    /// Parts seated so far, with their target poses (obstacles for planning).
+    placed: Vec<(String, Isometry3<f64>)>,
+    /// Why the episode stopped early.
+    abort: Option<String>,
+    /// Why the last recovery (shake, retract, insertion retry) was chosen, for the event log.
+    last_reason: String,
+}
+
+impl<'a> Engine<'a> {
+    /// An episode ready to start at Home.
+    pub(super) fn new(
+        ctx: EpisodeContext<'a>,
+        cell: &'a mut dyn Workcell,
+        perception: &'a mut dyn PartPerception,
+    ) -> Self {
+        Self {
+            log: EventLog::new(ctx.episode),
+            ctx,
+            cell,
+            perception,
+            home: [0.0; 6],
+            cycle_start: 0.0,
+            index: 0,
+            step: StepState::new(0.0, 0),
+            shakes_ahead: 0,
+            records: Vec::new(),
+            placed: Vec::new(),
+            abort: None,
+            last_reason: String::new(),
+        }
+    }
+
+    /// Runs the state machine to its end and returns the episode record and its events.
+    pub(super) async fn run(mut self) -> (EpisodeRecord, EventLog) {
+        let mut state = State::Home;
+        let now = self.clock();
+        self.log.push(None, state, state, now, "start");
+        while !state.is_terminal() {
+            let bound = self.ctx.settings.timeouts.of(state);
+            let next = match tokio::time::timeout(bound, self.run_state(state)).await {
+                Ok(r) => r,
+                Err(_) => Err(Stop::Timeout(state, bound)),
+            };
+            let (next, detail) = match next {
+                Ok(n) => {
+                    let d = match n {
+                        State::Shake | State::Retract => self.last_reason.clone(),
+                        State::PlanInsert if state == State::Verify => self.last_reason.clone(),
+                        _ => String::new(),
+                    };
+                    (n, d)
+                }
+                Err(stop) => (State::SafeStop, self.safe_stop(stop).await),
+            };
+            let step = (self.index < self.steps()).then_some(self.index);
+            let now = self.clock();
+            self.log.push(step, state, next, now, detail);
+            state = next;
+        }
+        let success = self.records.len() == self.steps()
+            && self
+                .records
+                .iter()
+                .all(|r| r.outcome == StepOutcome::Seated);
+        let record = EpisodeRecord {
+            version: RECORD_VERSION,
+            scenario: self.ctx.scenario.to_string(),
+            seed: self.ctx.seed,
+            episode: self.ctx.episode,
+            success,
+            steps: std::mem::take(&mut self.records),
+            cycle_time_s: self.clock() - self.cycle_start,
+            wall_time_s: self.log.wall_time_s(),
+            abort: self.abort.take(),
+        };
+        (record, self.log)
+    }
+
+    /// Runs one state; returns the next.
+    async fn run_state(&mut self, state: State) -> Result<State, Stop> {
+        match state {
+            State::Home => self.home(state).await,
+            State::Capture => Ok(self.capture()),
+            State::Perceive => Ok(self.perceive()),
+            State::Select => self.select(state).await,
+            State::Shake => Ok(self.shake()),
+            State::PlanPick => self.plan_pick(state).await,
+            State::Pick => self.pick(state).await,
+            State::VerifyGrasp => Ok(self.verify_grasp()),
+            State::Retract => self.retract(state).await,
+            State::PlanInsert => self.plan_insert(state).await,
+            State::Insert => self.insert(state).await,
+            State::Verify => self.verify(state).await,
+            State::Done | State::SafeStop => Ok(state),
+        }
+    }
+
+    /// Open the gripper, go home; the assembly cycle starts there.
+    async fn home(&mut self, state: State) -> Result<State, Stop> {
+        let configured = self.ctx.settings.home;
+        let knowledge = self.ctx.knowledge;
+        let robot = self.cell.robot();
+        let r = async {
+            robot.open_gripper().await?;
+            let q = robot.joints().await?;
+            let home = configured.unwrap_or_else(|| knowledge.safe_home(&q));
+            if robots::kinematics::joint_distance(&home, &q) > 1e-9 {
+                let speeds = Speeds::within(robot.limits(), 0.01);
+                robot.move_j(home, speeds.joint).await?;
+            }
+            Ok::<_, RobotError>(home)
+        }
+        .await;
+        self.home = r.map_err(|e| Stop::Robot(state, e))?;
+        self.cycle_start = self.clock();
+        self.step = StepState::new(self.cycle_start, 0);
+        Ok(State::Capture)
+    }
+
+    /// Take a camera frame (the cell waits for the feeder to settle).
+    fn capture(&mut self) -> State {
+        match self.io().capture() {
+            Ok(f) => {
+                self.step.frame = Some(f);
+                self.step.excluded.clear();
+                State::Perceive
+            }
+            Err(e) => {
+                self.last_reason = e.to_string();
+                self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None)
+            }
+        }
+    }
+
+    /// Estimate the poses of the parts in the frame.
+    fn perceive(&mut self) -> State {
+        let r = match self.step.frame.take() {
+            Some(f) => self.perception.perceive(&f),
+            None => Ok(Vec::new()),
+        };
+        match r {
+            Ok(d) => {
+                self.step.detections = d;
+                State::Select
+            }
+            Err(e) => self.finish_step(
+                StepOutcome::Aborted,
+                Some(format!("perception failed: {e}")),
+                vec!["perception".into()],
+                None,
+            ),
+        }
+    }
+
+    /// Choose an instance to pick, or shake, or give the step up.
+    async fn select(&mut self, state: State) -> Result<State, Stop> {
+        let candidates: Vec<DetectedPart> = self
+            .step
+            .detections
+            .iter()
+            .filter(|d| !self.step.excluded.contains(&d.index))
+            .cloned()
+            .collect();
+        // Grasp yaw and travel are judged from where the arm is now.
+        let here = self.joints(state).await?;
+        let c = self.ctx;
+        let mut result = select(
+            c.knowledge,
+            c.catalog,
+            self.index,
+            &candidates,
+            &here,
+            &c.settings.selection,
+        );
+        // Excluded detections still count as neighbours for finger clearance.
+        if candidates.len() != self.step.detections.len()
+            && let Some(chosen) = &result.chosen
+            && self.blocked_by_excluded(chosen)
+        {
+            self.step.excluded.insert(chosen.detection.index);
+            return Ok(State::Select);
+        }
+        match result.chosen.take() {
+            Some(sel) => {
+                self.step.perception_error = sel
+                    .detection
+                    .truth_instance
+                    .and_then(|i| self.io().true_table_T_part(i))
+                    .map(|truth| table_error(&truth, &sel.detection.table_T_part));
+                self.step.selection = Some(sel);
+                Ok(State::PlanPick)
+            }
+            None => {
+                self.last_reason = result.summary();
+                if self.step.shakes < c.max_shakes {
+                    return Ok(State::Shake);
+                }
+                let cause = format!(
+                    "no usable {} after {} shakes ({})",
+                    self.step_part(),
+                    self.step.shakes,
+                    self.last_reason
+                );
+                // Named causes for the error budget: an exhausted feeder, or parts there that
+                // the shake bound gave no chance to come to rest usably.
+                let any = result
+                    .rejected
+                    .iter()
+                    .any(|(_, r)| !matches!(r, Rejection::OtherPart));
+                let source = if any {
+                    FEEDER_SHAKE_BOUND
+                } else if result.rejected.is_empty() {
+                    CAMERA_SAW_NOTHING
+                } else {
+                    FEEDER_EXHAUSTED
+                };
+                Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![source.into()], None))
+            }
+        }
+    }
+
+    /// Whether an excluded detection stands closer to `chosen`'s open fingers than the margin.
+    fn blocked_by_excluded(&self, chosen: &Selection) -> bool {
+        let k = self.ctx.knowledge;
+        let margin = self.ctx.settings.selection.finger_margin;
+        self.step.detections.iter().any(|n| {
+            n.index != chosen.detection.index
+                && self.step.excluded.contains(&n.index)
+                && k.part(&n.part).is_some_and(|g| {
+                    k.finger_distance(&chosen.base_T_grasp, g.hull.as_ref(), &n.base_T_part)
+                        < margin
+                })
+        })
+    }
+
+    /// Shake the feeder so parts come to rest anew.
+    fn shake(&mut self) -> State {
+        match self.io().shake_feeder() {
+            Ok(()) => {
+                self.step.shakes += 1;
+                State::Capture
+            }
+            Err(e) => self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None),
+        }
+    }
+
+    /// Plan the pick of the chosen instance; an unplannable instance is excluded.
+    async fn plan_pick(&mut self, state: State) -> Result<State, Stop> {
+        let Some(sel) = self.step.selection.clone() else {
+            return Ok(State::Select);
+        };
+        let start = self.joints(state).await?;
+        let placed = self.placed_shapes();
+        let k: &'a CellKnowledge = self.ctx.knowledge;
+        let feeder: Vec<(&'a PartGeometry, Isometry3<f64>)> = self
+            .step
+            .detections
+            .iter()
+            .filter_map(|d| Some((k.part(&d.part)?, d.base_T_part)))
+            .collect();
+        match self.planner().pick(&sel, &start, &placed, &feeder) {
+            Ok(plan) => {
+                self.step.plan = Some(plan);
+                Ok(State::Pick)
+            }
+            Err(e) => {
+                self.last_reason = format!("pick plan: {e}");
+                self.step.excluded.insert(sel.detection.index);
+                Ok(State::Select)
+            }
+        }
+    }
+
+    /// Approach, grasp, lift.
+    async fn pick(&mut self, state: State) -> Result<State, Stop> {
+        let Some(plan) = self.step.plan.take() else {
+            return Ok(State::PlanPick);
+        };
+        self.step.attempts += 1;
+        // A new part in the fingers: nothing learnt from an earlier one applies.
+        self.step.correction = Isometry3::identity();
+        self.step.slip = 0.0;
+        self.execute(state, &plan.motions).await?;
+        Ok(State::VerifyGrasp)
+    }
+
+    /// Check that a part is between the fingers; retract and retry, or give the step up.
+    fn verify_grasp(&mut self) -> State {
+        if self.io().part_in_gripper().unwrap_or(true) {
+            State::PlanInsert
+        } else if self.step.attempts < self.ctx.settings.max_grasp_attempts {
+            self.last_reason = "grasp failed: nothing between the fingers".into();
+            State::Retract
+        } else {
+            let cause = format!("grasp failed {} times", self.step.attempts);
+            self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None)
+        }
+    }
+
+    /// Open the gripper and back away upwards, then look again.
+    async fn retract(&mut self, state: State) -> Result<State, Stop> {
+        let clearance = self.ctx.settings.planning.clearance_height;
+        let robot = self.cell.robot();
+        let r = async {
+            robot.open_gripper().await?;
+            let tcp = robot.tcp_pose().await?;
+            let up = Translation3::new(0.0, 0.0, clearance) * tcp;
+            let speeds = Speeds::within(robot.limits(), 0.01);
+            robot.move_l(up, speeds.fast).await
+        }
+        .await;
+        r.map_err(|e| Stop::Robot(state, e))?;
+        Ok(State::Capture)
+    }
+
+    /// Plan the insertion of the held part (with the slip and search correction learnt so
+    /// far); an unplannable insertion puts the part back and gives the step up.
+    async fn plan_insert(&mut self, state: State) -> Result<State, Stop> {
+        let Some(sel) = self.step.selection.clone() else {
+            return Ok(State::Done);
+        };
+        let k: &'a CellKnowledge = self.ctx.knowledge;
+        let Some(g) = k.part(&sel.detection.part) else {
+            return Ok(State::Done);
+        };
+        // The part slipped up the fingers (TCP −z) by what earlier attempts measured.
+        let tcp_T_part =
+            Translation3::new(0.0, 0.0, -self.step.slip) * grasped_offset(&sel.tcp_T_part);
+        let correction = self.step.correction;
+        let start = self.joints(state).await?;
+        let placed = self.placed_shapes();
+        match self
+            .planner()
+            .insert(self.index, (g, &tcp_T_part), &correction, &start, &placed)
+        {
+            Ok(plan) => {
+                self.step.plan = Some(plan);
+                if self.step.insertions == 0 {
+                    self.shake_ahead(&sel, &start);
+                }
+                Ok(State::Insert)
+            }
+            Err(e) => {
+                let cause = format!("insertion plan: {e}");
+                // Put the part down where it came from rather than carry it around (let go
+                // 1 mm above the grasp: the grasp may have shifted it down).
+                let robot = self.cell.robot();
+                let back = async {
+                    let slow = Speeds::within(robot.limits(), 0.01).slow;
+                    robot
+                        .move_l(Translation3::new(0.0, 0.0, 0.001) * sel.base_T_grasp, slow)
+                        .await?;
+                    robot.open_gripper().await
+                }
+                .await;
+                back.map_err(|e| Stop::Robot(state, e))?;
+                Ok(self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None))
+            }
+        }
+    }
+
+    /// Transfer, pre-insert and insert; the fingers stay closed until the insertion is judged.
+    async fn insert(&mut self, state: State) -> Result<State, Stop> {
+        let Some(plan) = self.step.plan.take() else {
+            return Ok(State::PlanInsert);
+        };
+        let split = plan
+            .motions
+            .iter()
+            .position(|(_, m)| *m == Motion::Open)
+            .unwrap_or(plan.motions.len());
+        self.step.insertions += 1;
+        self.step.pending = plan.motions[split..].to_vec();
+        self.execute(state, &plan.motions[..split]).await?;
+        Ok(State::Verify)
+    }
+
+    /// Judge the insertion with the part still held when the cell can (retrying a jam or miss
+    /// within the bound); otherwise release, retreat and record what the cell says.
+    async fn verify(&mut self, state: State) -> Result<State, Stop> {
+        if let Some(c) = self.io().seating_check()
+            && c.outcome != StepOutcome::Seated
+            && self.step.insertions < self.ctx.max_insertion_attempts
+        {
+            return self.retry_insertion(state, c).await;
+        }
+        let pending = std::mem::take(&mut self.step.pending);
+        self.execute(state, &pending).await?;
+        let Some(c) = self.io().insertion_check() else {
+            return Ok(self.finish_step(
+                StepOutcome::Missed,
+                Some("the cell reported no insertion".into()),
+                vec![],
+                None,
+            ));
+        };
+        if c.outcome == StepOutcome::Seated {
+            let target = self.ctx.knowledge.base_T_targets[self.index];
+            self.placed.push((self.step_part(), target));
+        }
+        let cause = c.cause.map(|t| match self.step.insertions {
+            0 | 1 => t,
+            n => format!("{t} (after {n} insertion attempts)"),
+        });
+        Ok(self.finish_step(c.outcome, cause, c.sources, c.pose_error))
+    }
+
+    /// A jammed or missed insertion with the part still in the fingers: lift it clear along
+    /// the insertion axis (the retreat pose, fingers closed), then correct the next attempt:
+    /// the measured stop height is how far the part slipped up the fingers, so the held part's
+    /// estimate moves up by it (the next insertion goes that much deeper); and a search offset
+    /// (lateral for a miss, yaw for a jam, since a real cell measures neither error directly)
+    /// is tried, a different one each attempt.
+    async fn retry_insertion(
+        &mut self,
+        state: State,
+        check: InsertionCheck,
+    ) -> Result<State, Stop> {
+        let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
+            .into_iter()
+            .filter(|(_, m)| *m != Motion::Open)
+            .map(|(_, m)| ("lift clear", m))
+            .collect();
+        self.execute(state, &lift).await?;
+        // The part pushed back comes out a little higher in the fingers than it went in.
+        let planning = &self.ctx.settings.planning;
+        let slip_cap = planning.clearance_height / 2.0;
+        self.step.slip = (self.step.slip + check.stop_height.unwrap_or(0.0)).clamp(0.0, slip_cap);
+        let k = self.step.insertions as usize; // retries so far, ≥ 1
+        let search = planning.search;
+        let step = &self.ctx.knowledge.steps[self.index];
+        let lateral = step
+            .lead_in
+            .max(step.clearance / 2.0)
+            .max(search.min_lateral);
+        let (offset, yaw) = match check.outcome {
+            StepOutcome::Missed => {
+                const PATTERN: [(f64, f64); 4] = [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)];
+                let (x, y) = PATTERN[(k - 1) % PATTERN.len()];
+                let ring = ((k - 1) / PATTERN.len() + 1) as f64;
+                (Vector2::new(x, y) * lateral * ring, 0.0)
+            }
+            _ => {
+                let ring = (k.div_ceil(2)) as f64;
+                let sign = if k % 2 == 1 { 1.0 } else { -1.0 };
+                (Vector2::zeros(), sign * ring * search.yaw_step)
+            }
+        };
+        self.step.correction = Isometry3::from_parts(
+            Translation3::new(offset.x, offset.y, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
+        );
+        let what = match check.outcome {
+            StepOutcome::Missed => "missed",
+            _ => "jammed",
+        };
+        self.last_reason = format!(
+            "insertion {} {what} ({}); retry {} of {}",
+            self.step.insertions,
+            check.cause.as_deref().unwrap_or("not seated"),
+            self.step.insertions,
+            self.ctx.max_insertion_attempts - 1
+        );
+        Ok(State::PlanInsert)
+    }
+
+    /// With this step's part out of the feeder: when the frame that found it shows no usable
+    /// instance for the next step, start a shake now, so the feeder settles while the arm
+    /// inserts (the next step's capture waits for the parts to rest). Counts against the next
+    /// step's shake bound.
+    fn shake_ahead(&mut self, picked: &Selection, here: &Joints) {
+        let next = self.index + 1;
+        if next >= self.steps() || self.shakes_ahead >= self.ctx.max_shakes {
+            return;
+        }
+        let rest: Vec<DetectedPart> = self
+            .step
+            .detections
+            .iter()
+            .filter(|d| d.index != picked.detection.index)
+            .cloned()
+            .collect();
+        let c = self.ctx;
+        let ahead = select(
+            c.knowledge,
+            c.catalog,
+            next,
+            &rest,
+            here,
+            &c.settings.selection,
+        );
+        if ahead.chosen.is_none() && self.io().shake_feeder().is_ok() {
+            self.shakes_ahead += 1;
+        }
+    }
+
+    /// A robot error or an overrun: stop the arm (bounded), record the step in progress as
+    /// aborted, and say why.
+    async fn safe_stop(&mut self, stop: Stop) -> String {
+        let text = stop.text();
+        tracing::warn!(episode = self.ctx.episode, "safe stop: {text}");
+        // Errors here change nothing (the arm may be gone).
+        let _ = tokio::time::timeout(Duration::from_secs(2), self.cell.robot().stop()).await;
+        if self.records.len() <= self.index && self.index < self.steps() {
+            let now = self.clock();
+            let record = self.step.record(
+                self.step_part(),
+                StepOutcome::Aborted,
+                Some(text.clone()),
+                vec![],
+                None,
+                now,
+            );
+            self.records.push(record);
+        }
+        self.abort = Some(text.clone());
+        text
+    }
+
+    /// Closes the current step with an outcome; returns the next state.
+    fn finish_step(
+        &mut self,
+        outcome: StepOutcome,
+        cause: Option<String>,
+        sources: Vec<String>,
+        pose_error: Option<PoseError>,
+    ) -> State {
+        let now = self.clock();
+        let record = self
+            .step
+            .record(self.step_part(), outcome, cause, sources, pose_error, now);
+        self.records.push(record);
+        if outcome == StepOutcome::Seated && self.index + 1 < self.steps() {
+            self.index += 1;
+            // A shake started for this step while the last one inserted counts against its
+            // bound.
+            self.step = StepState::new(now, std::mem::take(&mut self.shakes_ahead));
+            State::Capture
+        } else {
+            State::Done
+        }
+    }
+
+    /// Runs `motions` in order; the first failure stops the episode.
+    async fn execute(
+        &mut self,
+        state: State,
+        motions: &[(&'static str, Motion)],
+    ) -> Result<(), Stop> {
+        for (name, m) in motions {
+            let robot = self.cell.robot();
+            let r = match m {
+                Motion::MoveJ(q, s) => robot.move_j(*q, *s).await,
+                Motion::MoveL(p, s) => robot.move_l(*p, *s).await,
+                Motion::Open => robot.open_gripper().await,
+                Motion::Close => robot.close_gripper().await,
+            };
+            let clock = self.clock();
+            tracing::debug!(
+                episode = self.ctx.episode,
+                waypoint = name,
+                clock,
+                "motion done"
+            );
+            if let Err(e) = r {
+                tracing::warn!(
+                    episode = self.ctx.episode,
+                    waypoint = name,
+                    "motion failed: {e}"
+                );
+                return Err(Stop::Robot(state, e));
+            }
+        }
+        Ok(())
+    }
+
+    fn planner(&mut self) -> Planner<'a> {
+        let config = self.ctx.settings.planning;
+        Planner {
+            knowledge: self.ctx.knowledge,
+            config,
+            speeds: Speeds::within(self.cell.robot().limits(), config.slow_speed),
+        }
+    }
+
+    /// The fixture and every part seated so far, as planning obstacles.
+    fn placed_shapes(&self) -> Vec<(&'a PartGeometry, Isometry3<f64>)> {
+        let k: &'a CellKnowledge = self.ctx.knowledge;
+        let fixture = k
+            .part(&k.geometry.fixture_part)
+            .map(|f| (f, k.geometry.base_T_fixture));
+        let placed = self
+            .placed
+            .iter()
+            .filter_map(|(name, pose)| Some((k.part(name)?, *pose)));
+        fixture.into_iter().chain(placed).collect()
+    }
+
+    async fn joints(&mut self, state: State) -> Result<Joints, Stop> {
+        self.cell
+            .robot()
+            .joints()
+            .await
+            .map_err(|e| Stop::Robot(state, e))
+    }
+
+    fn io(&mut self) -> &mut dyn CellIo {
+        self.cell.io()
+    }
+
+    fn clock(&mut self) -> f64 {
+        self.cell.io().clock()
+    }
+
+    fn steps(&self) -> usize {
+        self.ctx.knowledge.steps.len()
+    }
+
+    fn step_part(&self) -> String {
+        self.ctx
+            .knowledge
+            .steps
+            .get(self.index)
+            .map(|s| s.part.clone())
+            .unwrap_or_default()
+    }
+}
+
+/// Perception error in the table plane: [x mm, y mm, yaw degrees] of the estimate.
+#[allow(non_snake_case)]
+fn table_error(truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> [f64; 3] {
+    let d = estimate.translation.vector - truth.translation.vector;
+    let r = estimate.rotation * truth.rotation.inverse();
+    let yaw = r.scaled_axis().z;
+    [d.x * 1e3, d.y * 1e3, yaw.to_degrees()]
+}

@@ -1,0 +1,86 @@
+//! The state one assembly step carries while the engine works on it, reset as a whole when the
+//! next step begins.
+
+use std::collections::BTreeSet;
+
+use nalgebra::Isometry3;
+
+use super::perception::{DetectedPart, Frame};
+use super::planning::{Motion, Plan};
+use super::selection::Selection;
+use crate::episode::{PoseError, StepOutcome, StepRecord};
+
+/// Per-step state of the engine.
+pub(super) struct StepState {
+    /// Cell clock when the step began, seconds.
+    pub start: f64,
+    /// Picks started.
+    pub attempts: u32,
+    /// Feeder shakes counted against this step's bound.
+    pub shakes: u32,
+    /// Insertion attempts (first try and retries).
+    pub insertions: u32,
+    /// Search offset of the next insertion in the insertion frame.
+    pub correction: Isometry3<f64>,
+    /// Measured slip of the held part up the fingers so far, metres.
+    pub slip: f64,
+    /// Release and retreat of the insertion in progress, run once it is judged.
+    pub pending: Vec<(&'static str, Motion)>,
+    /// The last camera frame, until perceived.
+    pub frame: Option<Frame>,
+    /// What the last frame showed.
+    pub detections: Vec<DetectedPart>,
+    /// Detections of this frame ruled out (unplannable, or blocked by an excluded neighbour).
+    pub excluded: BTreeSet<usize>,
+    /// The instance chosen to pick.
+    pub selection: Option<Selection>,
+    /// The plan about to run.
+    pub plan: Option<Plan>,
+    /// Perception error of the picked instance in the table plane (x, y mm; yaw °).
+    pub perception_error: Option<[f64; 3]>,
+}
+
+impl StepState {
+    /// A fresh step starting at `start` with `shakes` already counted against it.
+    pub fn new(start: f64, shakes: u32) -> Self {
+        Self {
+            start,
+            attempts: 0,
+            shakes,
+            insertions: 0,
+            correction: Isometry3::identity(),
+            slip: 0.0,
+            pending: Vec::new(),
+            frame: None,
+            detections: Vec::new(),
+            excluded: BTreeSet::new(),
+            selection: None,
+            plan: None,
+            perception_error: None,
+        }
+    }
+
+    /// The record of this step ending now (`now` on the cell clock) with `outcome`.
+    pub fn record(
+        &self,
+        part: String,
+        outcome: StepOutcome,
+        cause: Option<String>,
+        sources: Vec<String>,
+        pose_error: Option<PoseError>,
+        now: f64,
+    ) -> StepRecord {
+        StepRecord {
+            part,
+            outcome,
+            attempts: self.attempts,
+            insertion_attempts: self.insertions,
+            shakes: self.shakes,
+            cause,
+            sources,
+            pose_error,
+            perception_error: self.perception_error,
+            sim_time_s: now - self.start,
+        }
+    }
+}

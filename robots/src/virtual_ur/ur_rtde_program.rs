@@ -1,0 +1,580 @@
+//! SDU ur_rtde 1.6.x's control script (`rtde_control`), executed natively: the register
+//! handshake on registers 0–23, each command with the effect the script's URScript statement
+//! has on a UR controller. A command the model cannot do exactly is a runtime error: the
+//! program stops (and the arm with it), so ur_rtde's call returns False or raises, never True
+//! without the effect.
+
+use super::arm::{ArmCommand, ArmError};
+use super::programs::{Program, ProgramIo, ProgramStep};
+use super::registers::Registers;
+use crate::kinematics::{Joints, from_ur_pose, to_ur_pose};
+use crate::program::layout as L;
+use nalgebra::{UnitQuaternion, Vector3};
+use std::collections::VecDeque;
+
+/// ur_rtde 1.6.x command ids (`RTDE::RobotCommand::Type`).
+pub mod ur_rtde_cmd {
+    /// moveJ.
+    pub const MOVE_J: i32 = 1;
+    /// moveJ_IK.
+    pub const MOVE_J_IK: i32 = 2;
+    /// moveL.
+    pub const MOVE_L: i32 = 3;
+    /// moveL_FK.
+    pub const MOVE_L_FK: i32 = 4;
+    /// forceMode (realtime).
+    pub const FORCE_MODE: i32 = 6;
+    /// forceModeStop.
+    pub const FORCE_MODE_STOP: i32 = 7;
+    /// zeroFtSensor.
+    pub const ZERO_FT_SENSOR: i32 = 8;
+    /// speedJ (realtime).
+    pub const SPEED_J: i32 = 9;
+    /// speedL (realtime).
+    pub const SPEED_L: i32 = 10;
+    /// servoJ (realtime).
+    pub const SERVO_J: i32 = 11;
+    /// servoC.
+    pub const SERVO_C: i32 = 12;
+    /// Legacy setStandardDigitalOut (not sent by 1.6.x's control interface).
+    pub const SET_STD_DIGITAL_OUT: i32 = 13;
+    /// Legacy setToolDigitalOut (not sent by 1.6.x's control interface).
+    pub const SET_TOOL_DIGITAL_OUT: i32 = 14;
+    /// speedStop.
+    pub const SPEED_STOP: i32 = 15;
+    /// servoStop.
+    pub const SERVO_STOP: i32 = 16;
+    /// setPayload.
+    pub const SET_PAYLOAD: i32 = 17;
+    /// servoL (realtime).
+    pub const SERVO_L: i32 = 24;
+    /// toolContact (realtime).
+    pub const TOOL_CONTACT: i32 = 25;
+    /// getStepTime (realtime).
+    pub const GET_STEPTIME: i32 = 26;
+    /// getActualJointPositionsHistory (realtime).
+    pub const GET_JOINT_POSITIONS_HISTORY: i32 = 27;
+    /// setTcp.
+    pub const SET_TCP: i32 = 29;
+    /// getInverseKinematics with qnear and tolerances.
+    pub const GET_IK_ARGS: i32 = 30;
+    /// triggerProtectiveStop.
+    pub const PROTECTIVE_STOP: i32 = 31;
+    /// stopL.
+    pub const STOP_L: i32 = 33;
+    /// stopJ.
+    pub const STOP_J: i32 = 34;
+    /// setWatchdog.
+    pub const SET_WATCHDOG: i32 = 35;
+    /// isPoseWithinSafetyLimits.
+    pub const IS_POSE_WITHIN_SAFETY_LIMITS: i32 = 36;
+    /// isJointsWithinSafetyLimits.
+    pub const IS_JOINTS_WITHIN_SAFETY_LIMITS: i32 = 37;
+    /// getJointTorques (realtime).
+    pub const GET_JOINT_TORQUES: i32 = 38;
+    /// poseTrans.
+    pub const POSE_TRANS: i32 = 39;
+    /// getTCPOffset.
+    pub const GET_TCP_OFFSET: i32 = 40;
+    /// jogStart.
+    pub const START_JOG: i32 = 41;
+    /// jogStop.
+    pub const STOP_JOG: i32 = 42;
+    /// getForwardKinematics() at the actual joints with the active TCP.
+    pub const GET_FK_DEFAULT: i32 = 43;
+    /// getForwardKinematics(q, tcp_offset).
+    pub const GET_FK_ARGS: i32 = 44;
+    /// getInverseKinematics(x) near the actual joints.
+    pub const GET_IK_DEFAULT: i32 = 46;
+    /// isSteady.
+    pub const IS_STEADY: i32 = 47;
+    /// getActualToolFlangePose.
+    pub const GET_ACTUAL_TOOL_FLANGE_POSE: i32 = 58;
+    /// getInverseKinematicsHasSolution(x).
+    pub const GET_IK_HAS_SOLUTION_DEFAULT: i32 = 60;
+    /// getInverseKinematicsHasSolution(x, qnear, ...).
+    pub const GET_IK_HAS_SOLUTION_ARGS: i32 = 61;
+    /// setTargetPayload.
+    pub const SET_TARGET_PAYLOAD: i32 = 65;
+    /// Watchdog kick (ur_rtde sends it as a plain input update).
+    pub const WATCHDOG: i32 = 99;
+    /// stopScript.
+    pub const STOP_SCRIPT: i32 = 255;
+}
+
+use ur_rtde_cmd::*;
+
+/// The script's realtime commands: processed every cycle while in the command register and
+/// answered with "ready"; ur_rtde does not clear the register after them.
+pub const REALTIME: [i32; 16] = [24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71];
+
+/// Largest payload a UR5e accepts (kg).
+pub const MAX_PAYLOAD_KG: f64 = 5.0;
+
+/// Controller cycles of joint positions kept for `get_actual_joint_positions_history`.
+pub const HISTORY_LEN: usize = 500;
+
+/// What a command leaves the handshake in.
+enum Outcome {
+    /// Done at once: signal "done".
+    Done,
+    /// A blocking motion: signal "done" when the arm is at rest.
+    Wait,
+    /// stopScript: the program ends.
+    Exit,
+}
+
+/// The `rtde_control` program.
+#[derive(Debug, Default)]
+pub struct UrRtdeProgram {
+    executing: bool,
+    waiting_for_motion: bool,
+    async_running: bool,
+    async_writes: i32,
+    async_op: i32,
+    /// The last speed command was speedJ (speedStop then stops in joint space).
+    speed_joint: bool,
+    /// The jog frame's rotation, fixed when jogging starts.
+    jog_frame: Option<UnitQuaternion<f64>>,
+    history: VecDeque<Joints>,
+    /// The command id the register held when the program started: left by a client whose
+    /// program ended, it is not run again until the client writes the register.
+    stale: Option<i32>,
+}
+
+const READY: i32 = 1;
+const DONE: i32 = 2;
+
+fn vector(regs: &Registers, first: usize) -> [f64; 6] {
+    std::array::from_fn(|i| regs.input_double[first + i])
+}
+
+fn write_vector(regs: &mut Registers, first: usize, v: &[f64; 6]) {
+    regs.output_double[first..first + 6].copy_from_slice(v);
+}
+
+/// A runtime error for a command the model cannot do exactly.
+fn unsupported(cmd: i32) -> String {
+    let what = match cmd {
+        FORCE_MODE | FORCE_MODE_STOP => "force mode",
+        18 | 19 => "teach mode",
+        20 | 21 => "force mode damping and gain",
+        SERVO_C => "servoc",
+        28 => "get_target_waypoint",
+        GET_JOINT_TORQUES => "get_joint_torques (the arm model has no dynamics)",
+        45 => "movePath (custom script code)",
+        51 => "moveUntilContact (the arm model senses no contact)",
+        52..=54 => "freedrive mode",
+        56 | 57 => "external force/torque sensor",
+        59 => "set_gravity",
+        62..=64 => "contact detection",
+        66..=71 => "dynamics (torque command, mass matrix, Jacobians over registers 36-47)",
+        _ => "this command",
+    };
+    format!("virtual-ur: ur_rtde command {cmd} is not simulated: {what}")
+}
+
+impl UrRtdeProgram {
+    /// A fresh program.
+    pub fn new() -> UrRtdeProgram {
+        UrRtdeProgram::default()
+    }
+
+    /// Mirrors `write_async_progress_register` of the script (output_int_register_2).
+    fn write_async(&mut self, regs: &mut Registers, running: bool, started: bool) {
+        self.async_writes = (self.async_writes + 1) % 128;
+        if started {
+            self.async_op = (self.async_op + 1) % 128;
+        }
+        let mut v = self.async_writes * 65536 + self.async_op * 16_777_216;
+        if running {
+            v += 32768;
+        }
+        regs.output_int[2] = v;
+        self.async_running = running;
+    }
+
+    /// Sends a motion to the arm: a protective stop from the model stops the arm, any other
+    /// refusal is a runtime error.
+    fn command(io: &mut ProgramIo<'_>, cmd: ArmCommand) -> Result<(), String> {
+        match io.arm.command(cmd) {
+            Ok(()) => Ok(()),
+            Err(ArmError::ProtectiveStop(why)) => {
+                tracing::warn!(why, "rtde_control: protective stop");
+                io.protective_stop = true;
+                Ok(())
+            }
+            Err(e) => Err(e.to_string()),
+        }
+    }
+
+    /// Starts a move; synchronous moves wait for rest, asynchronous ones report progress.
+    fn start_move(&mut self, io: &mut ProgramIo<'_>, cmd: ArmCommand) -> Result<Outcome, String> {
+        let asynchronous = io.regs.input_int[1] == 1;
+        Self::command(io, cmd)?;
+        if io.protective_stop {
+            return Ok(Outcome::Done);
+        }
+        if asynchronous {
+            self.write_async(io.regs, true, true);
+            Ok(Outcome::Done)
+        } else {
+            Ok(Outcome::Wait)
+        }
+    }
+
+    fn inverse(io: &ProgramIo<'_>, pose: &[f64; 6], near: &Joints) -> Result<Joints, String> {
+        io.arm
+            .inverse(pose, near)
+            .map_err(|e| format!("get_inverse_kin: {e}"))
+    }
+
+    fn flag(regs: &mut Registers, value: bool) {
+        regs.output_int[1] = i32::from(value);
+    }
+
+    /// Runs one regular command.
+    fn process(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> Result<Outcome, String> {
+        let regs = &*io.regs;
+        let target = vector(regs, 0);
+        let second = vector(regs, 6);
+        let (speed, accel) = (regs.input_double[6], regs.input_double[7]);
+        let q_now = io.arm.state().q;
+        match cmd {
+            MOVE_J => self.start_move(
+                io,
+                ArmCommand::MoveJ {
+                    q: target,
+                    speed,
+                    accel,
+                },
+            ),
+            MOVE_J_IK => {
+                let q = Self::inverse(io, &target, &q_now)?;
+                self.start_move(io, ArmCommand::MoveJ { q, speed, accel })
+            }
+            MOVE_L => self.start_move(
+                io,
+                ArmCommand::MoveL {
+                    pose: target,
+                    speed,
+                    accel,
+                },
+            ),
+            MOVE_L_FK => {
+                let pose = io.arm.forward(&target);
+                self.start_move(io, ArmCommand::MoveL { pose, speed, accel })
+            }
+            // The model's force reading is always zero: zeroing it changes nothing.
+            ZERO_FT_SENSOR => Ok(Outcome::Done),
+            SET_STD_DIGITAL_OUT | SET_TOOL_DIGITAL_OUT => {
+                let offset = if cmd == SET_TOOL_DIGITAL_OUT { 16 } else { 0 };
+                let pin = i64::from(regs.input_int[1]) + offset;
+                let level = regs.input_int[2] != 0;
+                if io.set_digital_output(pin, level) {
+                    Ok(Outcome::Done)
+                } else {
+                    Err(format!("set digital out: no output {pin}"))
+                }
+            }
+            SPEED_STOP | SERVO_STOP | STOP_L | STOP_J => {
+                let decel = regs.input_double[0];
+                let decel = if decel.is_finite() && decel > 0.0 {
+                    decel
+                } else {
+                    L::STOP_DECELERATION
+                };
+                let joint = cmd == STOP_J || (cmd == SPEED_STOP && self.speed_joint);
+                let asynchronous = (cmd == STOP_L || cmd == STOP_J) && regs.input_int[1] == 1;
+                let stop = if joint {
+                    ArmCommand::Stop { decel }
+                } else {
+                    ArmCommand::StopL { decel }
+                };
+                Self::command(io, stop)?;
+                if self.async_running {
+                    self.write_async(io.regs, false, false);
+                }
+                if asynchronous {
+                    self.write_async(io.regs, true, true);
+                    Ok(Outcome::Done)
+                } else {
+                    Ok(Outcome::Wait)
+                }
+            }
+            SET_PAYLOAD | SET_TARGET_PAYLOAD => {
+                let mass = regs.input_double[0];
+                let cog = [
+                    regs.input_double[1],
+                    regs.input_double[2],
+                    regs.input_double[3],
+                ];
+                let valid =
+                    (0.0..=MAX_PAYLOAD_KG).contains(&mass) && cog.iter().all(|c| c.is_finite());
+                if !valid {
+                    return Err(format!(
+                        "set_payload: mass {mass} kg outside 0..{MAX_PAYLOAD_KG} kg or cog not finite"
+                    ));
+                }
+                io.payload.mass = mass;
+                if cog != [0.0; 3] {
+                    io.payload.cog = cog;
+                }
+                if cmd == SET_TARGET_PAYLOAD {
+                    io.payload.inertia = std::array::from_fn(|i| regs.input_double[4 + i]);
+                }
+                Ok(Outcome::Done)
+            }
+            SET_TCP => {
+                io.arm
+                    .set_tcp(from_ur_pose(&target))
+                    .map_err(|e| format!("set_tcp: {e}"))?;
+                Ok(Outcome::Done)
+            }
+            GET_IK_ARGS | GET_IK_DEFAULT => {
+                let near = if cmd == GET_IK_ARGS { second } else { q_now };
+                let q = Self::inverse(io, &target, &near)?;
+                write_vector(io.regs, 0, &q);
+                Ok(Outcome::Done)
+            }
+            GET_IK_HAS_SOLUTION_DEFAULT | GET_IK_HAS_SOLUTION_ARGS => {
+                let near = if cmd == GET_IK_HAS_SOLUTION_ARGS {
+                    second
+                } else {
+                    q_now
+                };
+                let ok = io.arm.inverse(&target, &near).is_ok();
+                Self::flag(io.regs, ok);
+                Ok(Outcome::Done)
+            }
+            PROTECTIVE_STOP => {
+                io.protective_stop = true;
+                Ok(Outcome::Done)
+            }
+            SET_WATCHDOG => {
+                let frequency = regs.input_double[0];
+                if !(frequency.is_finite() && frequency > 0.0) {
+                    return Err(format!("rtde_set_watchdog: frequency {frequency} Hz"));
+                }
+                io.watchdog = Some(frequency);
+                Ok(Outcome::Done)
+            }
+            IS_POSE_WITHIN_SAFETY_LIMITS => {
+                let ok = io.arm.inverse(&target, &q_now).is_ok();
+                Self::flag(io.regs, ok);
+                Ok(Outcome::Done)
+            }
+            IS_JOINTS_WITHIN_SAFETY_LIMITS => {
+                let ok = target.iter().all(|v| v.is_finite())
+                    && io.arm.kinematics().joint_limits.contains(&target);
+                Self::flag(io.regs, ok);
+                Ok(Outcome::Done)
+            }
+            POSE_TRANS => {
+                let p = to_ur_pose(&(from_ur_pose(&target) * from_ur_pose(&second)));
+                write_vector(io.regs, 0, &p);
+                Ok(Outcome::Done)
+            }
+            GET_TCP_OFFSET => {
+                let tcp = to_ur_pose(&io.arm.kinematics().flange_T_tcp);
+                write_vector(io.regs, 0, &tcp);
+                Ok(Outcome::Done)
+            }
+            GET_FK_DEFAULT => {
+                let pose = io.arm.forward(&q_now);
+                write_vector(io.regs, 0, &pose);
+                Ok(Outcome::Done)
+            }
+            GET_FK_ARGS => {
+                // As the script: the TCP comes from registers 6-11 (ur_rtde leaves them as the
+                // previous command wrote them when no tcp_offset is given).
+                let flange = io.arm.kinematics().forward_flange(&target);
+                let pose = to_ur_pose(&(flange * from_ur_pose(&second)));
+                write_vector(io.regs, 0, &pose);
+                Ok(Outcome::Done)
+            }
+            GET_ACTUAL_TOOL_FLANGE_POSE => {
+                let flange = to_ur_pose(&io.arm.kinematics().forward_flange(&q_now));
+                write_vector(io.regs, 0, &flange);
+                Ok(Outcome::Done)
+            }
+            IS_STEADY => {
+                let state = io.arm.state();
+                let steady = !io.arm.is_moving() && state.qd.iter().all(|v| *v == 0.0);
+                Self::flag(io.regs, steady);
+                Ok(Outcome::Done)
+            }
+            START_JOG => {
+                let feature = regs.input_double[6].round() as i32;
+                let jog_accel = regs.input_double[7];
+                let custom = vector(regs, 8);
+                let frame = match self.jog_frame {
+                    Some(frame) => frame,
+                    None => match feature {
+                        0 => UnitQuaternion::identity(),
+                        1 => from_ur_pose(&io.arm.state().tcp_pose).rotation,
+                        2 => from_ur_pose(&custom).rotation,
+                        other => return Err(format!("jog: unknown feature {other}")),
+                    },
+                };
+                self.jog_frame = Some(frame);
+                let linear = frame * Vector3::new(target[0], target[1], target[2]);
+                let angular = frame * Vector3::new(target[3], target[4], target[5]);
+                let xd = [
+                    linear.x, linear.y, linear.z, angular.x, angular.y, angular.z,
+                ];
+                Self::command(
+                    io,
+                    ArmCommand::SpeedL {
+                        xd,
+                        accel: jog_accel,
+                    },
+                )?;
+                Ok(Outcome::Done)
+            }
+            STOP_JOG => {
+                self.jog_frame = None;
+                Self::command(io, ArmCommand::StopL { decel: 1.2 })?;
+                Ok(Outcome::Wait)
+            }
+            WATCHDOG => Ok(Outcome::Done),
+            STOP_SCRIPT => Ok(Outcome::Exit),
+            other => Err(unsupported(other)),
+        }
+    }
+
+    /// Realtime commands (processed every cycle, answered with ready).
+    fn realtime(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> Result<(), String> {
+        let regs = &*io.regs;
+        let target = vector(regs, 0);
+        match cmd {
+            SPEED_J => {
+                self.speed_joint = true;
+                let accel = regs.input_double[6];
+                Self::command(io, ArmCommand::SpeedJ { qd: target, accel })
+            }
+            SPEED_L => {
+                self.speed_joint = false;
+                let accel = regs.input_double[6];
+                Self::command(io, ArmCommand::SpeedL { xd: target, accel })
+            }
+            SERVO_J => {
+                let time = regs.input_double[8];
+                Self::command(io, ArmCommand::ServoJ { q: target, time })
+            }
+            SERVO_L => {
+                let time = regs.input_double[8];
+                let q = Self::inverse(io, &target, &io.arm.state().q)?;
+                Self::command(io, ArmCommand::ServoJ { q, time })
+            }
+            // The model senses no contact: no step back.
+            TOOL_CONTACT => {
+                io.regs.output_int[1] = 0;
+                Ok(())
+            }
+            GET_STEPTIME => {
+                io.regs.output_double[0] = io.dt;
+                Ok(())
+            }
+            GET_JOINT_POSITIONS_HISTORY => {
+                let steps = regs.input_int[1];
+                let q = usize::try_from(steps)
+                    .ok()
+                    .and_then(|i| self.history.get(i))
+                    .ok_or_else(|| {
+                        format!(
+                            "get_actual_joint_positions_history({steps}): outside the {} kept cycles",
+                            self.history.len()
+                        )
+                    })?;
+                let q = *q;
+                write_vector(io.regs, 0, &q);
+                Ok(())
+            }
+            GET_ACTUAL_TOOL_FLANGE_POSE => self.process(io, cmd).map(|_| ()),
+            other => Err(unsupported(other)),
+        }
+    }
+}
+
+impl Program for UrRtdeProgram {
+    fn name(&self) -> &'static str {
+        crate::program::UR_RTDE_PROGRAM_NAME
+    }
+
+    fn start(&mut self, io: &mut ProgramIo<'_>) {
+        self.executing = false;
+        self.waiting_for_motion = false;
+        self.jog_frame = None;
+        self.stale = Some(io.regs.input_int[0]).filter(|c| *c != 0);
+        self.write_async(io.regs, false, false);
+        io.regs.output_int[0] = READY;
+    }
+
+    fn step(&mut self, io: &mut ProgramIo<'_>) -> ProgramStep {
+        if self.history.len() == HISTORY_LEN {
+            self.history.pop_back();
+        }
+        self.history.push_front(io.arm.state().q);
+        if let Some(e) = &io.arm_error
+            && !matches!(e, ArmError::ProtectiveStop(_))
+        {
+            // A motion the arm had to abort (singularity, unreachable pose on the way) is a
+            // runtime error of the statement that moved it.
+            io.runtime_error = Some(e.to_string());
+            return ProgramStep::Exit;
+        }
+        if self.async_running && !io.arm.is_moving() {
+            self.write_async(io.regs, false, false);
+        }
+        if self.waiting_for_motion {
+            if io.arm.is_moving() {
+                return ProgramStep::Continue;
+            }
+            self.waiting_for_motion = false;
+            io.regs.output_int[0] = DONE;
+        }
+        let mut cmd = io.regs.input_int[0];
+        if self.stale.is_some() {
+            if self.stale == Some(cmd) {
+                cmd = 0;
+            } else {
+                self.stale = None;
+            }
+        }
+        if REALTIME.contains(&cmd) {
+            if let Err(e) = self.realtime(io, cmd) {
+                io.runtime_error = Some(e);
+                return ProgramStep::Exit;
+            }
+            io.regs.output_int[0] = READY;
+            return ProgramStep::Continue;
+        }
+        if cmd == 0 {
+            self.executing = false;
+            io.regs.output_int[0] = READY;
+        } else if !self.executing {
+            self.executing = true;
+            match self.process(io, cmd) {
+                Ok(Outcome::Exit) => return ProgramStep::Exit,
+                Ok(Outcome::Wait) => self.waiting_for_motion = true,
+                Ok(Outcome::Done) => io.regs.output_int[0] = DONE,
+                Err(e) => {
+                    io.runtime_error = Some(e);
+                    return ProgramStep::Exit;
+                }
+            }
+        }
+        ProgramStep::Continue
+    }
+
+    fn interrupted(&mut self, io: &mut ProgramIo<'_>) {
+        if self.waiting_for_motion {
+            self.waiting_for_motion = false;
+            io.regs.output_int[0] = DONE;
+        }
+        if self.async_running {
+            self.write_async(io.regs, false, false);
+        }
+    }
+}
