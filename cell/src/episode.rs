@@ -60,8 +60,15 @@ pub struct StepRecord {
     /// True pose error at insertion, when an insertion happened.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose_error: Option<PoseError>,
-    /// Perception error of the picked instance in the table plane (x, y in mm; yaw in degrees).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Perception error of the picked instance in the table plane (x, y in mm; yaw in degrees);
+    /// written as `perception_error_xy_mm_yaw_deg` (records from before read their
+    /// `perception_error`).
+    #[serde(
+        default,
+        rename = "perception_error_xy_mm_yaw_deg",
+        alias = "perception_error",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub perception_error: Option<[f64; 3]>,
     /// Simulated seconds the step took.
     pub sim_time_s: f64,

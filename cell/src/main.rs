@@ -10,12 +10,23 @@ use clap::{Parser, Subcommand};
 /// A scenario file describes a whole cell: camera, flexible feeder, UR arm, gripper, fixture, the
 /// part catalog and the assembly steps. Typical flow:
 ///
-///   cell parts prepare scenarios/parts/usbc.toml   # keypoints, mass, stable poses (physics)
 ///   cell check scenarios/usbc_nominal.toml         # validate a scenario before running it
+///   cell run scenarios/usbc_nominal.toml           # run its episodes; summary.json, report.html
+///   cell replay runs/usbc-nominal/all --episode 3  # one episode again: timeline and pictures
+///   cell regress scenarios/usbc_nominal.toml --baseline scenarios/baselines   # gate a change
+///   cell parts prepare scenarios/parts/usbc.toml   # after changing a part: keypoints, mass,
+///                                                  # stable poses (physics)
 ///
 /// Every command prints what it measured; files it writes are written atomically.
 #[derive(Debug, Parser)]
-#[command(name = "cell", version, about, long_about, propagate_version = true)]
+#[command(
+    name = "cell",
+    version,
+    about,
+    long_about,
+    verbatim_doc_comment,
+    propagate_version = true
+)]
 struct Cli {
     /// Log filter, e.g. "info" or "sim=debug" (also read from RUST_LOG).
     #[arg(long, global = true, default_value = "warn")]
@@ -45,6 +56,9 @@ enum Command {
     /// behind a loopback virtual UR over RTDE (`--robot virtual-ur`), or a real controller
     /// (`--robot ur://HOST`, after the production pre-flight).
     Run(commands::run::Args),
+    /// Re-run one stored episode of a simulated run from its seed: its event timeline, a check
+    /// against the stored record, and pictures of its failure.
+    Replay(commands::replay::Args),
     /// Combine shard results (`cell run --shard I/N`) into one results set and report.
     Merge(commands::merge::Args),
     /// Success-rate regression gate: run scenarios and compare with their baselines
@@ -71,13 +85,14 @@ fn main() -> std::process::ExitCode {
         Command::Dataset(args) => commands::dataset::run(args),
         Command::Run(args) => commands::run::run(args),
         Command::Merge(args) => commands::merge::run(args),
+        Command::Replay(args) => commands::replay::run(args),
         Command::Regress(args) => commands::regress::run(args),
         Command::Scorers(args) => commands::scorers::run(args),
     };
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", commands::error_text(&e));
             std::process::ExitCode::FAILURE
         }
     }

@@ -365,7 +365,7 @@ fn records_that_do_not_belong_are_rejected() {
     let (mut store, _) =
         ResultsStore::open(tmp.path(), l.header(Shard::new(1, 2).unwrap())).unwrap();
     let err = store.append(record(&l.scenario, 4)).unwrap_err();
-    assert!(err.to_string().contains("not in shard 1/2"), "{err}");
+    assert!(err.to_string().contains("not in shard 2/2"), "{err}");
     store.append(record(&l.scenario, 5)).unwrap();
     assert!(store.append(record(&l.scenario, 5)).is_err());
     let wrong = |s: &Scenario, e: u32| record(s, e + 1);
@@ -448,7 +448,9 @@ fn summary_counts_match_the_records() {
             Some(u64::from(t.seated_after_retry))
         );
     }
-    let html = cell::report::render_html(&s, &records).unwrap();
+    let html = cell::report::render_html(&s, &records, &Default::default())
+        .unwrap()
+        .html;
     assert!(html.contains("<th>insertions / inserted episode</th><th>seated after a retry</th>"));
     for t in &s.steps {
         let cells = format!(
@@ -484,7 +486,9 @@ fn results_and_summaries_from_before_insertion_counts_still_load() {
         assert_eq!(t.mean_insertion_attempts, None);
         assert_eq!(t.seated_after_retry, 0);
     }
-    let html = cell::report::render_html(&s, &old).unwrap();
+    let html = cell::report::render_html(&s, &old, &Default::default())
+        .unwrap()
+        .html;
     assert!(html.contains(&format!(
         "<td>{:.2}</td><td>–</td><td>–</td><td>{}</td>",
         s.steps[0].mean_attempts, s.steps[0].shakes

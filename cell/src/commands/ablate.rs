@@ -445,11 +445,8 @@ where
             .x_desc("keypoint noise σ (px)")
             .y_desc(label)
             .y_label_formatter(&|v| {
-                if ymax < 0.1 {
-                    format!("{v:.3}")
-                } else {
-                    format!("{v:.1}")
-                }
+                let d = cell::report::plots::tick_decimals(ymax, 10);
+                format!("{v:.d$}")
             })
             .draw()
             .map_err(|e| anyhow::anyhow!("{e}"))?;

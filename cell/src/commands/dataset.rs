@@ -24,17 +24,20 @@ pub struct Args {
     /// Parts to render (default: every part that is not a fixture).
     #[arg(long, value_delimiter = ',')]
     pub parts: Vec<String>,
-    /// Keypoint training crops per part (128 × 128, full resolution).
-    #[arg(long, default_value_t = 20_000)]
-    pub train_crops: usize,
-    /// Keypoint test crops per part.
-    #[arg(long, default_value_t = 2_000)]
-    pub test_crops: usize,
-    /// Overview images with all parts (BOP train_pbr), for segmentation training.
-    #[arg(long, default_value_t = 2_000)]
-    pub train_overviews: usize,
-    /// Overview images for testing (BOP test).
+    /// Keypoint training crops per part (128 × 128, full resolution). The defaults make a small
+    /// set in about a minute; the full training set (about an hour) is `--train-crops 20000
+    /// --test-crops 2000 --train-overviews 2000 --test-overviews 200`.
     #[arg(long, default_value_t = 200)]
+    pub train_crops: usize,
+    /// Keypoint test crops per part (full set: 2000).
+    #[arg(long, default_value_t = 20)]
+    pub test_crops: usize,
+    /// Overview images with all parts (BOP train_pbr), for segmentation training (full set:
+    /// 2000).
+    #[arg(long, default_value_t = 20)]
+    pub train_overviews: usize,
+    /// Overview images for testing (BOP test; full set: 200).
+    #[arg(long, default_value_t = 5)]
     pub test_overviews: usize,
     /// Fewest copies of each part per overview scene.
     #[arg(long, default_value_t = 1)]
@@ -127,5 +130,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         summary.skipped,
         elapsed
     );
+    if args.train_crops == 200 && args.train_overviews == 20 {
+        println!(
+            "this is the small default set; the full training set: --train-crops 20000 \
+             --test-crops 2000 --train-overviews 2000 --test-overviews 200 (about an hour)"
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }

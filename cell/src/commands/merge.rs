@@ -18,6 +18,10 @@ pub struct Args {
     /// beside the first shard folder).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Merge even when shards or episodes are missing (a partial results set); without it a
+    /// missing shard or episode is an error, so a CI job cannot pass on half a run.
+    #[arg(long)]
+    pub allow_partial: bool,
 }
 
 /// Merges, writes the merged results and report, prints the headline.
@@ -40,25 +44,47 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             path.display()
         );
     }
+    let missing: Vec<String> = merged
+        .missing_shards()
+        .iter()
+        .map(|m| format!("{m} (folder {})", m.dir_name()))
+        .collect();
     let gaps = merged.gaps();
+    let mut partial = Vec::new();
+    if !missing.is_empty() {
+        partial.push(format!(
+            "{} of {} shards missing: {}",
+            missing.len(),
+            merged.inputs[0].1.count,
+            missing.join(", ")
+        ));
+    }
     if !gaps.is_empty() {
         let shown: Vec<String> = gaps.iter().take(20).map(u32::to_string).collect();
-        eprintln!(
-            "warning: {} episodes below the highest one are missing (a shard not run or not \
-             finished?): {}{}",
-            gaps.len(),
+        partial.push(format!(
+            "{} below the highest one missing (a shard not run or not finished?): {}{}",
+            super::run::count(gaps.len(), "episode"),
             shown.join(", "),
             if gaps.len() > 20 { ", ..." } else { "" }
+        ));
+    }
+    if !partial.is_empty() {
+        let what = partial.join("; ");
+        anyhow::ensure!(
+            args.allow_partial,
+            "the results are incomplete: {what}; run the missing shards, or pass \
+             --allow-partial to merge what is there"
         );
+        eprintln!("warning: merging a partial results set (--allow-partial): {what}");
     }
     let file = write_results(&out, &merged.header, &merged.records)?;
     let summary = Summary::new(&merged.header, merged.records.values());
     let report = write_report(&out, &summary, &merged.records)?;
     println!(
-        "{}: {} of {} episodes succeeded ({:.1} %, 95 % CI {:.1}–{:.1} %)\nwrote {}, {}, {}",
+        "{}: {} of {} succeeded ({:.1} %, 95 % CI {:.1}–{:.1} %)\nwrote {}, {}, {}",
         summary.scenario,
         summary.successes,
-        summary.episodes,
+        super::run::count(summary.episodes as usize, "episode"),
         100.0 * summary.success_rate,
         100.0 * summary.success_ci95.lo,
         100.0 * summary.success_ci95.hi,

@@ -17,9 +17,11 @@ pub struct Args {
     /// earlier run.
     #[arg(long)]
     pub episodes: Option<u32>,
-    /// Run only shard I of N (episodes i with i % N == I), for an external scheduler; combine
-    /// the shards with `cell merge`.
-    #[arg(long, default_value = "0/1")]
+    /// Run only shard I of N, counting from 1 (episodes e with e % N == I − 1), for an
+    /// external scheduler: SLURM `--shard $SLURM_ARRAY_TASK_ID/N` with `--array=1-N`; a
+    /// Kubernetes indexed job (0-based) `--shard $((JOB_COMPLETION_INDEX + 1))/N`. Combine the
+    /// shards with `cell merge`.
+    #[arg(long, default_value = "1/1")]
     pub shard: Shard,
     /// Results root: episodes go to OUT/<scenario>/<shard>/episodes.jsonl, and a rerun
     /// continues with the episodes not yet there.
@@ -44,15 +46,66 @@ pub struct Args {
     /// --robot ur://HOST).
     #[arg(long)]
     pub camera: Option<PathBuf>,
+    /// Failed episodes to draw pictures of (the failing insertion from two views with its
+    /// capture band, and the feeder), linked from the report; 0 for none.
+    #[arg(long, default_value_t = 20)]
+    pub pictures: usize,
+}
+
+/// Draws the pictures of the first `limit` failed episodes of a simulated run into
+/// `dir/pictures` and rewrites the report so it shows them; returns how many episodes.
+fn draw_failures(
+    loaded: &LoadedScenario,
+    dir: &std::path::Path,
+    episodes: u32,
+    limit: usize,
+) -> anyhow::Result<usize> {
+    use cell::report::pictures::failure_pictures;
+    let results = cell::run::read_results(&dir.join(cell::run::RESULTS_FILE))?;
+    let records: std::collections::BTreeMap<u32, cell::episode::EpisodeRecord> = results
+        .records
+        .range(..episodes)
+        .map(|(k, v)| (*k, v.clone()))
+        .collect();
+    let failed: Vec<&cell::episode::EpisodeRecord> = records
+        .values()
+        .filter(|r| !r.success)
+        .take(limit)
+        .collect();
+    if failed.is_empty() {
+        return Ok(0);
+    }
+    let setup = cell::harness::SimSetup::new(loaded.scenario.clone())?;
+    let pictures = dir.join(cell::report::PICTURES_DIR);
+    for r in &failed {
+        let feeder = setup
+            .cell(r.episode)?
+            .lock()
+            .map(|c| c.feeder_parts().to_vec())
+            .unwrap_or_default();
+        failure_pictures(&loaded.scenario, r, Some(&feeder), &pictures)?;
+    }
+    let summary = Summary::new(&results.header, records.values());
+    cell::report::write_report(dir, &summary, &records)?;
+    Ok(failed.len())
+}
+
+/// `n` and a noun, singular for one: "1 episode", "3 episodes".
+pub fn count(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
 }
 
 /// The headline of a summary, one line.
 pub fn headline(s: &Summary) -> String {
     format!(
-        "{}: {} of {} episodes assembled, {:.1} % (95 % Wilson {:.1}–{:.1} %)",
+        "{}: {} of {} assembled, {:.1} % (95 % Wilson {:.1}–{:.1} %)",
         s.scenario,
         s.successes,
-        s.episodes,
+        count(s.episodes as usize, "episode"),
         100.0 * s.success_rate,
         100.0 * s.success_ci95.lo,
         100.0 * s.success_ci95.hi
@@ -91,6 +144,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         !args.quiet,
         &driver,
     )?;
+    let drawn = if args.pictures > 0 && matches!(args.robot, RobotTarget::Sim) {
+        draw_failures(&loaded, &done.dir, episodes, args.pictures)?
+    } else {
+        0
+    };
     println!("{}", headline(&done.summary));
     for t in &done.summary.steps {
         println!(
@@ -110,13 +168,34 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             100.0 * e.share
         );
     }
+    let o = &done.outcome;
     println!(
-        "ran {} episodes in {:.1} s ({} resumed); results {}, report {}",
-        done.outcome.ran,
-        done.outcome.wall_s,
-        done.outcome.resumed,
+        "ran {} in {:.1} s{} ({} resumed); results {}, report {}",
+        count(o.ran, "episode"),
+        o.wall_s,
+        match o.ran {
+            0 => String::new(),
+            n => format!(", {:.3} s per episode", o.wall_s / n as f64),
+        },
+        o.resumed,
         done.dir.join(cell::run::RESULTS_FILE).display(),
         done.report.html.display()
     );
+    if drawn > 0 {
+        println!(
+            "pictures of {} in {}",
+            count(drawn, "failed episode"),
+            done.dir.join(cell::report::PICTURES_DIR).display()
+        );
+    }
+    if o.beyond > 0 {
+        eprintln!(
+            "note: {} holds {} more from an earlier, longer run; summary.json and report.html \
+             cover episodes 0..{episodes} only (run with --episodes {} to include them)",
+            done.dir.display(),
+            count(o.beyond, "episode"),
+            episodes as usize + o.beyond
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -21,6 +21,9 @@ use crate::episode::{EpisodeRecord, PoseError, RECORD_VERSION, StepOutcome};
 
 /// Error-budget name of a step given up because the feeder held none of its part.
 pub const FEEDER_EXHAUSTED: &str = "feeder.parts";
+/// Error-budget name of a step given up because the camera detected no part at all (pointed
+/// away from the feeder, or nothing in view).
+pub const CAMERA_SAW_NOTHING: &str = "camera.view";
 /// Error-budget name of a step given up after `max_shakes` shakes left no usable instance.
 pub const FEEDER_SHAKE_BOUND: &str = "feeder.max_shakes";
 
@@ -270,6 +273,8 @@ impl<'a> Engine<'a> {
                     .any(|(_, r)| !matches!(r, Rejection::OtherPart));
                 let source = if any {
                     FEEDER_SHAKE_BOUND
+                } else if result.rejected.is_empty() {
+                    CAMERA_SAW_NOTHING
                 } else {
                     FEEDER_EXHAUSTED
                 };

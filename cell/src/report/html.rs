@@ -1,11 +1,13 @@
-//! The HTML report: one self-contained file (inline CSS and SVG, no scripts, no external
-//! resources) with the headline rate, tables and plots.
+//! The HTML report: one small page (inline CSS, no scripts, nothing fetched from elsewhere)
+//! with the headline rate, tables, the failed episodes with links to their event logs and
+//! pictures, and plots as separate SVG files beside it.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use super::plots;
 use crate::episode::EpisodeRecord;
+use crate::episode::StepOutcome;
 use crate::run::Summary;
 use crate::run::summary::{Distribution, outcome_name};
 
@@ -26,8 +28,45 @@ pub fn escape(s: &str) -> String {
 }
 
 fn pct(x: f64) -> String {
-    format!("{:.1} %", 100.0 * x)
+    format!("{:.1}&nbsp;%", 100.0 * x)
 }
+
+/// A duration in seconds for people: milliseconds below a second, so a fast episode does not
+/// read "0.00 s".
+pub fn seconds_text(s: f64) -> String {
+    if s >= 1.0 {
+        format!("{s:.2} s")
+    } else if s >= 1e-3 {
+        format!("{:.1} ms", s * 1e3)
+    } else {
+        format!("{:.0} µs", s * 1e6)
+    }
+}
+
+/// Where a report links for each episode: its event log and its pictures, as paths relative to
+/// the report.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct EpisodeLinks {
+    /// Event log (JSON lines) by episode.
+    pub events: BTreeMap<u32, String>,
+    /// Pictures by episode.
+    pub pictures: BTreeMap<u32, Vec<String>>,
+}
+
+/// A rendered report: the page and the image files it refers to (relative path, bytes).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Page {
+    /// The HTML text.
+    pub html: String,
+    /// Files to write beside it.
+    pub files: Vec<(String, Vec<u8>)>,
+}
+
+/// Failed episodes listed in the report at most.
+pub const MAX_LISTED_FAILURES: usize = 500;
+
+/// Folder of the plots, relative to the report.
+pub const PLOTS_DIR: &str = "plots";
 
 fn dist_cells(d: &Option<Distribution>, scale: f64) -> String {
     match d {
@@ -42,17 +81,35 @@ fn dist_cells(d: &Option<Distribution>, scale: f64) -> String {
     }
 }
 
-const STYLE: &str = "body{font-family:sans-serif;max-width:1400px;margin:2em auto;padding:0 1em;color:#222}\
-table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;text-align:right}\
-th{background:#f3f3f3}td.l,th.l{text-align:left}.big{font-size:1.6em}svg{max-width:100%;height:auto;display:block;margin:1em 0}\
-code{background:#f3f3f3;padding:1px 4px}";
+const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}\
+.scroll{overflow-x:auto}table{border-collapse:collapse;margin:1em 0}\
+td,th{border:1px solid #ccc;padding:4px 8px;text-align:right;white-space:nowrap}\
+th{background:#f3f3f3}td.l,th.l{text-align:left}td.w{white-space:normal;min-width:16em}\
+.big{font-size:1.6em}img.plot{max-width:100%;height:auto;display:block;margin:1em 0}\
+img.pic{width:240px;max-width:45%;margin:2px;border:1px solid #ccc}\
+code{background:#f3f3f3;padding:1px 4px;word-break:break-all}";
 
-/// Renders the report of `summary` and its `records`.
+/// Adds a plot file to `files` and an image of it to the page.
+fn plot(h: &mut String, files: &mut Vec<(String, Vec<u8>)>, name: &str, alt: &str, svg: String) {
+    let path = format!("{PLOTS_DIR}/{name}.svg");
+    let _ = writeln!(
+        h,
+        "<img class=plot src=\"{}\" alt=\"{}\">",
+        escape(&path),
+        escape(alt)
+    );
+    files.push((path, svg.into_bytes()));
+}
+
+/// Renders the report of `summary` and its `records`, linking each failed episode to what
+/// `links` holds for it.
 pub fn render_html(
     s: &Summary,
     records: &BTreeMap<u32, EpisodeRecord>,
-) -> Result<String, plots::PlotError> {
+    links: &EpisodeLinks,
+) -> Result<Page, plots::PlotError> {
     let recs: Vec<&EpisodeRecord> = records.values().collect();
+    let mut files: Vec<(String, Vec<u8>)> = Vec::new();
     let mut h = String::new();
     let name = escape(&s.scenario);
     let _ = write!(
@@ -62,7 +119,7 @@ pub fn render_html(
     );
     let _ = writeln!(
         h,
-        "<p class=big>{} of {} episodes assembled: <b>{}</b> (95 % Wilson interval {} – {})</p>",
+        "<p class=big>{} of {} episodes assembled: <b>{}</b> (95&nbsp;% Wilson interval {} – {})</p>",
         s.successes,
         s.episodes,
         pct(s.success_rate),
@@ -72,16 +129,16 @@ pub fn render_html(
     let wall: f64 = recs.iter().map(|r| r.wall_time_s).sum();
     let _ = writeln!(
         h,
-        "<p>seed {} · scenario file SHA-256 <code>{}</code> · record version {} · {:.1} s of \
-         compute ({:.2} s per episode)</p>",
+        "<p>seed {} · scenario file SHA-256 <code>{}</code> · record version {} · {} of \
+         compute ({} per episode)</p>",
         s.seed,
         escape(&s.scenario_sha256),
         s.record_version,
-        wall,
-        wall / f64::from(s.episodes.max(1))
+        seconds_text(wall),
+        seconds_text(wall / f64::from(s.episodes.max(1)))
     );
 
-    h.push_str("<h2>Steps</h2>\n<table><tr><th class=l>step</th><th>reached</th><th>seated</th><th>jammed</th><th>missed</th><th>aborted</th><th>seated rate</th><th>95 % interval</th><th>attempts / episode</th><th>insertions / inserted episode</th><th>seated after a retry</th><th>shakes</th><th>lateral error p50 / p95 (mm)</th><th>tilt p95 (°)</th></tr>\n");
+    h.push_str("<h2>Steps</h2>\n<div class=scroll><table><tr><th class=l>step</th><th>reached</th><th>seated</th><th>jammed</th><th>missed</th><th>aborted</th><th>seated rate</th><th>95 % interval</th><th>attempts / episode</th><th>insertions / inserted episode</th><th>seated after a retry</th><th>shakes</th><th>lateral error p50 / p95 (mm)</th><th>tilt p95 (°)</th></tr>\n");
     for t in &s.steps {
         let (lat, tilt) = match &t.pose_error {
             Some(e) => (
@@ -113,28 +170,45 @@ pub fn render_html(
             t.shakes
         );
     }
-    h.push_str("</table>\n");
-    h.push_str(&plots::success_rates(s)?);
+    h.push_str("</table></div>\n");
+    plot(
+        &mut h,
+        &mut files,
+        "success_rate",
+        "success rate per step with 95 % intervals",
+        plots::success_rates(s)?,
+    );
 
     h.push_str("<h2>Failures</h2>\n");
     if s.failures == 0 {
         h.push_str("<p>No episode failed.</p>\n");
     } else {
-        h.push_str("<table><tr><th class=l>step</th><th class=l>outcome</th><th class=l>cause</th><th>episodes</th><th>share</th></tr>\n");
-        for c in &s.failure_causes {
+        h.push_str("<p>Failures grouped by mechanism; the numbers each cause carried are given as their range, and the first one (the offset, tilt, … that failed) as median and 95th percentile.</p>\n<div class=scroll><table><tr><th class=l>step</th><th class=l>mechanism</th><th>episodes</th><th>share</th><th>median</th><th>p95</th><th class=l>causes</th></tr>\n");
+        for m in &s.failure_mechanisms {
+            let (p50, p95) = match &m.value {
+                Some(v) => (format!("{:.3}", v.p50), format!("{:.3}", v.p95)),
+                None => ("–".into(), "–".into()),
+            };
             let _ = writeln!(
                 h,
-                "<tr><td class=l>{}</td><td class=l>{}</td><td class=l>{}</td><td>{}</td><td>{}</td></tr>",
-                escape(c.part.as_deref().unwrap_or("episode")),
-                c.outcome.map_or("stopped", outcome_name),
-                escape(&c.cause),
-                c.count,
-                pct(f64::from(c.count) / f64::from(s.failures))
+                "<tr><td class=l>{}</td><td class=l>{}</td><td>{}</td><td>{}</td><td>{p50}</td><td>{p95}</td><td class=\"l w\">{}</td></tr>",
+                escape(m.part.as_deref().unwrap_or("episode")),
+                escape(&m.mechanism),
+                m.count,
+                pct(f64::from(m.count) / f64::from(s.failures)),
+                escape(&m.detail)
             );
         }
-        h.push_str("</table>\n");
-        h.push_str(&plots::failure_causes(s, 12)?);
-        h.push_str("<h2>Error budget</h2>\n<p>Each failed episode is charged to the error sources its failing step blamed (an episode may blame several, so shares can add up to more than 100 %).</p>\n<table><tr><th class=l>error source</th><th>failed episodes</th><th>share</th></tr>\n");
+        h.push_str("</table></div>\n");
+        plot(
+            &mut h,
+            &mut files,
+            "failure_mechanisms",
+            "failed episodes per failure mechanism",
+            plots::failure_mechanisms(s, 12)?,
+        );
+        failed_episodes(&mut h, &recs, links);
+        h.push_str("<h2>Error budget</h2>\n<p>Each failed episode is charged to the error sources its failing step blamed (an episode may blame several, so shares can add up to more than 100 %).</p>\n<div class=scroll><table><tr><th class=l>error source</th><th>failed episodes</th><th>share</th></tr>\n");
         for e in &s.error_budget {
             let _ = writeln!(
                 h,
@@ -144,8 +218,14 @@ pub fn render_html(
                 pct(e.share)
             );
         }
-        h.push_str("</table>\n");
-        h.push_str(&plots::error_budget(s)?);
+        h.push_str("</table></div>\n");
+        plot(
+            &mut h,
+            &mut files,
+            "error_budget",
+            "share of failures blamed on each error source",
+            plots::error_budget(s)?,
+        );
     }
 
     h.push_str("<h2>Cycle time</h2>\n<table><tr><th class=l></th><th>mean</th><th>median</th><th>p95</th><th>max</th></tr>\n");
@@ -155,10 +235,77 @@ pub fn render_html(
         dist_cells(&s.cycle_time_s, 1.0)
     );
     if !recs.is_empty() {
-        h.push_str(&plots::cycle_time_histogram(&recs)?);
+        plot(
+            &mut h,
+            &mut files,
+            "cycle_time",
+            "histogram of simulated cycle times",
+            plots::cycle_time_histogram(&recs)?,
+        );
     }
-    h.push_str("<h2>Pose error at insertion</h2>\n<p>True offset of the held part from its target in the target frame when insertion started.</p>\n");
-    h.push_str(&plots::pose_error_scatter(s, &recs)?);
+    h.push_str("<h2>Pose error at insertion</h2>\n<p>True offset of the held part from its target in the target frame when insertion started. The dashed square is the step's capture band (clearance / 2 + lead-in): outside it a part misses; inside it, a failure is a tilt or yaw.</p>\n");
+    for t in &s.steps {
+        plot(
+            &mut h,
+            &mut files,
+            &format!("pose_error_step{}", t.index),
+            &format!("pose error at insertion of step {}", t.index),
+            plots::pose_error_scatter(s, t.index, &recs)?,
+        );
+    }
     h.push_str("</body></html>\n");
-    Ok(h)
+    Ok(Page { html: h, files })
+}
+
+/// The failed episodes: failing step, outcome, cause, and links to the event log and pictures.
+fn failed_episodes(h: &mut String, recs: &[&EpisodeRecord], links: &EpisodeLinks) {
+    let failed: Vec<&&EpisodeRecord> = recs.iter().filter(|r| !r.success).collect();
+    let _ = writeln!(
+        h,
+        "<h2>Failed episodes</h2>\n<p>{} failed{}. Replay one with <code>cell replay RESULTS --episode N</code>.</p>\n<div class=scroll><table><tr><th>episode</th><th class=l>step</th><th class=l>outcome</th><th class=l>cause</th><th class=l>events</th><th class=l>pictures</th></tr>",
+        failed.len(),
+        if failed.len() > MAX_LISTED_FAILURES {
+            format!(" (the first {MAX_LISTED_FAILURES} listed)")
+        } else {
+            String::new()
+        }
+    );
+    for r in failed.iter().take(MAX_LISTED_FAILURES) {
+        let step = r.steps.iter().find(|s| s.outcome != StepOutcome::Seated);
+        let (part, outcome, cause) = match step {
+            Some(s) => (
+                s.part.as_str(),
+                outcome_name(s.outcome),
+                s.cause.as_deref().unwrap_or(""),
+            ),
+            None => ("episode", "stopped", r.abort.as_deref().unwrap_or("")),
+        };
+        let events = links.events.get(&r.episode).map_or("–".to_string(), |p| {
+            format!("<a href=\"{}\">events</a>", escape(p))
+        });
+        let pictures = links
+            .pictures
+            .get(&r.episode)
+            .map_or("–".to_string(), |ps| {
+                ps.iter()
+                    .map(|p| {
+                        format!(
+                            "<a href=\"{0}\"><img class=pic src=\"{0}\" alt=\"episode {1}\"></a>",
+                            escape(p),
+                            r.episode
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join("")
+            });
+        let _ = writeln!(
+            h,
+            "<tr id=\"episode-{0}\"><td>{0}</td><td class=l>{1}</td><td class=l>{2}</td><td class=\"l w\">{3}</td><td class=l>{events}</td><td class=l>{pictures}</td></tr>",
+            r.episode,
+            escape(part),
+            outcome,
+            escape(cause)
+        );
+    }
+    h.push_str("</table></div>\n");
 }

@@ -79,7 +79,53 @@ fn category_label(labels: &[String], x: f64) -> String {
     }
 }
 
-/// Episode success and each step's seated rate with 95 % Wilson intervals.
+/// Decimals that tell apart ticks of an axis spanning `span` with about `ticks` labels (so
+/// ticks 0.05 apart print as 0.05, 0.10, 0.15, not 0.1, 0.1, 0.2).
+pub fn tick_decimals(span: f64, ticks: usize) -> usize {
+    let step = (span / ticks.max(1) as f64).abs();
+    if !(step.is_finite() && step > 0.0) {
+        return 1;
+    }
+    // plotters steps are 1, 2 or 5 times a power of ten: one more decimal covers a 2.5 step.
+    (-(step.log10().floor()) as i64 + 1).clamp(0, 6) as usize
+}
+
+/// Font size of tick labels and axis descriptions, pixels (the SVGs are shown at about their
+/// own width, so this stays readable at 800 px).
+const LABEL_PX: u32 = 16;
+
+/// The lower end of a percentage axis that shows the differences between `lows` (the lowest
+/// interval ends): 0 when something is far from 100 %, otherwise a round number below them,
+/// so that 99.5 % and 100 % do not look the same.
+pub fn rate_axis_floor(lows: &[f64]) -> f64 {
+    let lo = lows.iter().copied().fold(100.0, f64::min);
+    let span = (100.0 - lo).max(0.5) * 1.25;
+    let floor = 100.0 - span;
+    if floor < 40.0 {
+        return 0.0;
+    }
+    let step = if span > 20.0 {
+        10.0
+    } else if span > 5.0 {
+        1.0
+    } else {
+        0.5
+    };
+    (floor / step).floor() * step
+}
+
+/// Vertical 95 % interval markers: a line from `lo` to `hi` with caps.
+fn interval_marker(x: f64, lo: f64, hi: f64) -> Vec<PathElement<(f64, f64)>> {
+    let style = BLACK.stroke_width(2);
+    vec![
+        PathElement::new(vec![(x, lo), (x, hi)], style),
+        PathElement::new(vec![(x - 0.1, lo), (x + 0.1, lo)], style),
+        PathElement::new(vec![(x - 0.1, hi), (x + 0.1, hi)], style),
+    ]
+}
+
+/// Episode success and each step's seated rate with 95 % Wilson intervals; the rate axis starts
+/// where the differences show (its lower end is printed in the caption when it is not 0).
 pub fn success_rates(s: &Summary) -> Result<String, PlotError> {
     let mut bars = vec![("episode".to_string(), s.success_rate, s.success_ci95)];
     bars.extend(
@@ -89,65 +135,99 @@ pub fn success_rates(s: &Summary) -> Result<String, PlotError> {
     );
     let labels: Vec<String> = bars.iter().map(|b| b.0.clone()).collect();
     let n = bars.len();
-    svg("success rate", (900, 480), |root| {
+    let lows: Vec<f64> = bars.iter().map(|b| 100.0 * b.2.lo).collect();
+    let floor = rate_axis_floor(&lows);
+    let caption = if floor > 0.0 {
+        format!("Success rate, 95 % Wilson intervals (axis from {floor} %)")
+    } else {
+        "Success rate, 95 % Wilson intervals".to_string()
+    };
+    let decimals = if 100.0 - floor <= 5.0 { 1 } else { 0 };
+    svg("success rate", (800, 420), |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption(
-                "Success rate with 95 % Wilson intervals",
-                ("sans-serif", 22),
-            )
+            .caption(caption, ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(-0.5f64..n as f64 - 0.5, 0.0f64..100.0)?;
+            .y_label_area_size(70)
+            .build_cartesian_2d(-0.5f64..n as f64 - 0.5, floor..100.0)?;
         chart
             .configure_mesh()
             .disable_x_mesh()
             .x_labels(n)
             .x_label_formatter(&|x| category_label(&labels, *x))
-            .y_desc("% of episodes reaching it")
+            .y_label_formatter(&|y| format!("{y:.decimals$} %"))
+            .label_style(("sans-serif", LABEL_PX))
+            .axis_desc_style(("sans-serif", LABEL_PX))
+            .y_desc("seated / reached")
             .draw()?;
         chart.draw_series(bars.iter().enumerate().map(|(i, (_, r, _))| {
             let x = i as f64;
             let c = if i == 0 { BLUE } else { GREEN };
-            Rectangle::new([(x - 0.3, 0.0), (x + 0.3, 100.0 * r)], c.mix(0.7).filled())
-        }))?;
-        chart.draw_series(bars.iter().enumerate().map(|(i, (_, r, ci))| {
-            ErrorBar::new_vertical(
-                i as f64,
-                100.0 * ci.lo,
-                100.0 * r,
-                100.0 * ci.hi,
-                BLACK.stroke_width(2),
-                16,
+            Rectangle::new(
+                [(x - 0.3, floor), (x + 0.3, (100.0 * r).max(floor))],
+                c.mix(0.7).filled(),
             )
         }))?;
+        for (i, (_, r, ci)) in bars.iter().enumerate() {
+            let x = i as f64;
+            chart.draw_series(interval_marker(
+                x,
+                (100.0 * ci.lo).max(floor),
+                100.0 * ci.hi,
+            ))?;
+            chart.draw_series(std::iter::once(Text::new(
+                format!("{:.1} %", 100.0 * r),
+                (x + 0.12, (100.0 * r).max(floor)),
+                ("sans-serif", LABEL_PX).into_font(),
+            )))?;
+        }
         Ok(())
     })
 }
 
-/// Horizontal bars of `(label, value)` with a value axis named `x_desc`.
+/// Horizontal bars of `(label, value)` with a value axis named `x_desc`; `counts` prints the
+/// value axis as whole numbers. The label area fits the longest label.
 fn horizontal_bars(
     plot: &'static str,
     caption: &str,
     x_desc: &str,
     items: &[(String, f64)],
     colour: RGBColor,
+    counts: bool,
 ) -> Result<String, PlotError> {
-    let labels: Vec<String> = items.iter().map(|(l, _)| shorten(l, 48)).collect();
+    let labels: Vec<String> = items.iter().map(|(l, _)| shorten(l, 64)).collect();
     let n = items.len().max(1);
     let max = items.iter().map(|i| i.1).fold(0.0, f64::max).max(1e-9) * 1.1;
-    svg(plot, (900, 120 + 32 * n as u32), |root| {
+    let longest = labels.iter().map(|l| l.chars().count()).max().unwrap_or(8) as u32;
+    let label_area = (longest * 9 + 16).clamp(120, 560);
+    let width = (label_area + 360).max(800);
+    let ticks = if counts {
+        (max.ceil() as usize).clamp(1, 10)
+    } else {
+        10
+    };
+    svg(plot, (width, 110 + 34 * n as u32), |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption(caption, ("sans-serif", 22))
+            .caption(caption, ("sans-serif", 20))
             .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(360)
+            .x_label_area_size(44)
+            .y_label_area_size(label_area)
             .build_cartesian_2d(0.0f64..max, -0.5f64..n as f64 - 0.5)?;
         chart
             .configure_mesh()
             .disable_y_mesh()
             .y_labels(n)
             .y_label_formatter(&|y| category_label(&labels, *y))
+            .x_labels(ticks)
+            .x_label_formatter(&|x| {
+                if counts {
+                    format!("{x:.0}")
+                } else {
+                    format!("{x}")
+                }
+            })
+            .label_style(("sans-serif", LABEL_PX))
+            .axis_desc_style(("sans-serif", LABEL_PX))
             .x_desc(x_desc)
             .draw()?;
         chart.draw_series(items.iter().enumerate().map(|(i, (_, v))| {
@@ -158,26 +238,24 @@ fn horizontal_bars(
     })
 }
 
-/// Failed episodes per cause (the `top` most frequent).
-pub fn failure_causes(s: &Summary, top: usize) -> Result<String, PlotError> {
+/// Failed episodes per failure mechanism (the `top` most frequent).
+pub fn failure_mechanisms(s: &Summary, top: usize) -> Result<String, PlotError> {
     let items: Vec<(String, f64)> = s
-        .failure_causes
+        .failure_mechanisms
         .iter()
         .take(top)
-        .map(|c| {
-            let head = match (&c.part, c.outcome) {
-                (Some(p), Some(o)) => format!("{p} {}: ", outcome_name(o)),
-                _ => "episode: ".into(),
-            };
-            (format!("{head}{}", c.cause), f64::from(c.count))
+        .map(|m| {
+            let part = m.part.as_deref().unwrap_or("episode");
+            (format!("{part} {}", m.mechanism), f64::from(m.count))
         })
         .collect();
     horizontal_bars(
-        "failure causes",
-        "Failure causes",
+        "failure mechanisms",
+        "Failure mechanisms",
         "failed episodes",
         &items,
         RED,
+        true,
     )
 }
 
@@ -194,6 +272,7 @@ pub fn error_budget(s: &Summary) -> Result<String, PlotError> {
         "% of failed episodes",
         &items,
         PURPLE,
+        false,
     )
 }
 
@@ -226,7 +305,7 @@ pub fn cycle_time_histogram(records: &[&EpisodeRecord]) -> Result<String, PlotEr
         .max()
         .unwrap_or(1)
         .max(1);
-    svg("cycle time", (900, 420), |root| {
+    svg("cycle time", (800, 400), |root| {
         let mut chart = ChartBuilder::on(root)
             .caption("Simulated cycle time", ("sans-serif", 22))
             .margin(12)
@@ -235,6 +314,10 @@ pub fn cycle_time_histogram(records: &[&EpisodeRecord]) -> Result<String, PlotEr
             .build_cartesian_2d(lo..lo + width * bins as f64, 0.0..f64::from(top) * 1.1)?;
         chart
             .configure_mesh()
+            .y_labels((top as usize + 1).min(10))
+            .y_label_formatter(&|y| format!("{y:.0}"))
+            .label_style(("sans-serif", LABEL_PX))
+            .axis_desc_style(("sans-serif", LABEL_PX))
             .x_desc("cycle time (s)")
             .y_desc("episodes")
             .draw()?;
@@ -276,60 +359,101 @@ fn outcome_colour(o: StepOutcome) -> RGBColor {
     }
 }
 
-/// Lateral pose error at insertion (dx, dy in mm), one panel per step, coloured by outcome.
-pub fn pose_error_scatter(s: &Summary, records: &[&EpisodeRecord]) -> Result<String, PlotError> {
-    let steps: Vec<(usize, String)> = s.steps.iter().map(|t| (t.index, t.part.clone())).collect();
-    let panels = steps.len().max(1);
-    svg("pose error", (440 * panels as u32, 460), |root| {
-        for ((index, part), area) in steps.iter().zip(root.split_evenly((1, panels))) {
-            let points: Vec<(f64, f64, StepOutcome)> = records
-                .iter()
-                .filter_map(|r| r.steps.get(*index).filter(|t| &t.part == part))
-                .filter_map(|t| t.pose_error.map(|e| (e.dx_mm, e.dy_mm, t.outcome)))
+/// Lateral pose error at insertion (dx, dy in mm) of step `index`, coloured by outcome, with
+/// the step's capture band (|dx|, |dy| ≤ clearance / 2 + lead-in) drawn as a dashed square
+/// when known: points outside it missed, points inside that failed jammed or were yawed.
+pub fn pose_error_scatter(
+    s: &Summary,
+    index: usize,
+    records: &[&EpisodeRecord],
+) -> Result<String, PlotError> {
+    let Some(step) = s.steps.iter().find(|t| t.index == index) else {
+        return Err(PlotError {
+            plot: "pose error",
+            message: format!("no step {index}"),
+        });
+    };
+    let part = &step.part;
+    let points: Vec<(f64, f64, StepOutcome)> = records
+        .iter()
+        .filter_map(|r| r.steps.get(index).filter(|t| &t.part == part))
+        .filter_map(|t| t.pose_error.map(|e| (e.dx_mm, e.dy_mm, t.outcome)))
+        .collect();
+    let band = step.capture_mm;
+    let r = points
+        .iter()
+        .map(|p| p.0.abs().max(p.1.abs()))
+        .fold(band.unwrap_or(0.0), f64::max)
+        .max(0.01)
+        * 1.15;
+    svg("pose error", (520, 520), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(format!("{index}: {part}"), ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(70)
+            .build_cartesian_2d(-r..r, -r..r)?;
+        chart
+            .configure_mesh()
+            .x_labels(6)
+            .y_labels(6)
+            .label_style(("sans-serif", LABEL_PX))
+            .axis_desc_style(("sans-serif", LABEL_PX))
+            .x_desc("dx (mm)")
+            .y_desc("dy (mm)")
+            .draw()?;
+        if let Some(c) = band {
+            let corners = [(-c, -c), (c, -c), (c, c), (-c, c), (-c, -c)];
+            let dashes: Vec<PathElement<(f64, f64)>> = corners
+                .windows(2)
+                .flat_map(|w| {
+                    let (a, b) = (w[0], w[1]);
+                    (0..20).step_by(2).map(move |k| {
+                        let t0 = f64::from(k) / 20.0;
+                        let t1 = f64::from(k + 1) / 20.0;
+                        PathElement::new(
+                            vec![
+                                (a.0 + (b.0 - a.0) * t0, a.1 + (b.1 - a.1) * t0),
+                                (a.0 + (b.0 - a.0) * t1, a.1 + (b.1 - a.1) * t1),
+                            ],
+                            BLACK.stroke_width(2),
+                        )
+                    })
+                })
                 .collect();
-            let r = points
-                .iter()
-                .map(|p| p.0.abs().max(p.1.abs()))
-                .fold(0.0, f64::max)
-                .max(0.01)
-                * 1.1;
-            let mut chart = ChartBuilder::on(&area)
-                .caption(format!("{index}: {part}"), ("sans-serif", 18))
-                .margin(10)
-                .x_label_area_size(36)
-                .y_label_area_size(56)
-                .build_cartesian_2d(-r..r, -r..r)?;
             chart
-                .configure_mesh()
-                .x_desc("dx (mm)")
-                .y_desc("dy (mm)")
-                .draw()?;
-            for o in [
-                StepOutcome::Seated,
-                StepOutcome::Jammed,
-                StepOutcome::Missed,
-                StepOutcome::Aborted,
-            ] {
-                let c = outcome_colour(o);
-                let pts: Vec<(f64, f64)> = points
-                    .iter()
-                    .filter(|p| p.2 == o)
-                    .map(|p| (p.0, p.1))
-                    .collect();
-                if pts.is_empty() {
-                    continue;
-                }
-                chart
-                    .draw_series(pts.iter().map(|p| Circle::new(*p, 3, c.mix(0.8).filled())))?
-                    .label(outcome_name(o))
-                    .legend(move |(x, y)| Circle::new((x + 6, y), 4, c.filled()));
+                .draw_series(dashes)?
+                .label(format!("capture band ±{c:.3} mm"))
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(2))
+                });
+        }
+        for o in [
+            StepOutcome::Seated,
+            StepOutcome::Jammed,
+            StepOutcome::Missed,
+            StepOutcome::Aborted,
+        ] {
+            let c = outcome_colour(o);
+            let pts: Vec<(f64, f64)> = points
+                .iter()
+                .filter(|p| p.2 == o)
+                .map(|p| (p.0, p.1))
+                .collect();
+            if pts.is_empty() {
+                continue;
             }
             chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()?;
+                .draw_series(pts.iter().map(|p| Circle::new(*p, 3, c.mix(0.8).filled())))?
+                .label(outcome_name(o))
+                .legend(move |(x, y)| Circle::new((x + 6, y), 4, c.filled()));
         }
+        chart
+            .configure_series_labels()
+            .label_font(("sans-serif", 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
         Ok(())
     })
 }

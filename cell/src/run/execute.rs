@@ -117,6 +117,18 @@ pub enum Driver {
     Production(Box<Production>),
 }
 
+impl Driver {
+    /// The robot as `--robot` names it, recorded in the results header so that results of
+    /// different robots never mix in one file.
+    pub fn robot(&self) -> String {
+        match self {
+            Driver::Sim => RobotTarget::Sim.to_string(),
+            Driver::VirtualUr => RobotTarget::VirtualUr.to_string(),
+            Driver::Production(p) => p.robot.to_string(),
+        }
+    }
+}
+
 /// A checked production set-up (see [`production`]).
 pub struct Production {
     robot: RobotTarget,
@@ -187,7 +199,8 @@ pub fn execute_on(
 ) -> Result<Executed, ExecuteError> {
     let name = &loaded.scenario.spec.name;
     let dir = results_dir(root, name, shard);
-    let (mut store, opened) = ResultsStore::open(&dir, loaded.header(shard))?;
+    let header = loaded.header(shard).with_robot(driver.robot());
+    let (mut store, opened) = ResultsStore::open(&dir, header)?;
     if opened.truncated_bytes > 0 {
         eprintln!(
             "{}: cut off a torn last line ({} bytes) from an interrupted run",

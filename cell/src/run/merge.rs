@@ -66,6 +66,21 @@ pub struct Merged {
 }
 
 impl Merged {
+    /// Shards of the split the inputs come from that no input holds (for inputs that all use
+    /// the same number of shards; empty otherwise, where [`Merged::gaps`] still tells).
+    pub fn missing_shards(&self) -> Vec<Shard> {
+        let Some(count) = self.inputs.first().map(|(_, s)| s.count) else {
+            return Vec::new();
+        };
+        if self.inputs.iter().any(|(_, s)| s.count != count) {
+            return Vec::new();
+        }
+        (0..count)
+            .filter_map(|i| Shard::new(i, count))
+            .filter(|s| !self.inputs.iter().any(|(_, have)| have == s))
+            .collect()
+    }
+
     /// Episode indices below the highest one present that no input holds.
     pub fn gaps(&self) -> Vec<u32> {
         let end = self.records.keys().next_back().map_or(0, |e| e + 1);

@@ -4,6 +4,7 @@
 
 pub mod execute;
 pub mod header;
+pub mod mechanism;
 pub mod merge;
 pub mod robot_target;
 pub mod runner;

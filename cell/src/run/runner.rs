@@ -63,24 +63,23 @@ impl LoadedScenario {
     /// Reads and validates a scenario file; a file that fails `cell check` is an error here, so
     /// it can never start a run.
     pub fn load(path: &Path) -> Result<Self, RunError> {
-        let bytes = std::fs::read(path).map_err(|e| {
-            ScenarioError(vec![crate::scenario::Problem {
-                file: path.into(),
-                line: 1,
-                column: 1,
-                key: None,
-                message: format!("cannot read the scenario: {e}"),
-            }])
-        })?;
-        let text = String::from_utf8_lossy(&bytes);
-        let scenario = Scenario::parse(&text, path)?;
+        let bytes = crate::scenario::read_scenario(path)?;
+        let scenario = Scenario::from_bytes(&bytes, path)?;
         Ok(Self { scenario, bytes })
     }
 
     /// The results header of this scenario for `shard`.
     pub fn header(&self, shard: Shard) -> ResultsHeader {
         let spec = &self.scenario.spec;
-        ResultsHeader::new(&spec.name, spec.seed, &self.bytes, shard)
+        ResultsHeader {
+            capture_mm: spec
+                .assembly
+                .iter()
+                .map(|s| (s.clearance / 2.0 + s.lead_in) * 1e3)
+                .collect(),
+            scenario_file: std::path::absolute(&self.scenario.path).ok(),
+            ..ResultsHeader::new(&spec.name, spec.seed, &self.bytes, shard)
+        }
     }
 }
 
@@ -132,6 +131,9 @@ pub struct RunOutcome {
     pub ran: usize,
     /// Wall-clock seconds spent.
     pub wall_s: f64,
+    /// Episodes stored from an earlier, longer run at or beyond `episodes`: kept in the file,
+    /// but outside this run's summary and report.
+    pub beyond: usize,
 }
 
 /// Runs the shard's episodes of `0..options.episodes` that `store` lacks, with `episode`
@@ -156,6 +158,7 @@ where
         .filter(|e| !store.contains(*e))
         .collect();
     let resumed = planned.len() - pending.len();
+    let beyond = store.records().range(options.episodes..).count();
     let progress = if options.progress {
         let pb = ProgressBar::new(planned.len() as u64);
         pb.set_style(
@@ -213,5 +216,6 @@ where
         resumed,
         ran: pending.len(),
         wall_s: start.elapsed().as_secs_f64(),
+        beyond,
     })
 }

@@ -117,6 +117,10 @@ pub struct StepSummary {
     pub seated_after_retry: u32,
     /// Pose error at insertion, when any insertion happened.
     pub pose_error: Option<PoseErrorStats>,
+    /// The step's lateral capture band (clearance / 2 + lead-in), millimetres, when the
+    /// results header records it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub capture_mm: Option<f64>,
 }
 
 impl StepSummary {
@@ -137,6 +141,26 @@ pub struct CauseCount {
     pub cause: String,
     /// Failed episodes with this cause.
     pub count: u32,
+}
+
+/// How often one failure mechanism ended an episode, with the numbers its causes carried.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MechanismCount {
+    /// The failing step's part (`None`: the episode stopped outside any step).
+    pub part: Option<String>,
+    /// The failing step's outcome.
+    pub outcome: Option<StepOutcome>,
+    /// The mechanism in words ("missed: lateral offset beyond the capture band").
+    pub mechanism: String,
+    /// The causes with every number replaced by its range over these episodes.
+    pub detail: String,
+    /// Failed episodes with this mechanism.
+    pub count: u32,
+    /// The first number of each cause (the offset, tilt, ... that failed), when causes have one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<Distribution>,
+    /// The failed episodes, in order.
+    pub episodes: Vec<u32>,
 }
 
 /// One error source's share of the failures.
@@ -175,6 +199,10 @@ pub struct Summary {
     pub failures: u32,
     /// Causes of failed episodes, most frequent first.
     pub failure_causes: Vec<CauseCount>,
+    /// The same failures grouped by mechanism (the cause with its numbers taken out), most
+    /// frequent first.
+    #[serde(default)]
+    pub failure_mechanisms: Vec<MechanismCount>,
     /// Error sources blamed for failures, most blamed first.
     pub error_budget: Vec<SourceShare>,
     /// Simulated cycle time of successful episodes, seconds.
@@ -199,6 +227,7 @@ impl Summary {
 
         let mut steps: Vec<StepAcc> = Vec::new();
         let mut causes: BTreeMap<(Option<String>, Option<usize>, String), u32> = BTreeMap::new();
+        let mut mechanisms = super::mechanism::Mechanisms::default();
         let mut sources: BTreeMap<String, u32> = BTreeMap::new();
         let mut cycle = Vec::new();
         for r in &records {
@@ -233,6 +262,7 @@ impl Summary {
                         .unwrap_or_else(|| "no cause recorded".into()),
                 ),
             };
+            mechanisms.add(key.0.clone(), key.1.map(|k| OUTCOMES[k]), &key.2, r.episode);
             *causes.entry(key).or_default() += 1;
             let blamed: Vec<String> = match failed {
                 Some(s) if !s.sources.is_empty() => {
@@ -278,9 +308,16 @@ impl Summary {
             successes,
             success_rate: counts.rate(),
             success_ci95: wilson(counts, CONFIDENCE),
-            steps: steps.into_iter().map(StepAcc::finish).collect(),
+            steps: steps
+                .into_iter()
+                .map(|a| {
+                    let capture = header.capture_mm.get(a.index).copied();
+                    a.finish(capture)
+                })
+                .collect(),
             failures,
             failure_causes,
+            failure_mechanisms: mechanisms.finish(),
             error_budget,
             cycle_time_s: Distribution::of(&cycle),
         }
@@ -364,7 +401,7 @@ impl StepAcc {
         }
     }
 
-    fn finish(self) -> StepSummary {
+    fn finish(self, capture_mm: Option<f64>) -> StepSummary {
         let reached: u32 = self.outcomes.iter().sum();
         let c = Counts::new(self.outcomes[0], reached);
         let pose_error = match (
@@ -400,6 +437,7 @@ impl StepAcc {
                 .then(|| self.insertions as f64 / f64::from(self.inserted)),
             seated_after_retry: self.seated_after_retry,
             pose_error,
+            capture_mm,
         }
     }
 }

@@ -2,6 +2,7 @@
 //! (catalog loaded, paths absolute) that runs use.
 
 mod locate;
+mod messages;
 mod spec;
 mod validate;
 
@@ -55,6 +56,19 @@ impl fmt::Display for ScenarioError {
     }
 }
 
+/// Reads a scenario file's bytes; a file that cannot be read is a problem at its line 1.
+pub fn read_scenario(path: &Path) -> Result<Vec<u8>, ScenarioError> {
+    std::fs::read(path).map_err(|e| {
+        ScenarioError(vec![Problem {
+            file: path.into(),
+            line: 1,
+            column: 1,
+            key: None,
+            message: format!("cannot read the scenario: {e}"),
+        }])
+    })
+}
+
 /// A validated scenario with its catalog loaded and its paths resolved.
 #[derive(Debug, Clone)]
 pub struct Scenario {
@@ -69,16 +83,31 @@ pub struct Scenario {
 impl Scenario {
     /// Reads, parses and validates a scenario file and loads its catalog.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
+        let bytes = read_scenario(path)?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Parses and validates a scenario file's bytes read from `path`: the same errors
+    /// `cell check` and `cell run` report, whatever the bytes hold (text that is not UTF-8 is
+    /// refused at its first bad byte).
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, ScenarioError> {
+        let text = std::str::from_utf8(bytes).map_err(|e| {
+            let valid = &bytes[..e.valid_up_to()];
+            let text = String::from_utf8_lossy(valid);
+            let (line, column) = line_column(&text, text.len());
             ScenarioError(vec![Problem {
                 file: path.into(),
-                line: 1,
-                column: 1,
+                line,
+                column,
                 key: None,
-                message: format!("cannot read the scenario: {e}"),
+                message: format!(
+                    "byte {} is not UTF-8 text; a scenario is a TOML text file (is this a binary \
+                     file?)",
+                    e.valid_up_to()
+                ),
             }])
         })?;
-        Self::parse(&text, path)
+        Self::parse(text, path)
     }
 
     /// Parses and validates scenario text that was read from `path`.
@@ -93,7 +122,7 @@ impl Scenario {
                 line,
                 column,
                 key: None,
-                message: e.message().trim().to_string(),
+                message: messages::toml_message(e.message(), text, e.span()),
             }])
         })?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();

@@ -3,25 +3,15 @@
 
 use std::path::Path;
 
-use nalgebra::Vector3;
 use perception::part::{Catalog, PartRole};
-use sim::cell::check_feasible;
+use sim::cell::feasible::{check_geometry, check_values};
 
-use super::{Destination, KeyPath, MAX_INSERTION_ATTEMPTS, ScenarioSpec};
+use super::{KeyPath, MAX_INSERTION_ATTEMPTS, PerceptionMode, ScenarioSpec};
 
 type Issues = Vec<(KeyPath, String)>;
 
 fn root() -> KeyPath {
     KeyPath::default()
-}
-
-fn positive(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
-    if !(value.is_finite() && value > 0.0) {
-        issues.push((
-            path,
-            format!("{what} must be a positive number, got {value}"),
-        ));
-    }
 }
 
 fn non_negative(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
@@ -68,58 +58,13 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
             format!("invalid limits: {}", e.reason),
         ));
     }
-    let g = &spec.cell.gripper;
-    let gp = cell.key("gripper");
-    positive(&mut issues, gp.key("stroke"), g.stroke, "stroke");
-    positive(
-        &mut issues,
-        gp.key("finger_width"),
-        g.finger_width,
-        "finger_width",
-    );
-    positive(
-        &mut issues,
-        gp.key("finger_thickness"),
-        g.finger_thickness,
-        "finger_thickness",
-    );
-    positive(
-        &mut issues,
-        gp.key("finger_length"),
-        g.finger_length,
-        "finger_length",
-    );
-    non_negative(&mut issues, gp.key("friction"), g.friction, "friction");
-    if let Some(problem) = g.actuation_time_problem() {
-        issues.push((gp.key("actuation_time"), problem));
+    if let Some(problem) = spec.cell.gripper.actuation_time_problem() {
+        issues.push((cell.key("gripper").key("actuation_time"), problem));
     }
-    let fp = cell.key("feeder");
-    for i in 0..2 {
-        positive(
-            &mut issues,
-            fp.key("size").index(i),
-            spec.cell.feeder.size[i],
-            "feeder size",
-        );
+    // The cell's numbers have one home, the simulator's feasibility check.
+    for (key, message) in check_values(&spec.cell, &spec.assembly, &spec.noise) {
+        issues.push((KeyPath::parse(&key), message));
     }
-    let np = root().key("noise");
-    let n = &spec.noise;
-    for (key, v) in [
-        ("robot_repeatability", n.robot_repeatability),
-        ("calibration_translation", n.calibration_translation),
-        ("calibration_rotation", n.calibration_rotation),
-        ("grasp_offset", n.grasp_offset),
-        ("grasp_rotation", n.grasp_rotation),
-    ] {
-        non_negative(&mut issues, np.key(key), v, key);
-    }
-    let fp2 = cell.key("feeder");
-    non_negative(
-        &mut issues,
-        fp2.key("shake_time"),
-        spec.cell.feeder.shake_time,
-        "shake_time",
-    );
     let attempts = spec.policy.max_insertion_attempts;
     if !(1..=MAX_INSERTION_ATTEMPTS).contains(&attempts) {
         issues.push((
@@ -130,6 +75,14 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         ));
     }
     let pp = root().key("perception");
+    if spec.perception.mode == PerceptionMode::Learned {
+        issues.push((
+            pp.key("mode"),
+            "mode \"learned\" is not available yet: no trained segmentation and keypoint \
+             models ship with this version; use mode = \"keypoint-noise\""
+                .into(),
+        ));
+    }
     non_negative(
         &mut issues,
         pp.key("keypoint_noise_px"),
@@ -156,12 +109,15 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         }
     };
     if let Some(catalog) = &catalog {
-        check_against_catalog(spec, catalog, &mut issues);
-        // What the simulated cell refuses as impossible (reach, workspace, feeder over the
-        // fixture, parts wider than the stroke), where not already reported at the same key.
-        let c = &spec.cell;
-        for (key, message) in check_feasible(c, &spec.assembly, &spec.noise, catalog) {
-            let path = KeyPath::parse(&key);
+        // What the simulated cell refuses as impossible (parts and meshes, reach, workspace,
+        // feeder over the fixture, camera view, parts wider than the stroke), then what the
+        // scenario needs of the catalog, each where no problem is reported at the same key yet.
+        let mut found: Issues = check_geometry(&spec.cell, &spec.assembly, catalog)
+            .into_iter()
+            .map(|(key, message)| (KeyPath::parse(&key), message))
+            .collect();
+        check_against_catalog(spec, catalog, &mut found);
+        for (path, message) in found {
             if !issues.iter().any(|(p, _)| *p == path) {
                 issues.push((path, message));
             }
@@ -171,104 +127,45 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
 }
 
 fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Issues) {
-    let names: Vec<&str> = catalog.parts.iter().map(|p| p.name.as_str()).collect();
-    let known = names.join(", ");
+    // Names missing from the catalog are reported by the geometry check.
     let cell = root().key("cell");
     for name in spec.cell.feeder.parts.keys() {
-        match catalog.part(name) {
-            None => issues.push((
-                cell.key("feeder").key("parts").key(name),
-                format!("no part \"{name}\" in the catalog (it has: {known})"),
-            )),
-            Some(p) if p.role == PartRole::Fixture => issues.push((
-                cell.key("feeder").key("parts").key(name),
-                format!("\"{name}\" is a fixture, not a part that can lie in a feeder"),
-            )),
-            Some(_) => {}
-        }
-    }
-    if catalog.part(&spec.cell.fixture.part).is_none() {
-        issues.push((
-            cell.key("fixture").key("part"),
-            format!(
-                "no part \"{}\" in the catalog (it has: {known})",
-                spec.cell.fixture.part
-            ),
-        ));
-    }
-    let mut placed: Vec<&str> = Vec::new();
-    for (i, step) in spec.assembly.iter().enumerate() {
-        let sp = root().key("assembly").index(i);
-        match catalog.part(&step.part) {
-            None => issues.push((
-                sp.key("part"),
-                format!("no part \"{}\" in the catalog (it has: {known})", step.part),
-            )),
-            Some(part) => {
-                if !part.is_prepared() {
-                    issues.push((
-                        sp.key("part"),
-                        format!(
-                            "part \"{}\" has no keypoints or stable poses yet: run `cell parts \
-                             prepare {}`",
-                            step.part,
-                            catalog.dir.join("usbc.toml").display()
-                        ),
-                    ));
-                } else if !part
-                    .grasps
-                    .iter()
-                    .any(|g| part.stable_pose(&g.stable_pose).is_some())
-                {
-                    issues.push((
-                        sp.key("part"),
-                        format!(
-                            "part \"{}\" has no grasp for any of its stable poses",
-                            step.part
-                        ),
-                    ));
-                }
-            }
-        }
-        if let Destination::Part(target) = &step.into
-            && !placed.contains(&target.as_str())
+        if let Some(p) = catalog.part(name)
+            && p.role == PartRole::Fixture
         {
             issues.push((
-                sp.key("into"),
-                format!("\"{target}\" is not placed by an earlier step, so nothing can go into it"),
+                cell.key("feeder").key("parts").key(name),
+                format!("\"{name}\" is a fixture, not a part that can lie in a feeder"),
             ));
         }
-        if !step.target.is_finite() {
-            issues.push((sp.key("target"), "pose has a non-finite number".into()));
+    }
+    for (i, step) in spec.assembly.iter().enumerate() {
+        let sp = root().key("assembly").index(i);
+        if let Some(part) = catalog.part(&step.part) {
+            if !part.is_prepared() {
+                issues.push((
+                    sp.key("part"),
+                    format!(
+                        "part \"{}\" has no keypoints or stable poses yet: run `cell parts \
+                         prepare {}`",
+                        step.part,
+                        catalog.file.display()
+                    ),
+                ));
+            } else if !part
+                .grasps
+                .iter()
+                .any(|g| part.stable_pose(&g.stable_pose).is_some())
+            {
+                issues.push((
+                    sp.key("part"),
+                    format!(
+                        "part \"{}\" has no grasp for any of its stable poses",
+                        step.part
+                    ),
+                ));
+            }
         }
-        let axis = Vector3::from(step.insertion_axis);
-        if !(axis.norm() > 1e-9 && axis.iter().all(|v| v.is_finite())) {
-            issues.push((
-                sp.key("insertion_axis"),
-                "insertion_axis must be a non-zero vector".into(),
-            ));
-        }
-        positive(issues, sp.key("clearance"), step.clearance, "clearance");
-        non_negative(issues, sp.key("lead_in"), step.lead_in, "lead_in");
-        let tp = sp.key("tolerances");
-        positive(
-            issues,
-            tp.key("lateral"),
-            step.tolerances.lateral,
-            "tolerance lateral",
-        );
-        positive(
-            issues,
-            tp.key("depth"),
-            step.tolerances.depth,
-            "tolerance depth",
-        );
-        positive(
-            issues,
-            tp.key("tilt"),
-            step.tolerances.tilt,
-            "tolerance tilt",
-        );
         if spec.cell.feeder.parts.get(&step.part).copied().unwrap_or(0) == 0 {
             issues.push((
                 sp.key("part"),
@@ -278,7 +175,6 @@ fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Is
                 ),
             ));
         }
-        placed.push(step.part.as_str());
     }
     if spec.assembly.is_empty() {
         issues.push((root(), "the scenario has no [[assembly]] step".into()));

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{LengthUnit, PartError, StablePose, TriMesh, load_mesh};
+use super::{LengthUnit, MeshAt, PartError, StablePose, TriMesh, load_mesh};
 
 /// A part set: the parts of one product, read from a catalog file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -23,6 +23,24 @@ pub struct Catalog {
     /// Folder the catalog was read from; mesh paths are relative to it.
     #[serde(skip)]
     pub dir: PathBuf,
+    /// The catalog file, for error messages.
+    #[serde(skip)]
+    pub file: PathBuf,
+    /// (line, column) of each part's `mesh` value in the file, by part index.
+    #[serde(skip)]
+    pub mesh_locations: Vec<(usize, usize)>,
+}
+
+/// Where each `[[part]]`'s `mesh` value is written, read with spans.
+#[derive(Deserialize)]
+struct MeshSpans {
+    #[serde(default)]
+    part: Vec<MeshSpan>,
+}
+
+#[derive(Deserialize)]
+struct MeshSpan {
+    mesh: Option<toml::Spanned<toml::Value>>,
 }
 
 /// The role a part plays in the assembly.
@@ -206,6 +224,19 @@ impl Catalog {
             }
         })?;
         catalog.dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        catalog.file = path.into();
+        catalog.mesh_locations = toml::from_str::<MeshSpans>(text)
+            .map(|m| {
+                m.part
+                    .iter()
+                    .map(|p| {
+                        p.mesh
+                            .as_ref()
+                            .map_or((1, 1), |s| line_column(text, s.span().start))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
         Ok(catalog)
     }
 
@@ -219,9 +250,23 @@ impl Catalog {
         self.dir.join(&part.mesh)
     }
 
-    /// Loads a part's mesh in metres, in the part frame.
+    /// Loads a part's mesh in metres, in the part frame; an error names the catalog file and
+    /// the line of the part's `mesh` key, the mesh file and why it failed.
     pub fn load_mesh(&self, part: &PartSpec) -> Result<TriMesh, PartError> {
-        load_mesh(&self.mesh_path(part), part.unit)
+        load_mesh(&self.mesh_path(part), part.unit).map_err(|error| {
+            let index = self.parts.iter().position(|p| p.name == part.name);
+            let (line, column) = index
+                .and_then(|i| self.mesh_locations.get(i).copied())
+                .unwrap_or((1, 1));
+            PartError::Mesh(Box::new(MeshAt {
+                catalog: self.file.clone(),
+                line,
+                column,
+                part: part.name.clone(),
+                mesh: part.mesh.clone(),
+                error,
+            }))
+        })
     }
 }
 

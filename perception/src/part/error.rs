@@ -70,4 +70,26 @@ pub enum PartError {
         /// What was wrong and what was expected.
         message: String,
     },
+    /// A part's mesh could not be loaded: located at the catalog's `mesh` key, with the mesh
+    /// file's own error (its path and why: not found, or where it fails to parse).
+    #[error("{0}")]
+    Mesh(Box<MeshAt>),
+}
+
+/// Where a catalog names a mesh that could not be loaded, and why.
+#[derive(Debug, thiserror::Error)]
+#[error("{catalog}:{line}:{column}: part \"{part}\": mesh = {mesh:?}: {error}")]
+pub struct MeshAt {
+    /// The catalog file.
+    pub catalog: PathBuf,
+    /// 1-based line of the part's `mesh` value.
+    pub line: usize,
+    /// 1-based column of it.
+    pub column: usize,
+    /// The part.
+    pub part: String,
+    /// The `mesh` value as written.
+    pub mesh: PathBuf,
+    /// What loading the mesh file said.
+    pub error: PartError,
 }

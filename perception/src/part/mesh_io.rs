@@ -116,13 +116,108 @@ fn parse_error(path: &Path, format: &'static str, message: impl ToString) -> Par
     }
 }
 
+/// Statements an OBJ file may hold (geometry we read, and grouping, material and free-form
+/// statements that are ignored).
+const OBJ_STATEMENTS: [&str; 22] = [
+    "v", "vt", "vn", "vp", "f", "l", "p", "g", "o", "s", "mtllib", "usemtl", "cstype", "deg",
+    "bmat", "step", "curv", "curv2", "surf", "parm", "end", "mg",
+];
+
+/// Checks that an OBJ file is text whose statements are OBJ statements, and that vertices hold
+/// three numbers and faces at least three indices; the error names the byte or line.
+fn check_obj_text(path: &Path, bytes: &[u8]) -> Result<(), PartError> {
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        parse_error(
+            path,
+            "OBJ",
+            format!(
+                "byte {} is not text (a binary file named .obj?)",
+                e.valid_up_to()
+            ),
+        )
+    })?;
+    for (i, line) in text.lines().enumerate() {
+        let at = |what: String| parse_error(path, "OBJ", format!("line {}: {what}", i + 1));
+        let line = line.split('#').next().unwrap_or_default().trim();
+        let mut words = line.split_whitespace();
+        let Some(statement) = words.next() else {
+            continue;
+        };
+        if !OBJ_STATEMENTS.contains(&statement) {
+            let shown: String = statement.chars().take(20).collect();
+            return Err(at(format!("\"{shown}\" is not an OBJ statement")));
+        }
+        let args: Vec<&str> = words.collect();
+        match statement {
+            "v" if args.len() < 3 || args.iter().take(3).any(|a| a.parse::<f64>().is_err()) => {
+                return Err(at("a vertex needs three numbers: v X Y Z".into()));
+            }
+            "f" if args.len() < 3
+                || args.iter().any(|a| {
+                    a.split('/')
+                        .next()
+                        .is_none_or(|v| v.parse::<i64>().map_or(true, |n| n == 0))
+                }) =>
+            {
+                return Err(at(
+                    "a face needs three or more vertex indices (1-based): f A B C".into(),
+                ));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Checks the size of a binary STL file against its triangle count (an ASCII STL, which starts
+/// with `solid` and is text, is left to the parser).
+fn check_stl_size(path: &Path, bytes: &[u8]) -> Result<(), PartError> {
+    let ascii = bytes.starts_with(b"solid") && std::str::from_utf8(bytes).is_ok();
+    if ascii {
+        return Ok(());
+    }
+    if bytes.len() < 84 {
+        return Err(parse_error(
+            path,
+            "STL",
+            format!(
+                "the file has {} bytes, less than a binary STL's 84-byte header",
+                bytes.len()
+            ),
+        ));
+    }
+    let count = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]);
+    let needed = 84 + 50 * u64::from(count);
+    if needed != bytes.len() as u64 {
+        return Err(parse_error(
+            path,
+            "STL",
+            format!(
+                "bytes 80..84 say {count} triangles, which need {needed} bytes, but the file \
+                 has {} (not a binary STL, or truncated)",
+                bytes.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, PartError> {
+    std::fs::read(path).map_err(|source| PartError::Io {
+        path: path.into(),
+        source,
+    })
+}
+
 fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
+    let bytes = read_bytes(path)?;
+    check_obj_text(path, &bytes)?;
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ..Default::default()
     };
-    let mut reader = open(path)?;
+    let mut reader = std::io::Cursor::new(bytes);
     let (models, _) = tobj::load_obj_buf(&mut reader, &options, |_| {
         Ok((Vec::new(), Default::default()))
     })
@@ -151,7 +246,9 @@ fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
 }
 
 fn read_stl(path: &Path) -> Result<TriMesh, PartError> {
-    let mut reader = open(path)?;
+    let bytes = read_bytes(path)?;
+    check_stl_size(path, &bytes)?;
+    let mut reader = std::io::Cursor::new(bytes);
     let stl = stl_io::read_stl(&mut reader).map_err(|e| parse_error(path, "STL", e))?;
     let vertices = stl
         .vertices

@@ -10,7 +10,7 @@ mod mesh_repair;
 mod stable_pose;
 
 pub use catalog::{Catalog, Grasp, Material, PartRole, PartSpec, Symmetry, line_column};
-pub use error::PartError;
+pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
 pub use mesh::{MeshDefect, OpenRegion, TriMesh};
 pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};

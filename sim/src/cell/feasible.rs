@@ -1,4 +1,7 @@
-//! Rejecting impossible scenarios before a run, each problem with its key path and reason.
+//! Rejecting impossible scenarios before a run, each problem with its key path and reason. This
+//! is the one home of the checks of the cell's numbers (gripper, feeder, noise, steps) and of
+//! its geometry (reach, camera view, footprints): `cell check` reports what it finds here, and
+//! the simulated cell refuses to build on the same findings.
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use perception::part::{Catalog, TriMesh};
@@ -9,23 +12,45 @@ use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec};
 /// How far above a point the reachability check puts the TCP, metres.
 const APPROACH: f64 = 0.03;
 
-/// Every reason the scenario cannot run, as (key path, message); empty when it is feasible.
-///
-/// Checks: tolerances, clearances and lead-ins; the insertion axis; parts and destinations in the
-/// catalog and placed by an earlier step; each grasp's part width against the gripper stroke;
-/// gripper and feeder sizes; noise values; the fixture and the feeder corners inside the limits'
-/// workspace box and reachable top-down by the UR5e with this gripper; the feeder region
-/// overlapping the fixture's footprint.
+/// Fewest pixels the largest side of the smallest feeder part must span in the camera image:
+/// below this its keypoints crowd within a few pixels of each other, and a pixel of keypoint
+/// error becomes a large fraction of the part (PnP is ill-conditioned). The seed's camera sees
+/// the 9 mm main shell over about 64 pixels.
+pub const MIN_PART_PIXELS: f64 = 24.0;
+
+/// A found problem: (key path, message).
+pub type Finding = (String, String);
+
+/// Every reason the scenario cannot run, as (key path, message); empty when it is feasible:
+/// [`check_values`] and [`check_geometry`].
 pub fn check_feasible(
     cell: &CellSpec,
     steps: &[AssemblyStep],
     noise: &NoiseSpec,
     catalog: &Catalog,
-) -> Vec<(String, String)> {
-    let mut out: Vec<(String, String)> = Vec::new();
-    let mut bad = |k: String, m: String| out.push((k, m));
-    let positive = |v: f64| v.is_finite() && v > 0.0;
+) -> Vec<Finding> {
+    let mut out = check_values(cell, steps, noise);
+    out.extend(check_geometry(cell, steps, catalog));
+    out
+}
 
+fn positive(out: &mut Vec<Finding>, key: String, v: f64) {
+    if !(v.is_finite() && v > 0.0) {
+        out.push((key, format!("must be a positive number, got {v}")));
+    }
+}
+
+fn non_negative(out: &mut Vec<Finding>, key: String, v: f64) {
+    if !(v.is_finite() && v >= 0.0) {
+        out.push((key, format!("must be zero or positive, got {v}")));
+    }
+}
+
+/// The cell's numbers, without the catalog: gripper sizes and friction, feeder size and shake
+/// time, noise values, and each step's tolerances, clearance, lead-in, insertion axis, target
+/// and destination order.
+pub fn check_values(cell: &CellSpec, steps: &[AssemblyStep], noise: &NoiseSpec) -> Vec<Finding> {
+    let mut out = Vec::new();
     let g = &cell.gripper;
     for (k, v) in [
         ("stroke", g.stroke),
@@ -34,26 +59,14 @@ pub fn check_feasible(
         ("finger_length", g.finger_length),
         ("tcp_offset", g.tcp_offset),
     ] {
-        if !positive(v) {
-            bad(
-                format!("cell.gripper.{k}"),
-                format!("must be positive, got {v}"),
-            );
-        }
+        positive(&mut out, format!("cell.gripper.{k}"), v);
     }
-    if !(g.friction.is_finite() && g.friction >= 0.0) {
-        bad(
-            "cell.gripper.friction".into(),
-            format!("must be ≥ 0, got {}", g.friction),
-        );
-    }
+    non_negative(&mut out, "cell.gripper.friction".into(), g.friction);
     let f = &cell.feeder;
-    if !(positive(f.size[0]) && positive(f.size[1])) {
-        bad(
-            "cell.feeder.size".into(),
-            format!("must be positive, got {:?}", f.size),
-        );
+    for i in 0..2 {
+        positive(&mut out, format!("cell.feeder.size[{i}]"), f.size[i]);
     }
+    non_negative(&mut out, "cell.feeder.shake_time".into(), f.shake_time);
     for (k, v) in [
         ("robot_repeatability", noise.robot_repeatability),
         ("calibration_translation", noise.calibration_translation),
@@ -61,15 +74,57 @@ pub fn check_feasible(
         ("grasp_offset", noise.grasp_offset),
         ("grasp_rotation", noise.grasp_rotation),
     ] {
-        if !(v.is_finite() && v >= 0.0) {
-            bad(format!("noise.{k}"), format!("must be ≥ 0, got {v}"));
-        }
+        non_negative(&mut out, format!("noise.{k}"), v);
     }
+    let mut placed: Vec<&str> = Vec::new();
+    for (i, s) in steps.iter().enumerate() {
+        let t = &s.tolerances;
+        for (k, v) in [("lateral", t.lateral), ("depth", t.depth), ("tilt", t.tilt)] {
+            positive(&mut out, format!("assembly[{i}].tolerances.{k}"), v);
+        }
+        positive(&mut out, format!("assembly[{i}].clearance"), s.clearance);
+        non_negative(&mut out, format!("assembly[{i}].lead_in"), s.lead_in);
+        let axis = Vector3::from(s.insertion_axis);
+        if !(axis.iter().all(|v| v.is_finite()) && axis.norm() > 1e-9) {
+            out.push((
+                format!("assembly[{i}].insertion_axis"),
+                "must be a non-zero vector".into(),
+            ));
+        }
+        if !s.target.is_finite() {
+            out.push((
+                format!("assembly[{i}].target"),
+                "pose has a non-finite number".into(),
+            ));
+        }
+        if let Destination::Part(p) = &s.into
+            && !placed.contains(&p.as_str())
+        {
+            out.push((
+                format!("assembly[{i}].into"),
+                format!("\"{p}\" is not placed by an earlier step, so nothing can go into it"),
+            ));
+        }
+        placed.push(s.part.as_str());
+    }
+    out
+}
 
-    let mesh_of = |name: &str| -> Option<TriMesh> {
-        let spec = catalog.part(name)?;
-        catalog.load_mesh(spec).ok()
-    };
+/// The cell's geometry against the catalog: the parts named exist and their meshes load, each
+/// grasp's part width against the gripper stroke, the fixture and the feeder corners inside the
+/// limits' workspace box and reachable top-down by the UR5e with this gripper, the feeder region
+/// clear of the fixture's footprint, and the camera seeing the feeder region and the fixture
+/// with the smallest feeder part at least [`MIN_PART_PIXELS`] across.
+pub fn check_geometry(cell: &CellSpec, steps: &[AssemblyStep], catalog: &Catalog) -> Vec<Finding> {
+    let mut out: Vec<Finding> = Vec::new();
+    let g = &cell.gripper;
+    let f = &cell.feeder;
+    let known = catalog
+        .parts
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ");
     // Widths across the jaws of every part the gripper must pick.
     let mut picked: Vec<(String, String)> = f
         .parts
@@ -79,20 +134,30 @@ pub fn check_feasible(
     for (i, s) in steps.iter().enumerate() {
         picked.push((s.part.clone(), format!("assembly[{i}].part")));
     }
-    picked.sort();
-    picked.dedup_by(|a, b| a.0 == b.0);
+    let mut smallest_part = f64::INFINITY;
+    let mut seen: Vec<String> = Vec::new();
     for (name, key) in &picked {
         let Some(spec) = catalog.part(name) else {
-            bad(key.clone(), format!("part {name:?} is not in the catalog"));
-            continue;
-        };
-        let Some(mesh) = mesh_of(name) else {
-            bad(
+            out.push((
                 key.clone(),
-                format!("part {name:?}: its mesh cannot be loaded"),
-            );
+                format!("no part \"{name}\" in the catalog (it has: {known})"),
+            ));
             continue;
         };
+        if seen.contains(name) {
+            continue;
+        }
+        seen.push(name.clone());
+        let mesh = match catalog.load_mesh(spec) {
+            Ok(m) => m,
+            Err(e) => {
+                out.push((key.clone(), format!("cannot load its mesh: {e}")));
+                continue;
+            }
+        };
+        if f.parts.contains_key(name) {
+            smallest_part = smallest_part.min(mesh.extents().max());
+        }
         for grasp in &spec.grasps {
             let axis = Vector3::from(grasp.closing_axis);
             if axis.norm() == 0.0 {
@@ -107,61 +172,18 @@ pub fn check_feasible(
                     (l.min(d), h.max(d))
                 });
             if hi - lo > g.stroke {
-                bad(
+                out.push((
                     key.clone(),
                     format!(
-                        "part {name:?} is {:.2} mm wide across its grasp ({}) but the gripper opens only {:.2} mm",
+                        "part \"{name}\" is {:.2} mm wide across its grasp ({}) but the gripper \
+                         opens only {:.2} mm",
                         (hi - lo) * 1e3,
                         grasp.stable_pose,
                         g.stroke * 1e3
                     ),
-                );
+                ));
             }
         }
-    }
-
-    let mut placed: Vec<&str> = Vec::new();
-    for (i, s) in steps.iter().enumerate() {
-        let t = &s.tolerances;
-        for (k, v) in [("lateral", t.lateral), ("depth", t.depth), ("tilt", t.tilt)] {
-            if !positive(v) {
-                bad(
-                    format!("assembly[{i}].tolerances.{k}"),
-                    format!("must be positive, got {v}"),
-                );
-            }
-        }
-        if !positive(s.clearance) {
-            bad(
-                format!("assembly[{i}].clearance"),
-                format!("must be positive, got {}", s.clearance),
-            );
-        }
-        if !(s.lead_in.is_finite() && s.lead_in >= 0.0) {
-            bad(
-                format!("assembly[{i}].lead_in"),
-                format!("must be ≥ 0, got {}", s.lead_in),
-            );
-        }
-        let axis = Vector3::from(s.insertion_axis);
-        if !(axis.iter().all(|v| v.is_finite()) && axis.norm() > 1e-9) {
-            bad(
-                format!("assembly[{i}].insertion_axis"),
-                "must be a non-zero vector".into(),
-            );
-        }
-        if !s.target.is_finite() {
-            bad(format!("assembly[{i}].target"), "must be finite".into());
-        }
-        if let Destination::Part(p) = &s.into
-            && !placed.contains(&p.as_str())
-        {
-            bad(
-                format!("assembly[{i}].into"),
-                format!("part {p:?} is not placed by an earlier step"),
-            );
-        }
-        placed.push(s.part.as_str());
     }
 
     // Reach: the fixture and the feeder corners, top-down, inside the workspace box.
@@ -177,39 +199,62 @@ pub fn check_feasible(
     };
     let fixture_origin = base_T_table * cell.fixture.table_T_fixture.isometry() * Point3::origin();
     if !cell.limits.workspace.contains(&fixture_origin.coords) {
-        bad(
+        out.push((
             "cell.fixture.table_T_fixture".into(),
             format!(
                 "fixture at {:?} m (base) is outside the limits' workspace box",
                 fixture_origin.coords.as_slice()
             ),
-        );
+        ));
     } else if !reachable(&fixture_origin) {
-        bad(
+        out.push((
             "cell.fixture.table_T_fixture".into(),
             format!(
                 "fixture at {:?} m (base) is out of the UR5e's reach top-down",
                 fixture_origin.coords.as_slice()
             ),
-        );
+        ));
     }
-    let [cx, cy] = f.center;
-    let (hx, hy) = (f.size[0] / 2.0, f.size[1] / 2.0);
-    for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-        let corner = base_T_table * Point3::new(cx + sx * hx, cy + sy * hy, 0.0);
+    let feeder_corners = feeder_corners(cell);
+    for corner in &feeder_corners {
+        let corner = base_T_table * corner;
         if !cell.limits.workspace.contains(&corner.coords) || !reachable(&corner) {
-            bad(
+            out.push((
                 "cell.feeder".into(),
                 format!(
                     "feeder corner at {:?} m (base) is outside the workspace or out of reach",
                     corner.coords.as_slice()
                 ),
-            );
+            ));
             break;
         }
     }
     // Feeder against the fixture's footprint on the table.
-    if let Some(mesh) = mesh_of(&cell.fixture.part) {
+    let fixture_mesh = match catalog.part(&cell.fixture.part) {
+        None => {
+            out.push((
+                "cell.fixture.part".into(),
+                format!(
+                    "no part \"{}\" in the catalog (it has: {known})",
+                    cell.fixture.part
+                ),
+            ));
+            None
+        }
+        Some(spec) => match catalog.load_mesh(spec) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                out.push((
+                    "cell.fixture.part".into(),
+                    format!("cannot load the fixture's mesh: {e}"),
+                ));
+                None
+            }
+        },
+    };
+    if let Some(mesh) = &fixture_mesh {
+        let [cx, cy] = f.center;
+        let (hx, hy) = (f.size[0] / 2.0, f.size[1] / 2.0);
         let t = cell.fixture.table_T_fixture.isometry();
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for p in &mesh.vertices {
@@ -219,22 +264,111 @@ pub fn check_feasible(
         }
         let overlap = lo[0] < cx + hx && hi[0] > cx - hx && lo[1] < cy + hy && hi[1] > cy - hy;
         if overlap {
-            bad(
+            out.push((
                 "cell.feeder".into(),
                 format!(
-                    "the feeder region overlaps the fixture {:?} (footprint x {:.3}..{:.3}, y {:.3}..{:.3} m on the table)",
+                    "the feeder region overlaps the fixture {:?} (footprint x {:.3}..{:.3}, y \
+                     {:.3}..{:.3} m on the table)",
                     cell.fixture.part, lo[0], hi[0], lo[1], hi[1]
                 ),
-            );
+            ));
         }
-    } else {
-        bad(
-            "cell.fixture.part".into(),
-            format!(
-                "fixture part {:?} is not in the catalog or its mesh cannot be loaded",
-                cell.fixture.part
-            ),
-        );
     }
+    out.extend(check_camera_view(
+        cell,
+        &feeder_corners,
+        fixture_mesh.as_ref(),
+        smallest_part,
+    ));
     out
+}
+
+/// The feeder region's corners in the table frame.
+fn feeder_corners(cell: &CellSpec) -> [Point3<f64>; 4] {
+    let [cx, cy] = cell.feeder.center;
+    let (hx, hy) = (cell.feeder.size[0] / 2.0, cell.feeder.size[1] / 2.0);
+    [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+        .map(|(sx, sy)| Point3::new(cx + sx * hx, cy + sy * hy, 0.0))
+}
+
+/// The camera sees every feeder corner and the fixture's bounding box inside its image, and the
+/// smallest feeder part (`smallest_part` metres across) spans at least [`MIN_PART_PIXELS`].
+fn check_camera_view(
+    cell: &CellSpec,
+    feeder_corners: &[Point3<f64>; 4],
+    fixture: Option<&TriMesh>,
+    smallest_part: f64,
+) -> Vec<Finding> {
+    let key = "cell.camera.base_T_camera".to_string();
+    let camera = &cell.camera.intrinsics;
+    if !cell.camera.base_T_camera.is_finite() || camera.validate().is_err() {
+        return Vec::new(); // reported where the camera's numbers are checked
+    }
+    let camera_T_table =
+        cell.camera.base_T_camera.isometry().inverse() * cell.base_T_table.isometry();
+    let fix = "point base_T_camera's optical axis (its z) at the table, or move the feeder or \
+               fixture into the view";
+    let sees = |what: &str, points: &[Point3<f64>]| -> Result<(), String> {
+        for p in points {
+            let q = camera_T_table * p;
+            if q.z <= 0.0 {
+                return Err(format!(
+                    "the camera cannot see the {what}: it lies behind the camera ({:.3} m along \
+                     its optical axis); {fix}",
+                    q.z
+                ));
+            }
+            match camera.project(&q) {
+                Ok(px) if camera.contains(px) => {}
+                Ok(px) => {
+                    return Err(format!(
+                        "the camera cannot see all of the {what}: a corner projects to pixel \
+                         ({:.0}, {:.0}), outside the {} × {} image; {fix}",
+                        px.x, px.y, camera.width, camera.height
+                    ));
+                }
+                Err(e) => return Err(format!("the camera cannot see the {what}: {e}; {fix}")),
+            }
+        }
+        Ok(())
+    };
+    if let Err(m) = sees("feeder region", feeder_corners) {
+        return vec![(key, m)];
+    }
+    if let Some(mesh) = fixture {
+        let t = cell.fixture.table_T_fixture.isometry();
+        let (lo, hi) = mesh.aabb();
+        let box_corners: Vec<Point3<f64>> = (0..8)
+            .map(|i| {
+                t * Point3::new(
+                    if i & 1 == 0 { lo.x } else { hi.x },
+                    if i & 2 == 0 { lo.y } else { hi.y },
+                    if i & 4 == 0 { lo.z } else { hi.z },
+                )
+            })
+            .collect();
+        if let Err(m) = sees("fixture", &box_corners) {
+            return vec![(key, m)];
+        }
+    }
+    if smallest_part.is_finite() {
+        // Pixels per metre at the farthest feeder corner.
+        let far = feeder_corners
+            .iter()
+            .map(|p| (camera_T_table * p).z)
+            .fold(0.0, f64::max);
+        let pixels = smallest_part * camera.fx.min(camera.fy) / far;
+        if pixels < MIN_PART_PIXELS {
+            return vec![(
+                key,
+                format!(
+                    "the smallest feeder part ({:.1} mm) spans only {pixels:.1} pixels at {far:.2} \
+                     m from the camera; perception needs at least {MIN_PART_PIXELS} (move the \
+                     camera closer or use a longer lens)",
+                    smallest_part * 1e3
+                ),
+            )];
+        }
+    }
+    Vec::new()
 }
