@@ -46,7 +46,8 @@ fn conv_relu(input: &[f32]) -> Vec<f64> {
                     for ky in 0..3 {
                         for kx in 0..3 {
                             let (iy, ix) = ((2 * y + ky) as isize - 1, (2 * x + kx) as isize - 1);
-                            if (0..SIZE as isize).contains(&iy) && (0..SIZE as isize).contains(&ix) {
+                            if (0..SIZE as isize).contains(&iy) && (0..SIZE as isize).contains(&ix)
+                            {
                                 let v = input[c * SIZE * SIZE + iy as usize * SIZE + ix as usize];
                                 acc += weight(o, c, ky, kx) * v as f64;
                             }
@@ -62,7 +63,10 @@ fn conv_relu(input: &[f32]) -> Vec<f64> {
 
 fn max_abs_diff(a: &[f32], b: &[f64]) -> f64 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(&x, &y)| (x as f64 - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| (x as f64 - y).abs())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -83,7 +87,10 @@ fn batches_through_one_session_match_the_convolution_by_hand() {
         for (k, &i) in batch.iter().enumerate() {
             let expected = conv_relu(&crops[i]);
             let positive = expected.iter().filter(|&&v| v > 0.0).count();
-            assert!(positive > 1000 && positive < expected.len() - 1000, "the relu must cut: {positive}");
+            assert!(
+                positive > 1000 && positive < expected.len() - 1000,
+                "the relu must cut: {positive}"
+            );
             let err = max_abs_diff(features.item(k), &expected);
             assert!(err < 1e-4, "crop {i}: features differ by {err}");
             let mean: Vec<f64> = expected
@@ -91,22 +98,39 @@ fn batches_through_one_session_match_the_convolution_by_hand() {
                 .map(|ch| ch.iter().sum::<f64>() / (OUT * OUT) as f64)
                 .collect();
             let err = max_abs_diff(pooled.item(k), &mean);
-            assert!(err < 1e-5, "crop {i}: pooled {:?} vs {mean:?}", pooled.item(k));
+            assert!(
+                err < 1e-5,
+                "crop {i}: pooled {:?} vs {mean:?}",
+                pooled.item(k)
+            );
         }
     }
 }
 
 #[test]
 fn a_batch_item_of_the_wrong_size_is_refused_with_the_model_named() {
-    let mut session = BatchSession::open(&runtime(), &fixture_dir().join("conv_fixture.toml"), 1).unwrap();
+    let mut session =
+        BatchSession::open(&runtime(), &fixture_dir().join("conv_fixture.toml"), 1).unwrap();
     let short = vec![0.0f32; 3 * 64 * 64];
     let err = session.run(&[&short]).unwrap_err().to_string();
-    assert!(err.contains("conv_fixture.onnx") && err.contains("batch item 0 has 12288 values"), "{err}");
-    assert!(session.run(&[]).unwrap_err().to_string().contains("empty batch"));
+    assert!(
+        err.contains("conv_fixture.onnx") && err.contains("batch item 0 has 12288 values"),
+        "{err}"
+    );
+    assert!(
+        session
+            .run(&[])
+            .unwrap_err()
+            .to_string()
+            .contains("empty batch")
+    );
 }
 
 /// Copies the fixture into a temp dir with the manifest edited by `edit`, and the model bytes by `bytes`.
-fn variant(edit: impl Fn(String) -> String, bytes: impl Fn(Vec<u8>) -> Vec<u8>) -> (tempfile::TempDir, PathBuf) {
+fn variant(
+    edit: impl Fn(String) -> String,
+    bytes: impl Fn(Vec<u8>) -> Vec<u8>,
+) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let manifest = std::fs::read_to_string(fixture_dir().join("conv_fixture.toml")).unwrap();
     let model = std::fs::read(fixture_dir().join("conv_fixture.onnx")).unwrap();
@@ -125,18 +149,27 @@ fn open_err(manifest: &Path) -> String {
 
 fn sha256_hex(bytes: &[u8]) -> String {
     use sha2::Digest;
-    sha2::Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 #[test]
 fn a_model_whose_checksum_differs_from_the_manifest_is_refused() {
-    let (_dir, path) = variant(|m| m, |mut b| {
-        let n = b.len();
-        b[n - 3] ^= 0x01;
-        b
-    });
+    let (_dir, path) = variant(
+        |m| m,
+        |mut b| {
+            let n = b.len();
+            b[n - 3] ^= 0x01;
+            b
+        },
+    );
     let err = open_err(&path);
-    assert!(err.contains("conv_fixture.onnx: sha256 is") && err.contains("a15d2b51"), "{err}");
+    assert!(
+        err.contains("conv_fixture.onnx: sha256 is") && err.contains("a15d2b51"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -145,11 +178,19 @@ fn a_corrupt_model_with_a_matching_checksum_is_refused_by_onnx_runtime() {
     let truncated = model[..model.len() / 2].to_vec();
     let sha = sha256_hex(&truncated);
     let (_dir, path) = variant(
-        |m| m.replace("a15d2b5113df6247db2cf9a9e28658e0c04a4a7e883d30fbd82033a24fba684f", &sha),
+        |m| {
+            m.replace(
+                "a15d2b5113df6247db2cf9a9e28658e0c04a4a7e883d30fbd82033a24fba684f",
+                &sha,
+            )
+        },
         |_| truncated.clone(),
     );
     let err = open_err(&path);
-    assert!(err.contains("conv_fixture.onnx: ONNX Runtime cannot load this model"), "{err}");
+    assert!(
+        err.contains("conv_fixture.onnx: ONNX Runtime cannot load this model"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -157,21 +198,53 @@ fn a_missing_model_is_named() {
     let (dir, path) = variant(|m| m, |b| b);
     std::fs::remove_file(dir.path().join("conv_fixture.onnx")).unwrap();
     let err = open_err(&path);
-    assert!(err.contains("conv_fixture.onnx") && err.contains("No such file"), "{err}");
+    assert!(
+        err.contains("conv_fixture.onnx") && err.contains("No such file"),
+        "{err}"
+    );
 }
 
 #[test]
 fn shapes_names_and_counts_that_differ_from_the_manifest_are_named() {
     let cases = [
-        ("shape = [-1, 3, 128, 128]", "shape = [-1, 3, 64, 64]", "input 0 differs", "crops: shape: manifest [-1, 3, 64, 64], model [-1, 3, 128, 128]"),
-        ("shape = [-1, 2, 1, 1]", "shape = [-1, 2, 2, 2]", "output 1 differs", "pooled: shape"),
-        ("name = \"features\"", "name = \"heatmap\"", "output 0 differs", "name: manifest \"heatmap\", model \"features\""),
-        ("[[outputs]]\nname = \"pooled\"\nshape = [-1, 2, 1, 1]\ndtype = \"f32\"\n", "", "output count differs", "manifest lists 1, model has 2"),
+        (
+            "shape = [-1, 3, 128, 128]",
+            "shape = [-1, 3, 64, 64]",
+            "input 0 differs",
+            "crops: shape: manifest [-1, 3, 64, 64], model [-1, 3, 128, 128]",
+        ),
+        (
+            "shape = [-1, 2, 1, 1]",
+            "shape = [-1, 2, 2, 2]",
+            "output 1 differs",
+            "pooled: shape",
+        ),
+        (
+            "name = \"features\"",
+            "name = \"heatmap\"",
+            "output 0 differs",
+            "name: manifest \"heatmap\", model \"features\"",
+        ),
+        (
+            "[[outputs]]\nname = \"pooled\"\nshape = [-1, 2, 1, 1]\ndtype = \"f32\"\n",
+            "",
+            "output count differs",
+            "manifest lists 1, model has 2",
+        ),
     ];
     for (from, to, what, detail) in cases {
-        let (_dir, path) = variant(|m| { assert!(m.contains(from)); m.replace(from, to) }, |b| b);
+        let (_dir, path) = variant(
+            |m| {
+                assert!(m.contains(from));
+                m.replace(from, to)
+            },
+            |b| b,
+        );
         let err = open_err(&path);
-        assert!(err.contains("conv_fixture.onnx") && err.contains(what) && err.contains(detail), "{err}");
+        assert!(
+            err.contains("conv_fixture.onnx") && err.contains(what) && err.contains(detail),
+            "{err}"
+        );
         assert!(err.contains("conv_fixture.toml"), "{err}");
     }
 }
@@ -180,9 +253,14 @@ fn shapes_names_and_counts_that_differ_from_the_manifest_are_named() {
 fn a_malformed_manifest_names_file_line_and_column() {
     let (_dir, path) = variant(|m| m.replace("opset = 17", "opset = \"seventeen\""), |b| b);
     let err = ModelManifest::load(&path).unwrap_err();
-    let OnnxError::Manifest { line, column, .. } = err else { panic!("{err}") };
+    let OnnxError::Manifest { line, column, .. } = err else {
+        panic!("{err}")
+    };
     assert_eq!((line, column), (6, 9), "{err}");
     let (_dir, path) = variant(|m| m.replace("sha256 = \"a15d", "sha256 = \"zz5d"), |b| b);
     let err = ModelManifest::load(&path).unwrap_err().to_string();
-    assert!(err.contains("conv_fixture.toml:5:1: sha256 must be 64 hex digits"), "{err}");
+    assert!(
+        err.contains("conv_fixture.toml:5:1: sha256 must be 64 hex digits"),
+        "{err}"
+    );
 }

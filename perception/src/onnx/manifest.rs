@@ -84,23 +84,46 @@ impl ModelManifest {
                 message,
             }
         };
-        let mut manifest: Self = toml::from_str(text)
-            .map_err(|e| at(e.span().map_or(0, |s| s.start), e.message().trim().to_string()))?;
-        let key = |k: &str| text.find(&format!("{k} =")).or_else(|| text.find(k)).unwrap_or(0);
+        let mut manifest: Self = toml::from_str(text).map_err(|e| {
+            at(
+                e.span().map_or(0, |s| s.start),
+                e.message().trim().to_string(),
+            )
+        })?;
+        let key = |k: &str| {
+            text.find(&format!("{k} ="))
+                .or_else(|| text.find(k))
+                .unwrap_or(0)
+        };
         if manifest.sha256.len() != 64 || !manifest.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {
             return Err(at(key("sha256"), "sha256 must be 64 hex digits".into()));
         }
         manifest.sha256.make_ascii_lowercase();
         for spec in manifest.inputs.iter().chain(&manifest.outputs) {
             if spec.dtype != "f32" {
-                return Err(at(key(&spec.dtype), format!("{}: dtype {:?} is not supported (only \"f32\")", spec.name, spec.dtype)));
+                return Err(at(
+                    key(&spec.dtype),
+                    format!(
+                        "{}: dtype {:?} is not supported (only \"f32\")",
+                        spec.name, spec.dtype
+                    ),
+                ));
             }
             if spec.shape.iter().any(|&d| d == 0 || d < -1) {
-                return Err(at(key(&spec.name), format!("{}: dimensions must be positive or -1, got {:?}", spec.name, spec.shape)));
+                return Err(at(
+                    key(&spec.name),
+                    format!(
+                        "{}: dimensions must be positive or -1, got {:?}",
+                        spec.name, spec.shape
+                    ),
+                ));
             }
         }
         if manifest.inputs.is_empty() || manifest.outputs.is_empty() {
-            return Err(at(0, "a model needs at least one input and one output".into()));
+            return Err(at(
+                0,
+                "a model needs at least one input and one output".into(),
+            ));
         }
         manifest.path = path.into();
         Ok(manifest)
@@ -108,6 +131,9 @@ impl ModelManifest {
 
     /// The ONNX file this manifest describes.
     pub fn model_path(&self) -> PathBuf {
-        self.path.parent().unwrap_or(Path::new(".")).join(&self.file)
+        self.path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(&self.file)
     }
 }

@@ -66,10 +66,7 @@ impl RuntimeConfig {
     pub fn library(&self) -> Result<PathBuf, OnnxError> {
         if let Some(path) = &self.dylib_override {
             if !path.is_file() {
-                return Err(runtime_error(
-                    path,
-                    "ORT_DYLIB_PATH names no file".into(),
-                ));
+                return Err(runtime_error(path, "ORT_DYLIB_PATH names no file".into()));
             }
             return Ok(path.clone());
         }
@@ -104,7 +101,14 @@ impl Runtime {
     /// return the same runtime, or an error if they ask for a different library.
     pub fn load(config: &RuntimeConfig) -> Result<Self, OnnxError> {
         let mut loaded = LOADED.lock().unwrap_or_else(|e| e.into_inner());
-        let library = config.library()?;
+        // Once loaded, only compare paths: the library in memory cannot change.
+        let library = match loaded.as_ref() {
+            Some(_) => config
+                .dylib_override
+                .clone()
+                .unwrap_or_else(|| config.cached_library()),
+            None => config.library()?,
+        };
         if let Some(runtime) = loaded.as_ref() {
             if same_file(&runtime.library, &library) {
                 return Ok(runtime.clone());
@@ -176,21 +180,40 @@ fn provision(config: &RuntimeConfig, target: &Path) -> Result<(), OnnxError> {
     result
 }
 
-fn download_and_extract(config: &RuntimeConfig, target: &Path, scratch: &Path) -> Result<(), OnnxError> {
+fn download_and_extract(
+    config: &RuntimeConfig,
+    target: &Path,
+    scratch: &Path,
+) -> Result<(), OnnxError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |source| OnnxError::Io { path, source }
     };
     std::fs::create_dir_all(scratch).map_err(io(scratch))?;
     let out = std::process::Command::new(&config.python)
-        .args(["-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:"])
-        .args(["--platform", "manylinux_2_28_x86_64", "--python-version", "311"])
+        .args([
+            "-m",
+            "pip",
+            "download",
+            "--quiet",
+            "--no-deps",
+            "--only-binary=:all:",
+        ])
+        .args([
+            "--platform",
+            "manylinux_2_28_x86_64",
+            "--python-version",
+            "311",
+        ])
         .args(["--implementation", "cp", "--abi", "cp311", "--dest"])
         .arg(scratch)
         .arg(format!("onnxruntime=={ORT_VERSION}"))
         .output()
         .map_err(|e| {
-            runtime_error(target, format!("cannot run {} -m pip: {e}", config.python.display()))
+            runtime_error(
+                target,
+                format!("cannot run {} -m pip: {e}", config.python.display()),
+            )
         })?;
     if !out.status.success() {
         return Err(runtime_error(
@@ -273,7 +296,12 @@ mod tests {
     #[test]
     fn variables_choose_override_cache_and_python() {
         let vars = |pairs: &'static [(&'static str, &'static str)]| {
-            move |k: &str| pairs.iter().find(|(n, _)| *n == k).map(|(_, v)| PathBuf::from(v))
+            move |k: &str| {
+                pairs
+                    .iter()
+                    .find(|(n, _)| *n == k)
+                    .map(|(_, v)| PathBuf::from(v))
+            }
         };
         let c = RuntimeConfig::from_vars(vars(&[("ORT_DYLIB_PATH", "/x/lib.so"), ("HOME", "/h")]));
         assert_eq!(c.dylib_override, Some(PathBuf::from("/x/lib.so")));
@@ -286,9 +314,15 @@ mod tests {
             ("CELL_PYTHON", "/py"),
         ]));
         assert_eq!(c.dylib_override, None);
-        assert_eq!(c.cached_library(), PathBuf::from("/xdg/cell/onnxruntime-1.31.1/libonnxruntime.so.1.31.1"));
+        assert_eq!(
+            c.cached_library(),
+            PathBuf::from("/xdg/cell/onnxruntime-1.31.1/libonnxruntime.so.1.31.1")
+        );
         assert_eq!(c.python, PathBuf::from("/py"));
-        let c = RuntimeConfig::from_vars(vars(&[("CELL_CACHE_DIR", "/c"), ("XDG_CACHE_HOME", "/xdg")]));
+        let c = RuntimeConfig::from_vars(vars(&[
+            ("CELL_CACHE_DIR", "/c"),
+            ("XDG_CACHE_HOME", "/xdg"),
+        ]));
         assert_eq!(c.cache_dir, PathBuf::from("/c"));
     }
 }

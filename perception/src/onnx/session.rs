@@ -40,7 +40,11 @@ pub struct BatchSession {
 impl BatchSession {
     /// Opens the model a manifest names: checks its sha256, builds the session with
     /// `intra_threads` threads and checks the session's signature against the manifest.
-    pub fn open(runtime: &Runtime, manifest: &Path, intra_threads: usize) -> Result<Self, OnnxError> {
+    pub fn open(
+        runtime: &Runtime,
+        manifest: &Path,
+        intra_threads: usize,
+    ) -> Result<Self, OnnxError> {
         let manifest = ModelManifest::load(manifest)?;
         let model = manifest.model_path();
         let actual = sha256_file(&model)?;
@@ -68,16 +72,26 @@ impl BatchSession {
             .map_err(model_error)?;
         check_signature(&session, &manifest, &model)?;
         let [input] = manifest.inputs.as_slice() else {
-            return Err(signature(&manifest, &model, "inputs", format!(
-                "a batch session takes one input, the manifest lists {}",
-                manifest.inputs.len()
-            )));
+            return Err(signature(
+                &manifest,
+                &model,
+                "inputs",
+                format!(
+                    "a batch session takes one input, the manifest lists {}",
+                    manifest.inputs.len()
+                ),
+            ));
         };
         if input.shape.first() != Some(&-1) || input.shape[1..].contains(&-1) {
-            return Err(signature(&manifest, &model, "input 0", format!(
-                "a batch session needs shape [-1, fixed...], the manifest has {:?}",
-                input.shape
-            )));
+            return Err(signature(
+                &manifest,
+                &model,
+                "input 0",
+                format!(
+                    "a batch session needs shape [-1, fixed...], the manifest has {:?}",
+                    input.shape
+                ),
+            ));
         }
         let item_len = input.shape[1..].iter().product::<i64>() as usize;
         let outputs = manifest
@@ -114,7 +128,11 @@ impl BatchSession {
         if items.is_empty() {
             return Err(self.batch_error("empty batch".into()));
         }
-        if let Some((i, item)) = items.iter().enumerate().find(|(_, c)| c.len() != self.item_len) {
+        if let Some((i, item)) = items
+            .iter()
+            .enumerate()
+            .find(|(_, c)| c.len() != self.item_len)
+        {
             return Err(self.batch_error(format!(
                 "batch item {i} has {} values, the input {} {:?} needs {}",
                 item.len(),
@@ -133,7 +151,8 @@ impl BatchSession {
             path: self.model.clone(),
             message: e.to_string(),
         };
-        let tensor = TensorRef::from_array_view((shape, self.input.as_slice())).map_err(run_error)?;
+        let tensor =
+            TensorRef::from_array_view((shape, self.input.as_slice())).map_err(run_error)?;
         let results = self.session.run(ort::inputs![tensor]).map_err(run_error)?;
         for out in &mut self.outputs {
             let value = results.get(&out.name).ok_or_else(|| OnnxError::Run {
@@ -167,23 +186,37 @@ fn signature(manifest: &ModelManifest, model: &Path, what: &str, detail: String)
 }
 
 /// Checks the session's inputs and outputs (count, names, element types, shapes) against the manifest.
-fn check_signature(session: &Session, manifest: &ModelManifest, model: &Path) -> Result<(), OnnxError> {
+fn check_signature(
+    session: &Session,
+    manifest: &ModelManifest,
+    model: &Path,
+) -> Result<(), OnnxError> {
     let sides = [
         ("input", session.inputs(), &manifest.inputs),
         ("output", session.outputs(), &manifest.outputs),
     ];
     for (side, outlets, specs) in sides {
         if outlets.len() != specs.len() {
-            return Err(signature(manifest, model, &format!("{side} count"), format!(
-                "manifest lists {}, model has {} ({})",
-                specs.len(),
-                outlets.len(),
-                outlets.iter().map(|o| o.name()).collect::<Vec<_>>().join(", ")
-            )));
+            return Err(signature(
+                manifest,
+                model,
+                &format!("{side} count"),
+                format!(
+                    "manifest lists {}, model has {} ({})",
+                    specs.len(),
+                    outlets.len(),
+                    outlets
+                        .iter()
+                        .map(|o| o.name())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
         }
         for (i, (outlet, spec)) in outlets.iter().zip(specs.iter()).enumerate() {
             let what = format!("{side} {i}");
-            check_outlet(outlet, spec).map_err(|detail| signature(manifest, model, &what, detail))?;
+            check_outlet(outlet, spec)
+                .map_err(|detail| signature(manifest, model, &what, detail))?;
         }
     }
     Ok(())
@@ -191,7 +224,11 @@ fn check_signature(session: &Session, manifest: &ModelManifest, model: &Path) ->
 
 fn check_outlet(outlet: &ort::value::Outlet, spec: &TensorSpec) -> Result<(), String> {
     if outlet.name() != spec.name {
-        return Err(format!("name: manifest {:?}, model {:?}", spec.name, outlet.name()));
+        return Err(format!(
+            "name: manifest {:?}, model {:?}",
+            spec.name,
+            outlet.name()
+        ));
     }
     let dtype = outlet.dtype();
     if dtype.tensor_type() != Some(TensorElementType::Float32) {
@@ -199,7 +236,10 @@ fn check_outlet(outlet: &ort::value::Outlet, spec: &TensorSpec) -> Result<(), St
     }
     let shape: Vec<i64> = dtype.tensor_shape().map(|s| s.to_vec()).unwrap_or_default();
     if shape != spec.shape {
-        return Err(format!("{}: shape: manifest {:?}, model {:?}", spec.name, spec.shape, shape));
+        return Err(format!(
+            "{}: shape: manifest {:?}, model {:?}",
+            spec.name, spec.shape, shape
+        ));
     }
     Ok(())
 }
