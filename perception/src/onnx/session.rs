@@ -2,10 +2,11 @@
 //! (checksum, input and output names, shapes and types); running it reuses the session, the input
 //! buffer and the output buffers across calls.
 
-use super::provision::sha256_file;
+use super::provision::hex;
 use super::{ModelManifest, OnnxError, Runtime, TensorSpec};
 use ort::session::Session;
 use ort::value::{TensorElementType, TensorRef};
+use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
 /// One output of a batch run: its name, concrete shape and values (row-major).
@@ -47,7 +48,11 @@ impl BatchSession {
     ) -> Result<Self, OnnxError> {
         let manifest = ModelManifest::load(manifest)?;
         let model = manifest.model_path();
-        let actual = sha256_file(&model)?;
+        let bytes = std::fs::read(&model).map_err(|source| OnnxError::Io {
+            path: model.clone(),
+            source,
+        })?;
+        let actual = hex(&Sha256::digest(&bytes));
         if actual != manifest.sha256 {
             return Err(OnnxError::Checksum {
                 path: model,
@@ -56,10 +61,6 @@ impl BatchSession {
                 actual,
             });
         }
-        let bytes = std::fs::read(&model).map_err(|source| OnnxError::Io {
-            path: model.clone(),
-            source,
-        })?;
         let model_error = |e: ort::Error| OnnxError::Model {
             path: model.clone(),
             message: e.to_string(),
