@@ -137,3 +137,63 @@ impl ModelManifest {
             .join(&self.file)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TRAINED: &str = r#"name = "pvnet-main-shell"
+parts = ["main_shell"]
+file = "pvnet-main-shell.onnx"
+sha256 = "A15D2B5113DF6247DB2CF9A9E28658E0C04A4A7E883D30FBD82033A24FBA684F"
+opset = 17
+[[inputs]]
+name = "crops"
+shape = [-1, 3, 128, 128]
+dtype = "f32"
+[[outputs]]
+name = "mask"
+shape = [-1, 2, 128, 128]
+dtype = "f32"
+[training]
+dataset_seed = 7
+dataset_size = 20000
+code_commit = "863d068"
+curve = "pvnet-main-shell.curve.csv"
+test_metrics = { mask_iou = 0.97, keypoint_px = 0.8 }
+"#;
+
+    #[test]
+    fn a_trained_model_manifest_parses_with_its_provenance() {
+        let m = ModelManifest::parse(TRAINED, Path::new("/models/pvnet-main-shell.toml")).unwrap();
+        assert_eq!(
+            m.model_path(),
+            PathBuf::from("/models/pvnet-main-shell.onnx")
+        );
+        assert_eq!(
+            m.sha256,
+            "a15d2b5113df6247db2cf9a9e28658e0c04a4a7e883d30fbd82033a24fba684f"
+        );
+        let t = m.training.unwrap();
+        assert_eq!((t.dataset_seed, t.dataset_size), (7, 20000));
+        assert_eq!(t.test_metrics["keypoint_px"], 0.8);
+    }
+
+    #[test]
+    fn unknown_keys_bad_dimensions_and_types_are_located() {
+        let err = |text: String| {
+            ModelManifest::parse(&text, Path::new("m.toml"))
+                .unwrap_err()
+                .to_string()
+        };
+        let e = err(TRAINED.replace("dataset_seed", "datset_seed"));
+        assert!(
+            e.starts_with("m.toml:15:1: unknown field `datset_seed`"),
+            "{e}"
+        );
+        let e = err(TRAINED.replace("[-1, 2, 128, 128]", "[-1, 0, 128, 128]"));
+        assert!(e.contains("mask: dimensions must be positive or -1"), "{e}");
+        let e = err(TRAINED.replace("dtype = \"f32\"\n[training]", "dtype = \"f16\"\n[training]"));
+        assert!(e.contains("mask: dtype \"f16\" is not supported"), "{e}");
+    }
+}
