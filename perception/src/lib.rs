@@ -10,6 +10,7 @@ pub mod part;
 pub use camera::{Camera, CameraError, Distortion};
 pub mod ablation;
 pub mod metrics;
+pub mod onnx;
 pub mod planar;
 pub mod pnp;
 pub mod symmetry;
