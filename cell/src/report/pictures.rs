@@ -73,11 +73,11 @@ fn part_instance(
         .ok_or_else(|| err("not in the catalog".into()))?;
     let mesh = catalog.load_mesh(spec).map_err(|e| err(e.to_string()))?;
     let mesh = RenderMesh::new(&mesh).ok_or_else(|| err("no triangles to render".into()))?;
-    Ok(Instance {
-        mesh: Arc::new(mesh),
+    Ok(Instance::new(
+        Arc::new(mesh),
         table_T_part,
-        appearance: Appearance::for_material(spec.material),
-    })
+        Appearance::for_material(spec.material),
+    ))
 }
 
 /// The table-frame pose of step `i`'s destination, assuming the earlier steps seated.
@@ -98,10 +98,12 @@ fn lights(at: &Point3<f64>) -> Vec<PointLight> {
         PointLight {
             position: at + Vector3::new(0.3, -0.4, 1.0),
             intensity: [0.9, 0.9, 0.85],
+            radius: 0.0,
         },
         PointLight {
             position: at + Vector3::new(-0.5, 0.3, 0.8),
             intensity: [0.35, 0.35, 0.4],
+            radius: 0.0,
         },
     ]
 }
@@ -114,6 +116,7 @@ fn table() -> Table {
             metallic: 0.0,
             roughness: 0.9,
             specular: 0.2,
+            anisotropy: 0.0,
         },
     }
 }
