@@ -82,15 +82,16 @@ pub enum UrConfigError {
 }
 
 impl UrRobotConfig {
-    /// Defaults for a controller at `host` on the standard ports.
-    pub fn new(host: impl Into<String>) -> UrRobotConfig {
+    /// Defaults for the arm with `kinematics` (from its description, with the TCP set in the
+    /// controller) at `host` on the standard ports.
+    pub fn new(host: impl Into<String>, kinematics: UrKinematics) -> UrRobotConfig {
         UrRobotConfig {
             host: host.into(),
             rtde_port: crate::rtde::RTDE_PORT,
             dashboard_port: crate::dashboard::DASHBOARD_PORT,
             script_port: 30003,
             limits: Limits::default(),
-            kinematics: UrKinematics::ur5e(),
+            kinematics,
             command_timeout: Duration::from_secs(30),
             program_start_timeout: Duration::from_secs(5),
             heartbeat_period: Duration::from_millis(50),

@@ -40,7 +40,7 @@ fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
         dashboard_port: vur.dashboard_addr().port(),
         script_port: vur.script_addr().port(),
         command_timeout: Duration::from_secs(10),
-        ..UrRobotConfig::new("127.0.0.1")
+        ..UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e())
     }
 }
 

@@ -103,7 +103,7 @@ fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
         script_port: vur.script_addr().port(),
         command_timeout: Duration::from_secs(10),
         kinematics: UrKinematics::ur5e().with_tcp(tcp()),
-        ..UrRobotConfig::new("127.0.0.1")
+        ..UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e())
     }
 }
 
@@ -203,7 +203,7 @@ async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time(
 
 #[test]
 fn the_gripper_actuation_time_is_validated() {
-    let mut config = UrRobotConfig::new("127.0.0.1");
+    let mut config = UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e());
     assert_eq!(config.validate(), Ok(()));
     for good in [0.0, 0.25, MAX_GRIPPER_ACTUATION_S] {
         config.gripper_actuation_s = good;

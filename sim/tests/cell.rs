@@ -20,11 +20,11 @@ use sim::config::NoiseSpec;
 
 mod support;
 
-use support::{Nominal as Scenario, catalog, scenario};
+use support::{Nominal as Scenario, arm, catalog, scenario};
 
 fn model(noise: &NoiseSpec, scorer: Scorer) -> Arc<CellModel> {
     let s = scenario();
-    CellModel::new(&s.cell, &s.assembly, noise, &catalog(), scorer).unwrap()
+    CellModel::new(&s.cell, &arm(), &s.assembly, noise, &catalog(), scorer).unwrap()
 }
 
 fn zero_noise() -> NoiseSpec {
@@ -248,6 +248,7 @@ fn cell_with_workspace_below_the_table() -> SimCell {
     s.cell.limits.workspace.min[2] = -0.05;
     let m = CellModel::new(
         &s.cell,
+        &arm(),
         &s.assembly,
         &zero_noise(),
         &catalog(),
@@ -342,9 +343,9 @@ async fn the_arm_model_stops_a_path_into_the_table() {
 fn impossible_scenarios_are_rejected_with_the_reason() {
     let cat = catalog();
     let ok = scenario();
-    assert!(check_feasible(&ok.cell, &ok.assembly, &ok.noise, &cat).is_empty());
+    assert!(check_feasible(&ok.cell, &arm(), &ok.assembly, &ok.noise, &cat).is_empty());
     let keys = |s: &Scenario| -> Vec<String> {
-        check_feasible(&s.cell, &s.assembly, &s.noise, &cat)
+        check_feasible(&s.cell, &arm(), &s.assembly, &s.noise, &cat)
             .into_iter()
             .map(|(k, _)| k)
             .collect()
@@ -374,7 +375,15 @@ fn impossible_scenarios_are_rejected_with_the_reason() {
     s.cell.feeder.center = [0.05, -0.05];
     assert_eq!(keys(&s), vec!["cell.feeder".to_string()]);
     // The model refuses to build and says why.
-    let err = CellModel::new(&s.cell, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap_err();
+    let err = CellModel::new(
+        &s.cell,
+        &arm(),
+        &s.assembly,
+        &s.noise,
+        &cat,
+        Scorer::Analytic,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("overlaps the fixture"), "{err}");
 }
 
@@ -417,7 +426,8 @@ fn the_gripper_actuation_time_is_the_scenarios_and_adds_per_actuation() {
     let run = |actuation_time: f64, episode: u64| {
         let mut spec = s.cell.clone();
         spec.gripper.actuation_time = actuation_time;
-        let m = CellModel::new(&spec, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap();
+        let m =
+            CellModel::new(&spec, &arm(), &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap();
         let arm = SimArm::new(Arc::new(std::sync::Mutex::new(
             SimCell::new(m.clone(), 11, episode).unwrap(),
         )));
@@ -464,7 +474,8 @@ fn a_bad_gripper_actuation_time_is_refused() {
         let mut spec = s.cell.clone();
         spec.gripper.actuation_time = bad;
         assert!(spec.gripper.actuation_time_problem().is_some(), "{bad}");
-        let err = CellModel::new(&spec, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap_err();
+        let err = CellModel::new(&spec, &arm(), &s.assembly, &s.noise, &cat, Scorer::Analytic)
+            .unwrap_err();
         assert!(
             err.to_string().contains("cell.gripper.actuation_time"),
             "{bad}: {err}"

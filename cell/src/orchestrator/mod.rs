@@ -180,7 +180,14 @@ impl SimSetup {
     pub fn new(scenario: Scenario) -> Result<Self, OrchestratorError> {
         let s = &scenario.spec;
         let scorer = s.simulation.insertion_scorer;
-        let model = CellModel::new(&s.cell, &s.assembly, &s.noise, &scenario.catalog, scorer)?;
+        let model = CellModel::new(
+            &s.cell,
+            &scenario.robot,
+            &s.assembly,
+            &s.noise,
+            &scenario.catalog,
+            scorer,
+        )?;
         let knowledge = CellKnowledge::new(&scenario)?;
         Ok(Self {
             scenario,

@@ -58,12 +58,11 @@ pub async fn connect_sim_over_rtde(
         ..VirtualUrConfig::ephemeral()
     };
     let controller = VirtualUr::start_with_arm(config, Box::new(SimArm::new(cell.clone()))).await?;
-    let mut rc = UrRobotConfig::new("127.0.0.1");
+    let mut rc = UrRobotConfig::new("127.0.0.1", setup.knowledge.kinematics.clone());
     rc.rtde_port = controller.rtde_addr().port();
     rc.dashboard_port = controller.dashboard_addr().port();
     rc.script_port = controller.script_addr().port();
     rc.limits = setup.scenario.spec.cell.limits.clone();
-    rc.kinematics = setup.knowledge.kinematics.clone();
     rc.gripper_actuation_s = setup.scenario.spec.cell.gripper.actuation_time;
     let robot = UrRobot::connect(rc).await?;
     Ok(SimOverRtde {

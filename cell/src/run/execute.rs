@@ -178,10 +178,9 @@ impl Production {
             robot: self.robot.to_string(),
             source,
         };
-        let mut config = UrRobotConfig::new(self.host.clone());
+        let mut config = UrRobotConfig::new(self.host.clone(), setup.knowledge.kinematics.clone());
         config.rtde_port = self.port;
         config.limits = setup.scenario.spec.cell.limits.clone();
-        config.kinematics = setup.knowledge.kinematics.clone();
         config.gripper_actuation_s = setup.scenario.spec.cell.gripper.actuation_time;
         let mut robot = UrRobot::connect(config).await.map_err(robot_err)?;
         let (mut io, mut perception) = self

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 use perception::part::{Catalog, PartRole};
+use robots::ur_arm::UrArm;
 use sim::cell::check_feasible;
 
 use super::{Destination, KeyPath, MAX_INSERTION_ATTEMPTS, ScenarioSpec};
@@ -33,20 +34,49 @@ fn non_negative(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
     }
 }
 
-/// Checks a parsed scenario whose relative paths start at `dir`; returns the catalog when it loads.
-pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
+/// The arm the scenario's `cell.robot` describes (a UR arm's URDF, relative to `dir`), and its
+/// joint speed limits against the scenario's; `None` (with the problem recorded) when unusable.
+fn load_arm(spec: &ScenarioSpec, dir: &Path, issues: &mut Issues) -> Option<UrArm> {
+    let key = root().key("cell").key("robot");
+    let path = dir.join(&spec.cell.robot);
+    if !path.is_file() {
+        issues.push((
+            key,
+            format!("robot description {} does not exist", path.display()),
+        ));
+        return None;
+    }
+    let arm = match UrArm::from_file(&path) {
+        Ok(arm) => arm,
+        Err(e) => {
+            issues.push((key, format!("cannot use the robot description: {e}")));
+            return None;
+        }
+    };
+    let slowest = arm.slowest_joint_speed();
+    if spec.cell.limits.max_joint_speed > slowest {
+        issues.push((
+            root().key("cell").key("limits").key("max_joint_speed"),
+            format!(
+                "{} rad/s is more than the {}'s slowest joint allows ({slowest:.4} rad/s, from {})",
+                spec.cell.limits.max_joint_speed,
+                arm.name,
+                path.display()
+            ),
+        ));
+    }
+    Some(arm)
+}
+
+/// Checks a parsed scenario whose relative paths start at `dir`; returns the catalog and the arm
+/// when they load.
+pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrArm>, Issues) {
     let mut issues = Issues::new();
     if spec.episodes == 0 {
         issues.push((root().key("episodes"), "episodes must be at least 1".into()));
     }
     let cell = root().key("cell");
-    let robot = dir.join(&spec.cell.robot);
-    if !robot.is_file() {
-        issues.push((
-            cell.key("robot"),
-            format!("robot description {} does not exist", robot.display()),
-        ));
-    }
+    let arm = load_arm(spec, dir, &mut issues);
     for (name, pose) in [("base_T_table", &spec.cell.base_T_table)] {
         if !pose.is_finite() {
             issues.push((cell.key(name), "pose has a non-finite number".into()));
@@ -157,17 +187,19 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
     };
     if let Some(catalog) = &catalog {
         check_against_catalog(spec, catalog, &mut issues);
+    }
+    if let (Some(catalog), Some(arm)) = (&catalog, &arm) {
         // What the simulated cell refuses as impossible (reach, workspace, feeder over the
         // fixture, parts wider than the stroke), where not already reported at the same key.
         let c = &spec.cell;
-        for (key, message) in check_feasible(c, &spec.assembly, &spec.noise, catalog) {
+        for (key, message) in check_feasible(c, arm, &spec.assembly, &spec.noise, catalog) {
             let path = KeyPath::parse(&key);
             if !issues.iter().any(|(p, _)| *p == path) {
                 issues.push((path, message));
             }
         }
     }
-    (catalog, issues)
+    (catalog, arm, issues)
 }
 
 fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Issues) {

@@ -2,7 +2,7 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use perception::part::{Catalog, TriMesh};
-use robots::kinematics::UrKinematics;
+use robots::ur_arm::UrArm;
 
 use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec};
 
@@ -14,10 +14,12 @@ const APPROACH: f64 = 0.03;
 /// Checks: tolerances, clearances and lead-ins; the insertion axis; parts and destinations in the
 /// catalog and placed by an earlier step; each grasp's part width against the gripper stroke;
 /// gripper and feeder sizes; noise values; the fixture and the feeder corners inside the limits'
-/// workspace box and reachable top-down by the UR5e with this gripper; the feeder region
+/// workspace box and reachable top-down by the arm (`arm`, the scenario's `cell.robot`) with this
+/// gripper; the feeder region
 /// overlapping the fixture's footprint.
 pub fn check_feasible(
     cell: &CellSpec,
+    arm: &UrArm,
     steps: &[AssemblyStep],
     noise: &NoiseSpec,
     catalog: &Catalog,
@@ -167,7 +169,7 @@ pub fn check_feasible(
     // Reach: the fixture and the feeder corners, top-down, inside the workspace box.
     let base_T_table = cell.base_T_table.isometry();
     let kin =
-        UrKinematics::ur5e().with_tcp(Isometry3::translation(0.0, 0.0, g.tcp_offset.max(0.0)));
+        (arm.kinematics.clone()).with_tcp(Isometry3::translation(0.0, 0.0, g.tcp_offset.max(0.0)));
     let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
     let reachable = |p: &Point3<f64>| {
         let tcp = Isometry3::from_parts(Translation3::new(p.x, p.y, p.z + APPROACH), down);
@@ -188,8 +190,9 @@ pub fn check_feasible(
         bad(
             "cell.fixture.table_T_fixture".into(),
             format!(
-                "fixture at {:?} m (base) is out of the UR5e's reach top-down",
-                fixture_origin.coords.as_slice()
+                "fixture at {:?} m (base) is out of the {}'s reach top-down",
+                fixture_origin.coords.as_slice(),
+                arm.name
             ),
         );
     }
