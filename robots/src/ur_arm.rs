@@ -19,6 +19,10 @@ use crate::kinematics::{Joints, SingularityPolicy, SingularityThresholds, UrDh, 
 /// kinematics and the derived UR parameters'.
 pub const FK_TOLERANCE: f64 = 1e-9;
 
+/// Resolution the derived DH lengths are rounded to (m): far below any arm's accuracy, far above
+/// the rounding of the joint-axis arithmetic.
+pub const LENGTH_RESOLUTION: f64 = 1e-10;
+
 /// Link the UR chain starts at (the controller base frame).
 pub const BASE_LINK: &str = "base";
 /// Link the UR chain ends at (the tool flange, UR's tool0).
@@ -151,13 +155,16 @@ fn derive_dh(chain: &SerialChain) -> Result<UrDh, String> {
     let d4 = -point(4).y;
     let d5 = d1 - point(5).z;
     let d6 = -flange.y - d4;
+    // The differences above carry ~1e-16 m of rounding; lengths written in decimal (as UR
+    // publishes them) come out exactly when snapped to LENGTH_RESOLUTION.
+    let snap = |v: f64| (v / LENGTH_RESOLUTION).round() / LENGTH_RESOLUTION.recip();
     let dh = UrDh {
-        d1,
-        a2,
-        a3,
-        d4,
-        d5,
-        d6,
+        d1: snap(d1),
+        a2: snap(a2),
+        a3: snap(a3),
+        d4: snap(d4),
+        d5: snap(d5),
+        d6: snap(d6),
     };
     if !dh.is_valid() {
         return Err(format!(
