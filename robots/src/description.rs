@@ -558,10 +558,7 @@ impl SerialChain {
 
     /// Each movable joint's axis in the root frame at joint values `q`: a point on it and its
     /// direction, root first (the axis of joint i does not depend on q_i).
-    pub fn joint_axes(
-        &self,
-        q: &[f64],
-    ) -> Result<Vec<JointAxis>, DescriptionError> {
+    pub fn joint_axes(&self, q: &[f64]) -> Result<Vec<JointAxis>, DescriptionError> {
         self.check_count(q)?;
         let mut pose = Isometry3::identity();
         let mut out = Vec::with_capacity(self.segments.len());

@@ -2,7 +2,9 @@
 pub mod dashboard;
 pub mod description;
 pub mod kinematics;
+pub mod limited;
 pub mod limits;
+pub mod motion;
 pub mod program;
 pub mod robot;
 pub mod rtde;

@@ -123,7 +123,7 @@ async fn wait_for(what: &str, cond: impl Fn() -> bool) {
 }
 
 /// Controller seconds one gripper command takes.
-async fn timed_gripper(vur: &VirtualUr, robot: &mut UrRobot, close: bool) -> f64 {
+async fn timed_gripper(vur: &VirtualUr, robot: &mut impl Robot, close: bool) -> f64 {
     let t0 = vur.controller.snapshot().timestamp;
     if close {
         robot.close_gripper().await.unwrap();

@@ -261,7 +261,10 @@ fn cell_with_workspace_below_the_table() -> SimCell {
 #[tokio::test]
 async fn the_robot_trait_checks_limits_and_the_table() {
     let mut cell = cell_with_workspace_below_the_table();
-    let robot: &mut dyn Robot = &mut cell;
+    let model = cell.model().clone();
+    // Driven as a robot, the cell is wrapped in the limits decorator.
+    let mut limited = model.limited(&mut cell).unwrap();
+    let robot: &mut dyn Robot = &mut limited;
     let home = robot.tcp_pose().await.unwrap();
     let slow = LinearMotion {
         speed: 0.1,
@@ -291,7 +294,8 @@ async fn the_robot_trait_checks_limits_and_the_table() {
     robot.move_l(just_above, slow).await.unwrap();
     let t0 = cell.clock();
     assert!(t0 > 1.0, "two moves of ~0.12 and 0.15 m at 0.1 m/s: {t0} s");
-    let robot: &mut dyn Robot = &mut cell;
+    let mut limited = model.limited(&mut cell).unwrap();
+    let robot: &mut dyn Robot = &mut limited;
     let mut below = just_above;
     below.translation.vector.z = -0.001;
     assert!(matches!(
@@ -304,7 +308,8 @@ async fn the_robot_trait_checks_limits_and_the_table() {
     ));
     assert!(!robot.status().await.unwrap().ready());
     cell.unlock_protective_stop();
-    let robot: &mut dyn Robot = &mut cell;
+    let mut limited = model.limited(&mut cell).unwrap();
+    let robot: &mut dyn Robot = &mut limited;
     robot.move_l(beside, slow).await.unwrap();
 }
 

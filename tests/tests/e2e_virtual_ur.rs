@@ -16,6 +16,7 @@ use cell::orchestrator::{
 };
 use nalgebra::Isometry3;
 use robots::kinematics::Joints;
+use robots::limited::Limited;
 use robots::limits::Limits;
 use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
 use robots::ur_robot::UrRobot;
@@ -24,7 +25,7 @@ use sim::cell::SimCell;
 
 use e2e_support::{Setup, setup};
 
-async fn start(setup: &Setup, episode: u32) -> (VirtualUr, UrRobot, Arc<Mutex<SimCell>>) {
+async fn start(setup: &Setup, episode: u32) -> (VirtualUr, Limited<UrRobot>, Arc<Mutex<SimCell>>) {
     let s = connect_sim_over_rtde(setup, episode, Duration::from_millis(100))
         .await
         .unwrap();
@@ -53,7 +54,7 @@ async fn run_over_rtde(
 
 /// A robot that counts the moves it passes on.
 struct CountingRobot<'a> {
-    inner: &'a mut UrRobot,
+    inner: &'a mut Limited<UrRobot>,
     moves: usize,
 }
 

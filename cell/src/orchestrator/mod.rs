@@ -90,6 +90,9 @@ pub enum OrchestratorError {
     /// No tokio runtime could be built.
     #[error("tokio runtime: {0}")]
     Runtime(String),
+    /// The cell's limits are unusable, so its robot cannot be driven.
+    #[error(transparent)]
+    Limits(#[from] robots::limits::InvalidLimits),
 }
 
 /// One episode's output: the record and its events.
@@ -214,7 +217,7 @@ pub async fn run_sim_episode(
     episode: u32,
 ) -> Result<EpisodeOutput, OrchestratorError> {
     let cell = setup.cell(episode)?;
-    let mut robot = SharedSimRobot::new(cell.clone());
+    let mut robot = setup.model.limited(SharedSimRobot::new(cell.clone()))?;
     let mut io = SimCellIo::new(cell);
     let mut perception = keypoint_noise_for(&setup.scenario, episode)?;
     Ok(run_episode(

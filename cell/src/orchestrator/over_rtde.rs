@@ -7,6 +7,7 @@ use std::net::{IpAddr, Ipv4Addr};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use robots::limited::Limited;
 use robots::robot::RobotError;
 use robots::ur_robot::{UrRobot, UrRobotConfig};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
@@ -35,7 +36,7 @@ pub struct SimOverRtde {
     /// The virtual controller (drop it to stop it); tests inject faults through it.
     pub controller: VirtualUr,
     /// The production client, connected and running our program.
-    pub robot: UrRobot,
+    pub robot: Limited<UrRobot>,
     /// The simulated cell the controller drives (camera, feeder, verdicts).
     pub cell: Arc<Mutex<SimCell>>,
 }

@@ -5,6 +5,9 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::part::Catalog;
 use robots::kinematics::{IkError, Joints, UrKinematics, joint_distance};
+use robots::limited::Limited;
+use robots::limits::InvalidLimits;
+use robots::robot::Robot;
 use robots::ur_arm::UrArm;
 
 use super::error::CellError;
@@ -136,6 +139,12 @@ impl CellModel {
             home,
             drop_models,
         }))
+    }
+
+    /// `robot` (the simulated cell, or a handle on it) wrapped with the cell's limits and
+    /// kinematics, so every commanded target is checked: how the cell is driven as a robot.
+    pub fn limited<R: Robot>(&self, robot: R) -> Result<Limited<R>, InvalidLimits> {
+        Limited::new(robot, self.spec.limits.clone(), self.kinematics.clone())
     }
 
     /// The shapes of a part.
