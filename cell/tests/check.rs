@@ -165,7 +165,7 @@ fn a_fixture_out_of_reach_and_a_feeder_over_the_fixture_are_rejected_with_their_
         .iter()
         .find(|p| p.key.as_deref() == Some("cell.fixture.table_T_fixture"))
         .unwrap_or_else(|| panic!("{err}"));
-    assert!(p.message.contains("out of the UR5e's reach"), "{err}");
+    assert!(p.message.contains("out of the ur5e's reach"), "{err}");
     assert_eq!(p.line, line_of(&text, "table_T_fixture ="));
 
     // The feeder region centred on the fixture nest.

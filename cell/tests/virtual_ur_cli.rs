@@ -56,7 +56,7 @@ async fn serves_the_scenario_cell_from_its_home() {
             && banner.contains("127.0.0.1:"),
         "{banner}"
     );
-    let mut config = UrRobotConfig::new("127.0.0.1");
+    let mut config = UrRobotConfig::new("127.0.0.1", setup.engine.knowledge.kinematics.clone());
     config.rtde_port = port_after(&banner, "RTDE ");
     config.dashboard_port = port_after(&banner, "dashboard ");
     config.script_port = port_after(&banner, "script ");

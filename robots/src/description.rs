@@ -6,7 +6,7 @@
 //! for its movable joints. The path may climb from the root link to a common ancestor through
 //! fixed joints (ROS's `base` frame hangs off `base_link` that way), then descend to the tip.
 
-use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -127,6 +127,14 @@ pub enum DescriptionError {
         /// A link on the cycle.
         link: String,
     },
+    /// The chain from `base` to `tool0` is not a six-joint Universal Robots arm.
+    #[error("{origin}: not a six-joint UR arm from `base` to `tool0`: {reason}")]
+    NotUrArm {
+        /// File name or other label of the text.
+        origin: String,
+        /// What differs from a UR arm.
+        reason: String,
+    },
     /// Forward kinematics got the wrong number of joint values.
     #[error("chain `{root}` → `{tip}` has {expected} movable joints, got {got} values")]
     JointCount {
@@ -219,6 +227,11 @@ impl RobotDescription {
             }
         }
         Ok(description)
+    }
+
+    /// The file name or label the description was read from (errors name it).
+    pub fn origin(&self) -> &str {
+        &self.origin
     }
 
     /// The robot's name in the URDF.
@@ -460,6 +473,9 @@ pub struct UrdfJointLimit {
     pub effort: f64,
 }
 
+/// A joint axis in the root frame: a point on it and its direction.
+pub type JointAxis = (Point3<f64>, Unit<Vector3<f64>>);
+
 /// The movable joints between two links of a description, with forward kinematics.
 #[derive(Clone, Debug)]
 pub struct SerialChain {
@@ -530,6 +546,31 @@ impl SerialChain {
             pose = pose * segment.before * segment.motion(value);
         }
         Ok(pose * self.after)
+    }
+
+    /// Whether each movable joint turns (revolute or continuous) rather than slides, root first.
+    pub fn revolute(&self) -> Vec<bool> {
+        self.segments
+            .iter()
+            .map(|s| s.motion == Motion::Revolute)
+            .collect()
+    }
+
+    /// Each movable joint's axis in the root frame at joint values `q`: a point on it and its
+    /// direction, root first (the axis of joint i does not depend on q_i).
+    pub fn joint_axes(&self, q: &[f64]) -> Result<Vec<JointAxis>, DescriptionError> {
+        self.check_count(q)?;
+        let mut pose = Isometry3::identity();
+        let mut out = Vec::with_capacity(self.segments.len());
+        for (segment, &value) in self.segments.iter().zip(q) {
+            let joint = pose * segment.before;
+            out.push((
+                joint * Point3::origin(),
+                Unit::new_normalize(joint.rotation * segment.axis.into_inner()),
+            ));
+            pose = joint * segment.motion(value);
+        }
+        Ok(out)
     }
 
     /// `root_T_link` for the child link of every movable joint (root first), e.g. to place

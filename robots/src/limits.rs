@@ -1,4 +1,5 @@
-//! Cell limits every [`crate::robot::Robot`] implementation checks before sending a target.
+//! Cell limits: the workspace box, speeds, accelerations and joint ranges every commanded target
+//! is checked against ([`crate::limited::Limited`] does it for every robot).
 
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -6,7 +7,7 @@ use std::f64::consts::PI;
 use thiserror::Error;
 
 use crate::kinematics::{JointLimits, Joints, UrKinematics};
-use crate::robot::{JointMotion, LinearMotion};
+use crate::motion::{JointMotion, LinearMotion};
 
 /// An axis-aligned box in the robot base frame the TCP must stay in (m).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -9,8 +9,9 @@
 //! futures run on tokio's multi-threaded runtime. Implementations write
 //! `Box::pin(async move { ... })`.
 //!
-//! Every implementation checks each target with [`Limits`] before sending it and fails with
-//! [`RobotError::LimitViolation`] instead of moving.
+//! Implementations do not check limits themselves: every construction site wraps its robot in
+//! [`crate::limited::Limited`], which checks each target against the [`Limits`] before it is
+//! passed on and fails with [`RobotError::LimitViolation`] instead of moving.
 
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
@@ -21,27 +22,10 @@ use thiserror::Error;
 
 use crate::kinematics::{IkError, Joints};
 use crate::limits::{LimitViolation, Limits};
+pub use crate::motion::{JointMotion, LinearMotion};
 
 /// The future every [`Robot`] method returns.
 pub type RobotFuture<'a, T> = Pin<Box<dyn Future<Output = Result<T, RobotError>> + Send + 'a>>;
-
-/// Speed and acceleration of a joint-space move (the leading joint's, like URScript `movej`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct JointMotion {
-    /// Joint speed (rad/s).
-    pub speed: f64,
-    /// Joint acceleration (rad/s²).
-    pub acceleration: f64,
-}
-
-/// Speed and acceleration of a straight-line TCP move (like URScript `movel`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LinearMotion {
-    /// TCP speed (m/s).
-    pub speed: f64,
-    /// TCP acceleration (m/s²).
-    pub acceleration: f64,
-}
 
 /// The arm's power and control state (UR `robot_mode`): the one type for it, on RTDE, the
 /// dashboard (words in [`crate::dashboard`]) and the virtual controller alike.
@@ -292,6 +276,50 @@ pub trait Robot: Send {
     /// Mode, safety state and whether our program runs.
     fn status(&mut self) -> RobotFuture<'_, RobotStatus>;
 }
+
+/// Forwards every method to the robot behind a pointer, so a decorator such as
+/// [`crate::limited::Limited`] can wrap a borrowed or boxed robot.
+macro_rules! forward_robot {
+    ($ty:ty) => {
+        impl<R: Robot + ?Sized> Robot for $ty {
+            fn limits(&self) -> &Limits {
+                (**self).limits()
+            }
+            fn joints(&mut self) -> RobotFuture<'_, Joints> {
+                (**self).joints()
+            }
+            fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
+                (**self).tcp_pose()
+            }
+            fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
+                (**self).move_j(target, motion)
+            }
+            #[allow(non_snake_case)]
+            fn move_l(
+                &mut self,
+                base_T_tcp: Isometry3<f64>,
+                motion: LinearMotion,
+            ) -> RobotFuture<'_, ()> {
+                (**self).move_l(base_T_tcp, motion)
+            }
+            fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
+                (**self).open_gripper()
+            }
+            fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
+                (**self).close_gripper()
+            }
+            fn stop(&mut self) -> RobotFuture<'_, ()> {
+                (**self).stop()
+            }
+            fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
+                (**self).status()
+            }
+        }
+    };
+}
+
+forward_robot!(&mut R);
+forward_robot!(Box<R>);
 
 #[cfg(test)]
 mod tests {

@@ -1,7 +1,8 @@
 //! `UrRobot`: the [`Robot`] trait over RTDE + dashboard + our URScript program (`cell.script`).
 //!
-//! Every target is checked against the configured [`Limits`] (workspace box, speeds,
-//! accelerations, joint range) before anything is sent. Each command gets a fresh id, is written
+//! [`UrRobot::connect`] returns the robot wrapped in [`Limited`], which checks every target
+//! against the configured [`Limits`] (workspace box, speeds, accelerations, joint range) before
+//! anything is sent. Each command gets a fresh id, is written
 //! to the program's registers in one RTDE package, and is awaited with a timeout; a protective
 //! stop, an emergency stop or the program stopping aborts the wait with a typed error. While a
 //! safety stop is active no command is sent at all. A gripper command is done only after the
@@ -9,6 +10,7 @@
 
 use crate::dashboard::{DashboardClient, DashboardError};
 use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
+use crate::limited::Limited;
 use crate::limits::Limits;
 use crate::program::{self, layout as L};
 use crate::robot::{
@@ -45,7 +47,7 @@ pub struct UrRobotConfig {
     pub dashboard_port: u16,
     /// Script port (30003).
     pub script_port: u16,
-    /// Limits every target is checked against.
+    /// Limits every target is checked against (by the [`Limited`] wrapper `connect` returns).
     pub limits: Limits,
     /// Kinematics used for the joint-move path check and reachability.
     pub kinematics: UrKinematics,
@@ -82,15 +84,16 @@ pub enum UrConfigError {
 }
 
 impl UrRobotConfig {
-    /// Defaults for a controller at `host` on the standard ports.
-    pub fn new(host: impl Into<String>) -> UrRobotConfig {
+    /// Defaults for the arm with `kinematics` (from its description, with the TCP set in the
+    /// controller) at `host` on the standard ports.
+    pub fn new(host: impl Into<String>, kinematics: UrKinematics) -> UrRobotConfig {
         UrRobotConfig {
             host: host.into(),
             rtde_port: crate::rtde::RTDE_PORT,
             dashboard_port: crate::dashboard::DASHBOARD_PORT,
             script_port: 30003,
             limits: Limits::default(),
-            kinematics: UrKinematics::ur5e(),
+            kinematics,
             command_timeout: Duration::from_secs(30),
             program_start_timeout: Duration::from_secs(5),
             heartbeat_period: Duration::from_millis(50),
@@ -218,9 +221,14 @@ pub async fn upload_script(address: &str, script: &str, timeout: Duration) -> st
 }
 
 impl UrRobot {
-    /// Connects RTDE and the dashboard, uploads our program and waits until it runs.
-    pub async fn connect(config: UrRobotConfig) -> Result<UrRobot, RobotError> {
-        config.limits.validate().map_err(|e| RobotError::Rejected {
+    /// Connects RTDE and the dashboard, uploads our program and waits until it runs. The robot
+    /// comes wrapped in [`Limited`] with the configured limits and kinematics (the only way to
+    /// get one), so no target reaches the controller unchecked.
+    pub async fn connect(config: UrRobotConfig) -> Result<Limited<UrRobot>, RobotError> {
+        let limits = config.limits.clone();
+        let kinematics = config.kinematics.clone();
+        // Checked before anything connects.
+        limits.validate().map_err(|e| RobotError::Rejected {
             detail: e.to_string(),
         })?;
         config.validate().map_err(|e| RobotError::Rejected {
@@ -262,7 +270,9 @@ impl UrRobot {
             heartbeat,
         };
         robot.start_program().await?;
-        Ok(robot)
+        Limited::new(robot, limits, kinematics).map_err(|e| RobotError::Rejected {
+            detail: e.to_string(),
+        })
     }
 
     /// The newest state, or a connection error when the link is down or no state has arrived.
@@ -495,14 +505,6 @@ impl Robot for UrRobot {
 
     fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
         Box::pin(async move {
-            let from = self.joints().await?;
-            self.config.limits.check_move_j(
-                &self.config.kinematics,
-                &from,
-                &target,
-                &motion,
-                32,
-            )?;
             let cmd = Command {
                 kind: L::KIND_MOVEJ,
                 target,
@@ -517,7 +519,6 @@ impl Robot for UrRobot {
     #[allow(non_snake_case)]
     fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
         Box::pin(async move {
-            self.config.limits.check_move_l(&base_T_tcp, &motion)?;
             let from = self.joints().await?;
             self.config.kinematics.inverse_nearest(&base_T_tcp, &from)?;
             let cmd = Command {

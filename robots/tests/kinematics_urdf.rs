@@ -1,4 +1,4 @@
-//! The shipped UR5e URDF against the DH kinematics, and the loader's errors.
+//! The shipped UR URDFs against the DH kinematics derived from them, and the loader's errors.
 
 #![allow(non_snake_case)]
 
@@ -7,6 +7,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robots::description::{DescriptionError, RobotDescription};
 use robots::kinematics::{Joints, UrKinematics};
+use robots::ur_arm::UrArm;
 use std::f64::consts::{PI, TAU};
 use std::path::PathBuf;
 
@@ -220,4 +221,158 @@ fn loader_errors_name_the_file_and_what_is_missing() {
         RobotDescription::from_urdf_str(&floating, "float.urdf"),
         Err(DescriptionError::UnsupportedJoint { .. })
     ));
+}
+
+/// The shipped arms with UR's published DH lengths (d1, a2, a3, d4, d5, d6) and their datasheet
+/// joint speeds (deg/s, base first).
+const ARMS: [(&str, [f64; 6], [f64; 6]); 5] = [
+    (
+        "ur3e",
+        [0.15185, -0.24355, -0.2132, 0.13105, 0.08535, 0.0921],
+        [180.0, 180.0, 180.0, 360.0, 360.0, 360.0],
+    ),
+    (
+        "ur5e",
+        [0.1625, -0.425, -0.3922, 0.1333, 0.0997, 0.0996],
+        [180.0; 6],
+    ),
+    (
+        "ur10e",
+        [0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655],
+        [120.0, 120.0, 180.0, 180.0, 180.0, 180.0],
+    ),
+    (
+        "ur16e",
+        [0.1807, -0.4784, -0.36, 0.17415, 0.11985, 0.11655],
+        [120.0, 120.0, 180.0, 180.0, 180.0, 180.0],
+    ),
+    (
+        "ur20",
+        [0.2363, -0.862, -0.7287, 0.201, 0.1593, 0.1543],
+        [120.0, 120.0, 150.0, 210.0, 210.0, 210.0],
+    ),
+];
+
+fn arm_urdf(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("../scenarios/robots/{name}.urdf"))
+}
+
+#[test]
+fn every_shipped_arm_yields_the_published_ur_parameters_and_its_urdf_kinematics() {
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for (name, published, speeds_deg) in ARMS {
+        let arm = UrArm::from_file(arm_urdf(name)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(arm.name, name);
+        let dh = arm.kinematics.dh;
+        let derived = [dh.d1, dh.a2, dh.a3, dh.d4, dh.d5, dh.d6];
+        for (d, p) in derived.iter().zip(published) {
+            assert!(
+                *d == p,
+                "{name}: derived {derived:?}, published {published:?}"
+            );
+        }
+        for (speed, deg) in arm.max_joint_speeds.iter().zip(speeds_deg) {
+            assert!(
+                (speed - deg.to_radians()).abs() < 1e-12,
+                "{name}: {:?}",
+                arm.max_joint_speeds
+            );
+        }
+        // ±360° on every joint; the UR3e's wrist 3 turns without limit.
+        let limits = arm.kinematics.joint_limits;
+        for i in 0..6 {
+            let unlimited = name == "ur3e" && i == 5;
+            let expected = if unlimited { f64::INFINITY } else { TAU };
+            assert_eq!(
+                (limits.lower[i], limits.upper[i]),
+                (-expected, expected),
+                "{name} {i}"
+            );
+        }
+        // FK through the URDF joint chain and through the derived parameters agree.
+        let chain = RobotDescription::from_file(arm_urdf(name))
+            .unwrap()
+            .chain("base", "tool0")
+            .unwrap();
+        for _ in 0..500 {
+            let q: Joints = std::array::from_fn(|_| rng.random_range(-TAU..TAU));
+            let urdf = chain.forward(&q).unwrap();
+            let derived = arm.kinematics.forward_flange(&q);
+            assert!(
+                close(&urdf, &derived, 1e-9),
+                "{name} {q:?}: {urdf} vs {derived}"
+            );
+        }
+    }
+    // The UR5e derived from its URDF is exactly the built-in nominal UR5e.
+    assert_eq!(
+        UrArm::from_file(ur5e_urdf()).unwrap().kinematics,
+        UrKinematics::ur5e()
+    );
+}
+
+fn ur5e_text() -> String {
+    std::fs::read_to_string(ur5e_urdf()).unwrap()
+}
+
+fn not_ur(text: &str, origin: &str) -> String {
+    let err = UrArm::from_description(&RobotDescription::from_urdf_str(text, origin).unwrap())
+        .unwrap_err();
+    let message = err.to_string();
+    assert!(message.starts_with(origin), "{message}");
+    message
+}
+
+#[test]
+fn a_urdf_that_is_not_a_six_joint_ur_chain_is_refused_with_the_reason() {
+    // Not a UR chain at all: no `base` link (the file and the known links are named).
+    let err = UrArm::from_description(&RobotDescription::from_urdf_str(MINI, "mini.urdf").unwrap())
+        .unwrap_err();
+    assert!(matches!(err, DescriptionError::UnknownLink { .. }), "{err}");
+    assert!(err.to_string().starts_with("mini.urdf"), "{err}");
+
+    // Five movable joints: wrist 3 welded.
+    let text = ur5e_text().replace(
+        r#"<joint name="wrist_3_joint" type="revolute">"#,
+        r#"<joint name="wrist_3_joint" type="fixed">"#,
+    );
+    let message = not_ur(&text, "five.urdf");
+    assert!(message.contains("has 5 movable joints"), "{message}");
+
+    // A sliding joint.
+    let text = ur5e_text().replace(
+        r#"<joint name="elbow_joint" type="revolute">"#,
+        r#"<joint name="elbow_joint" type="prismatic">"#,
+    );
+    let message = not_ur(&text, "slide.urdf");
+    assert!(message.contains("joint `elbow_joint` slides"), "{message}");
+
+    // A joint turning the other way round.
+    let text = ur5e_text().replace(
+        "<origin xyz=\"0 0 0.1625\" rpy=\"1.570796326794897 0 0\"/>\n    <axis xyz=\"0 0 1\"/>",
+        "<origin xyz=\"0 0 0.1625\" rpy=\"1.570796326794897 0 0\"/>\n    <axis xyz=\"0 0 -1\"/>",
+    );
+    assert_ne!(text, ur5e_text());
+    let message = not_ur(&text, "flipped.urdf");
+    assert!(
+        message.contains("joint 2 `shoulder_lift_joint` turns about"),
+        "{message}"
+    );
+
+    // The forearm offset sideways: parallel axes, but no longer the UR structure the analytic
+    // IK solves (the FK check finds it).
+    let text = ur5e_text().replace(
+        r#"<origin xyz="-0.3922 0 0" rpy="0 0 0"/>"#,
+        r#"<origin xyz="-0.3922 0.01 0" rpy="0 0 0"/>"#,
+    );
+    let message = not_ur(&text, "offset.urdf");
+    assert!(
+        message.contains("not a six-joint UR arm")
+            && message.contains("forward kinematics only to"),
+        "{message}"
+    );
+
+    // Missing file: named.
+    let err = UrArm::from_file("/nonexistent/ur.urdf").unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/ur.urdf"), "{err}");
 }

@@ -40,7 +40,7 @@ fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
         dashboard_port: vur.dashboard_addr().port(),
         script_port: vur.script_addr().port(),
         command_timeout: Duration::from_secs(10),
-        ..UrRobotConfig::new("127.0.0.1")
+        ..UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e())
     }
 }
 
@@ -309,13 +309,13 @@ async fn protective_stop_aborts_the_move_and_blocks_motion_until_unlocked() {
     assert!(max_diff(&snap.arm.q, &halted) < 1e-12);
 
     // A real UR refuses to unlock during the first seconds (here 300 ms).
-    let too_early = robot.unlock_protective_stop().await;
+    let too_early = robot.inner_mut().unlock_protective_stop().await;
     assert!(
         matches!(too_early, Err(RobotError::Rejected { .. })),
         "{too_early:?}"
     );
     tokio::time::sleep(Duration::from_millis(300)).await;
-    robot.unlock_protective_stop().await.unwrap();
+    robot.inner_mut().unlock_protective_stop().await.unwrap();
     robot.move_j(home, JOINT).await.unwrap();
     assert!(max_diff(&robot.joints().await.unwrap(), &home) < 1e-6);
 }
@@ -338,12 +338,12 @@ async fn emergency_stop_and_program_stop_abort_with_typed_errors() {
         "{result:?}"
     );
     vur.controller.release_emergency_stop();
-    let dash = robot.dashboard().unwrap();
+    let dash = robot.inner_mut().dashboard().unwrap();
     assert_eq!(dash.robot_mode().await.unwrap(), RobotMode::PowerOff);
     dash.power_on().await.unwrap();
     dash.brake_release().await.unwrap();
     assert_eq!(dash.safety_status().await.unwrap(), SafetyStatus::Normal);
-    robot.start_program().await.unwrap();
+    robot.inner_mut().start_program().await.unwrap();
 
     // The program stopping (dashboard stop from elsewhere) aborts a running move.
     let address = vur.dashboard_addr().to_string();
@@ -398,11 +398,11 @@ async fn refused_program_and_dropped_link_give_typed_errors() {
     // While the link is down, state queries fail with a typed error.
     let deadline = Instant::now() + Duration::from_secs(1);
     loop {
-        let status = robot.rtde().status();
+        let status = robot.inner_mut().rtde().status();
         if status != LinkStatus::Streaming {
             match robot.joints().await {
                 Err(RobotError::ConnectionLost { .. }) => break,
-                Ok(_) if robot.rtde().reconnects() > 0 => break, // already back up
+                Ok(_) if robot.inner_mut().rtde().reconnects() > 0 => break, // already back up
                 other => panic!("{other:?} while {status:?}"),
             }
         }
@@ -410,11 +410,12 @@ async fn refused_program_and_dropped_link_give_typed_errors() {
         tokio::time::sleep(Duration::from_millis(1)).await;
     }
     let deadline = Instant::now() + Duration::from_secs(3);
-    while robot.rtde().status() != LinkStatus::Streaming {
+    while robot.inner_mut().rtde().status() != LinkStatus::Streaming {
         assert!(Instant::now() < deadline, "link not back");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     robot
+        .inner_mut()
         .rtde()
         .next_state(Duration::from_secs(1))
         .await

@@ -106,7 +106,7 @@ fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
         script_port: vur.script_addr().port(),
         command_timeout: Duration::from_secs(10),
         kinematics: UrKinematics::ur5e().with_tcp(tcp()),
-        ..UrRobotConfig::new("127.0.0.1")
+        ..UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e())
     }
 }
 
@@ -126,7 +126,7 @@ async fn wait_for(what: &str, cond: impl Fn() -> bool) {
 }
 
 /// Controller seconds one gripper command takes.
-async fn timed_gripper(vur: &VirtualUr, robot: &mut UrRobot, close: bool) -> f64 {
+async fn timed_gripper(vur: &VirtualUr, robot: &mut impl Robot, close: bool) -> f64 {
     let t0 = vur.controller.snapshot().timestamp;
     if close {
         robot.close_gripper().await.unwrap();
@@ -206,7 +206,7 @@ async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time(
 
 #[test]
 fn the_gripper_actuation_time_is_validated() {
-    let mut config = UrRobotConfig::new("127.0.0.1");
+    let mut config = UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e());
     assert_eq!(config.validate(), Ok(()));
     for good in [0.0, 0.25, MAX_GRIPPER_ACTUATION_S] {
         config.gripper_actuation_s = good;

@@ -21,12 +21,19 @@ use sim::cell::{CellModel, SimCell};
 #[path = "../tests/support/mod.rs"]
 mod support;
 
-use support::{catalog, scenario, script};
+use support::{arm, catalog, scenario, script};
 
 fn episodes(c: &mut Criterion) {
     let s = scenario();
-    let model: Arc<CellModel> =
-        CellModel::new(&s.cell, &s.assembly, &s.noise, &catalog(), Scorer::Analytic).unwrap();
+    let model: Arc<CellModel> = CellModel::new(
+        &s.cell,
+        &arm(),
+        &s.assembly,
+        &s.noise,
+        &catalog(),
+        Scorer::Analytic,
+    )
+    .unwrap();
     let mut episode = 0u64;
     c.bench_function("cell/episode_analytic_1_core", |b| {
         b.iter(|| {

@@ -20,11 +20,11 @@ use sim::config::NoiseSpec;
 
 mod support;
 
-use support::{Nominal as Scenario, catalog, scenario, script};
+use support::{Nominal as Scenario, arm, catalog, scenario, script};
 
 fn model(noise: &NoiseSpec, scorer: Scorer) -> Arc<CellModel> {
     let s = scenario();
-    CellModel::new(&s.cell, &s.assembly, noise, &catalog(), scorer).unwrap()
+    CellModel::new(&s.cell, &arm(), &s.assembly, noise, &catalog(), scorer).unwrap()
 }
 
 fn zero_noise() -> NoiseSpec {
@@ -248,6 +248,7 @@ fn cell_with_workspace_below_the_table() -> SimCell {
     s.cell.limits.workspace.min[2] = -0.05;
     let m = CellModel::new(
         &s.cell,
+        &arm(),
         &s.assembly,
         &zero_noise(),
         &catalog(),
@@ -260,7 +261,10 @@ fn cell_with_workspace_below_the_table() -> SimCell {
 #[tokio::test]
 async fn the_robot_trait_checks_limits_and_the_table() {
     let mut cell = cell_with_workspace_below_the_table();
-    let robot: &mut dyn Robot = &mut cell;
+    let model = cell.model().clone();
+    // Driven as a robot, the cell is wrapped in the limits decorator.
+    let mut limited = model.limited(&mut cell).unwrap();
+    let robot: &mut dyn Robot = &mut limited;
     let home = robot.tcp_pose().await.unwrap();
     let slow = LinearMotion {
         speed: 0.1,
@@ -290,7 +294,8 @@ async fn the_robot_trait_checks_limits_and_the_table() {
     robot.move_l(just_above, slow).await.unwrap();
     let t0 = cell.clock();
     assert!(t0 > 1.0, "two moves of ~0.12 and 0.15 m at 0.1 m/s: {t0} s");
-    let robot: &mut dyn Robot = &mut cell;
+    let mut limited = model.limited(&mut cell).unwrap();
+    let robot: &mut dyn Robot = &mut limited;
     let mut below = just_above;
     below.translation.vector.z = -0.001;
     assert!(matches!(
@@ -303,7 +308,8 @@ async fn the_robot_trait_checks_limits_and_the_table() {
     ));
     assert!(!robot.status().await.unwrap().ready());
     cell.unlock_protective_stop();
-    let robot: &mut dyn Robot = &mut cell;
+    let mut limited = model.limited(&mut cell).unwrap();
+    let robot: &mut dyn Robot = &mut limited;
     robot.move_l(beside, slow).await.unwrap();
 }
 
@@ -342,9 +348,9 @@ async fn the_arm_model_stops_a_path_into_the_table() {
 fn impossible_scenarios_are_rejected_with_the_reason() {
     let cat = catalog();
     let ok = scenario();
-    assert!(check_feasible(&ok.cell, &ok.assembly, &ok.noise, &cat).is_empty());
+    assert!(check_feasible(&ok.cell, &arm(), &ok.assembly, &ok.noise, &cat).is_empty());
     let keys = |s: &Scenario| -> Vec<String> {
-        check_feasible(&s.cell, &s.assembly, &s.noise, &cat)
+        check_feasible(&s.cell, &arm(), &s.assembly, &s.noise, &cat)
             .into_iter()
             .map(|(k, _)| k)
             .collect()
@@ -374,7 +380,15 @@ fn impossible_scenarios_are_rejected_with_the_reason() {
     s.cell.feeder.center = [0.05, -0.05];
     assert_eq!(keys(&s), vec!["cell.feeder".to_string()]);
     // The model refuses to build and says why.
-    let err = CellModel::new(&s.cell, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap_err();
+    let err = CellModel::new(
+        &s.cell,
+        &arm(),
+        &s.assembly,
+        &s.noise,
+        &cat,
+        Scorer::Analytic,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("overlaps the fixture"), "{err}");
 }
 
@@ -417,7 +431,8 @@ fn the_gripper_actuation_time_is_the_scenarios_and_adds_per_actuation() {
     let run = |actuation_time: f64, episode: u64| {
         let mut spec = s.cell.clone();
         spec.gripper.actuation_time = actuation_time;
-        let m = CellModel::new(&spec, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap();
+        let m =
+            CellModel::new(&spec, &arm(), &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap();
         let arm = SimArm::new(Arc::new(std::sync::Mutex::new(
             SimCell::new(m.clone(), 11, episode).unwrap(),
         )));
@@ -464,7 +479,8 @@ fn a_bad_gripper_actuation_time_is_refused() {
         let mut spec = s.cell.clone();
         spec.gripper.actuation_time = bad;
         assert!(spec.gripper.actuation_time_problem().is_some(), "{bad}");
-        let err = CellModel::new(&spec, &s.assembly, &s.noise, &cat, Scorer::Analytic).unwrap_err();
+        let err = CellModel::new(&spec, &arm(), &s.assembly, &s.noise, &cat, Scorer::Analytic)
+            .unwrap_err();
         assert!(
             err.to_string().contains("cell.gripper.actuation_time"),
             "{bad}: {err}"

@@ -121,6 +121,7 @@ fn an_empty_feeder_shakes_the_bounded_number_of_times_then_aborts() {
     spec.cell.feeder.parts.insert("main_shell".into(), 0);
     let model = CellModel::new(
         &spec.cell,
+        &base.scenario().robot,
         &spec.assembly,
         &spec.noise,
         &base.scenario().catalog,

@@ -14,6 +14,7 @@ use cell::harness::{SimCellIo, connect_sim_over_rtde, keypoint_noise_for, run_si
 use cell::orchestrator::{EpisodeOutput, SplitCell, State, run_episode};
 use nalgebra::Isometry3;
 use robots::kinematics::Joints;
+use robots::limited::Limited;
 use robots::limits::Limits;
 use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
 use robots::ur_robot::UrRobot;
@@ -22,7 +23,7 @@ use sim::cell::SimCell;
 
 use e2e_support::{Setup, setup};
 
-async fn start(setup: &Setup, episode: u32) -> (VirtualUr, UrRobot, Arc<Mutex<SimCell>>) {
+async fn start(setup: &Setup, episode: u32) -> (VirtualUr, Limited<UrRobot>, Arc<Mutex<SimCell>>) {
     let s = connect_sim_over_rtde(setup, episode, Duration::from_millis(100))
         .await
         .unwrap();
@@ -43,7 +44,7 @@ async fn run_over_rtde(
 
 /// A robot that counts the moves it passes on.
 struct CountingRobot<'a> {
-    inner: &'a mut UrRobot,
+    inner: &'a mut Limited<UrRobot>,
     moves: usize,
 }
 

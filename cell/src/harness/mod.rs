@@ -54,6 +54,9 @@ pub enum HarnessError {
     /// No tokio runtime could be built.
     #[error("tokio runtime: {0}")]
     Runtime(String),
+    /// The cell's limits are unusable, so its robot cannot be driven.
+    #[error(transparent)]
+    Limits(#[from] robots::limits::InvalidLimits),
 }
 
 /// What stays the same across a scenario's simulated episodes.
@@ -70,7 +73,14 @@ impl SimSetup {
     pub fn new(scenario: Scenario) -> Result<Self, HarnessError> {
         let s = &scenario.spec;
         let scorer = s.simulation.insertion_scorer;
-        let model = CellModel::new(&s.cell, &s.assembly, &s.noise, &scenario.catalog, scorer)?;
+        let model = CellModel::new(
+            &s.cell,
+            &scenario.robot,
+            &s.assembly,
+            &s.noise,
+            &scenario.catalog,
+            scorer,
+        )?;
         Ok(Self {
             engine: Setup::new(scenario)?,
             model,
@@ -102,7 +112,7 @@ pub async fn run_sim_episode(
     setup: &SimSetup,
     episode: u32,
 ) -> Result<EpisodeOutput, HarnessError> {
-    let mut cell = setup.sim_cell(episode)?;
+    let mut cell = setup.model.limited(setup.sim_cell(episode)?)?;
     let mut perception = keypoint_noise_for(setup.scenario(), episode)?;
     Ok(run_episode(setup.engine.context(episode), &mut cell, &mut perception).await)
 }

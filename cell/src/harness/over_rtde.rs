@@ -7,6 +7,7 @@ use std::net::{IpAddr, Ipv4Addr};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use robots::limited::Limited;
 use robots::robot::RobotError;
 use robots::ur_robot::{UrRobot, UrRobotConfig};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
@@ -36,7 +37,7 @@ pub struct SimOverRtde {
     /// The virtual controller (drop it to stop it); tests inject faults through it.
     pub controller: VirtualUr,
     /// The production client, connected and running our program.
-    pub robot: UrRobot,
+    pub robot: Limited<UrRobot>,
     /// The simulated cell the controller drives (camera, feeder, verdicts).
     pub cell: Arc<Mutex<SimCell>>,
 }
@@ -59,12 +60,11 @@ pub async fn connect_sim_over_rtde(
         ..VirtualUrConfig::ephemeral()
     };
     let controller = VirtualUr::start_with_arm(config, Box::new(SimArm::new(cell.clone()))).await?;
-    let mut rc = UrRobotConfig::new("127.0.0.1");
+    let mut rc = UrRobotConfig::new("127.0.0.1", setup.engine.knowledge.kinematics.clone());
     rc.rtde_port = controller.rtde_addr().port();
     rc.dashboard_port = controller.dashboard_addr().port();
     rc.script_port = controller.script_addr().port();
     rc.limits = setup.scenario().spec.cell.limits.clone();
-    rc.kinematics = setup.engine.knowledge.kinematics.clone();
     rc.gripper_actuation_s = setup.scenario().spec.cell.gripper.actuation_time;
     let robot = UrRobot::connect(rc).await?;
     Ok(SimOverRtde {

@@ -1,11 +1,13 @@
 //! The simulated cell as the engine's cell: its camera, feeder and verdicts as [`CellIo`], and the
-//! whole cell as a [`Workcell`] whose arm is the cell's own `impl Robot for SimCell` (the one
-//! `Robot` implementation of the simulated cell). [`SimCellIo`] reads the same side channels from
+//! whole cell, wrapped in the scenario's limits, as a [`Workcell`] whose arm is the cell's own
+//! `impl Robot for SimCell` (the one `Robot` implementation of the simulated cell) behind
+//! [`Limited`]. [`SimCellIo`] reads the same side channels from
 //! a cell shared with the virtual UR controller, whose arm model drives it over RTDE.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use nalgebra::Isometry3;
+use robots::limited::Limited;
 use robots::robot::Robot;
 use sim::cell::SimCell;
 
@@ -74,13 +76,13 @@ impl CellIo for SimCell {
     }
 }
 
-impl Workcell for SimCell {
+impl Workcell for Limited<SimCell> {
     fn robot(&mut self) -> &mut dyn Robot {
         self
     }
 
     fn io(&mut self) -> &mut dyn CellIo {
-        self
+        self.inner_mut()
     }
 }
 

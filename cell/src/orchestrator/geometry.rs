@@ -33,7 +33,7 @@ pub struct CellKnowledge {
     pub steps: Vec<AssemblyStep>,
     /// Frames and shapes.
     pub geometry: CellGeometry,
-    /// UR5e kinematics with the gripper TCP (fingertip centre, `tcp_offset` below the flange).
+    /// The scenario's arm kinematics with the gripper TCP (fingertip centre, `tcp_offset` below the flange).
     pub kinematics: UrKinematics,
     /// Nominal seated pose of each step's part in the base frame.
     pub base_T_targets: Vec<Isometry3<f64>>,
@@ -54,11 +54,15 @@ impl CellKnowledge {
         let spec = &scenario.spec;
         let geometry = CellGeometry::new(&spec.cell, &spec.assembly, &scenario.catalog)
             .map_err(|e| KnowledgeError::Geometry(e.to_string()))?;
-        let kinematics = UrKinematics::ur5e().with_tcp(Isometry3::translation(
-            0.0,
-            0.0,
-            spec.cell.gripper.tcp_offset,
-        ));
+        let kinematics = scenario
+            .robot
+            .kinematics
+            .clone()
+            .with_tcp(Isometry3::translation(
+                0.0,
+                0.0,
+                spec.cell.gripper.tcp_offset,
+            ));
         let mut base_T_targets: Vec<Isometry3<f64>> = Vec::new();
         let mut base_T_insertions = Vec::new();
         for (i, s) in spec.assembly.iter().enumerate() {
@@ -93,7 +97,7 @@ impl CellKnowledge {
             kinematics,
             base_T_targets,
             base_T_insertions,
-            dh: UrDh::ur5e(),
+            dh: scenario.robot.kinematics.dh,
             finger,
             palm,
         }))

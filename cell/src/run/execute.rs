@@ -264,10 +264,9 @@ impl Production {
             source,
         };
         let cell = &setup.scenario.spec.cell;
-        let mut config = UrRobotConfig::new(self.host.clone());
+        let mut config = UrRobotConfig::new(self.host.clone(), setup.knowledge.kinematics.clone());
         config.rtde_port = self.port;
         config.limits = cell.limits.clone();
-        config.kinematics = setup.knowledge.kinematics.clone();
         config.gripper_actuation_s = cell.gripper.actuation_time;
         let mut robot = UrRobot::connect(config).await.map_err(robot_err)?;
         let (mut io, mut perception) = self

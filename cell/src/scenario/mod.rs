@@ -14,6 +14,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use perception::part::{Catalog, line_column};
+use robots::ur_arm::UrArm;
 
 /// One problem in a scenario file, located.
 #[derive(Debug, Clone, PartialEq)]
@@ -78,6 +79,8 @@ pub struct Scenario {
     pub spec: ScenarioSpec,
     /// The part catalog.
     pub catalog: Catalog,
+    /// The arm `cell.robot` describes: kinematics and joint limits from its URDF.
+    pub robot: UrArm,
 }
 
 impl Scenario {
@@ -126,7 +129,7 @@ impl Scenario {
             }])
         })?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        let (catalog, issues) = validate::validate(&spec, &dir);
+        let (catalog, robot, issues) = validate::validate(&spec, &dir);
         if !issues.is_empty() {
             let locator = Locator::new(text);
             let problems = issues
@@ -147,11 +150,14 @@ impl Scenario {
                 .collect();
             return Err(ScenarioError(problems));
         }
-        let catalog = catalog.expect("validation loads the catalog when it reports no problem");
+        let (Some(catalog), Some(robot)) = (catalog, robot) else {
+            unreachable!("validation loads the catalog and the arm when it reports no problem")
+        };
         Ok(Self {
             path: path.into(),
             spec,
             catalog,
+            robot,
         })
     }
 

@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use perception::part::{Catalog, PartRole};
+use robots::ur_arm::UrArm;
 use sim::cell::feasible::{check_geometry, check_values};
 
 use super::{KeyPath, MAX_INSERTION_ATTEMPTS, PerceptionMode, ScenarioSpec};
@@ -23,20 +24,49 @@ fn non_negative(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
     }
 }
 
-/// Checks a parsed scenario whose relative paths start at `dir`; returns the catalog when it loads.
-pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
+/// The arm the scenario's `cell.robot` describes (a UR arm's URDF, relative to `dir`), and its
+/// joint speed limits against the scenario's; `None` (with the problem recorded) when unusable.
+fn load_arm(spec: &ScenarioSpec, dir: &Path, issues: &mut Issues) -> Option<UrArm> {
+    let key = root().key("cell").key("robot");
+    let path = dir.join(&spec.cell.robot);
+    if !path.is_file() {
+        issues.push((
+            key,
+            format!("robot description {} does not exist", path.display()),
+        ));
+        return None;
+    }
+    let arm = match UrArm::from_file(&path) {
+        Ok(arm) => arm,
+        Err(e) => {
+            issues.push((key, format!("cannot use the robot description: {e}")));
+            return None;
+        }
+    };
+    let slowest = arm.slowest_joint_speed();
+    if spec.cell.limits.max_joint_speed > slowest {
+        issues.push((
+            root().key("cell").key("limits").key("max_joint_speed"),
+            format!(
+                "{} rad/s is more than the {}'s slowest joint allows ({slowest:.4} rad/s, from {})",
+                spec.cell.limits.max_joint_speed,
+                arm.name,
+                path.display()
+            ),
+        ));
+    }
+    Some(arm)
+}
+
+/// Checks a parsed scenario whose relative paths start at `dir`; returns the catalog and the arm
+/// when they load.
+pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrArm>, Issues) {
     let mut issues = Issues::new();
     if spec.episodes == 0 {
         issues.push((root().key("episodes"), "episodes must be at least 1".into()));
     }
     let cell = root().key("cell");
-    let robot = dir.join(&spec.cell.robot);
-    if !robot.is_file() {
-        issues.push((
-            cell.key("robot"),
-            format!("robot description {} does not exist", robot.display()),
-        ));
-    }
+    let arm = load_arm(spec, dir, &mut issues);
     for (name, pose) in [("base_T_table", &spec.cell.base_T_table)] {
         if !pose.is_finite() {
             issues.push((cell.key(name), "pose has a non-finite number".into()));
@@ -109,13 +139,17 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
         }
     };
     if let Some(catalog) = &catalog {
-        // What the simulated cell refuses as impossible (parts and meshes, reach, workspace,
-        // feeder over the fixture, camera view, parts wider than the stroke), then what the
-        // scenario needs of the catalog, each where no problem is reported at the same key yet.
-        let mut found: Issues = check_geometry(&spec.cell, &spec.assembly, catalog)
-            .into_iter()
-            .map(|(key, message)| (KeyPath::parse(&key), message))
-            .collect();
+        // What the simulated cell refuses as impossible on the scenario's arm (parts and meshes,
+        // reach, workspace, feeder over the fixture, camera view, parts wider than the stroke),
+        // then what the scenario needs of the catalog, each where no problem is reported at the
+        // same key yet.
+        let mut found: Issues = match &arm {
+            Some(arm) => check_geometry(&spec.cell, arm, &spec.assembly, catalog)
+                .into_iter()
+                .map(|(key, message)| (KeyPath::parse(&key), message))
+                .collect(),
+            None => Vec::new(),
+        };
         check_against_catalog(spec, catalog, &mut found);
         for (path, message) in found {
             if !issues.iter().any(|(p, _)| *p == path) {
@@ -123,7 +157,7 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Issues) {
             }
         }
     }
-    (catalog, issues)
+    (catalog, arm, issues)
 }
 
 fn check_against_catalog(spec: &ScenarioSpec, catalog: &Catalog, issues: &mut Issues) {

@@ -49,12 +49,6 @@ pub struct UrDh {
     pub d6: f64,
 }
 
-impl Default for UrDh {
-    fn default() -> Self {
-        Self::ur5e()
-    }
-}
-
 impl UrDh {
     /// UR5e nominal parameters from Universal Robots' published DH table.
     pub const fn ur5e() -> Self {

@@ -1,4 +1,5 @@
-//! Forward and analytic inverse kinematics of Universal Robots arms (UR5e by default).
+//! Forward and analytic inverse kinematics of Universal Robots arms (parameters from the robot
+//! description: [`crate::ur_arm::UrArm`]).
 //!
 //! Frames follow the controller's conventions: `base` is the controller base frame (ROS's
 //! `base_link` is rotated 180° about z from it), `flange` is the tool flange (UR's tool0), and

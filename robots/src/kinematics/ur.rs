@@ -27,14 +27,10 @@ pub struct UrKinematics {
     pub singularity_policy: SingularityPolicy,
 }
 
-impl Default for UrKinematics {
-    fn default() -> Self {
-        Self::ur5e()
-    }
-}
-
 impl UrKinematics {
-    /// A nominal UR5e with the TCP at the flange, ±2π limits, singular solutions reported.
+    /// A nominal UR5e with the TCP at the flange, ±2π limits, singular solutions reported (for
+    /// tests and benches; a cell takes its arm from its robot description,
+    /// [`crate::ur_arm::UrArm`]).
     pub fn ur5e() -> Self {
         Self {
             dh: UrDh::ur5e(),

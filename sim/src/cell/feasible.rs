@@ -5,7 +5,7 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use perception::part::{Catalog, TriMesh};
-use robots::kinematics::UrKinematics;
+use robots::ur_arm::UrArm;
 
 use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec};
 
@@ -21,16 +21,17 @@ pub const MIN_PART_PIXELS: f64 = 24.0;
 /// A found problem: (key path, message).
 pub type Finding = (String, String);
 
-/// Every reason the scenario cannot run, as (key path, message); empty when it is feasible:
-/// [`check_values`] and [`check_geometry`].
+/// Every reason the scenario cannot run on `arm` (the scenario's `cell.robot`), as (key path,
+/// message); empty when it is feasible: [`check_values`] and [`check_geometry`].
 pub fn check_feasible(
     cell: &CellSpec,
+    arm: &UrArm,
     steps: &[AssemblyStep],
     noise: &NoiseSpec,
     catalog: &Catalog,
 ) -> Vec<Finding> {
     let mut out = check_values(cell, steps, noise);
-    out.extend(check_geometry(cell, steps, catalog));
+    out.extend(check_geometry(cell, arm, steps, catalog));
     out
 }
 
@@ -115,7 +116,12 @@ pub fn check_values(cell: &CellSpec, steps: &[AssemblyStep], noise: &NoiseSpec) 
 /// limits' workspace box and reachable top-down by the UR5e with this gripper, the feeder region
 /// clear of the fixture's footprint, and the camera seeing the feeder region and the fixture
 /// with the smallest feeder part at least [`MIN_PART_PIXELS`] across.
-pub fn check_geometry(cell: &CellSpec, steps: &[AssemblyStep], catalog: &Catalog) -> Vec<Finding> {
+pub fn check_geometry(
+    cell: &CellSpec,
+    arm: &UrArm,
+    steps: &[AssemblyStep],
+    catalog: &Catalog,
+) -> Vec<Finding> {
     let mut out: Vec<Finding> = Vec::new();
     let g = &cell.gripper;
     let f = &cell.feeder;
@@ -189,7 +195,7 @@ pub fn check_geometry(cell: &CellSpec, steps: &[AssemblyStep], catalog: &Catalog
     // Reach: the fixture and the feeder corners, top-down, inside the workspace box.
     let base_T_table = cell.base_T_table.isometry();
     let kin =
-        UrKinematics::ur5e().with_tcp(Isometry3::translation(0.0, 0.0, g.tcp_offset.max(0.0)));
+        (arm.kinematics.clone()).with_tcp(Isometry3::translation(0.0, 0.0, g.tcp_offset.max(0.0)));
     let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
     let reachable = |p: &Point3<f64>| {
         let tcp = Isometry3::from_parts(Translation3::new(p.x, p.y, p.z + APPROACH), down);
@@ -210,8 +216,9 @@ pub fn check_geometry(cell: &CellSpec, steps: &[AssemblyStep], catalog: &Catalog
         out.push((
             "cell.fixture.table_T_fixture".into(),
             format!(
-                "fixture at {:?} m (base) is out of the UR5e's reach top-down",
-                fixture_origin.coords.as_slice()
+                "fixture at {:?} m (base) is out of the {}'s reach top-down",
+                fixture_origin.coords.as_slice(),
+                arm.name
             ),
         ));
     }

@@ -4,7 +4,11 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::part::Catalog;
-use robots::kinematics::{IkError, Joints, UrDh, UrKinematics, joint_distance};
+use robots::kinematics::{IkError, Joints, UrKinematics, joint_distance};
+use robots::limited::Limited;
+use robots::limits::InvalidLimits;
+use robots::robot::Robot;
+use robots::ur_arm::UrArm;
 
 use super::error::CellError;
 use super::feasible::check_feasible;
@@ -16,7 +20,7 @@ use crate::scene::PartModel;
 
 /// Height of the home TCP above the feeder centre, metres.
 const HOME_HEIGHT: f64 = 0.15;
-/// A UR5e elbow-up, wrist-down configuration used to pick the home IK branch.
+/// A UR elbow-up, wrist-down configuration used to pick the home IK branch.
 const HOME_REFERENCE: Joints = [
     -std::f64::consts::FRAC_PI_2,
     -std::f64::consts::FRAC_PI_2,
@@ -35,7 +39,7 @@ fn elbow_up(
     base_T_table: &Isometry3<f64>,
     base_T_tcp: &Isometry3<f64>,
 ) -> Result<Joints, IkError> {
-    let dh = UrDh::ur5e();
+    let dh = &kinematics.dh;
     let table_T_base = base_T_table.inverse();
     let lowest = |q: &Joints| {
         dh.frames(q)[1..]
@@ -78,7 +82,7 @@ pub struct CellModel {
     pub contact: ContactSettings,
     /// Frames and part shapes.
     pub geometry: CellGeometry,
-    /// UR5e kinematics with the gripper's TCP.
+    /// The arm's kinematics (from the scenario's robot description) with the gripper's TCP.
     pub kinematics: UrKinematics,
     /// Joints at the start of every episode: TCP pointing down above the feeder.
     pub home: Joints,
@@ -87,15 +91,17 @@ pub struct CellModel {
 }
 
 impl CellModel {
-    /// Checks the scenario and builds the shared model.
+    /// Checks the scenario and builds the shared model for the arm `arm` (the scenario's
+    /// `cell.robot`, loaded with [`UrArm::from_file`]).
     pub fn new(
         spec: &CellSpec,
+        arm: &UrArm,
         steps: &[AssemblyStep],
         noise: &NoiseSpec,
         catalog: &Catalog,
         scorer: Scorer,
     ) -> Result<Arc<Self>, CellError> {
-        let mut problems = check_feasible(spec, steps, noise, catalog);
+        let mut problems = check_feasible(spec, arm, steps, noise, catalog);
         if let Some(problem) = spec.gripper.actuation_time_problem() {
             problems.push(("cell.gripper.actuation_time".into(), problem));
         }
@@ -103,7 +109,7 @@ impl CellModel {
             return Err(CellError::Infeasible(problems));
         }
         let geometry = CellGeometry::new(spec, steps, catalog)?;
-        let kinematics = UrKinematics::ur5e().with_tcp(Isometry3::translation(
+        let kinematics = arm.kinematics.clone().with_tcp(Isometry3::translation(
             0.0,
             0.0,
             spec.gripper.tcp_offset,
@@ -133,6 +139,12 @@ impl CellModel {
             home,
             drop_models,
         }))
+    }
+
+    /// `robot` (the simulated cell, or a handle on it) wrapped with the cell's limits and
+    /// kinematics, so every commanded target is checked: how the cell is driven as a robot.
+    pub fn limited<R: Robot>(&self, robot: R) -> Result<Limited<R>, InvalidLimits> {
+        Limited::new(robot, self.spec.limits.clone(), self.kinematics.clone())
     }
 
     /// The shapes of a part.

@@ -563,17 +563,10 @@ impl SimCell {
         ErrorBudget::new(named, result.start.lateral)
     }
 
-    /// Runs a joint move now (the `Robot::move_j` body).
+    /// Runs a joint move now (the `Robot::move_j` body). The cell's limits are not checked here:
+    /// wrap the cell in [`robots::limited::Limited`] ([`CellModel::limited`]) to drive it.
     pub fn move_j_sync(&mut self, target: Joints, motion: JointMotion) -> Result<(), RobotError> {
         self.check_motion_allowed()?;
-        let limits = &self.model.spec.limits;
-        limits.check_move_j(
-            &self.model.kinematics,
-            &self.q,
-            &target,
-            &motion,
-            PATH_SAMPLES,
-        )?;
         let poses = self.joint_path(&target);
         self.begin_motion();
         self.check_clearance(&poses)?;
@@ -583,14 +576,14 @@ impl SimCell {
         Ok(())
     }
 
-    /// Runs a straight-line TCP move now (the `Robot::move_l` body).
+    /// Runs a straight-line TCP move now (the `Robot::move_l` body); limits as for
+    /// [`Self::move_j_sync`].
     pub fn move_l_sync(
         &mut self,
         base_T_tcp: Isometry3<f64>,
         motion: LinearMotion,
     ) -> Result<(), RobotError> {
         self.check_motion_allowed()?;
-        self.model.spec.limits.check_move_l(&base_T_tcp, &motion)?;
         let start = self.model.kinematics.forward_tcp(&self.q);
         let (poses, q) = self.linear_path(&base_T_tcp)?;
         self.begin_motion();

@@ -8,6 +8,7 @@ pub mod script;
 use std::path::{Path, PathBuf};
 
 use perception::part::Catalog;
+use robots::ur_arm::UrArm;
 use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
 
 /// The simulator's share of a scenario file.
@@ -30,6 +31,11 @@ pub fn scenarios() -> PathBuf {
 pub fn scenario() -> Nominal {
     let text = std::fs::read_to_string(scenarios().join("usbc_nominal.toml")).unwrap();
     toml::from_str(&text).unwrap()
+}
+
+/// The arm the nominal scenario's `cell.robot` describes.
+pub fn arm() -> UrArm {
+    UrArm::from_file(scenarios().join(scenario().cell.robot)).unwrap()
 }
 
 /// `scenarios/parts/usbc.toml` (committed prepared: keypoints and stable poses).
