@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use cell::prepare::prepare_catalog;
+use cell::prepare::prepare_catalog_with;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim::stable_poses::DropSettings;
 
@@ -29,6 +29,10 @@ pub struct PrepareArgs {
     /// Seed of the drop orientations (the same seed reproduces the table).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Physics engine that drops the parts: rapier (the reference) or mujoco (a cross-check;
+    /// the table written is then MuJoCo's).
+    #[arg(long, default_value = "rapier")]
+    pub engine: String,
 }
 
 /// Arguments of `cell parts cad`.
@@ -56,6 +60,9 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.drops == 0 {
         anyhow::bail!("--drops must be at least 1");
     }
+    let engine = sim::stable_poses::DropEngine::from_name(&args.engine).ok_or_else(|| {
+        anyhow::anyhow!("--engine {:?}: expected rapier or mujoco", args.engine)
+    })?;
     let settings = DropSettings {
         drops: args.drops,
         seed: args.seed,
@@ -67,7 +74,7 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     );
     bar.set_message("dropping");
     let start = Instant::now();
-    let prepared = prepare_catalog(&args.catalog, &settings, Some(&bar))?;
+    let prepared = prepare_catalog_with(engine, &args.catalog, &settings, Some(&bar))?;
     bar.finish_and_clear();
     let elapsed = start.elapsed().as_secs_f64();
     let total: usize = prepared.iter().map(|p| p.report.drops).sum();

@@ -9,8 +9,7 @@ use robots::kinematics::{IkError, Joints, UrDh, UrKinematics, joint_distance};
 use super::error::CellError;
 use super::feasible::check_feasible;
 use super::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
-use super::insertion::Scorer;
-use super::insertion::contact::ContactSettings;
+use super::insertion::{InsertionScorer, Scorer};
 use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec, Placement};
 use crate::scene::PartModel;
 
@@ -74,8 +73,8 @@ pub struct CellModel {
     pub noise: NoiseSpec,
     /// Which scorer decides insertions.
     pub scorer: Scorer,
-    /// Contact-simulation settings (used when `scorer` is [`Scorer::Contact`]).
-    pub contact: ContactSettings,
+    /// That scorer, built with its default settings.
+    pub insertion: Arc<dyn InsertionScorer>,
     /// Frames and part shapes.
     pub geometry: CellGeometry,
     /// UR5e kinematics with the gripper's TCP.
@@ -103,6 +102,10 @@ impl CellModel {
             return Err(CellError::Infeasible(problems));
         }
         let geometry = CellGeometry::new(spec, steps, catalog)?;
+        let insertion = scorer.build()?;
+        for part in geometry.parts.values() {
+            insertion.check_part(part)?;
+        }
         let kinematics = UrKinematics::ur5e().with_tcp(Isometry3::translation(
             0.0,
             0.0,
@@ -127,7 +130,7 @@ impl CellModel {
             steps: steps.to_vec(),
             noise: noise.clone(),
             scorer,
-            contact: ContactSettings::default(),
+            insertion,
             geometry,
             kinematics,
             home,
