@@ -131,7 +131,14 @@ fn cached_wheel() -> Result<PathBuf, String> {
     }
     let partial = dir.join(format!("{WHEEL}.{}.part", std::process::id()));
     let status = Command::new("curl")
-        .args(["--fail", "--location", "--silent", "--show-error", "--retry", "3"])
+        .args([
+            "--fail",
+            "--location",
+            "--silent",
+            "--show-error",
+            "--retry",
+            "3",
+        ])
         .arg("--output")
         .arg(&partial)
         .arg(WHEEL_URL)

@@ -76,7 +76,14 @@ pub fn prepare_part_with(
     progress: Option<&ProgressBar>,
 ) -> Result<PreparedPart, PrepareError> {
     let mesh = catalog.load_mesh(part)?;
-    let report = stable_poses_with(engine, &part.name, &mesh, part.density(), settings, progress)?;
+    let report = stable_poses_with(
+        engine,
+        &part.name,
+        &mesh,
+        part.density(),
+        settings,
+        progress,
+    )?;
     Ok(PreparedPart {
         name: part.name.clone(),
         mass: report.mass,

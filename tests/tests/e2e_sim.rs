@@ -331,5 +331,8 @@ fn the_mujoco_scorer_is_chosen_by_the_scenario() {
             );
         }
     }
-    assert!(successes >= 2, "{successes} of 3 assembled with MuJoCo scoring");
+    assert!(
+        successes >= 2,
+        "{successes} of 3 assembled with MuJoCo scoring"
+    );
 }

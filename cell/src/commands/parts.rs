@@ -60,9 +60,8 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.drops == 0 {
         anyhow::bail!("--drops must be at least 1");
     }
-    let engine = sim::stable_poses::DropEngine::from_name(&args.engine).ok_or_else(|| {
-        anyhow::anyhow!("--engine {:?}: expected rapier or mujoco", args.engine)
-    })?;
+    let engine = sim::stable_poses::DropEngine::from_name(&args.engine)
+        .ok_or_else(|| anyhow::anyhow!("--engine {:?}: expected rapier or mujoco", args.engine))?;
     let settings = DropSettings {
         drops: args.drops,
         seed: args.seed,

@@ -30,6 +30,8 @@ pub struct Options {
     pub contact_impedance: f64,
     /// Solver iterations per step.
     pub iterations: usize,
+    /// Iterations of MuJoCo's no-slip pass (0: off); it removes the creep of soft friction.
+    pub noslip_iterations: usize,
 }
 
 /// An MJCF document under construction: mesh assets for the convex pieces, with the part and
@@ -101,7 +103,7 @@ impl Mjcf {
         format!(
             "<mujoco model=\"cell\">\n  <compiler angle=\"radian\" autolimits=\"true\"/>\n  \
              <option timestep=\"{}\" gravity=\"{} {} {}\" integrator=\"implicitfast\" \
-             cone=\"elliptic\" iterations=\"{}\">\n    <flag multiccd=\"enable\"/>\n  </option>\n  \
+             cone=\"elliptic\" iterations=\"{}\" noslip_iterations=\"{}\">\n    <flag multiccd=\"enable\"/>\n  </option>\n  \
              <default>\n    <geom condim=\"3\" friction=\"{} 0 0\" solref=\"{} {}\" \
              solimp=\"{d} {d} 0.001\" density=\"0\"/>\n  </default>\n  <asset>\n{}  </asset>\n  \
              <worldbody>\n{worldbody}  </worldbody>\n  <actuator>\n{actuators}  </actuator>\n\
@@ -111,6 +113,7 @@ impl Mjcf {
             o.gravity.y,
             o.gravity.z,
             o.iterations.max(1),
+            o.noslip_iterations,
             o.friction,
             o.contact_timeconst,
             o.contact_dampratio,
@@ -148,7 +151,10 @@ pub fn check_piece(part: &str, piece: usize, points: &[Point3<f64>]) -> Result<(
         piece,
         reason,
     };
-    if let Some(p) = points.iter().find(|p| !p.coords.iter().all(|c| c.is_finite())) {
+    if let Some(p) = points
+        .iter()
+        .find(|p| !p.coords.iter().all(|c| c.is_finite()))
+    {
         return Err(fail(format!("vertex {p} is not finite")));
     }
     if points.len() < 4 {
@@ -222,7 +228,9 @@ mod tests {
             "{err}"
         );
         assert!(err.contains("degenerate"), "{err}");
-        let err = check_piece("p", 2, &cube(1e-3)[..3]).unwrap_err().to_string();
+        let err = check_piece("p", 2, &cube(1e-3)[..3])
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("3 vertices"), "{err}");
         let mut nan = cube(1e-3);
         nan[3].x = f64::NAN;

@@ -152,6 +152,7 @@ fn simulate_batch(
         contact_dampratio: 1.0,
         contact_impedance: 0.99,
         iterations: 50,
+        noslip_iterations: 0,
     });
     let geoms = mjcf.piece_geoms(part, &hull, &Isometry3::identity())?;
     let mut seed_rng = ChaCha8Rng::seed_from_u64(settings.seed);

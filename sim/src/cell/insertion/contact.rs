@@ -210,7 +210,8 @@ pub fn simulate(
     while t < w.max_time {
         t += dt;
         steps += 1;
-        world.bodies[wrist].set_next_kinematic_position(pose_from_isometry(&w.pose_at(&start_pose, t)));
+        world.bodies[wrist]
+            .set_next_kinematic_position(pose_from_isometry(&w.pose_at(&start_pose, t)));
         world.step();
         let rb = &world.bodies[part];
         let at_rest = w.is_still(mating, rb.linvel().length(), rb.angvel().length());
