@@ -9,7 +9,7 @@ use sim::cad::usbc;
 use sim::cell::geometry::PartGeometry;
 use sim::cell::insertion::agreement::{StepGeometry, compare_scorers};
 use sim::cell::insertion::contact::{self, ContactSettings};
-use sim::cell::insertion::{InsertionScorer, Mating, ReceiverPart, Scorer, Verdict, analytic};
+use sim::cell::insertion::{Mating, ReceiverPart, Scorer, Verdict, analytic};
 use sim::config::AssemblyStep;
 
 mod support;
