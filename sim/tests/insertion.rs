@@ -60,6 +60,21 @@ fn setup<'a>(p: &'a Parts, i: usize) -> (&'a PartGeometry, Vec<ReceiverPart<'a>>
     }
 }
 
+/// Every step's geometry, all earlier parts seated exactly.
+fn step_geometries(p: &Parts) -> Vec<StepGeometry<'_>> {
+    let s = steps();
+    (0..3)
+        .map(|i| {
+            let (held, receivers) = setup(p, i);
+            StepGeometry {
+                mating: Mating::new(&s[i], held, &receivers[..1]),
+                held,
+                receivers,
+            }
+        })
+        .collect()
+}
+
 fn both(
     m: &Mating,
     held: &PartGeometry,
@@ -174,17 +189,8 @@ fn a_tilt_beyond_the_jam_angle_jams() {
 /// must agree on at least 95 % and the samples must straddle the boundary.
 #[test]
 fn scorers_agree_around_the_capture_boundary() {
-    let (p, s) = (parts(), steps());
-    let geometries: Vec<StepGeometry<'_>> = (0..3)
-        .map(|i| {
-            let (held, receivers) = setup(&p, i);
-            StepGeometry {
-                mating: Mating::new(&s[i], held, &receivers[..1]),
-                held,
-                receivers,
-            }
-        })
-        .collect();
+    let p = parts();
+    let geometries = step_geometries(&p);
     let engines = [
         Scorer::Analytic.build().unwrap(),
         Scorer::Contact.build().unwrap(),
@@ -275,17 +281,8 @@ fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
 /// where they differ it is MuJoCo seating a part rapier leaves on the rim.
 #[test]
 fn mujoco_and_rapier_agree_around_the_capture_boundary() {
-    let (p, s) = (parts(), steps());
-    let geometries: Vec<StepGeometry<'_>> = (0..3)
-        .map(|i| {
-            let (held, receivers) = setup(&p, i);
-            StepGeometry {
-                mating: Mating::new(&s[i], held, &receivers[..1]),
-                held,
-                receivers,
-            }
-        })
-        .collect();
+    let p = parts();
+    let geometries = step_geometries(&p);
     let engines = [Scorer::Contact.build().unwrap(), mujoco()];
     let a = compare_scorers(&geometries, 150, 12, &engines).unwrap();
     for d in &a.disagreements {

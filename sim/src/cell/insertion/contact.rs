@@ -22,7 +22,7 @@ use rapier3d_f64::prelude::{
     PhysicsWorld, RigidBodyBuilder, Vector,
 };
 
-use super::{InsertionResult, Mating, ReceiverPart, Wrist, classify};
+use super::{InsertionResult, Mating, ReceiverPart, Wrist};
 use crate::cell::geometry::PartGeometry;
 use crate::convert::{isometry_from_pose, pose_from_isometry, vec_from_point};
 
@@ -225,16 +225,8 @@ pub fn simulate(
         }
     }
     let end_pose = isometry_from_pose(world.bodies[part].position());
-    let end = mating.pose_error(&end_pose);
-    let (verdict, cause) = classify(mating, &start, &end);
     ContactRun {
-        result: InsertionResult {
-            verdict,
-            cause,
-            start,
-            end,
-            ins_T_part: end_pose,
-        },
+        result: InsertionResult::ended_at(mating, start, end_pose),
         simulated_time: t,
         steps,
     }

@@ -166,6 +166,23 @@ pub struct InsertionResult {
     pub ins_T_part: Isometry3<f64>,
 }
 
+impl InsertionResult {
+    /// The result of an insertion that started at `start` and left the part at `ins_T_part`
+    /// (insertion frame), classified by [`classify`].
+    #[allow(non_snake_case)]
+    pub fn ended_at(mating: &Mating, start: PoseError, ins_T_part: Isometry3<f64>) -> Self {
+        let end = mating.pose_error(&ins_T_part);
+        let (verdict, cause) = classify(mating, &start, &end);
+        Self {
+            verdict,
+            cause,
+            start,
+            end,
+            ins_T_part,
+        }
+    }
+}
+
 /// Decides the verdict from where the part ended, and when it is not seated, the cause from the
 /// start error: seated within the tolerances; missed when the leading face ended outside the
 /// capture band (on the rim or beside the target); jammed otherwise.

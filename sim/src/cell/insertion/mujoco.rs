@@ -213,7 +213,7 @@ impl Mujoco {
     fn simulate(&self, case: &InsertionCase<'_>) -> Result<Scored, MujocoError> {
         use mujoco_rs::prelude::{MjData, MjtObjBase};
 
-        use super::{InsertionResult, classify};
+        use super::InsertionResult;
         use crate::mujoco::mjcf::{Mjcf, pose_from};
 
         let settings = &self.settings;
@@ -296,16 +296,8 @@ impl Mujoco {
             }
         }
         let end_pose = pose_from(&data.xpos()[part], &data.xquat()[part]);
-        let end = mating.pose_error(&end_pose);
-        let (verdict, cause) = classify(mating, &start, &end);
         Ok(Scored {
-            result: InsertionResult {
-                verdict,
-                cause,
-                start,
-                end,
-                ins_T_part: end_pose,
-            },
+            result: InsertionResult::ended_at(mating, start, end_pose),
             simulated_time: t,
             steps,
         })
