@@ -221,12 +221,14 @@ fn scorers_agree_around_the_capture_boundary() {
     );
 }
 
+#[cfg(feature = "mujoco")]
 fn mujoco() -> std::sync::Arc<dyn sim::cell::insertion::InsertionScorer> {
     Scorer::Mujoco
         .build()
         .expect("sim is built with MuJoCo (its default `mujoco` feature)")
 }
 
+#[cfg(feature = "mujoco")]
 fn mujoco_verdict(
     m: &Mating,
     held: &PartGeometry,
@@ -245,6 +247,7 @@ fn mujoco_verdict(
 /// MuJoCo, the second contact engine, on the same pieces and wrist: it seats a perfect pose,
 /// does not seat one just beyond the capture band, and jams one tilted beyond the jam angle.
 #[test]
+#[cfg(feature = "mujoco")]
 fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
     let (p, s) = (parts(), steps());
     for (i, step) in s.iter().enumerate().take(3) {
@@ -280,6 +283,7 @@ fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
 /// on at least 90 % (measured 92–98 % with this seed; the goal is 95 %, see the report) and
 /// where they differ it is MuJoCo seating a part rapier leaves on the rim.
 #[test]
+#[cfg(feature = "mujoco")]
 fn mujoco_and_rapier_agree_around_the_capture_boundary() {
     let p = parts();
     let geometries = step_geometries(&p);
@@ -303,6 +307,7 @@ fn mujoco_and_rapier_agree_around_the_capture_boundary() {
 
 /// A convex piece MuJoCo cannot use is refused before any run, naming the part and the piece.
 #[test]
+#[cfg(feature = "mujoco")]
 fn mujoco_refuses_a_degenerate_piece_naming_the_part_and_piece() {
     let mut p = parts();
     let flat: Vec<nalgebra::Point3<f64>> = p.insert.pieces.pieces[3]

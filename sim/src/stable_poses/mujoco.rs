@@ -11,7 +11,6 @@
 //! share 9 points away from rapier's: MuJoCo's soft contact is not that linear spring.)
 
 use indicatif::ProgressBar;
-use nalgebra::Isometry3;
 use perception::part::TriMesh;
 use rayon::prelude::*;
 
@@ -126,7 +125,7 @@ fn simulate_batch(
     count: usize,
 ) -> Result<Vec<DropOutcome>, MujocoError> {
     use mujoco_rs::prelude::{MjData, MjtObjBase};
-    use nalgebra::Vector3;
+    use nalgebra::{Isometry3, Vector3};
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rapier3d_f64::prelude::MassProperties;

@@ -21,8 +21,6 @@
 //! over an area, so multi-point convex contacts are on (`multiccd`); friction is the parts'
 //! Coulomb friction with an elliptic cone (sliding only, like rapier).
 
-use nalgebra::Isometry3;
-
 use super::{InsertionCase, InsertionScorer, Scored, ScorerError, Wrist};
 use crate::mujoco::MujocoError;
 use crate::mujoco::mjcf::Options;
@@ -171,7 +169,7 @@ fn check_part(
     settings: &MujocoSettings,
 ) -> Result<(), MujocoError> {
     let mut mjcf = crate::mujoco::mjcf::Mjcf::new(settings.options(0.3));
-    let geoms = mjcf.part_geoms(part, &Isometry3::identity())?;
+    let geoms = mjcf.part_geoms(part, &nalgebra::Isometry3::identity())?;
     let body = format!(
         "    <body name=\"part\">\n      <freejoint/>\n      <inertial pos=\"0 0 0\" mass=\"1\" \
          diaginertia=\"1 1 1\"/>\n{geoms}    </body>\n"
@@ -228,7 +226,7 @@ impl Mujoco {
         for r in case.receivers {
             world += &mjcf.part_geoms(r.geometry, &(ins_T_d * r.destination_T_part))?;
         }
-        let held = mjcf.part_geoms(case.held, &Isometry3::identity())?;
+        let held = mjcf.part_geoms(case.held, &nalgebra::Isometry3::identity())?;
         let c = mating.lead_point;
         let lead = format!("{} {} {}", c.x, c.y, c.z);
         let (kl, kr, ka) = (
