@@ -64,8 +64,8 @@ enum Command {
     /// Success-rate regression gate: run scenarios and compare with their baselines
     /// (one-sided Fisher exact test); exits non-zero on a significant drop.
     Regress(commands::regress::Args),
-    /// How often the fast analytic insertion scorer agrees with the contact simulation near each
-    /// step's capture boundary; exits non-zero below `--min-agreement`.
+    /// How often the insertion scorers (analytic, rapier, mujoco) agree near each step's capture
+    /// boundary, with the disagreeing cases; exits non-zero below `--min-agreement`.
     Scorers(commands::scorers::Args),
 }
 

@@ -9,7 +9,7 @@ use perception::part::{
     Catalog, MeshRepairs, PartRole, PartSpec, StablePose, farthest_point_sample,
     load_mesh_repaired, sample_surface,
 };
-use sim::stable_poses::{DropSettings, StablePoseReport, stable_poses};
+use sim::stable_poses::{DropEngine, DropSettings, StablePoseReport, stable_poses_with};
 use toml_edit::{Array, ArrayOfTables, DocumentMut, Item, Table, value};
 
 /// Surface samples the keypoints are chosen from.
@@ -38,6 +38,9 @@ pub enum PrepareError {
     /// The catalog or a mesh could not be loaded.
     #[error(transparent)]
     Part(#[from] perception::part::PartError),
+    /// The drop engine failed (MuJoCo missing, or a mesh it rejects).
+    #[error(transparent)]
+    Engine(#[from] sim::mujoco::MujocoError),
     /// The catalog could not be rewritten.
     #[error("{path}: {message}")]
     Write {
@@ -57,15 +60,33 @@ pub fn keypoints(mesh: &perception::part::TriMesh, seed: u64) -> Vec<Point3<f64>
     kp
 }
 
-/// Prepares one part: keypoints, mass properties, stable poses.
+/// Prepares one part: keypoints, mass properties, stable poses (dropped with rapier).
 pub fn prepare_part(
     catalog: &Catalog,
     part: &PartSpec,
     settings: &DropSettings,
     progress: Option<&ProgressBar>,
 ) -> Result<PreparedPart, PrepareError> {
+    prepare_part_with(DropEngine::Rapier, catalog, part, settings, progress)
+}
+
+/// [`prepare_part`] with the stable poses dropped by `engine`.
+pub fn prepare_part_with(
+    engine: DropEngine,
+    catalog: &Catalog,
+    part: &PartSpec,
+    settings: &DropSettings,
+    progress: Option<&ProgressBar>,
+) -> Result<PreparedPart, PrepareError> {
     let (mesh, repairs) = load_mesh_repaired(&catalog.mesh_path(part), part.unit)?;
-    let report = stable_poses(&mesh, part.density(), settings, progress);
+    let report = stable_poses_with(
+        engine,
+        &part.name,
+        &mesh,
+        part.density(),
+        settings,
+        progress,
+    )?;
     Ok(PreparedPart {
         name: part.name.clone(),
         mass: report.mass,
@@ -82,6 +103,16 @@ pub fn prepare_catalog(
     settings: &DropSettings,
     progress: Option<&ProgressBar>,
 ) -> Result<Vec<PreparedPart>, PrepareError> {
+    prepare_catalog_with(DropEngine::Rapier, path, settings, progress)
+}
+
+/// [`prepare_catalog`] with the stable poses dropped by `engine`.
+pub fn prepare_catalog_with(
+    engine: DropEngine,
+    path: &Path,
+    settings: &DropSettings,
+    progress: Option<&ProgressBar>,
+) -> Result<Vec<PreparedPart>, PrepareError> {
     let catalog = Catalog::load(path)?;
     let parts: Vec<&PartSpec> = catalog
         .parts
@@ -93,7 +124,7 @@ pub fn prepare_catalog(
     }
     let prepared = parts
         .iter()
-        .map(|part| prepare_part(&catalog, part, settings, progress))
+        .map(|part| prepare_part_with(engine, &catalog, part, settings, progress))
         .collect::<Result<Vec<_>, _>>()?;
     let text = std::fs::read_to_string(path).map_err(|source| perception::part::PartError::Io {
         path: path.into(),

@@ -45,7 +45,7 @@ fn compares_every_step_and_writes_the_disagreements() {
     );
     // Near the boundary some insertions seat and some do not, for each step.
     for s in steps {
-        let seated = s["contact_seated"].as_u64().unwrap();
+        let seated = s["seated"]["contact"].as_u64().unwrap();
         assert!(seated > 0 && seated < 20, "{s}");
     }
 }

@@ -1,8 +1,8 @@
 //! Simulated-cell benchmarks: pick-and-insert episodes for the three parts (sampled feeder,
 //! analytic scoring, perception excluded) one at a time and 2 cores at a time, and one
-//! contact-simulated insertion.
+//! contact-simulated insertion per contact engine (rapier, and MuJoCo when built in).
 //!
-//! `cargo bench -p sim --bench cell`
+//! `cargo bench -p sim --bench cell` (`-- insertion` for the contact engines only)
 
 #![allow(missing_docs, non_snake_case)]
 
@@ -14,8 +14,7 @@ use nalgebra::{Isometry3, Vector2};
 use rayon::prelude::*;
 use sim::cad::usbc;
 use sim::cell::geometry::PartGeometry;
-use sim::cell::insertion::contact::{self, ContactSettings};
-use sim::cell::insertion::{Mating, ReceiverPart, Scorer};
+use sim::cell::insertion::{InsertionCase, Mating, ReceiverPart, Scorer};
 use sim::cell::{CellModel, SimCell};
 
 #[path = "../tests/support/mod.rs"]
@@ -91,14 +90,19 @@ fn contact_insertion(c: &mut Criterion) {
     let mating = Mating::new(&s.assembly[1], &insert, &receivers[..1]);
     // Inside the chamfer: the lead-in guides it, the typical case.
     let start = mating.pose_with_error(Vector2::new(8e-5, -5e-5), 0.0, 1e-3, 2e-3, Vector2::x());
-    let settings = ContactSettings::default();
-    c.bench_function("cell/contact_insertion_insert_mold", |b| {
-        b.iter(|| {
-            black_box(contact::simulate(
-                &mating, &insert, &receivers, &start, &settings,
-            ))
-        })
-    });
+    let case = InsertionCase {
+        mating: &mating,
+        held: &insert,
+        receivers: &receivers,
+        ins_T_part: start,
+    };
+    for (scorer, label) in [(Scorer::Contact, "contact"), (Scorer::Mujoco, "mujoco")] {
+        // MuJoCo is absent from a build without sim's `mujoco` feature.
+        let Ok(engine) = scorer.build() else { continue };
+        c.bench_function(&format!("cell/{label}_insertion_insert_mold"), |b| {
+            b.iter(|| black_box(engine.score(&case).unwrap()))
+        });
+    }
 }
 
 criterion_group!(benches, episodes, contact_insertion);

@@ -6,6 +6,7 @@ pub mod config;
 pub mod convert;
 pub mod dataset;
 pub mod fsutil;
+pub mod mujoco;
 pub mod render;
 pub mod scene;
 pub mod seed;

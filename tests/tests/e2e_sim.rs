@@ -301,3 +301,38 @@ fn the_contact_scorer_is_chosen_by_the_scenario() {
     );
     assert!(longer >= 3, "only {longer} episodes comparable");
 }
+
+/// `[simulation] insertion_scorer = "mujoco"` decides every insertion by the MuJoCo contact
+/// simulation (the same pieces and compliant wrist as rapier): the nominal cell still
+/// assembles, and each insertion costs the simulated time of the push.
+#[test]
+fn the_mujoco_scorer_is_chosen_by_the_scenario() {
+    let analytic = setup(|_| {});
+    let mujoco = setup(|doc| {
+        doc["simulation"] = toml_edit::table();
+        doc["simulation"]["insertion_scorer"] = toml_edit::value("mujoco");
+    });
+    assert_eq!(
+        mujoco.scenario.spec.simulation.insertion_scorer,
+        Scorer::Mujoco
+    );
+    assert_eq!(mujoco.model.insertion.name(), "mujoco");
+    let mut successes = 0;
+    for e in 0..3u32 {
+        let a = run_sim_episode_blocking(&analytic, e).unwrap().record;
+        let m = run_sim_episode_blocking(&mujoco, e).unwrap().record;
+        successes += usize::from(m.success);
+        if a.success && m.success && a.steps.len() == m.steps.len() {
+            assert!(
+                m.cycle_time_s > a.cycle_time_s,
+                "episode {e}: mujoco {} s vs analytic {} s",
+                m.cycle_time_s,
+                a.cycle_time_s
+            );
+        }
+    }
+    assert!(
+        successes >= 2,
+        "{successes} of 3 assembled with MuJoCo scoring"
+    );
+}

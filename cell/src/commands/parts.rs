@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use cell::prepare::prepare_catalog;
+use cell::prepare::prepare_catalog_with;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim::stable_poses::DropSettings;
 
@@ -36,6 +36,10 @@ pub struct PrepareArgs {
     /// differently: parts that come to rest on a neighbour are counted apart.
     #[arg(long, default_value_t = 1)]
     pub crowd: usize,
+    /// Physics engine that drops the parts: rapier (the reference) or mujoco (a cross-check;
+    /// the table written is then MuJoCo's).
+    #[arg(long, default_value = "rapier")]
+    pub engine: String,
 }
 
 /// Arguments of `cell parts cad`.
@@ -72,6 +76,8 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.crowd == 0 || args.crowd > 1000 {
         anyhow::bail!("--crowd must be between 1 and 1000, got {}", args.crowd);
     }
+    let engine = sim::stable_poses::DropEngine::from_name(&args.engine)
+        .ok_or_else(|| anyhow::anyhow!("--engine {:?}: expected rapier or mujoco", args.engine))?;
     let settings = DropSettings {
         drops: args.drops,
         seed: args.seed,
@@ -85,7 +91,7 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     );
     bar.set_message("dropping");
     let start = Instant::now();
-    let prepared = prepare_catalog(&args.catalog, &settings, Some(&bar))?;
+    let prepared = prepare_catalog_with(engine, &args.catalog, &settings, Some(&bar))?;
     bar.finish_and_clear();
     let elapsed = start.elapsed().as_secs_f64();
     let total: usize = prepared.iter().map(|p| p.report.drops).sum();

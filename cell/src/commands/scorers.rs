@@ -1,28 +1,39 @@
-//! `cell scorers SCENARIO`: how often the analytic insertion scorer agrees with the contact
-//! simulation near the capture boundary of each assembly step.
+//! `cell scorers SCENARIO [--engines analytic,rapier,mujoco]`: how often the insertion scorers
+//! agree near the capture boundary of each assembly step, with every case where they do not.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context;
 use cell::scenario::Scenario;
 use sim::cell::geometry::CellGeometry;
-use sim::cell::insertion::agreement::{StepGeometry, compare_scorers};
-use sim::cell::insertion::contact::ContactSettings;
+use sim::cell::insertion::agreement::{Agreement, Disagreement, StepGeometry, compare_scorers};
+use sim::cell::insertion::{InsertionScorer, PoseError, Scorer};
+
+/// Disagreeing cases printed (all of them go to `--out`).
+const SHOWN_CASES: usize = 20;
 
 /// Arguments of `cell scorers`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Scenario whose assembly steps to check.
     pub scenario: PathBuf,
-    /// Misalignments to score with both scorers (a third per step for three steps).
+    /// Misalignments to score with every engine (a third per step for three steps).
     #[arg(long, default_value_t = 1000)]
     pub samples: usize,
     /// Seed of the misalignment draws.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Exit non-zero when fewer than this fraction of samples agree.
+    /// Engines to compare, comma-separated: analytic, rapier (or contact), mujoco.
+    #[arg(long, value_delimiter = ',', default_value = "analytic,rapier")]
+    pub engines: Vec<String>,
+    /// The engine the others are checked against.
+    #[arg(long, default_value = "rapier")]
+    pub reference: String,
+    /// Exit non-zero when, on some step, an engine agrees with the reference on fewer than
+    /// this fraction of samples.
     #[arg(long, default_value_t = 0.95)]
     pub min_agreement: f64,
     /// Also write the counts and every disagreement as JSON (atomically).
@@ -30,8 +41,9 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-/// Scores boundary misalignments with both scorers, prints a table per step and the overall
-/// agreement, and fails when it is below `--min-agreement`.
+/// Scores boundary misalignments with every engine, prints a table per step, the cases where
+/// an engine disagrees with the reference, and fails when a step's agreement is below
+/// `--min-agreement`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(args.samples > 0, "--samples must be at least 1");
     anyhow::ensure!(
@@ -39,10 +51,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "--min-agreement must be a fraction between 0 and 1, got {}",
         args.min_agreement
     );
+    let engines = build_engines(&args.engines)?;
+    let reference = Scorer::from_name(&args.reference)
+        .with_context(|| format!("--reference {:?} is not an engine", args.reference))?
+        .name();
+    anyhow::ensure!(
+        engines.iter().any(|e| e.name() == reference),
+        "--reference {reference} is not among --engines"
+    );
     let scenario = Scenario::load(&args.scenario).map_err(|e| anyhow::anyhow!("{e}"))?;
     let spec = &scenario.spec;
     let geometry = CellGeometry::new(&spec.cell, &spec.assembly, &scenario.catalog)
         .context("loading the part shapes")?;
+    for engine in &engines {
+        for part in geometry.parts.values() {
+            engine.check_part(part)?;
+        }
+    }
     let steps = (0..spec.assembly.len())
         .map(|i| {
             StepGeometry::nominal(&geometry, &spec.assembly, i).with_context(|| {
@@ -55,43 +80,147 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let started = Instant::now();
-    let agreement = compare_scorers(&steps, args.samples, args.seed, &ContactSettings::default());
+    let agreement = compare_scorers(&steps, args.samples, args.seed, &engines)?;
     let elapsed = started.elapsed().as_secs_f64();
 
+    let others: Vec<&str> = agreement
+        .engines
+        .iter()
+        .map(String::as_str)
+        .filter(|e| *e != reference)
+        .collect();
+    print_table(&agreement, reference, &others);
     println!(
-        "{:<14} {:>7} {:>10} {:>9} {:>16} {:>15}",
-        "step", "samples", "disagree", "agree %", "analytic seated", "contact seated"
-    );
-    for st in &agreement.steps {
-        let agree = 100.0 * (1.0 - st.disagreements as f64 / st.samples.max(1) as f64);
-        println!(
-            "{:<14} {:>7} {:>10} {:>9.1} {:>16} {:>15}",
-            st.part, st.samples, st.disagreements, agree, st.analytic_seated, st.contact_seated
-        );
-    }
-    let rate = agreement.rate();
-    println!(
-        "{} samples in {elapsed:.1} s: the scorers agree on {:.1} % (contact simulation is the \
-         reference; goal ≥ {:.1} %)",
+        "{} samples in {elapsed:.1} s; agreement with {reference} (the reference; goal ≥ {:.1} % \
+         per step): {}",
         agreement.samples(),
-        100.0 * rate,
-        100.0 * args.min_agreement
+        100.0 * args.min_agreement,
+        others
+            .iter()
+            .map(|o| format!("{o} {:.1} %", 100.0 * agreement.pair_rate(o, reference)))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
+    print_cases(&agreement, reference);
     if let Some(out) = &args.out {
         let json = serde_json::to_vec_pretty(&agreement)?;
         sim::fsutil::write_atomic(out, &json)
             .with_context(|| format!("writing {}", out.display()))?;
         println!("wrote {}", out.display());
     }
-    Ok(if rate >= args.min_agreement {
+    let mut below = Vec::new();
+    for st in &agreement.steps {
+        for o in &others {
+            let rate = st.pair_rate(o, reference);
+            if rate < args.min_agreement {
+                below.push(format!("{} {o} {:.1} %", st.part, 100.0 * rate));
+            }
+        }
+    }
+    Ok(if below.is_empty() {
         ExitCode::SUCCESS
     } else {
         eprintln!(
-            "error: the analytic scorer agrees with the contact simulation on {:.1} % of samples, \
-             below --min-agreement {:.1} %",
-            100.0 * rate,
-            100.0 * args.min_agreement
+            "error: agreement with {reference} below --min-agreement {:.1} % on: {}",
+            100.0 * args.min_agreement,
+            below.join("; ")
         );
         ExitCode::FAILURE
     })
+}
+
+/// The engines named on the command line, each once.
+fn build_engines(names: &[String]) -> anyhow::Result<Vec<Arc<dyn InsertionScorer>>> {
+    let mut engines: Vec<Arc<dyn InsertionScorer>> = Vec::new();
+    for name in names {
+        let scorer = Scorer::from_name(name.trim()).with_context(|| {
+            format!("--engines: {name:?} is not an engine (analytic, rapier, mujoco)")
+        })?;
+        anyhow::ensure!(
+            engines.iter().all(|e| e.name() != scorer.name()),
+            "--engines names {} twice",
+            scorer.name()
+        );
+        engines.push(scorer.build()?);
+    }
+    anyhow::ensure!(engines.len() >= 2, "--engines needs at least two engines");
+    Ok(engines)
+}
+
+fn print_table(agreement: &Agreement, reference: &str, others: &[&str]) {
+    let mut header = format!("{:<14} {:>7}", "step", "samples");
+    for e in &agreement.engines {
+        header += &format!(" {:>16}", format!("{e} seated"));
+    }
+    for o in others {
+        header += &format!(" {:>18}", format!("{o}~{reference} %"));
+    }
+    header += &format!(" {:>12}", "all agree %");
+    println!("{header}");
+    for st in &agreement.steps {
+        let mut row = format!("{:<14} {:>7}", st.part, st.samples);
+        for e in &agreement.engines {
+            row += &format!(" {:>16}", st.seated.get(e).copied().unwrap_or(0));
+        }
+        for o in others {
+            row += &format!(" {:>18.1}", 100.0 * st.pair_rate(o, reference));
+        }
+        let all = 1.0 - st.disagreements as f64 / st.samples.max(1) as f64;
+        row += &format!(" {:>12.1}", 100.0 * all);
+        println!("{row}");
+    }
+}
+
+/// Prints the cases where an engine other than the analytic model disagrees with the
+/// reference: the start pose, then each engine's verdict and final pose.
+fn print_cases(agreement: &Agreement, reference: &str) {
+    let cases: Vec<&Disagreement> = agreement
+        .disagreements
+        .iter()
+        .filter(|d| {
+            d.outcomes
+                .iter()
+                .any(|o| o.engine != "analytic" && Some(o.verdict) != d.verdict(reference))
+        })
+        .collect();
+    if cases.is_empty() {
+        return;
+    }
+    println!(
+        "\n{} cases where a contact engine disagrees with {reference} (lateral x,y µm; height \
+         above seated µm; tilt, yaw mrad){}:",
+        cases.len(),
+        if cases.len() > SHOWN_CASES {
+            format!("; the first {SHOWN_CASES}")
+        } else {
+            String::new()
+        }
+    );
+    for d in cases.iter().take(SHOWN_CASES) {
+        println!(
+            "  step {} sample {}: start {}",
+            d.step + 1,
+            d.sample,
+            pose(&d.start)
+        );
+        for o in &d.outcomes {
+            println!(
+                "    {:<9} {:<7} end {}",
+                o.engine,
+                format!("{:?}", o.verdict).to_lowercase(),
+                pose(&o.end)
+            );
+        }
+    }
+}
+
+fn pose(p: &PoseError) -> String {
+    format!(
+        "lateral ({:+.1}, {:+.1}) height {:+.1} tilt {:.2} yaw {:+.2}",
+        p.lateral.x * 1e6,
+        p.lateral.y * 1e6,
+        p.height * 1e6,
+        p.tilt * 1e3,
+        p.yaw * 1e3
+    )
 }

@@ -43,9 +43,9 @@ pub struct ScenarioSpec {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationSpec {
-    /// Which scorer decides insertions: `analytic` (capture model, microseconds; the default)
-    /// or `contact` (rapier contact simulation of the real meshes, the reference; ~15 ms per
-    /// insertion). `cell scorers` measures how often they agree.
+    /// Which scorer decides insertions: `analytic` (capture model, microseconds; the default),
+    /// `contact` (rapier contact simulation of the real meshes, the reference; ~15 ms per
+    /// insertion) or `mujoco` (the same in MuJoCo). `cell scorers` measures how often they agree.
     #[serde(default)]
     pub insertion_scorer: Scorer,
 }

@@ -37,6 +37,9 @@ pub enum CellError {
     /// The physics drop failed.
     #[error("feeder drop: {0}")]
     Drop(String),
+    /// The scenario's insertion scorer cannot be built or refuses a part.
+    #[error("{0}")]
+    Scorer(#[from] super::insertion::ScorerError),
     /// The robot's home pose has no joint solution.
     #[error("home pose unreachable: {0}")]
     Home(String),

@@ -13,8 +13,7 @@ use robots::ur_arm::UrArm;
 use super::error::CellError;
 use super::feasible::check_feasible;
 use super::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
-use super::insertion::Scorer;
-use super::insertion::contact::ContactSettings;
+use super::insertion::{InsertionScorer, Scorer};
 use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec, Placement};
 use crate::scene::PartModel;
 
@@ -78,8 +77,8 @@ pub struct CellModel {
     pub noise: NoiseSpec,
     /// Which scorer decides insertions.
     pub scorer: Scorer,
-    /// Contact-simulation settings (used when `scorer` is [`Scorer::Contact`]).
-    pub contact: ContactSettings,
+    /// That scorer, built with its default settings.
+    pub insertion: Arc<dyn InsertionScorer>,
     /// Frames and part shapes.
     pub geometry: CellGeometry,
     /// The arm's kinematics (from the scenario's robot description) with the gripper's TCP.
@@ -109,6 +108,10 @@ impl CellModel {
             return Err(CellError::Infeasible(problems));
         }
         let geometry = CellGeometry::new(spec, steps, catalog)?;
+        let insertion = scorer.build()?;
+        for part in geometry.parts.values() {
+            insertion.check_part(part)?;
+        }
         let kinematics = arm.kinematics.clone().with_tcp(Isometry3::translation(
             0.0,
             0.0,
@@ -133,7 +136,7 @@ impl CellModel {
             steps: steps.to_vec(),
             noise: noise.clone(),
             scorer,
-            contact: ContactSettings::default(),
+            insertion,
             geometry,
             kinematics,
             home,

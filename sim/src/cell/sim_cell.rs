@@ -15,7 +15,7 @@ use super::error::CellError;
 use super::feeder::{self, FeederPart};
 use super::gripper::{self, Grasp, GraspCandidate, GraspFailure};
 use super::insertion::{
-    InsertionCause, InsertionResult, Mating, ReceiverPart, Scorer, Verdict, analytic, contact,
+    InsertionCase, InsertionCause, InsertionResult, Mating, ReceiverPart, Verdict,
 };
 use super::model::CellModel;
 use super::motion::{move_j_time, move_l_time};
@@ -511,25 +511,33 @@ impl SimCell {
             return;
         };
         let ins_T_part = base_T_ins.inverse() * tcp * held.part.tcp_T_part;
-        let result = match self.model.scorer {
-            Scorer::Analytic => analytic::score(&mating, &ins_T_part),
-            Scorer::Contact => {
-                let s = &self.model.steps[step];
-                let base_T_dest = self
-                    .destination(&s.into)
-                    .unwrap_or(self.model.geometry.base_T_fixture);
-                let (Some(geom), Some(receivers)) = (
-                    self.model.geometry.parts.get(&s.part),
-                    self.receivers(step, &base_T_dest),
-                ) else {
-                    return;
-                };
-                let run =
-                    contact::simulate(&mating, geom, &receivers, &ins_T_part, &self.model.contact);
-                self.clock += run.simulated_time;
-                run.result
+        let s = &self.model.steps[step];
+        let base_T_dest = self
+            .destination(&s.into)
+            .unwrap_or(self.model.geometry.base_T_fixture);
+        let (Some(geom), Some(receivers)) = (
+            self.model.geometry.parts.get(&s.part),
+            self.receivers(step, &base_T_dest),
+        ) else {
+            return;
+        };
+        let case = InsertionCase {
+            mating: &mating,
+            held: geom,
+            receivers: &receivers,
+            ins_T_part,
+        };
+        // Every part was checked against the scorer when the model was built; an engine that
+        // still fails leaves the part unscored (it is released away from any target).
+        let scored = match self.model.insertion.score(&case) {
+            Ok(scored) => scored,
+            Err(e) => {
+                eprintln!("warning: step {step} insertion not scored: {e}");
+                return;
             }
         };
+        self.clock += scored.simulated_time;
+        let result = scored.result;
         let budget = self.budget(&base_T_ins, &tcp, &result);
         let base_T_part = base_T_ins * result.ins_T_part;
         if let Some(h) = self.held.as_mut() {

@@ -3,12 +3,14 @@
 
 mod cluster;
 pub(crate) mod drop;
+mod mujoco;
 
 pub use cluster::{CLASS_ANGLE_RAD, LEAN_HEIGHT, PoseClass, cluster, leaning};
 pub use drop::{
     DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch,
     stratified_rotation,
 };
+pub use mujoco::{DropEngine, stable_poses_mujoco, stable_poses_with};
 
 use indicatif::ProgressBar;
 use perception::part::TriMesh;

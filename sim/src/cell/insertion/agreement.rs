@@ -1,8 +1,11 @@
-//! How often the fast analytic scorer agrees with the contact simulation near the capture
-//! boundary, where a verdict is hardest: the check to run after changing a part, a clearance or
-//! a lead-in, before trusting analytic success rates (the contact simulation is the reference).
+//! How often insertion scorers agree near the capture boundary, where a verdict is hardest: the
+//! check to run after changing a part, a clearance or a lead-in, before trusting analytic
+//! success rates (the rapier contact simulation is the reference), and where two independent
+//! contact engines (rapier and MuJoCo) disagree, the cases that show where a success rate is
+//! fragile.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use nalgebra::{Isometry3, Vector2};
 use rand::{Rng, RngExt, SeedableRng};
@@ -10,8 +13,9 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::contact::{self, ContactSettings};
-use super::{Mating, PoseError, ReceiverPart, Verdict, analytic};
+use super::{
+    InsertionCase, InsertionScorer, Mating, PoseError, ReceiverPart, ScorerError, Verdict,
+};
 use crate::cell::geometry::{CellGeometry, PartGeometry, destination_part};
 use crate::config::AssemblyStep;
 
@@ -97,7 +101,18 @@ pub fn boundary_misalignment(mating: &Mating, rng: &mut impl Rng) -> Isometry3<f
     )
 }
 
-/// One sample on which the scorers disagree.
+/// One engine's outcome of a sample.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EngineOutcome {
+    /// The scorer's name.
+    pub engine: String,
+    /// Its verdict.
+    pub verdict: Verdict,
+    /// Where it left the part.
+    pub end: PoseError,
+}
+
+/// One sample on which the scorers disagree: the start and every engine's verdict and end.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Disagreement {
     /// Index of the assembly step.
@@ -106,10 +121,29 @@ pub struct Disagreement {
     pub sample: usize,
     /// The start misalignment.
     pub start: PoseError,
-    /// The analytic verdict.
-    pub analytic: Verdict,
-    /// The contact simulation's verdict (the reference).
-    pub contact: Verdict,
+    /// Each engine's outcome, in the order the engines were given.
+    pub outcomes: Vec<EngineOutcome>,
+}
+
+impl Disagreement {
+    /// The verdict of `engine`, if it took part.
+    pub fn verdict(&self, engine: &str) -> Option<Verdict> {
+        self.outcomes
+            .iter()
+            .find(|o| o.engine == engine)
+            .map(|o| o.verdict)
+    }
+}
+
+/// How often two engines disagree on one step.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PairAgreement {
+    /// The first engine.
+    pub a: String,
+    /// The second engine.
+    pub b: String,
+    /// Samples on which their verdicts differ.
+    pub disagreements: usize,
 }
 
 /// Agreement counts of one step.
@@ -119,20 +153,40 @@ pub struct StepAgreement {
     pub part: String,
     /// Samples drawn for this step.
     pub samples: usize,
-    /// Samples with different verdicts.
+    /// Samples on which not every engine gives the same verdict.
     pub disagreements: usize,
-    /// Samples the analytic scorer seats.
-    pub analytic_seated: usize,
-    /// Samples the contact simulation seats.
-    pub contact_seated: usize,
+    /// Samples each engine seats, by engine name.
+    pub seated: BTreeMap<String, usize>,
+    /// Every pair of engines, in the order given.
+    pub pairs: Vec<PairAgreement>,
 }
 
-/// The comparison of the two scorers over all steps.
+impl StepAgreement {
+    /// Fraction of this step's samples on which engines `a` and `b` agree (1 when either is
+    /// absent or there are no samples).
+    pub fn pair_rate(&self, a: &str, b: &str) -> f64 {
+        let Some(p) = self
+            .pairs
+            .iter()
+            .find(|p| (p.a == a && p.b == b) || (p.a == b && p.b == a))
+        else {
+            return 1.0;
+        };
+        if self.samples == 0 {
+            return 1.0;
+        }
+        1.0 - p.disagreements as f64 / self.samples as f64
+    }
+}
+
+/// The comparison of the scorers over all steps.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Agreement {
+    /// The engines compared, in the order given.
+    pub engines: Vec<String>,
     /// Per step, in assembly order.
     pub steps: Vec<StepAgreement>,
-    /// Every disagreeing sample, in sample order.
+    /// Every sample on which the engines do not all agree, in sample order.
     pub disagreements: Vec<Disagreement>,
 }
 
@@ -142,7 +196,7 @@ impl Agreement {
         self.steps.iter().map(|s| s.samples).sum()
     }
 
-    /// Fraction of samples on which the verdicts (seated, jammed, missed) are the same.
+    /// Fraction of samples on which every engine gives the same verdict.
     pub fn rate(&self) -> f64 {
         let n = self.samples();
         if n == 0 {
@@ -150,57 +204,104 @@ impl Agreement {
         }
         1.0 - self.disagreements.len() as f64 / n as f64
     }
+
+    /// Fraction of all samples on which engines `a` and `b` agree.
+    pub fn pair_rate(&self, a: &str, b: &str) -> f64 {
+        let n = self.samples();
+        if n == 0 {
+            return 1.0;
+        }
+        let differ = self
+            .disagreements
+            .iter()
+            .filter(|d| d.verdict(a) != d.verdict(b))
+            .count();
+        1.0 - differ as f64 / n as f64
+    }
 }
 
-/// Scores `samples` boundary misalignments with both scorers, cycling through the steps; sample
+/// Scores `samples` boundary misalignments with every scorer, cycling through the steps; sample
 /// `k` draws from its own stream of `seed`, so the result does not depend on the thread count.
 pub fn compare_scorers(
     steps: &[StepGeometry<'_>],
     samples: usize,
     seed: u64,
-    settings: &ContactSettings,
-) -> Agreement {
+    scorers: &[Arc<dyn InsertionScorer>],
+) -> Result<Agreement, ScorerError> {
+    let names: Vec<String> = scorers.iter().map(|s| s.name().to_string()).collect();
+    let pairs: Vec<(usize, usize)> = (0..scorers.len())
+        .flat_map(|a| (a + 1..scorers.len()).map(move |b| (a, b)))
+        .collect();
     let mut out = Agreement {
+        engines: names.clone(),
         steps: steps
             .iter()
             .map(|s| StepAgreement {
                 part: s.mating.part.clone(),
+                seated: names.iter().map(|n| (n.clone(), 0)).collect(),
+                pairs: pairs
+                    .iter()
+                    .map(|&(a, b)| PairAgreement {
+                        a: names[a].clone(),
+                        b: names[b].clone(),
+                        disagreements: 0,
+                    })
+                    .collect(),
                 ..StepAgreement::default()
             })
             .collect(),
         disagreements: Vec::new(),
     };
     if steps.is_empty() {
-        return out;
+        return Ok(out);
     }
-    let verdicts: Vec<(usize, PoseError, Verdict, Verdict)> = (0..samples)
+    let scored: Vec<(usize, PoseError, Vec<EngineOutcome>)> = (0..samples)
         .into_par_iter()
         .map(|k| {
             let i = k % steps.len();
             let s = &steps[i];
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             rng.set_stream(k as u64);
-            let pose = boundary_misalignment(&s.mating, &mut rng);
-            let a = analytic::score(&s.mating, &pose);
-            let c = contact::simulate(&s.mating, s.held, &s.receivers, &pose, settings);
-            (i, a.start, a.verdict, c.result.verdict)
+            let case = InsertionCase {
+                mating: &s.mating,
+                held: s.held,
+                receivers: &s.receivers,
+                ins_T_part: boundary_misalignment(&s.mating, &mut rng),
+            };
+            let start = s.mating.pose_error(&case.ins_T_part);
+            let outcomes = scorers
+                .iter()
+                .map(|sc| {
+                    sc.score(&case).map(|r| EngineOutcome {
+                        engine: sc.name().to_string(),
+                        verdict: r.result.verdict,
+                        end: r.result.end,
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            Ok((i, start, outcomes))
         })
-        .collect();
-    for (k, (i, start, a, c)) in verdicts.into_iter().enumerate() {
+        .collect::<Result<_, ScorerError>>()?;
+    for (k, (i, start, outcomes)) in scored.into_iter().enumerate() {
         let st = &mut out.steps[i];
         st.samples += 1;
-        st.analytic_seated += usize::from(a == Verdict::Seated);
-        st.contact_seated += usize::from(c == Verdict::Seated);
-        if a != c {
+        for o in &outcomes {
+            if o.verdict == Verdict::Seated {
+                *st.seated.entry(o.engine.clone()).or_default() += 1;
+            }
+        }
+        for (p, &(a, b)) in st.pairs.iter_mut().zip(&pairs) {
+            p.disagreements += usize::from(outcomes[a].verdict != outcomes[b].verdict);
+        }
+        if outcomes.iter().any(|o| o.verdict != outcomes[0].verdict) {
             st.disagreements += 1;
             out.disagreements.push(Disagreement {
                 step: i,
                 sample: k,
                 start,
-                analytic: a,
-                contact: c,
+                outcomes,
             });
         }
     }
-    out
+    Ok(out)
 }

@@ -53,3 +53,21 @@ pub fn score(mating: &Mating, ins_T_part: &Isometry3<f64>) -> InsertionResult {
         ins_T_part: end_pose,
     }
 }
+
+/// The analytic model as an [`InsertionScorer`](super::InsertionScorer).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Analytic;
+
+impl super::InsertionScorer for Analytic {
+    fn name(&self) -> &'static str {
+        "analytic"
+    }
+
+    fn score(&self, case: &super::InsertionCase<'_>) -> Result<super::Scored, super::ScorerError> {
+        Ok(super::Scored {
+            result: score(case.mating, &case.ins_T_part),
+            simulated_time: 0.0,
+            steps: 0,
+        })
+    }
+}

@@ -16,47 +16,23 @@
 //! lets a corner that landed a few microns onto the rim yaw off it): 2.6 % of boundary samples
 //! disagree (`cell scorers`).
 
-use nalgebra::{Isometry3, Translation3, Vector3};
+use nalgebra::Isometry3;
 use rapier3d_f64::prelude::{
     ColliderBuilder, GenericJointBuilder, JointAxesMask, JointAxis, MassProperties, MotorModel,
     PhysicsWorld, RigidBodyBuilder, Vector,
 };
 
-use super::{InsertionResult, Mating, ReceiverPart, classify};
+use super::{InsertionResult, Mating, ReceiverPart, Wrist};
 use crate::cell::geometry::PartGeometry;
 use crate::convert::{isometry_from_pose, pose_from_isometry, vec_from_point};
 
-/// Parameters of the compliant wrist and the simulation.
+/// Rapier's solver settings for the insertion (the wrist is shared with the other engines).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactSettings {
+    /// The compliant wrist pushing the part in.
+    pub wrist: Wrist,
     /// Time step, seconds.
     pub dt: f64,
-    /// Wrist descent speed, m/s.
-    pub speed: f64,
-    /// How far below seated the wrist is commanded, metres (loads the axial spring).
-    pub overtravel: f64,
-    /// Lateral stiffness, N/m.
-    pub lateral_stiffness: f64,
-    /// Rotational stiffness, N·m/rad.
-    pub rotational_stiffness: f64,
-    /// Axial stiffness, N/m.
-    pub axial_stiffness: f64,
-    /// Largest axial push, N.
-    pub max_push: f64,
-    /// Damping ratio of every spring.
-    pub damping_ratio: f64,
-    /// Moving mass (platform, fingers and part), kg.
-    pub mass: f64,
-    /// Moving rotational inertia about each axis, kg·m².
-    pub inertia: f64,
-    /// Clear height above first contact where the part starts, metres.
-    pub standoff: f64,
-    /// Time the part must be still to end the simulation, seconds.
-    pub settle: f64,
-    /// Speed under which the part counts as still, m/s.
-    pub still_speed: f64,
-    /// Longest simulated time, seconds.
-    pub max_time: f64,
     /// Natural frequency of the contact constraints' softness, Hz (rapier's default of 30–60 Hz
     /// lets a 5 N push sink tens of microns into the chamfers at this scale).
     pub contact_frequency: f64,
@@ -76,26 +52,42 @@ pub struct ContactSettings {
 impl Default for ContactSettings {
     fn default() -> Self {
         Self {
+            wrist: Wrist::default(),
             dt: 5e-4,
-            speed: 0.025,
-            overtravel: 1e-3,
-            lateral_stiffness: 2_000.0,
-            rotational_stiffness: 50.0,
-            axial_stiffness: 5_000.0,
-            max_push: 5.0,
-            damping_ratio: 1.0,
-            mass: 0.05,
-            inertia: 2e-6,
-            standoff: 2e-4,
-            settle: 0.02,
-            still_speed: 5e-4,
-            max_time: 1.0,
             contact_frequency: 2000.0,
             solver_iterations: 8,
             length_unit: 1e-4,
             prediction_distance: 3e-5,
             max_corrective_velocity: 0.05,
         }
+    }
+}
+
+/// The rapier contact simulation as an [`InsertionScorer`](super::InsertionScorer).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Rapier {
+    /// Solver and wrist settings.
+    pub settings: ContactSettings,
+}
+
+impl super::InsertionScorer for Rapier {
+    fn name(&self) -> &'static str {
+        "contact"
+    }
+
+    fn score(&self, case: &super::InsertionCase<'_>) -> Result<super::Scored, super::ScorerError> {
+        let run = simulate(
+            case.mating,
+            case.held,
+            case.receivers,
+            &case.ins_T_part,
+            &self.settings,
+        );
+        Ok(super::Scored {
+            result: run.result,
+            simulated_time: run.simulated_time,
+            steps: run.steps,
+        })
     }
 }
 
@@ -121,12 +113,8 @@ pub fn simulate(
     settings: &ContactSettings,
 ) -> ContactRun {
     let start = mating.pose_error(ins_T_part);
-    // Start clear of the receivers: the leading face a standoff above the fit's top, lowered by
-    // how far the tilt drops a corner.
-    let corner_drop = mating.width_along(&start.tilt_direction) / 2.0 * start.tilt.sin();
-    let start_height = mating.engagement + settings.standoff + corner_drop.max(0.0);
-    let mut start_pose = *ins_T_part;
-    start_pose.translation.vector.z = start_height;
+    let w = &settings.wrist;
+    let start_pose = w.start_pose(mating, ins_T_part);
 
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::ZERO;
@@ -164,14 +152,13 @@ pub fn simulate(
         }
     }
 
-    let s = settings;
     let part = world.bodies.insert(
         RigidBodyBuilder::dynamic()
             .pose(pose_from_isometry(&start_pose))
             .additional_mass_properties(MassProperties::new(
                 Vector::ZERO,
-                s.mass,
-                Vector::splat(s.inertia),
+                w.mass,
+                Vector::splat(w.inertia),
             ))
             .can_sleep(false)
             .build(),
@@ -196,66 +183,50 @@ pub fn simulate(
         mating.lead_point.y,
         mating.lead_point.z,
     ));
-    let damping = |k: f64, m: f64| 2.0 * s.damping_ratio * (k * m).sqrt();
     let mut joint = GenericJointBuilder::new(JointAxesMask::empty())
         .local_frame1(centre)
         .local_frame2(centre);
     for (axis, k, m) in [
-        (JointAxis::LinX, s.lateral_stiffness, s.mass),
-        (JointAxis::LinY, s.lateral_stiffness, s.mass),
-        (JointAxis::LinZ, s.axial_stiffness, s.mass),
-        (JointAxis::AngX, s.rotational_stiffness, s.inertia),
-        (JointAxis::AngY, s.rotational_stiffness, s.inertia),
-        (JointAxis::AngZ, s.rotational_stiffness, s.inertia),
+        (JointAxis::LinX, w.lateral_stiffness, w.mass),
+        (JointAxis::LinY, w.lateral_stiffness, w.mass),
+        (JointAxis::LinZ, w.axial_stiffness, w.mass),
+        (JointAxis::AngX, w.rotational_stiffness, w.inertia),
+        (JointAxis::AngY, w.rotational_stiffness, w.inertia),
+        (JointAxis::AngZ, w.rotational_stiffness, w.inertia),
     ] {
         joint = joint
             .motor_model(axis, MotorModel::ForceBased)
-            .motor_position(axis, 0.0, k, damping(k, m));
+            .motor_position(axis, 0.0, k, w.damping(k, m));
     }
-    joint = joint.motor_max_force(JointAxis::LinZ, s.max_push);
+    joint = joint.motor_max_force(JointAxis::LinZ, w.max_push);
     world
         .impulse_joints
         .insert(wrist, part, joint.build(), true);
 
-    let end_height = -s.overtravel;
+    let dt = settings.dt;
     let mut t = 0.0;
     let mut still = 0.0;
     let mut steps = 0;
-    while t < s.max_time {
-        t += s.dt;
+    while t < w.max_time {
+        t += dt;
         steps += 1;
-        let z = (start_height - s.speed * t).max(end_height);
-        let mut wrist_pose = start_pose;
-        wrist_pose.translation = Translation3::from(Vector3::new(
-            start_pose.translation.x,
-            start_pose.translation.y,
-            z,
-        ));
-        world.bodies[wrist].set_next_kinematic_position(pose_from_isometry(&wrist_pose));
+        world.bodies[wrist]
+            .set_next_kinematic_position(pose_from_isometry(&w.pose_at(&start_pose, t)));
         world.step();
         let rb = &world.bodies[part];
-        let moving = rb.linvel().length() > s.still_speed
-            || rb.angvel().length() * mating.half_width.max() > s.still_speed;
-        still = if z <= end_height && !moving {
-            still + s.dt
+        let at_rest = w.is_still(mating, rb.linvel().length(), rb.angvel().length());
+        still = if w.bottomed(&start_pose, t) && at_rest {
+            still + dt
         } else {
             0.0
         };
-        if still >= s.settle {
+        if still >= w.settle {
             break;
         }
     }
     let end_pose = isometry_from_pose(world.bodies[part].position());
-    let end = mating.pose_error(&end_pose);
-    let (verdict, cause) = classify(mating, &start, &end);
     ContactRun {
-        result: InsertionResult {
-            verdict,
-            cause,
-            start,
-            end,
-            ins_T_part: end_pose,
-        },
+        result: InsertionResult::ended_at(mating, start, end_pose),
         simulated_time: t,
         steps,
     }

@@ -1,11 +1,13 @@
 //! Insertion scoring: from the true pose of the held part relative to its target when the
 //! insertion starts to seated, jammed or missed, with the cause.
 //!
-//! Two scorers share [`Mating`] (the step's geometry) and [`classify`]:
-//! [`analytic`] (capture by clearance and lead-in, two-point tilt jam; microseconds) and
-//! [`contact`] (rapier at millimetre scale with a compliant wrist pushing the real meshes
-//! together; the reference where the two disagree). [`agreement`] measures how often they agree
-//! near the capture boundary.
+//! Every scorer implements [`InsertionScorer`] and shares [`Mating`] (the step's geometry) and
+//! [`classify`]: [`analytic`] (capture by clearance and lead-in, two-point tilt jam;
+//! microseconds), [`contact`] (rapier at millimetre scale with a compliant [`Wrist`] pushing the
+//! real convex pieces together; the reference where they disagree) and [`mujoco`] (the same
+//! wrist and pieces in MuJoCo, a second independent contact engine). [`agreement`] measures how
+//! often they agree near the capture boundary. Adding a scorer is one file implementing
+//! [`InsertionScorer`] plus its variant in [`Scorer`] and its line in [`Scorer::build`].
 //!
 //! Poses are expressed in the step's insertion frame: origin at the seated part origin, z pointing
 //! out of the hole (against the insertion axis).
@@ -14,13 +16,20 @@ pub mod agreement;
 pub mod analytic;
 pub mod contact;
 mod mating;
+pub mod mujoco;
+mod scorer;
+mod wrist;
 
 pub use mating::{Mating, ReceiverPart};
+pub use scorer::{InsertionCase, InsertionScorer, Scored, ScorerError};
+pub use wrist::Wrist;
+
+use std::sync::Arc;
 
 use nalgebra::{Isometry3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// Which scorer decides insertions.
+/// Which scorer decides insertions (the scenario key `[simulation] insertion_scorer`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Scorer {
@@ -29,6 +38,39 @@ pub enum Scorer {
     Analytic,
     /// Rapier contact simulation of the real meshes with a compliant wrist.
     Contact,
+    /// MuJoCo contact simulation of the same pieces and wrist (needs the `mujoco` feature).
+    Mujoco,
+}
+
+impl Scorer {
+    /// Every scorer, in the order reports list them.
+    pub const ALL: [Scorer; 3] = [Scorer::Analytic, Scorer::Contact, Scorer::Mujoco];
+
+    /// The name the scenario key and `cell scorers --engines` use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scorer::Analytic => "analytic",
+            Scorer::Contact => "contact",
+            Scorer::Mujoco => "mujoco",
+        }
+    }
+
+    /// The scorer called `name` (`rapier` is accepted for `contact`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "rapier" => Some(Scorer::Contact),
+            _ => Self::ALL.into_iter().find(|s| s.name() == name),
+        }
+    }
+
+    /// Builds the scorer with its default settings; fails when it is not part of this build.
+    pub fn build(self) -> Result<Arc<dyn InsertionScorer>, ScorerError> {
+        Ok(match self {
+            Scorer::Analytic => Arc::new(analytic::Analytic),
+            Scorer::Contact => Arc::new(contact::Rapier::default()),
+            Scorer::Mujoco => mujoco::build()?,
+        })
+    }
 }
 
 /// How an insertion ended.
@@ -115,6 +157,23 @@ pub struct InsertionResult {
     pub end: PoseError,
     /// Where the part ended, in the insertion frame.
     pub ins_T_part: Isometry3<f64>,
+}
+
+impl InsertionResult {
+    /// The result of an insertion that started at `start` and left the part at `ins_T_part`
+    /// (insertion frame), classified by [`classify`].
+    #[allow(non_snake_case)]
+    pub fn ended_at(mating: &Mating, start: PoseError, ins_T_part: Isometry3<f64>) -> Self {
+        let end = mating.pose_error(&ins_T_part);
+        let (verdict, cause) = classify(mating, &start, &end);
+        Self {
+            verdict,
+            cause,
+            start,
+            end,
+            ins_T_part,
+        }
+    }
 }
 
 /// Decides the verdict from where the part ended, and when it is not seated, the cause from the

@@ -1,0 +1,73 @@
+//! Stable poses dropped in MuJoCo cross-check rapier's: for each USB-C part the same drop
+//! sequence (600 drops) gives class shares within 3 points and physics rest heights within
+//! 10 µm of the geometric ones. One known exception: the light plastic insert mold lands on its
+//! +z face about 6 points more often in MuJoCo (its oblique classes 2 points less each);
+//! that part's share bound is its measured gap, so the test still fails if it grows.
+
+#![cfg(feature = "mujoco")]
+
+use sim::cad::usbc;
+use sim::stable_poses::{DropSettings, StablePoseReport, stable_poses, stable_poses_mujoco};
+
+/// Largest difference of a class's share between the engines, per part.
+fn share_gap(a: &StablePoseReport, b: &StablePoseReport) -> (f64, String) {
+    let share = |r: &StablePoseReport, name: &str| {
+        r.classes
+            .iter()
+            .find(|c| c.pose.name == name)
+            .map_or(0.0, |c| c.pose.probability)
+    };
+    a.classes
+        .iter()
+        .chain(&b.classes)
+        .map(|c| {
+            let gap = (share(a, &c.pose.name) - share(b, &c.pose.name)).abs();
+            (gap, c.pose.name.clone())
+        })
+        .fold((0.0, String::new()), |m, g| if g.0 > m.0 { g } else { m })
+}
+
+#[test]
+fn mujoco_and_rapier_drops_give_the_same_stable_poses() {
+    let settings = DropSettings {
+        drops: 600,
+        seed: 3,
+        ..DropSettings::default()
+    };
+    let mut failures = Vec::new();
+    for (name, mesh, density, bound) in [
+        ("main_shell", usbc::main_shell(), 8500.0, 0.03),
+        ("insert_mold", usbc::insert_mold(), 1400.0, 0.07),
+        ("top_shell", usbc::top_shell(), 8500.0, 0.03),
+    ] {
+        let rapier = stable_poses(&mesh, density, &settings, None);
+        let mujoco = stable_poses_mujoco(name, &mesh, density, &settings, None).unwrap();
+        let (gap, class) = share_gap(&rapier, &mujoco);
+        eprintln!(
+            "{name}: largest share gap {:.1} points ({class})",
+            gap * 100.0
+        );
+        for c in &mujoco.classes {
+            eprintln!(
+                "  {:<9} mujoco {:.3} rest {:.1} µm (physics−geometry {:.2} µm)",
+                c.pose.name,
+                c.pose.probability,
+                c.pose.rest_height * 1e6,
+                c.max_height_error * 1e6
+            );
+            if c.max_height_error >= 1e-5 {
+                failures.push(format!(
+                    "{name} {}: MuJoCo rests {} m from the geometric height",
+                    c.pose.name, c.max_height_error
+                ));
+            }
+        }
+        if gap > bound {
+            failures.push(format!(
+                "{name} {class}: shares differ by {:.1} points",
+                gap * 100.0
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
