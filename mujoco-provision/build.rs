@@ -134,8 +134,20 @@ fn cached_wheel() -> Result<PathBuf, String> {
     let _ = fs::remove_dir_all(&scratch);
     let python = std::env::var("MUJOCO_PYTHON").unwrap_or_else(|_| "python3".into());
     let status = Command::new(&python)
-        .args(["-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:"])
-        .args(["--platform", "manylinux_2_28_x86_64", "--python-version", "3.11"])
+        .args([
+            "-m",
+            "pip",
+            "download",
+            "--quiet",
+            "--no-deps",
+            "--only-binary=:all:",
+        ])
+        .args([
+            "--platform",
+            "manylinux_2_28_x86_64",
+            "--python-version",
+            "3.11",
+        ])
         .args(["--implementation", "cp", "--abi", "cp311", "--dest"])
         .arg(&scratch)
         .arg(REQUIREMENT)
@@ -144,7 +156,9 @@ fn cached_wheel() -> Result<PathBuf, String> {
     let fetched = scratch.join(WHEEL);
     let result = match status {
         Err(e) => Err(e),
-        Ok(s) if !s.success() => Err(format!("`{python} -m pip download {REQUIREMENT}` failed ({s})")),
+        Ok(s) if !s.success() => Err(format!(
+            "`{python} -m pip download {REQUIREMENT}` failed ({s})"
+        )),
         Ok(_) if !fetched.is_file() => Err(format!(
             "`{python} -m pip download {REQUIREMENT}` did not fetch {WHEEL}"
         )),

@@ -313,7 +313,7 @@ fn the_mujoco_scorer_is_chosen_by_the_scenario() {
         doc["simulation"]["insertion_scorer"] = toml_edit::value("mujoco");
     });
     assert_eq!(
-        mujoco.scenario.spec.simulation.insertion_scorer,
+        mujoco.scenario().spec.simulation.insertion_scorer,
         Scorer::Mujoco
     );
     assert_eq!(mujoco.model.insertion.name(), "mujoco");

@@ -63,13 +63,25 @@ pub fn stable_poses(
             out
         })
         .collect();
+    let (mass, center_of_mass) = body.mass_and_com();
+    report(&outcomes, mesh, settings, mass, center_of_mass)
+}
+
+/// The report of a finished drop sequence, whichever engine dropped it: the rests clustered
+/// into classes, with the leaning, rare and still-jittering drops counted apart.
+pub(crate) fn report(
+    outcomes: &[DropOutcome],
+    mesh: &TriMesh,
+    settings: &DropSettings,
+    mass: f64,
+    center_of_mass: nalgebra::Point3<f64>,
+) -> StablePoseReport {
     let min_count = (settings.drops / 1000).max(2);
-    let classes = cluster(&outcomes, mesh, min_count);
+    let classes = cluster(outcomes, mesh, min_count);
     let classified: usize = classes.iter().map(|c| c.count).sum();
-    let leaning = leaning(&outcomes, mesh).iter().filter(|&&l| l).count();
+    let leaning = leaning(outcomes, mesh).iter().filter(|&&l| l).count();
     let settled = outcomes.len();
     let jittering = outcomes.iter().filter(|o| !o.settled).count();
-    let (mass, center_of_mass) = body.mass_and_com();
     StablePoseReport {
         classes,
         drops: outcomes.len(),

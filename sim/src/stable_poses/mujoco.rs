@@ -14,7 +14,7 @@ use indicatif::ProgressBar;
 use perception::part::TriMesh;
 use rayon::prelude::*;
 
-use super::{DropOutcome, DropSettings, StablePoseReport, cluster};
+use super::{DropOutcome, DropSettings, StablePoseReport};
 use crate::mujoco::MujocoError;
 
 /// Which physics engine drops the parts.
@@ -80,25 +80,13 @@ pub fn stable_poses_mujoco(
         })
         .collect::<Result<_, _>>()?;
     let outcomes: Vec<DropOutcome> = batches.into_iter().flatten().collect();
-    let min_count = (settings.drops / 1000).max(2);
-    let classes = cluster(&outcomes, mesh, min_count);
-    let classified: usize = classes.iter().map(|c| c.count).sum();
-    let jittering = outcomes.iter().filter(|o| !o.settled).count();
-    let resting = outcomes.len() - jittering;
-    Ok(StablePoseReport {
-        classes,
-        drops: outcomes.len(),
-        unsettled: jittering,
-        rare: outcomes.len() - classified,
+    Ok(super::report(
+        &outcomes,
+        mesh,
+        settings,
         mass,
         center_of_mass,
-        mean_rest_time: outcomes
-            .iter()
-            .filter(|o| o.settled)
-            .map(|o| o.time)
-            .sum::<f64>()
-            / resting.max(1) as f64,
-    })
+    ))
 }
 
 #[cfg(not(feature = "mujoco"))]
