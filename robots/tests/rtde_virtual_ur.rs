@@ -391,7 +391,21 @@ async fn refused_program_and_dropped_link_give_typed_errors() {
         refused.err()
     );
     vur.refuse_programs(false);
-    let mut robot = UrRobot::connect(config).await.unwrap();
+    // The refused client's input registers are held until the controller sees its socket close,
+    // which happens asynchronously after the client is dropped (as on a real UR): a client that
+    // reconnects at once may be told they are in use, and then tries again.
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let mut robot = loop {
+        match UrRobot::connect(config.clone()).await {
+            Ok(robot) => break robot,
+            Err(RobotError::ConnectionLost { detail })
+                if detail.contains("InUse") && Instant::now() < deadline =>
+            {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+            Err(e) => panic!("{e:?}"),
+        }
+    };
 
     // A dropped RTDE link is re-established and commands work again.
     vur.drop_rtde_connections();
