@@ -8,7 +8,7 @@ use parry3d_f64::math::Vector as DVec3;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
-use super::instance_grid::InstanceGrid;
+use super::instance_grid::{InstanceGrid, slab_range};
 use super::{Appearance, TagBoard};
 
 /// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
@@ -359,26 +359,7 @@ fn world_aabb(inst: &Instance) -> (Point3<f64>, Point3<f64>) {
 
 /// Entry distance of a ray into a box (0 when it starts inside); `None` when it misses.
 fn slab(lo: &Point3<f64>, hi: &Point3<f64>, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
-    let mut t0 = 0.0f64;
-    let mut t1 = f64::INFINITY;
-    for a in 0..3 {
-        let inv = 1.0 / d[a];
-        let (mut near, mut far) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
-        if near > far {
-            std::mem::swap(&mut near, &mut far);
-        }
-        // NaN (a zero direction component on a slab face) compares false and keeps the bound.
-        if near > t0 {
-            t0 = near;
-        }
-        if far < t1 {
-            t1 = far;
-        }
-        if t0 > t1 {
-            return None;
-        }
-    }
-    Some(t0)
+    slab_range(lo, hi, o, d).map(|(entry, _)| entry)
 }
 
 /// Hit of a ray with the board box (top face at z = 0, bottom at −thickness).
