@@ -8,14 +8,11 @@ use support::{cell, text};
 #[test]
 fn a_failed_episode_replays_to_its_record_with_a_timeline_and_pictures() {
     let tmp = tempfile::tempdir().unwrap();
-    let nominal = std::fs::read_to_string(support::nominal()).unwrap();
-    let noisy = nominal.replace("keypoint_noise_px = 0.5", "keypoint_noise_px = 3.0");
-    let scenario = support::root().join(format!("scenarios/.replay_{}.toml", std::process::id()));
-    std::fs::write(&scenario, noisy).unwrap();
+    let scenario = support::NoisyScenario::new("replay");
     let out = tmp.path().display().to_string();
     let o = cell(&[
         "run",
-        &scenario.display().to_string(),
+        &scenario.path().display().to_string(),
         "--episodes",
         "10",
         "--pictures",
@@ -47,7 +44,6 @@ fn a_failed_episode_replays_to_its_record_with_a_timeline_and_pictures() {
         "--episode",
         &e.to_string(),
     ]);
-    std::fs::remove_file(&scenario).ok();
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("the replay matches the stored record"), "{t}");

@@ -31,14 +31,11 @@ fn the_rate_axis_starts_where_99_5_and_100_percent_differ() {
 #[test]
 fn a_noisy_run_reports_mechanisms_and_links_every_failed_episode_to_its_events() {
     let tmp = tempfile::tempdir().unwrap();
-    let nominal = std::fs::read_to_string(support::nominal()).unwrap();
-    let noisy = nominal.replace("keypoint_noise_px = 0.5", "keypoint_noise_px = 3.0");
-    let scenario = support::root().join(format!("scenarios/.report_{}.toml", std::process::id()));
-    std::fs::write(&scenario, noisy).unwrap();
+    let scenario = support::NoisyScenario::new("report");
     let out = tmp.path().display().to_string();
     let o = cell(&[
         "run",
-        &scenario.display().to_string(),
+        &scenario.path().display().to_string(),
         "--episodes",
         "40",
         "--pictures",
@@ -47,7 +44,6 @@ fn a_noisy_run_reports_mechanisms_and_links_every_failed_episode_to_its_events()
         &out,
         "--quiet",
     ]);
-    std::fs::remove_file(&scenario).ok();
     assert!(
         text(&o).contains("pictures of 2 failed episodes"),
         "{}",

@@ -2,7 +2,7 @@
 
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// The repository root.
@@ -36,4 +36,30 @@ pub fn text(o: &Output) -> String {
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
     )
+}
+
+/// A copy of the nominal scenario with 3 px keypoint noise (so some episodes fail), written
+/// beside it (its relative paths must resolve) and removed when dropped, even by a failed test.
+pub struct NoisyScenario(PathBuf);
+
+impl NoisyScenario {
+    /// Writes `scenarios/.TAG_PID.toml`.
+    pub fn new(tag: &str) -> Self {
+        let nominal = std::fs::read_to_string(nominal()).unwrap();
+        let noisy = nominal.replace("keypoint_noise_px = 0.5", "keypoint_noise_px = 3.0");
+        let path = root().join(format!("scenarios/.{tag}_{}.toml", std::process::id()));
+        std::fs::write(&path, noisy).unwrap();
+        Self(path)
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for NoisyScenario {
+    fn drop(&mut self) {
+        std::fs::remove_file(&self.0).ok();
+    }
 }
