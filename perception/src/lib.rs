@@ -8,9 +8,15 @@ pub mod camera;
 pub mod part;
 
 pub use camera::{Camera, CameraError, Distortion};
+pub use detection::DetectedPart;
+pub use frame::{Frame, FrameContent, FrameImage, TruePart};
+pub use perceive::{PartPerception, PerceptionError};
 pub mod ablation;
+pub mod detection;
+pub mod frame;
 pub mod metrics;
 pub mod onnx;
+pub mod perceive;
 pub mod planar;
 pub mod pnp;
 pub mod symmetry;

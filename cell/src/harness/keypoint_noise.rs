@@ -19,7 +19,7 @@ use sim::seed::stream_rng;
 use super::HarnessError;
 use crate::scenario::{PerceptionMode, Scenario};
 
-use crate::orchestrator::{DetectedPart, Frame, FrameContent, PartPerception, PerceptionError};
+use perception::{DetectedPart, Frame, FrameContent, PartPerception, PerceptionError};
 
 /// Keypoint-noise settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -168,10 +168,10 @@ impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
     fn perceive(&mut self, frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
         let parts = match &frame.content {
             FrameContent::Simulated(parts) => parts,
-            FrameContent::ImageFile(_) => {
+            FrameContent::Image(_) => {
                 return Err(PerceptionError::UnsupportedFrame {
                     mode: "keypoint-noise",
-                    what: "image files (it needs the simulated scene)",
+                    what: "images (it needs the simulated scene)",
                 });
             }
         };
@@ -210,6 +210,7 @@ impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
                 stable_pose: m.refiner.stable_poses()[planar.class].name.clone(),
                 confidence: planar.confidence * consistency,
                 rms_px,
+                covariance: pnp.covariance,
             });
         }
         Ok(out)

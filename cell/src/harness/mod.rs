@@ -33,8 +33,9 @@ use std::sync::{Arc, Mutex};
 
 use sim::cell::{CellModel, SimCell};
 
-use crate::orchestrator::{EpisodeOutput, KnowledgeError, PerceptionError, Setup, run_episode};
+use crate::orchestrator::{EpisodeOutput, KnowledgeError, Setup, run_episode};
 use crate::scenario::{PerceptionMode, Scenario};
+use perception::PerceptionError;
 
 /// Why a simulated episode could not be set up (nothing ran).
 #[derive(Debug, thiserror::Error)]

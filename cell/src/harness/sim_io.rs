@@ -13,9 +13,8 @@ use sim::cell::SimCell;
 
 use super::verdict::check_of;
 use crate::episode::StepOutcome;
-use crate::orchestrator::{
-    CellIo, CellIoError, Frame, FrameContent, InsertionCheck, TruePart, Workcell,
-};
+use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, Workcell};
+use perception::{Frame, FrameContent, TruePart};
 
 impl CellIo for SimCell {
     fn capture(&mut self) -> Result<Frame, CellIoError> {

@@ -6,8 +6,8 @@
 use nalgebra::Isometry3;
 use robots::robot::Robot;
 
-use super::perception::Frame;
 use crate::episode::{PoseError, StepOutcome};
+use perception::Frame;
 
 /// Why a cell side channel failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

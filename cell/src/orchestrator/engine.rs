@@ -12,12 +12,12 @@ use super::cell_io::{CellIo, InsertionCheck, Workcell};
 use super::context::EpisodeContext;
 use super::events::EventLog;
 use super::geometry::CellKnowledge;
-use super::perception::{DetectedPart, PartPerception};
 use super::planning::{Motion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, select};
 use super::state::State;
 use super::step::StepState;
 use crate::episode::{EpisodeRecord, PoseError, RECORD_VERSION, StepOutcome};
+use perception::{DetectedPart, PartPerception};
 
 /// Error-budget name of a step given up because the feeder held none of its part.
 pub const FEEDER_EXHAUSTED: &str = "feeder.parts";

@@ -1,5 +1,5 @@
 //! The orchestrator engine: a tokio state machine that assembles a scenario's parts on any
-//! [`Workcell`] (a `robots::Robot` and the cell's [`CellIo`]) with any [`PartPerception`]. It
+//! [`Workcell`] (a `robots::Robot` and the cell's [`CellIo`]) with any [`perception::PartPerception`]. It
 //! knows only these seams; the simulated cell, keypoint-noise perception and the episode over
 //! loopback RTDE are the simulation harness's (`crate::harness`), which a production run never
 //! builds.
@@ -40,7 +40,6 @@ mod context;
 mod engine;
 mod events;
 mod geometry;
-mod perception;
 mod planning;
 mod production;
 mod selection;
@@ -52,9 +51,6 @@ pub use context::{EpisodeContext, EpisodeSettings, Setup};
 pub use engine::{FEEDER_EXHAUSTED, FEEDER_SHAKE_BOUND};
 pub use events::{Event, EventLog};
 pub use geometry::{CellKnowledge, KnowledgeError, top_down};
-pub use perception::{
-    DetectedPart, Frame, FrameContent, PartPerception, PerceptionError, TruePart,
-};
 pub use planning::{
     Motion, Plan, PlanError, Planner, PlanningConfig, SearchConfig, Speeds, grasped_offset,
 };
@@ -80,7 +76,7 @@ pub struct EpisodeOutput {
 pub async fn run_episode(
     ctx: EpisodeContext<'_>,
     cell: &mut dyn Workcell,
-    perception: &mut dyn PartPerception,
+    perception: &mut dyn perception::PartPerception,
 ) -> EpisodeOutput {
     let (record, events) = engine::Engine::new(ctx, cell, perception).run().await;
     EpisodeOutput { record, events }

@@ -12,8 +12,8 @@ use std::time::Instant;
 use nalgebra::Isometry3;
 
 use super::cell_io::{CellIo, CellIoError, InsertionCheck};
-use super::perception::{Frame, FrameContent};
 use crate::scenario::{PerceptionMode, Scenario};
+use perception::{Frame, FrameContent, FrameImage};
 
 /// Image file extensions a camera folder may hold.
 const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff"];
@@ -150,11 +150,13 @@ impl CellIo for ProductionCellIo {
         let file = self.images.next_image().ok_or_else(|| {
             CellIoError::Camera("every image of the camera source was used".into())
         })?;
+        let pixels = image::open(&file)
+            .map_err(|e| CellIoError::Camera(format!("{}: {e}", file.display())))?;
         let cam = &self.scenario.spec.cell.camera;
         Ok(Frame {
             camera: cam.intrinsics,
             base_T_camera: cam.base_T_camera.isometry(),
-            content: FrameContent::ImageFile(file),
+            content: FrameContent::Image(FrameImage::full(pixels)),
         })
     }
 

@@ -15,7 +15,7 @@ use perception::part::Catalog;
 use robots::kinematics::Joints;
 
 use super::geometry::CellKnowledge;
-use super::perception::DetectedPart;
+use perception::DetectedPart;
 
 /// Selection tuning.
 #[derive(Debug, Clone, Copy, PartialEq)]

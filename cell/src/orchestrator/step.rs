@@ -5,10 +5,10 @@ use std::collections::BTreeSet;
 
 use nalgebra::Isometry3;
 
-use super::perception::{DetectedPart, Frame};
 use super::planning::{Motion, Plan};
 use super::selection::Selection;
 use crate::episode::{PoseError, StepOutcome, StepRecord};
+use perception::{DetectedPart, Frame};
 
 /// Per-step state of the engine.
 pub(super) struct StepState {

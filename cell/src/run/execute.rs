@@ -15,11 +15,12 @@ use crate::harness::{
     HarnessError, OverRtdeError, SimSetup, run_sim_episode_blocking, sim_episode_over_rtde,
 };
 use crate::orchestrator::{
-    EpisodeOutput, KnowledgeError, PartPerception, ProductionCellIo, ProductionError,
-    ProductionOptions, Setup, SplitCell, preflight, run_episode,
+    EpisodeOutput, KnowledgeError, ProductionCellIo, ProductionError, ProductionOptions, Setup,
+    SplitCell, preflight, run_episode,
 };
 use crate::report::{ReportError, ReportFiles, write_report};
 use crate::scenario::{PerceptionMode, Scenario};
+use perception::PartPerception;
 
 /// What can stop one episode from producing a record.
 #[derive(Debug, thiserror::Error)]
@@ -349,7 +350,8 @@ fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, Prod
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::orchestrator::{DetectedPart, Frame, ImageSource, PerceptionError};
+    use crate::orchestrator::ImageSource;
+    use perception::{DetectedPart, Frame, PerceptionError};
 
     /// Stands in for the learned perception, which has no trained models yet; the guarded run
     /// never gets as far as perceiving.
