@@ -7,12 +7,12 @@
 //! PnP, by PnP + planar refinement, and by PnP + planar refinement + the 3-DOF keypoint fit.
 //! Everything is seeded: a trial's noise depends only on (seed, part, distance, axis, level, trial).
 
-use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use crate::keypoint_noise::KeypointNoiseModel;
 use crate::metrics::{ErrorSummary, PoseErrors, SummaryOptions, pose_errors};
 use crate::part::{PartSpec, StablePose};
 use crate::planar::{PlanarConfig, PlanarError, PlanarRefiner};
@@ -39,31 +39,7 @@ pub enum AblationError {
     Camera(#[from] CameraError),
 }
 
-/// Along which image axis keypoint noise is added.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum NoiseAxis {
-    /// Columns only.
-    X,
-    /// Rows only.
-    Y,
-    /// Both, independently (isotropic).
-    Iso,
-}
-
-impl NoiseAxis {
-    /// Every axis mode.
-    pub const ALL: [NoiseAxis; 3] = [NoiseAxis::X, NoiseAxis::Y, NoiseAxis::Iso];
-
-    /// Short name: "x", "y", "iso".
-    pub fn name(self) -> &'static str {
-        match self {
-            NoiseAxis::X => "x",
-            NoiseAxis::Y => "y",
-            NoiseAxis::Iso => "iso",
-        }
-    }
-}
+pub use crate::keypoint_noise::NoiseAxis;
 
 /// How a pose was estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -375,7 +351,10 @@ fn run_trial(
         rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
     );
     let truth = camera_t_table * table_t_part;
-    let normal = Normal::new(0.0, noise.max(0.0)).unwrap_or(Normal::new(0.0, 0.0).unwrap());
+    let model = KeypointNoiseModel {
+        axis,
+        ..KeypointNoiseModel::new(noise.max(0.0), 0.0)
+    };
     let pixels: Vec<Point2<f64>> = part
         .keypoints
         .iter()
@@ -384,12 +363,7 @@ fn run_trial(
                 .camera
                 .project(&(truth * p))
                 .unwrap_or(Point2::new(f64::NAN, f64::NAN));
-            let (nx, ny) = (normal.sample(rng), normal.sample(rng));
-            px + match axis {
-                NoiseAxis::X => Vector2::new(nx, 0.0),
-                NoiseAxis::Y => Vector2::new(0.0, ny),
-                NoiseAxis::Iso => Vector2::new(nx, ny),
-            }
+            model.perturb(px, rng)
         })
         .collect();
     let cam = &config.camera;

@@ -24,7 +24,7 @@ mod over_rtde;
 mod sim_io;
 mod verdict;
 
-pub use keypoint_noise::{KeypointNoise, KeypointNoiseConfig, keypoint_noise_for};
+pub use keypoint_noise::{KeypointNoise, keypoint_noise_for};
 pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
 pub use sim_io::SimCellIo;
 pub use verdict::{check_of, source_name};

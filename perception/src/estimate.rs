@@ -1,0 +1,238 @@
+//! From observed keypoints to a part pose on the table, in one place: PnP (weighted by keypoint
+//! covariances when they are known) → planar refinement onto the part's stable poses → reprojection
+//! RMS → confidence. Keypoint-noise perception and the learned pipeline both end here, so they
+//! differ only in where the keypoints come from.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Matrix2, Point2, Point3, UnitQuaternion};
+
+use crate::Camera;
+use crate::part::{Catalog, PartRole};
+use crate::perceive::PerceptionError;
+use crate::planar::{PlanarConfig, PlanarError, PlanarPose, PlanarRefiner};
+use crate::pnp::{PnpError, PnpSolution, solve_pnp};
+use crate::symmetry::symmetry_group;
+
+/// One observed keypoint: which model keypoint, where in the image (distorted pixels of the
+/// whole sensor), and how sure (covariance, px²) when the detector knows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    /// Index into the part's keypoints.
+    pub keypoint: usize,
+    /// Observed pixel.
+    pub pixel: Point2<f64>,
+    /// Covariance of the pixel, px².
+    pub covariance: Option<Matrix2<f64>>,
+}
+
+/// Estimation settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimatorConfig {
+    /// Estimates whose reprojection RMS exceeds this are rejected as failed, pixels.
+    pub max_rms_px: f64,
+    /// Planar refinement settings.
+    pub planar: PlanarConfig,
+}
+
+impl EstimatorConfig {
+    /// Default refinement with an RMS gate of `max_rms_px`.
+    pub fn with_gate(max_rms_px: f64) -> Self {
+        Self {
+            max_rms_px,
+            planar: PlanarConfig::default(),
+        }
+    }
+}
+
+/// A pose estimate of one part, with every stage kept for evaluation.
+#[derive(Debug, Clone, PartialEq)]
+#[allow(non_snake_case)]
+pub struct PoseEstimate {
+    /// The raw PnP solution (the paper's Table 1 is about this).
+    pub pnp: PnpSolution,
+    /// The estimate refined onto a stable pose on the table.
+    pub planar: PlanarPose,
+    /// Name of the chosen stable pose.
+    pub stable_pose: String,
+    /// Reprojection RMS of the refined pose over the observed keypoints, pixels.
+    pub rms_px: f64,
+    /// Stable-pose posterior times reprojection consistency, in (0, 1].
+    pub confidence: f64,
+}
+
+/// Why one part's pose could not be estimated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EstimateError {
+    /// The part is not one the estimator knows.
+    #[error("unknown part {0:?}")]
+    UnknownPart(String),
+    /// An observation names a keypoint the part does not have.
+    #[error("part {part}: keypoint {keypoint} does not exist (it has {count})")]
+    BadKeypoint {
+        /// The part.
+        part: String,
+        /// The keypoint index.
+        keypoint: usize,
+        /// How many keypoints the part has.
+        count: usize,
+    },
+    /// PnP failed.
+    #[error("PnP: {0}")]
+    Pnp(#[from] PnpError),
+    /// Planar refinement failed.
+    #[error("planar refinement: {0}")]
+    Planar(#[from] PlanarError),
+    /// The refined pose does not explain the keypoints.
+    #[error("reprojection RMS {rms_px:.2} px exceeds the gate of {gate_px:.2} px")]
+    Rms {
+        /// The RMS, pixels.
+        rms_px: f64,
+        /// The gate, pixels.
+        gate_px: f64,
+    },
+}
+
+struct PartModel {
+    keypoints: Vec<Point3<f64>>,
+    refiner: PlanarRefiner,
+}
+
+/// Estimates poses of a catalog's parts lying on a calibrated table.
+pub struct PoseEstimator {
+    models: BTreeMap<String, PartModel>,
+    config: EstimatorConfig,
+}
+
+impl PoseEstimator {
+    /// An estimator for every non-fixture part of `catalog` with at least four keypoints and a
+    /// stable pose, on the table at `camera_T_table` (from extrinsic calibration).
+    #[allow(non_snake_case)]
+    pub fn new(
+        catalog: &Catalog,
+        camera_T_table: Isometry3<f64>,
+        config: EstimatorConfig,
+    ) -> Result<Self, PerceptionError> {
+        if !(config.max_rms_px.is_finite() && config.max_rms_px > 0.0) {
+            return Err(PerceptionError::Settings(format!(
+                "the reprojection gate must be > 0 px, got {}",
+                config.max_rms_px
+            )));
+        }
+        let mut models = BTreeMap::new();
+        for part in catalog.parts.iter().filter(|p| p.role != PartRole::Fixture) {
+            if part.keypoints.len() < 4 || part.stable_poses.is_empty() {
+                continue;
+            }
+            let exact: Vec<_> = part
+                .symmetries
+                .iter()
+                .filter(|s| s.exact)
+                .cloned()
+                .collect();
+            let group: Vec<UnitQuaternion<f64>> = symmetry_group(&exact);
+            let refiner =
+                PlanarRefiner::new(camera_T_table, &part.stable_poses, &group, config.planar)
+                    .map_err(|e| PerceptionError::Part {
+                        part: part.name.clone(),
+                        reason: e.to_string(),
+                    })?;
+            models.insert(
+                part.name.clone(),
+                PartModel {
+                    keypoints: part.keypoint_points(),
+                    refiner,
+                },
+            );
+        }
+        Ok(Self { models, config })
+    }
+
+    /// The parts it can estimate, by name.
+    pub fn parts(&self) -> impl Iterator<Item = &str> {
+        self.models.keys().map(String::as_str)
+    }
+
+    /// A part's model keypoints (part frame, metres).
+    pub fn keypoints(&self, part: &str) -> Option<&[Point3<f64>]> {
+        self.models.get(part).map(|m| m.keypoints.as_slice())
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &EstimatorConfig {
+        &self.config
+    }
+
+    /// Estimates the pose of `part` from its observed keypoints in an image of `camera`.
+    pub fn estimate(
+        &self,
+        part: &str,
+        camera: &Camera,
+        observations: &[Observation],
+    ) -> Result<PoseEstimate, EstimateError> {
+        let m = self
+            .models
+            .get(part)
+            .ok_or_else(|| EstimateError::UnknownPart(part.into()))?;
+        let mut model = Vec::with_capacity(observations.len());
+        let mut pixels = Vec::with_capacity(observations.len());
+        let mut covariances = Vec::with_capacity(observations.len());
+        for o in observations {
+            let k = m
+                .keypoints
+                .get(o.keypoint)
+                .ok_or_else(|| EstimateError::BadKeypoint {
+                    part: part.into(),
+                    keypoint: o.keypoint,
+                    count: m.keypoints.len(),
+                })?;
+            model.push(*k);
+            pixels.push(o.pixel);
+            if let Some(c) = o.covariance {
+                covariances.push(c);
+            }
+        }
+        // Weighted only when every observation carries a covariance.
+        let weights = (covariances.len() == observations.len()).then_some(covariances.as_slice());
+        let pnp = solve_pnp(camera, &model, &pixels, weights)?;
+        let planar = m.refiner.refine_with_keypoints(
+            &pnp.camera_T_part,
+            camera,
+            &model,
+            &pixels,
+            weights,
+        )?;
+        let rms_px = pixel_rms(camera, &planar.camera_T_part, &model, &pixels);
+        let gate_px = self.config.max_rms_px;
+        if !(rms_px.is_finite() && rms_px <= gate_px) {
+            return Err(EstimateError::Rms { rms_px, gate_px });
+        }
+        let consistency = (-0.5 * (rms_px / gate_px).powi(2)).exp();
+        Ok(PoseEstimate {
+            stable_pose: m.refiner.stable_poses()[planar.class].name.clone(),
+            confidence: planar.confidence * consistency,
+            rms_px,
+            pnp,
+            planar,
+        })
+    }
+}
+
+/// Root-mean-square pixel distance between observed pixels and the projected model points
+/// (infinite when a point does not project).
+#[allow(non_snake_case)]
+pub fn pixel_rms(
+    camera: &Camera,
+    camera_T_part: &Isometry3<f64>,
+    model: &[Point3<f64>],
+    pixels: &[Point2<f64>],
+) -> f64 {
+    let mut sum = 0.0;
+    for (k, px) in model.iter().zip(pixels) {
+        match camera.project(&(camera_T_part * k)) {
+            Ok(p) => sum += (p - px).norm_squared(),
+            Err(_) => return f64::INFINITY,
+        }
+    }
+    (sum / model.len().max(1) as f64).sqrt()
+}
