@@ -14,11 +14,24 @@ use sim::cell::SimCell;
 use super::verdict::check_of;
 use crate::episode::StepOutcome;
 use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, Workcell};
-use perception::{Frame, FrameContent, TruePart};
+use perception::{Frame, FrameContent, FrameImage, TruePart};
 
 impl CellIo for SimCell {
     fn capture(&mut self) -> Result<Frame, CellIoError> {
         self.wait_for_feeder();
+        if self.renders_captures() {
+            let shot = self
+                .render_feeder()
+                .map_err(|e| CellIoError::Camera(e.to_string()))?;
+            return Ok(Frame {
+                camera: self.model().spec.camera.intrinsics,
+                base_T_camera: self.base_T_camera_nominal(),
+                content: FrameContent::Image(FrameImage {
+                    pixels: image::DynamicImage::ImageRgb8(shot.image),
+                    origin: [shot.window.x0, shot.window.y0],
+                }),
+            });
+        }
         let parts = self
             .camera_view()
             .into_iter()

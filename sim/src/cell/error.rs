@@ -34,6 +34,9 @@ pub enum CellError {
         /// Parts wanted.
         wanted: usize,
     },
+    /// The simulated camera could not deliver an image.
+    #[error("camera: {0}")]
+    Camera(String),
     /// The physics drop failed.
     #[error("feeder drop: {0}")]
     Drop(String),

@@ -39,6 +39,7 @@
 #![allow(non_snake_case)]
 
 pub mod arm;
+mod capture;
 pub mod error;
 pub mod feasible;
 pub mod feeder;
@@ -51,6 +52,7 @@ pub mod noise;
 pub mod pieces;
 mod sim_cell;
 
+pub use capture::FeederImage;
 pub use error::CellError;
 pub use feasible::check_feasible;
 pub use model::CellModel;

@@ -14,7 +14,7 @@ use super::error::CellError;
 use super::feasible::check_feasible;
 use super::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
 use super::insertion::{InsertionScorer, Scorer};
-use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec, Placement};
+use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec};
 use crate::scene::PartModel;
 
 /// Height of the home TCP above the feeder centre, metres.
@@ -85,8 +85,8 @@ pub struct CellModel {
     pub kinematics: UrKinematics,
     /// Joints at the start of every episode: TCP pointing down above the feeder.
     pub home: Joints,
-    /// Render/physics models for dropped placement (empty for sampled placement).
-    pub drop_models: Vec<PartModel>,
+    /// Render and physics models of the feeder's parts (dropped placement, rendered captures).
+    pub part_models: Vec<PartModel>,
 }
 
 impl CellModel {
@@ -125,12 +125,9 @@ impl CellModel {
             );
         let home = elbow_up(&kinematics, &geometry.base_T_table, &home_tcp)
             .map_err(|e| CellError::Home(e.to_string()))?;
-        let drop_models = if spec.feeder.placement == Placement::Dropped {
-            let names: Vec<String> = spec.feeder.parts.keys().cloned().collect();
-            PartModel::from_catalog(catalog, &names).map_err(|e| CellError::Drop(e.to_string()))?
-        } else {
-            Vec::new()
-        };
+        let names: Vec<String> = spec.feeder.parts.keys().cloned().collect();
+        let part_models =
+            PartModel::from_catalog(catalog, &names).map_err(|e| CellError::Drop(e.to_string()))?;
         Ok(Arc::new(Self {
             spec: spec.clone(),
             steps: steps.to_vec(),
@@ -140,7 +137,7 @@ impl CellModel {
             geometry,
             kinematics,
             home,
-            drop_models,
+            part_models,
         }))
     }
 

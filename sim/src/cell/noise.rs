@@ -34,6 +34,8 @@ pub const GRASP_STREAM: u64 = 4;
 /// Perception noise, drawn outside the simulated cell by the orchestrator's keypoint-noise
 /// perception.
 pub const PERCEPTION_STREAM: u64 = 5;
+/// Sensor noise of rendered camera captures.
+pub const CAMERA_STREAM: u64 = 6;
 
 /// Independent random streams of one episode, so a change in one (more feeder parts, another
 /// motion) does not shift the others, and any episode replays alone from (seed, index).
@@ -47,6 +49,8 @@ pub struct EpisodeStreams {
     pub robot: ChaCha8Rng,
     /// Grasp residuals.
     pub grasp: ChaCha8Rng,
+    /// Sensor noise of rendered captures.
+    pub camera: ChaCha8Rng,
 }
 
 impl EpisodeStreams {
@@ -58,6 +62,7 @@ impl EpisodeStreams {
             calibration: make(CALIBRATION_STREAM),
             robot: make(ROBOT_STREAM),
             grasp: make(GRASP_STREAM),
+            camera: make(CAMERA_STREAM),
         }
     }
 }

@@ -143,6 +143,8 @@ pub struct SimCell {
     gripper_actuations: u32,
     /// Clock time at which the parts of the last shake are at rest again.
     feeder_rest_at: f64,
+    /// Whether captures are rendered images (learned perception) or the true scene.
+    renders_captures: bool,
 }
 
 #[allow(non_snake_case)]
@@ -176,6 +178,7 @@ impl SimCell {
             shakes: 0,
             gripper_actuations: 0,
             feeder_rest_at: 0.0,
+            renders_captures: false,
         };
         cell.refill()?;
         Ok(cell)
@@ -199,6 +202,28 @@ impl SimCell {
     /// The calibrated (nominal) camera pose the orchestrator knows.
     pub fn base_T_camera_nominal(&self) -> Isometry3<f64> {
         self.model.geometry.base_T_camera_nominal
+    }
+
+    /// Makes captures rendered images (for learned perception) instead of the true scene.
+    pub fn render_captures(mut self, on: bool) -> Self {
+        self.renders_captures = on;
+        self
+    }
+
+    /// Whether captures are rendered images.
+    pub fn renders_captures(&self) -> bool {
+        self.renders_captures
+    }
+
+    /// The feeder window as the camera sees it now: rendered from the true camera and part
+    /// poses through the sensor (its noise from the episode's camera stream).
+    pub fn render_feeder(&mut self) -> Result<super::FeederImage, CellError> {
+        super::capture::render_feeder(
+            &self.model,
+            &self.feeder,
+            &self.base_T_camera,
+            &mut self.streams.camera,
+        )
     }
 
     /// The true camera pose (diagnostics only: a real cell does not know it).
@@ -373,7 +398,7 @@ impl SimCell {
             ),
             Placement::Dropped => feeder::drop(
                 spec,
-                &self.model.drop_models,
+                &self.model.part_models,
                 wanted,
                 &mut self.streams.feeder,
             ),
