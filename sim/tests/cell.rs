@@ -492,3 +492,36 @@ fn a_bad_gripper_actuation_time_is_refused() {
         assert_eq!(spec.gripper.actuation_time_problem(), None, "{good}");
     }
 }
+
+#[test]
+fn the_rendered_feeder_window_shows_every_feeder_part_and_repeats_by_seed() {
+    let m = model(&zero_noise(), Scorer::Analytic);
+    let mut cell = SimCell::new(m.clone(), 4, 2).unwrap().render_captures(true);
+    assert!(cell.renders_captures());
+    let shot = cell.render_feeder().unwrap();
+    let w = shot.window;
+    assert_eq!((shot.image.width(), shot.image.height()), (w.width, w.height));
+    // About the feeder rectangle plus margins at ~0.14 mm/px: hundreds of pixels, not the sensor.
+    let feeder = &m.spec.feeder;
+    let expect = (feeder.size[0] + 0.016) / 1.4e-4;
+    assert!(
+        (f64::from(w.width) - expect).abs() < 0.25 * expect,
+        "{w:?} vs {expect}"
+    );
+    for seen in cell.camera_view() {
+        let (x, y) = (seen.pixel.x, seen.pixel.y);
+        assert!(
+            x >= f64::from(w.x0) + 20.0
+                && y >= f64::from(w.y0) + 20.0
+                && x < f64::from(w.x0 + w.width) - 20.0
+                && y < f64::from(w.y0 + w.height) - 20.0,
+            "part {} at ({x:.0}, {y:.0}) is not well inside {w:?}",
+            seen.instance
+        );
+    }
+    // The same episode renders the same pixels; sensor noise differs between episodes.
+    let again = SimCell::new(m.clone(), 4, 2).unwrap().render_feeder().unwrap();
+    assert_eq!(again.image, shot.image);
+    let other = SimCell::new(m, 4, 3).unwrap().render_feeder().unwrap();
+    assert_ne!(other.image, shot.image);
+}
