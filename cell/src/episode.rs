@@ -21,6 +21,37 @@ pub enum StepOutcome {
     Aborted,
 }
 
+/// What the simulator knows of the detection a step picked (simulation only): the perception
+/// failure classes of the error budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PerceptionVerdict {
+    /// The right part in the right stable pose (its pose error is in `perception_error`).
+    Right,
+    /// Another kind of part lies there.
+    WrongPart,
+    /// The right part, lying in another stable pose than perceived.
+    WrongStablePose,
+    /// No part lies there.
+    Phantom,
+}
+
+impl PerceptionVerdict {
+    /// The error-budget source a failure after this verdict is blamed on (`None` when right).
+    pub fn source(self) -> Option<&'static str> {
+        match self {
+            PerceptionVerdict::Right => None,
+            PerceptionVerdict::WrongPart => Some("perception.wrong_part"),
+            PerceptionVerdict::WrongStablePose => Some("perception.wrong_stable_pose"),
+            PerceptionVerdict::Phantom => Some("perception.phantom"),
+        }
+    }
+}
+
+/// Error-budget source of a step that found nothing to pick while the camera saw parts of its
+/// kind that perception missed.
+pub const PERCEPTION_MISSED: &str = "perception.missed";
+
 /// True error of the held part relative to its target when insertion started.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PoseError {
@@ -70,6 +101,9 @@ pub struct StepRecord {
         skip_serializing_if = "Option::is_none"
     )]
     pub perception_error: Option<[f64; 3]>,
+    /// What the picked detection really was (simulation only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub perception_verdict: Option<PerceptionVerdict>,
     /// Simulated seconds the step took.
     pub sim_time_s: f64,
 }

@@ -500,7 +500,10 @@ fn the_rendered_feeder_window_shows_every_feeder_part_and_repeats_by_seed() {
     assert!(cell.renders_captures());
     let shot = cell.render_feeder().unwrap();
     let w = shot.window;
-    assert_eq!((shot.image.width(), shot.image.height()), (w.width, w.height));
+    assert_eq!(
+        (shot.image.width(), shot.image.height()),
+        (w.width, w.height)
+    );
     // About the feeder rectangle plus margins at ~0.14 mm/px: hundreds of pixels, not the sensor.
     let feeder = &m.spec.feeder;
     let expect = (feeder.size[0] + 0.016) / 1.4e-4;
@@ -520,7 +523,10 @@ fn the_rendered_feeder_window_shows_every_feeder_part_and_repeats_by_seed() {
         );
     }
     // The same episode renders the same pixels; sensor noise differs between episodes.
-    let again = SimCell::new(m.clone(), 4, 2).unwrap().render_feeder().unwrap();
+    let again = SimCell::new(m.clone(), 4, 2)
+        .unwrap()
+        .render_feeder()
+        .unwrap();
     assert_eq!(again.image, shot.image);
     let other = SimCell::new(m, 4, 3).unwrap().render_feeder().unwrap();
     assert_ne!(other.image, shot.image);

@@ -19,6 +19,7 @@
 
 #![allow(non_snake_case)]
 
+mod audit;
 mod keypoint_noise;
 mod over_rtde;
 mod sim_io;

@@ -6,15 +6,15 @@
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use nalgebra::Isometry3;
 use robots::limited::Limited;
 use robots::robot::Robot;
 use sim::cell::SimCell;
 
+use super::audit;
 use super::verdict::check_of;
 use crate::episode::StepOutcome;
-use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, Workcell};
-use perception::{Frame, FrameContent, FrameImage, TruePart};
+use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, Workcell};
+use perception::{DetectedPart, Frame, FrameContent, FrameImage, TruePart};
 
 impl CellIo for SimCell {
     fn capture(&mut self) -> Result<Frame, CellIoError> {
@@ -79,12 +79,12 @@ impl CellIo for SimCell {
         SimCell::clock(self)
     }
 
-    #[allow(non_snake_case)]
-    fn true_table_T_part(&self, instance: u32) -> Option<Isometry3<f64>> {
-        self.feeder_parts()
-            .iter()
-            .find(|p| p.instance == instance)
-            .map(|p| p.table_T_part)
+    fn audit(&self, detection: &DetectedPart) -> Option<PerceptionAudit> {
+        Some(audit::audit(self, detection))
+    }
+
+    fn missed(&self, part: &str, detections: &[DetectedPart]) -> Option<usize> {
+        Some(audit::missed(self, part, detections))
     }
 }
 
@@ -142,8 +142,11 @@ impl CellIo for SimCellIo {
         CellIo::clock(&*self.lock())
     }
 
-    #[allow(non_snake_case)]
-    fn true_table_T_part(&self, instance: u32) -> Option<Isometry3<f64>> {
-        self.lock().true_table_T_part(instance)
+    fn audit(&self, detection: &DetectedPart) -> Option<PerceptionAudit> {
+        self.lock().audit(detection)
+    }
+
+    fn missed(&self, part: &str, detections: &[DetectedPart]) -> Option<usize> {
+        self.lock().missed(part, detections)
     }
 }

@@ -3,11 +3,10 @@
 //! [`Workcell`]. Production implements [`CellIo`] with its camera source and sensors
 //! (`ProductionCellIo`); the simulation harness (`crate::harness`) with the simulated cell.
 
-use nalgebra::Isometry3;
 use robots::robot::Robot;
 
-use crate::episode::{PoseError, StepOutcome};
-use perception::Frame;
+use crate::episode::{PerceptionVerdict, PoseError, StepOutcome};
+use perception::{DetectedPart, Frame};
 
 /// Why a cell side channel failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -36,6 +35,15 @@ pub struct InsertionCheck {
     pub stop_height: Option<f64>,
 }
 
+/// A detection checked against the simulated world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PerceptionAudit {
+    /// Right, wrong part, wrong stable pose, or nothing there.
+    pub verdict: PerceptionVerdict,
+    /// Error of the estimate in the table plane against the part there (x, y mm; yaw °).
+    pub table_error: Option<[f64; 3]>,
+}
+
 /// The camera, feeder and sensors of a cell.
 pub trait CellIo: Send {
     /// Takes a camera frame.
@@ -56,9 +64,12 @@ pub trait CellIo: Send {
     }
     /// Seconds on the cell's clock since the episode started (simulated time in simulation).
     fn clock(&self) -> f64;
-    /// True table pose of a simulated instance (simulation only; for error reports).
-    #[allow(non_snake_case)]
-    fn true_table_T_part(&self, _instance: u32) -> Option<Isometry3<f64>> {
+    /// What the simulator knows of a detection (simulation only; for the error budget).
+    fn audit(&self, _detection: &DetectedPart) -> Option<PerceptionAudit> {
+        None
+    }
+    /// How many parts named `part` the camera sees that no detection matches (simulation only).
+    fn missed(&self, _part: &str, _detections: &[DetectedPart]) -> Option<usize> {
         None
     }
 }

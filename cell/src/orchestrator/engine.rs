@@ -16,7 +16,7 @@ use super::planning::{Motion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, select};
 use super::state::State;
 use super::step::StepState;
-use crate::episode::{EpisodeRecord, PoseError, RECORD_VERSION, StepOutcome};
+use crate::episode::{EpisodeRecord, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome};
 use perception::{DetectedPart, PartPerception};
 
 /// Error-budget name of a step given up because the feeder held none of its part.
@@ -246,11 +246,9 @@ impl<'a> Engine<'a> {
         }
         match result.chosen.take() {
             Some(sel) => {
-                self.step.perception_error = sel
-                    .detection
-                    .truth_instance
-                    .and_then(|i| self.io().true_table_T_part(i))
-                    .map(|truth| table_error(&truth, &sel.detection.table_T_part));
+                let audit = self.io().audit(&sel.detection);
+                self.step.perception_error = audit.and_then(|a| a.table_error);
+                self.step.perception_verdict = audit.map(|a| a.verdict);
                 self.step.selection = Some(sel);
                 Ok(State::PlanPick)
             }
@@ -271,7 +269,13 @@ impl<'a> Engine<'a> {
                     .rejected
                     .iter()
                     .any(|(_, r)| !matches!(r, Rejection::OtherPart));
-                let source = if any {
+                let part = self.step_part();
+                let detections = std::mem::take(&mut self.step.detections);
+                let missed = self.io().missed(&part, &detections).unwrap_or(0);
+                self.step.detections = detections;
+                let source = if missed > 0 {
+                    PERCEPTION_MISSED
+                } else if any {
                     FEEDER_SHAKE_BOUND
                 } else if result.rejected.is_empty() {
                     CAMERA_SAW_NOTHING
@@ -590,6 +594,11 @@ impl<'a> Engine<'a> {
         pose_error: Option<PoseError>,
     ) -> State {
         let now = self.clock();
+        // A failure after picking a misperceived part is that perception failure's.
+        let sources = match self.step.perception_verdict.and_then(|v| v.source()) {
+            Some(source) if outcome != StepOutcome::Seated => vec![source.into()],
+            _ => sources,
+        };
         let record = self
             .step
             .record(self.step_part(), outcome, cause, sources, pose_error, now);
@@ -688,13 +697,4 @@ impl<'a> Engine<'a> {
             .map(|s| s.part.clone())
             .unwrap_or_default()
     }
-}
-
-/// Perception error in the table plane: [x mm, y mm, yaw degrees] of the estimate.
-#[allow(non_snake_case)]
-fn table_error(truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> [f64; 3] {
-    let d = estimate.translation.vector - truth.translation.vector;
-    let r = estimate.rotation * truth.rotation.inverse();
-    let yaw = r.scaled_axis().z;
-    [d.x * 1e3, d.y * 1e3, yaw.to_degrees()]
 }

@@ -46,7 +46,7 @@ mod selection;
 mod state;
 mod step;
 
-pub use cell_io::{CellIo, CellIoError, InsertionCheck, SplitCell, Workcell};
+pub use cell_io::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, SplitCell, Workcell};
 pub use context::{EpisodeContext, EpisodeSettings, Setup};
 pub use engine::{FEEDER_EXHAUSTED, FEEDER_SHAKE_BOUND};
 pub use events::{Event, EventLog};

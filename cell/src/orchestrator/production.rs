@@ -9,8 +9,6 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use nalgebra::Isometry3;
-
 use super::cell_io::{CellIo, CellIoError, InsertionCheck};
 use crate::scenario::{PerceptionMode, Scenario};
 use perception::{Frame, FrameContent, FrameImage};
@@ -176,11 +174,6 @@ impl CellIo for ProductionCellIo {
 
     fn clock(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
-    }
-
-    #[allow(non_snake_case)]
-    fn true_table_T_part(&self, _instance: u32) -> Option<Isometry3<f64>> {
-        None
     }
 }
 

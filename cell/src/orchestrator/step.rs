@@ -7,7 +7,7 @@ use nalgebra::Isometry3;
 
 use super::planning::{Motion, Plan};
 use super::selection::Selection;
-use crate::episode::{PoseError, StepOutcome, StepRecord};
+use crate::episode::{PerceptionVerdict, PoseError, StepOutcome, StepRecord};
 use perception::{DetectedPart, Frame};
 
 /// Per-step state of the engine.
@@ -38,6 +38,8 @@ pub(super) struct StepState {
     pub plan: Option<Plan>,
     /// Perception error of the picked instance in the table plane (x, y mm; yaw °).
     pub perception_error: Option<[f64; 3]>,
+    /// What the picked detection really was (simulation only).
+    pub perception_verdict: Option<PerceptionVerdict>,
 }
 
 impl StepState {
@@ -57,6 +59,7 @@ impl StepState {
             selection: None,
             plan: None,
             perception_error: None,
+            perception_verdict: None,
         }
     }
 
@@ -80,6 +83,7 @@ impl StepState {
             sources,
             pose_error,
             perception_error: self.perception_error,
+            perception_verdict: self.perception_verdict,
             sim_time_s: now - self.start,
         }
     }
