@@ -120,6 +120,7 @@ fn the_fixture_models_load_and_a_frame_runs_through_every_stage() {
 #[test]
 fn learned_perception_refuses_simulated_frames_and_bad_images() {
     let pipeline = load(&fixture_dir()).unwrap();
+    #[allow(non_snake_case)]
     let base_T_camera = camera_T_table().inverse();
     let mut perception = LearnedPerception::new(pipeline, Isometry3::identity());
     let frame = |content| Frame {

@@ -62,8 +62,9 @@ pub fn sample_planar(
         clamp,
         stride: w,
     };
-    const S8: f32 = 1.0 / 255.0;
-    const S16: f32 = 1.0 / 65535.0;
+    // Divided (not multiplied by the reciprocal) so values equal the training's `value / 255`.
+    const S8: f32 = 255.0;
+    const S16: f32 = 65535.0;
     match image {
         DynamicImage::ImageLuma8(i) => fill(i.as_raw(), 1, S8, &window, dst),
         DynamicImage::ImageLumaA8(i) => fill(i.as_raw(), 2, S8, &window, dst),
@@ -87,7 +88,7 @@ struct Window {
     stride: usize,
 }
 
-fn fill<T: Copy + Into<f32>>(raw: &[T], channels: usize, scale: f32, w: &Window, dst: &mut [f32]) {
+fn fill<T: Copy + Into<f32>>(raw: &[T], channels: usize, full: f32, w: &Window, dst: &mut [f32]) {
     let plane = w.width * w.height;
     let (cx0, cy0) = (i64::from(w.clamp[0]), i64::from(w.clamp[1]));
     let (cx1, cy1) = (
@@ -105,11 +106,11 @@ fn fill<T: Copy + Into<f32>>(raw: &[T], channels: usize, scale: f32, w: &Window,
             let px = &line[sx * channels..];
             let i = out + col;
             if channels >= 3 {
-                r[i] = px[0].into() * scale;
-                g[i] = px[1].into() * scale;
-                b[i] = px[2].into() * scale;
+                r[i] = px[0].into() / full;
+                g[i] = px[1].into() / full;
+                b[i] = px[2].into() / full;
             } else {
-                let v = px[0].into() * scale;
+                let v = px[0].into() / full;
                 r[i] = v;
                 g[i] = v;
                 b[i] = v;
@@ -190,7 +191,7 @@ mod tests {
             assert_eq!(&dst[4 * c..4 * c + 4], &[0.2, 0.8, 0.2, 0.8]);
         }
         let deep: ImageBuffer<Luma<u16>, Vec<u16>> =
-            ImageBuffer::from_fn(2, 2, |x, y| Luma([(x * 65535 + y * 13107) as u16]));
+            ImageBuffer::from_fn(2, 2, |x, y| Luma([(x * 65535).max(y * 13107) as u16]));
         let img = DynamicImage::ImageLuma16(deep);
         sample_planar(&img, 0, 0, 2, 2, [0, 0, 2, 2], &mut dst).unwrap();
         assert_eq!(&dst[8..12], &[0.0, 1.0, 0.2, 1.0]);
