@@ -4,6 +4,23 @@
 //!
 //! It reads pixels and calibration only: [`crate::FrameContent::Simulated`] is refused.
 
+pub mod crops;
 mod detection;
+mod error;
+pub mod image;
+pub mod instances;
+pub mod keypoint_net;
+pub mod models;
+mod perception;
+mod pipeline;
+pub mod segmenter;
 
+pub use crops::{CropBatch, crop_camera, crop_origin};
 pub use detection::{InstanceMask, LearnedDetection, LearnedDetections, StageTimes};
+pub use error::LearnedError;
+pub use instances::{Instance, InstanceConfig, InstanceGrouper};
+pub use keypoint_net::KeypointNet;
+pub use models::LearnedModels;
+pub use perception::LearnedPerception;
+pub use pipeline::{LearnedPipeline, PipelineConfig};
+pub use segmenter::{SegmentMap, Segmenter};

@@ -83,18 +83,24 @@ impl BatchSession {
                 ),
             ));
         };
-        if input.shape.first() != Some(&-1) || input.shape[1..].contains(&-1) {
+        if input.shape.first() != Some(&-1) {
             return Err(signature(
                 &manifest,
                 &model,
                 "input 0",
                 format!(
-                    "a batch session needs shape [-1, fixed...], the manifest has {:?}",
+                    "a batch session needs shape [-1, ...], the manifest has {:?}",
                     input.shape
                 ),
             ));
         }
-        let item_len = input.shape[1..].iter().product::<i64>() as usize;
+        // Items of a fixed size go through `run`; dynamic item dimensions (an image of any
+        // H × W) through `run_shaped`.
+        let item_len = if input.shape[1..].contains(&-1) {
+            0
+        } else {
+            input.shape[1..].iter().product::<i64>() as usize
+        };
         let outputs = manifest
             .outputs
             .iter()
@@ -118,7 +124,13 @@ impl BatchSession {
         &self.manifest
     }
 
-    /// Values per batch item (e.g. 3·128·128 for an RGB crop).
+    /// The outputs of the last run (empty before the first), in manifest order.
+    pub fn outputs(&self) -> &[OutputTensor] {
+        &self.outputs
+    }
+
+    /// Values per batch item (e.g. 3·128·128 for an RGB crop); 0 when the input has dynamic
+    /// dimensions besides the batch.
     pub fn item_len(&self) -> usize {
         self.item_len
     }
@@ -126,6 +138,12 @@ impl BatchSession {
     /// Runs a batch (each item row-major, `item_len` values) and returns the outputs in manifest
     /// order; the returned buffers are reused by the next call.
     pub fn run(&mut self, items: &[&[f32]]) -> Result<&[OutputTensor], OnnxError> {
+        if self.item_len == 0 {
+            return Err(self.batch_error(format!(
+                "the input {} {:?} has dynamic dimensions: give the shape (run_shaped)",
+                self.manifest.inputs[0].name, self.manifest.inputs[0].shape
+            )));
+        }
         if items.is_empty() {
             return Err(self.batch_error("empty batch".into()));
         }
@@ -142,18 +160,58 @@ impl BatchSession {
                 self.item_len
             )));
         }
-        self.input.clear();
+        let mut input = std::mem::take(&mut self.input);
+        input.clear();
         for item in items {
-            self.input.extend_from_slice(item);
+            input.extend_from_slice(item);
         }
         let mut shape = self.manifest.inputs[0].shape.clone();
         shape[0] = items.len() as i64;
+        let result = self.infer(shape, &input);
+        self.input = input;
+        result?;
+        Ok(&self.outputs)
+    }
+
+    /// Runs one input tensor of concrete `shape` (row-major `data`, batch first) without copying
+    /// it: for inputs with dynamic dimensions (an image of any H × W) and for callers that build
+    /// the batch in their own reused buffer. The shape must match the manifest's fixed dimensions.
+    pub fn run_shaped(
+        &mut self,
+        shape: &[usize],
+        data: &[f32],
+    ) -> Result<&[OutputTensor], OnnxError> {
+        let spec = &self.manifest.inputs[0];
+        let fits = shape.len() == spec.shape.len()
+            && shape
+                .iter()
+                .zip(&spec.shape)
+                .all(|(&d, &s)| d > 0 && (s == -1 || d as i64 == s));
+        if !fits {
+            return Err(self.batch_error(format!(
+                "input shape {shape:?} does not fit {} {:?}",
+                spec.name, spec.shape
+            )));
+        }
+        let len = shape.iter().product::<usize>();
+        if len != data.len() {
+            return Err(self.batch_error(format!(
+                "input shape {shape:?} needs {len} values, got {}",
+                data.len()
+            )));
+        }
+        let shape: Vec<i64> = shape.iter().map(|&d| d as i64).collect();
+        self.infer(shape, data)?;
+        Ok(&self.outputs)
+    }
+
+    fn infer(&mut self, shape: Vec<i64>, data: &[f32]) -> Result<(), OnnxError> {
         let run_error = |e: ort::Error| OnnxError::Run {
             path: self.model.clone(),
             message: e.to_string(),
         };
         let tensor =
-            TensorRef::from_array_view((shape, self.input.as_slice())).map_err(run_error)?;
+            TensorRef::from_array_view((shape, data)).map_err(run_error)?;
         let results = self.session.run(ort::inputs![tensor]).map_err(run_error)?;
         for out in &mut self.outputs {
             let value = results.get(&out.name).ok_or_else(|| OnnxError::Run {
@@ -166,7 +224,7 @@ impl BatchSession {
             out.data.clear();
             out.data.extend_from_slice(data);
         }
-        Ok(&self.outputs)
+        Ok(())
     }
 
     fn batch_error(&self, message: String) -> OnnxError {

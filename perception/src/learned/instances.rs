@@ -1,0 +1,365 @@
+//! From the segmenter's cells to part instances: every foreground cell votes for its instance
+//! centre (cell centre + predicted offset); peaks of the vote map at least `min_separation_px`
+//! apart are the instances (so touching parts with distinct centres separate); each foreground
+//! cell joins the nearest peak within `assign_radius_px`; an instance's class is the majority of
+//! its cells' classes and its score their mean probability of that class.
+
+use super::detection::InstanceMask;
+use super::models::SEGMENTER_STRIDE;
+use super::segmenter::SegmentMap;
+
+/// Grouping settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InstanceConfig {
+    /// Two instance centres are at least this far apart, pixels (parts are ~60 px across).
+    pub min_separation_px: f64,
+    /// A cell joins a centre when its vote lands within this distance, pixels.
+    pub assign_radius_px: f64,
+    /// Radius of the mean shift that refines a peak to the mean of the votes near it, pixels.
+    pub refine_radius_px: f64,
+    /// Votes (cells) a peak needs, summed over its 3 × 3 cell neighbourhood.
+    pub min_peak_votes: f64,
+    /// Instances with fewer cells are dropped (each cell is 4 × 4 pixels).
+    pub min_cells: usize,
+}
+
+impl Default for InstanceConfig {
+    fn default() -> Self {
+        Self {
+            min_separation_px: 40.0,
+            assign_radius_px: 24.0,
+            refine_radius_px: 8.0,
+            min_peak_votes: 8.0,
+            min_cells: 16,
+        }
+    }
+}
+
+/// One instance found in a segment map (coordinates in pixels of the segmented region).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Instance {
+    /// Part index (class − 1).
+    pub part: usize,
+    /// Mean probability of the class over the instance's cells.
+    pub score: f64,
+    /// Voted centre, region pixels.
+    pub centre: [f64; 2],
+    /// Row-major indices of its cells.
+    pub cells: Vec<u32>,
+}
+
+impl Instance {
+    /// The instance's mask at full resolution (each cell covers 4 × 4 pixels), clipped to a
+    /// region of `valid` `[width, height]` pixels and placed at `offset` (the region's pixel).
+    pub fn mask(&self, map_width: usize, valid: [usize; 2], offset: [u32; 2]) -> InstanceMask {
+        let s = SEGMENTER_STRIDE;
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for &c in &self.cells {
+            let (i, j) = (c as usize / map_width, c as usize % map_width);
+            x0 = x0.min(s * j);
+            y0 = y0.min(s * i);
+            x1 = x1.max((s * j + s).min(valid[0]));
+            y1 = y1.max((s * i + s).min(valid[1]));
+        }
+        if self.cells.is_empty() || x1 <= x0 || y1 <= y0 {
+            return InstanceMask {
+                origin: offset,
+                width: 0,
+                height: 0,
+                bits: Vec::new(),
+            };
+        }
+        let (w, h) = (x1 - x0, y1 - y0);
+        let mut bits = vec![false; w * h];
+        for &c in &self.cells {
+            let (i, j) = (c as usize / map_width, c as usize % map_width);
+            for y in s * i..(s * i + s).min(y1) {
+                for x in s * j..(s * j + s).min(x1) {
+                    bits[(y - y0) * w + (x - x0)] = true;
+                }
+            }
+        }
+        InstanceMask {
+            origin: [offset[0] + x0 as u32, offset[1] + y0 as u32],
+            width: w as u32,
+            height: h as u32,
+            bits,
+        }
+    }
+}
+
+/// Groups cells into instances, reusing its buffers between frames.
+#[derive(Debug, Clone, Default)]
+pub struct InstanceGrouper {
+    config: InstanceConfig,
+    votes: Vec<[f32; 2]>,
+    voters: Vec<u32>,
+    accumulator: Vec<f32>,
+    owner: Vec<u32>,
+}
+
+impl InstanceGrouper {
+    /// A grouper with these settings.
+    pub fn new(config: InstanceConfig) -> Self {
+        Self {
+            config,
+            ..Self::default()
+        }
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &InstanceConfig {
+        &self.config
+    }
+
+    /// The instances of `map`, strongest peak first.
+    pub fn group(&mut self, map: &SegmentMap) -> Vec<Instance> {
+        let (w, h) = (map.width, map.height);
+        let plane = w * h;
+        let s = SEGMENTER_STRIDE as f32;
+        // 1. Votes of the foreground cells, splatted bilinearly onto the cell grid.
+        self.votes.clear();
+        self.voters.clear();
+        self.accumulator.clear();
+        self.accumulator.resize(plane, 0.0);
+        for c in 0..plane {
+            if map.class[c] == 0 {
+                continue;
+            }
+            let (i, j) = (c / w, c % w);
+            let vx = s * j as f32 + 1.5 + map.offsets[c];
+            let vy = s * i as f32 + 1.5 + map.offsets[plane + c];
+            if !(vx.is_finite() && vy.is_finite()) {
+                continue;
+            }
+            self.votes.push([vx, vy]);
+            self.voters.push(c as u32);
+            let (gx, gy) = ((vx - 1.5) / s, (vy - 1.5) / s);
+            let (fx, fy) = (gx.floor(), gy.floor());
+            let (ax, ay) = (gx - fx, gy - fy);
+            for (dy, wy) in [(0, 1.0 - ay), (1, ay)] {
+                for (dx, wx) in [(0, 1.0 - ax), (1, ax)] {
+                    let (x, y) = (fx as i64 + dx, fy as i64 + dy);
+                    if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
+                        self.accumulator[y as usize * w + x as usize] += wx * wy;
+                    }
+                }
+            }
+        }
+        // 2. Peaks: local maxima of the 3 × 3 vote sums, strongest first, kept when far enough
+        //    from every stronger peak.
+        let sum3 = |acc: &[f32], i: usize, j: usize| {
+            let mut t = 0.0;
+            for y in i.saturating_sub(1)..(i + 2).min(h) {
+                for x in j.saturating_sub(1)..(j + 2).min(w) {
+                    t += acc[y * w + x];
+                }
+            }
+            t
+        };
+        let mut candidates = Vec::new();
+        for i in 0..h {
+            for j in 0..w {
+                if self.accumulator[i * w + j] <= 0.0 {
+                    continue;
+                }
+                let v = sum3(&self.accumulator, i, j);
+                if f64::from(v) < self.config.min_peak_votes {
+                    continue;
+                }
+                let mut is_max = true;
+                'n: for y in i.saturating_sub(1)..(i + 2).min(h) {
+                    for x in j.saturating_sub(1)..(j + 2).min(w) {
+                        let u = sum3(&self.accumulator, y, x);
+                        if u > v || (u == v && (y * w + x) < (i * w + j)) {
+                            is_max = false;
+                            break 'n;
+                        }
+                    }
+                }
+                if is_max {
+                    candidates.push((v, [s * j as f32 + 1.5, s * i as f32 + 1.5]));
+                }
+            }
+        }
+        candidates.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let sep2 = (self.config.min_separation_px * self.config.min_separation_px) as f32;
+        let mut peaks: Vec<[f32; 2]> = Vec::new();
+        for (_, p) in candidates {
+            let p = self.mean_shift(p);
+            if peaks.iter().all(|q| dist2(*q, p) >= sep2) {
+                peaks.push(p);
+            }
+        }
+        // 3. Each voting cell joins the nearest peak within the radius.
+        let r2 = (self.config.assign_radius_px * self.config.assign_radius_px) as f32;
+        self.owner.clear();
+        self.owner.resize(self.votes.len(), u32::MAX);
+        for (k, v) in self.votes.iter().enumerate() {
+            let best = peaks
+                .iter()
+                .enumerate()
+                .map(|(n, p)| (n, dist2(*p, *v)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((n, d)) = best
+                && d <= r2
+            {
+                self.owner[k] = n as u32;
+            }
+        }
+        // 4. Class by majority, score by mean probability, centre by the refined peak.
+        let mut out = Vec::with_capacity(peaks.len());
+        for (n, peak) in peaks.iter().enumerate() {
+            let cells: Vec<u32> = self
+                .owner
+                .iter()
+                .zip(&self.voters)
+                .filter(|(o, _)| **o == n as u32)
+                .map(|(_, c)| *c)
+                .collect();
+            if cells.len() < self.config.min_cells.max(1) {
+                continue;
+            }
+            let mut counts = vec![0usize; map.classes];
+            for &c in &cells {
+                counts[map.class[c as usize] as usize] += 1;
+            }
+            let class = (1..map.classes)
+                .max_by_key(|&k| (counts[k], std::cmp::Reverse(k)))
+                .unwrap_or(1);
+            let score = cells
+                .iter()
+                .map(|&c| f64::from(map.probs[class * plane + c as usize]))
+                .sum::<f64>()
+                / cells.len() as f64;
+            out.push(Instance {
+                part: class - 1,
+                score,
+                centre: [f64::from(peak[0]), f64::from(peak[1])],
+                cells,
+            });
+        }
+        out
+    }
+
+    /// Moves `p` to the mean of the votes within the refine radius, a few times.
+    fn mean_shift(&self, mut p: [f32; 2]) -> [f32; 2] {
+        let r2 = (self.config.refine_radius_px * self.config.refine_radius_px) as f32;
+        for _ in 0..3 {
+            let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0usize);
+            for v in &self.votes {
+                if dist2(*v, p) <= r2 {
+                    sx += f64::from(v[0]);
+                    sy += f64::from(v[1]);
+                    n += 1;
+                }
+            }
+            if n == 0 {
+                break;
+            }
+            p = [(sx / n as f64) as f32, (sy / n as f64) as f32];
+        }
+        p
+    }
+}
+
+fn dist2(a: [f32; 2], b: [f32; 2]) -> f32 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A map of two touching discs (classes 1 and 3) whose cells point at their centres with
+    /// small deterministic offset noise, plus a 3-cell speck of class 2 far away.
+    fn two_touching_discs() -> (SegmentMap, [[f64; 2]; 2]) {
+        let (w, h) = (40, 30);
+        let plane = w * h;
+        let centres = [[50.3, 61.7], [97.1, 58.2]]; // 46.9 px apart: the discs (r = 24) touch
+        let mut map = SegmentMap {
+            width: w,
+            height: h,
+            classes: 4,
+            class: vec![0; plane],
+            probs: vec![0.0; 4 * plane],
+            offsets: vec![0.0; 2 * plane],
+        };
+        for c in 0..plane {
+            map.probs[c] = 1.0;
+        }
+        for i in 0..h {
+            for j in 0..w {
+                let c = i * w + j;
+                let (x, y) = (4.0 * j as f64 + 1.5, 4.0 * i as f64 + 1.5);
+                let d: Vec<f64> = centres
+                    .iter()
+                    .map(|q| ((x - q[0]).powi(2) + (y - q[1]).powi(2)).sqrt())
+                    .collect();
+                let k = if d[0] <= d[1] { 0 } else { 1 };
+                if d[k] > 24.0 {
+                    continue;
+                }
+                let class = [1u8, 3][k];
+                map.class[c] = class;
+                map.probs[c] = 0.1;
+                map.probs[class as usize * plane + c] = 0.8;
+                map.probs[2 * plane + c] = 0.1;
+                let noise = 1.5 * ((c * 7919) as f64).sin();
+                map.offsets[c] = (centres[k][0] - x + noise) as f32;
+                map.offsets[plane + c] = (centres[k][1] - y - noise) as f32;
+            }
+        }
+        // One mislabelled cell inside disc 0 (majority must win) and a far speck.
+        let inside = 15 * w + 12;
+        assert_eq!(map.class[inside], 1);
+        map.class[inside] = 2;
+        for c in [25 * w + 35, 25 * w + 36, 26 * w + 35] {
+            map.class[c] = 2;
+            map.probs[2 * plane + c] = 0.9;
+        }
+        (map, centres)
+    }
+
+    #[test]
+    fn touching_instances_separate_by_their_voted_centres() {
+        let (map, centres) = two_touching_discs();
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
+        assert_eq!(instances.len(), 2, "{instances:?}");
+        let mut found: Vec<&Instance> = instances.iter().collect();
+        found.sort_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
+        for (inst, (centre, part)) in found.iter().zip(centres.iter().zip([0, 2])) {
+            assert_eq!(inst.part, part);
+            let err = ((inst.centre[0] - centre[0]).powi(2) + (inst.centre[1] - centre[1]).powi(2))
+                .sqrt();
+            assert!(err < 1.0, "centre {:?} vs {centre:?}", inst.centre);
+            assert!((inst.score - 0.8).abs() < 0.01, "{}", inst.score);
+            // Every cell of the instance is on its own disc: none leaked across the contact.
+            for &c in &inst.cells {
+                let (i, j) = (c as usize / map.width, c as usize % map.width);
+                let (x, y) = (4.0 * j as f64 + 1.5, 4.0 * i as f64 + 1.5);
+                assert!(((x - centre[0]).powi(2) + (y - centre[1]).powi(2)).sqrt() <= 24.0);
+            }
+        }
+        // Disc cells: both discs are fully assigned (the speck is too small to be an instance).
+        let assigned: usize = instances.iter().map(|i| i.cells.len()).sum();
+        let fg = map.class.iter().filter(|&&c| c != 0).count();
+        assert_eq!(assigned, fg - 3);
+    }
+
+    #[test]
+    fn masks_cover_four_by_four_pixels_per_cell_clipped_to_the_region() {
+        let inst = Instance {
+            part: 0,
+            score: 1.0,
+            centre: [0.0, 0.0],
+            cells: vec![0, 1, 3 + 2],
+        };
+        // Map 3 cells wide; region 10 × 7 pixels: cell (1, 2) is clipped to 2 × 3 pixels.
+        let m = inst.mask(3, [10, 7], [100, 200]);
+        assert_eq!((m.origin, m.width, m.height), ([100, 200], 10, 7));
+        assert_eq!(m.area(), 32 + 2 * 3);
+        assert!(m.contains(100, 200) && m.contains(107, 203) && m.contains(109, 206));
+        assert!(!m.contains(100, 204) && !m.contains(110, 206));
+    }
+}
