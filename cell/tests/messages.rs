@@ -77,17 +77,29 @@ fn an_invalid_scenario_prints_each_error_once_and_the_same_from_check_and_run() 
 }
 
 #[test]
-fn learned_perception_is_refused_by_check_at_its_line() {
+fn learned_perception_without_usable_models_is_refused_by_check_at_its_line() {
+    // No models named: refused at the mode.
     let t = nominal_text().replace("mode = \"keypoint-noise\"", "mode = \"learned\"");
     let f = Temp::new(&scenarios(), "learned.toml", t.as_bytes());
     let err = Scenario::load(&f.0).unwrap_err();
     let p = &err.0[0];
     assert_eq!(p.key.as_deref(), Some("perception.mode"), "{err}");
     assert_eq!(p.line, line_of(&t, "mode = \"learned\""), "{err}");
-    assert!(p.message.contains("keypoint-noise"), "{err}");
+    assert!(p.message.contains("models"), "{err}");
     assert!(!p.message.contains("Learned"), "{err}");
     let (_, run) = check_and_run(&f.0);
     assert!(run.contains("perception.mode"), "{run}");
+    // A models folder that does not exist: refused at `models`, naming the folder.
+    let t = nominal_text().replace(
+        "mode = \"keypoint-noise\"",
+        "mode = \"learned\"\nmodels = \"models/nowhere\"",
+    );
+    let f = Temp::new(&scenarios(), "learned_nowhere.toml", t.as_bytes());
+    let err = Scenario::load(&f.0).unwrap_err();
+    let p = &err.0[0];
+    assert_eq!(p.key.as_deref(), Some("perception.models"), "{err}");
+    assert_eq!(p.line, line_of(&t, "models = \"models/nowhere\""), "{err}");
+    assert!(p.message.contains("nowhere"), "{err}");
 }
 
 #[test]

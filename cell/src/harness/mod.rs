@@ -23,11 +23,13 @@ mod audit;
 mod keypoint_noise;
 mod over_rtde;
 mod sim_io;
+mod sim_perception;
 mod verdict;
 
 pub use keypoint_noise::{KeypointNoise, keypoint_noise_for};
 pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
 pub use sim_io::SimCellIo;
+pub use sim_perception::{EpisodePerception, PipelinePool, SimPerception, models_dir};
 pub use verdict::{check_of, source_name};
 
 use std::sync::{Arc, Mutex};
@@ -67,6 +69,8 @@ pub struct SimSetup {
     pub engine: Setup,
     /// The simulator's cell model.
     pub model: Arc<CellModel>,
+    /// How episodes perceive (learned pipelines are pooled here).
+    pub perception: SimPerception,
 }
 
 impl SimSetup {
@@ -84,6 +88,7 @@ impl SimSetup {
             scorer,
         )?;
         Ok(Self {
+            perception: SimPerception::new(&scenario)?,
             engine: Setup::new(scenario)?,
             model,
         })
@@ -100,7 +105,8 @@ impl SimSetup {
             self.model.clone(),
             self.engine.scenario.spec.seed,
             u64::from(episode),
-        )?)
+        )?
+        .render_captures(self.perception.needs_pixels()))
     }
 
     /// A fresh simulated cell for `episode`, shared with a virtual controller that moves it.
@@ -115,7 +121,7 @@ pub async fn run_sim_episode(
     episode: u32,
 ) -> Result<EpisodeOutput, HarnessError> {
     let mut cell = setup.model.limited(setup.sim_cell(episode)?)?;
-    let mut perception = keypoint_noise_for(setup.scenario(), episode)?;
+    let mut perception = setup.perception.for_episode(setup.scenario(), episode)?;
     Ok(run_episode(setup.engine.context(episode), &mut cell, &mut perception).await)
 }
 

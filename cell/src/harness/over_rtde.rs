@@ -14,7 +14,7 @@ use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use sim::cell::SimCell;
 use sim::cell::arm::SimArm;
 
-use super::{HarnessError, SimCellIo, SimSetup, keypoint_noise_for};
+use super::{HarnessError, SimCellIo, SimSetup};
 use crate::orchestrator::{EpisodeOutput, SplitCell, run_episode};
 
 /// Why an episode over loopback RTDE could not run.
@@ -79,7 +79,7 @@ pub async fn sim_episode_over_rtde(
     setup: &SimSetup,
     episode: u32,
 ) -> Result<EpisodeOutput, OverRtdeError> {
-    let mut perception = keypoint_noise_for(setup.scenario(), episode)?;
+    let mut perception = setup.perception.for_episode(setup.scenario(), episode)?;
     let SimOverRtde {
         controller,
         mut robot,

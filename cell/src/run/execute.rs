@@ -12,7 +12,8 @@ use super::{
 };
 use crate::episode::EpisodeRecord;
 use crate::harness::{
-    HarnessError, OverRtdeError, SimSetup, run_sim_episode_blocking, sim_episode_over_rtde,
+    HarnessError, OverRtdeError, SimSetup, models_dir, run_sim_episode_blocking,
+    sim_episode_over_rtde,
 };
 use crate::orchestrator::{
     EpisodeOutput, KnowledgeError, ProductionCellIo, ProductionError, ProductionOptions, Setup,
@@ -20,7 +21,10 @@ use crate::orchestrator::{
 };
 use crate::report::{ReportError, ReportFiles, write_report};
 use crate::scenario::{PerceptionMode, Scenario};
-use perception::PartPerception;
+use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline};
+use perception::onnx::Runtime;
+use perception::{PartPerception, PerceptionError};
+use sim::cell::feeder_window;
 
 /// What can stop one episode from producing a record.
 #[derive(Debug, thiserror::Error)]
@@ -341,10 +345,30 @@ pub fn production(
     })))
 }
 
-/// The perception that reads camera images for `scenario`'s mode.
-fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, ProductionError> {
-    // No learned models are trained yet: the learned mode is refused here, before connecting.
-    Err(ProductionError::Unavailable(scenario.spec.perception.mode))
+/// The perception that reads camera images for `scenario`'s mode: the learned pipeline with both
+/// cores, searching the window of the full-sensor image that shows the feeder.
+#[allow(non_snake_case)]
+fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, PerceptionError> {
+    let dir = models_dir(scenario).ok_or_else(|| {
+        PerceptionError::Settings("mode \"learned\" needs [perception] models".into())
+    })?;
+    let models = LearnedModels::in_dir(&dir)?;
+    let runtime = Runtime::get().map_err(|e| PerceptionError::Model(e.to_string()))?;
+    let pipeline = LearnedPipeline::load(&models, &scenario.catalog, &runtime)?;
+    let cell = &scenario.spec.cell;
+    let base_T_table = cell.base_T_table.isometry();
+    let table_T_camera = base_T_table.inverse() * cell.camera.base_T_camera.isometry();
+    let window = feeder_window(cell, &table_T_camera).ok_or_else(|| {
+        PerceptionError::Settings("the feeder is not in the calibrated camera's view".into())
+    })?;
+    Ok(Box::new(
+        LearnedPerception::new(pipeline, base_T_table).with_roi([
+            window.x0,
+            window.y0,
+            window.width,
+            window.height,
+        ]),
+    ))
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use perception::learned::LearnedModels;
 use perception::part::{Catalog, PartRole};
 use robots::ur_arm::UrArm;
 use sim::cell::feasible::{check_geometry, check_values};
@@ -105,14 +106,25 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
         ));
     }
     let pp = root().key("perception");
-    if spec.perception.mode == PerceptionMode::Learned {
-        issues.push((
-            pp.key("mode"),
-            "mode \"learned\" is not available yet: no trained segmentation and keypoint \
-             models ship with this version; use mode = \"keypoint-noise\""
-                .into(),
-        ));
-    }
+    let learned_models = match (&spec.perception.mode, &spec.perception.models) {
+        (PerceptionMode::Learned, None) => {
+            issues.push((
+                pp.key("mode"),
+                "mode \"learned\" needs `models`, the folder of its ONNX models (e.g. \
+                 models = \"models/usbc\")"
+                    .into(),
+            ));
+            None
+        }
+        (PerceptionMode::Learned, Some(models)) => match LearnedModels::in_dir(&dir.join(models)) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                issues.push((pp.key("models"), format!("cannot use the models: {e}")));
+                None
+            }
+        },
+        (PerceptionMode::KeypointNoise, _) => None,
+    };
     non_negative(
         &mut issues,
         pp.key("keypoint_noise_px"),
@@ -138,6 +150,14 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
             None
         }
     };
+    if let (Some(catalog), Some(models)) = (&catalog, &learned_models)
+        && let Err(e) = models.check_catalog(catalog)
+    {
+        issues.push((
+            pp.key("models"),
+            format!("the models do not fit the catalog: {e}"),
+        ));
+    }
     if let Some(catalog) = &catalog {
         // What the simulated cell refuses as impossible on the scenario's arm (parts and meshes,
         // reach, workspace, feeder over the fixture, camera view, parts wider than the stroke),

@@ -35,6 +35,11 @@ impl LearnedPerception {
         self
     }
 
+    /// Gives the pipeline back (to reuse its sessions and buffers).
+    pub fn into_pipeline(self) -> LearnedPipeline {
+        self.pipeline
+    }
+
     /// The pipeline (for per-stage results and times).
     pub fn pipeline(&mut self) -> &mut LearnedPipeline {
         &mut self.pipeline

@@ -14,12 +14,12 @@ use super::instances::{InstanceConfig, InstanceGrouper};
 use super::keypoint_net::KeypointNet;
 use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
 use super::segmenter::{SegmentMap, Segmenter};
+use crate::Camera;
 use crate::estimate::{EstimatorConfig, Observation, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
 use crate::part::Catalog;
 use crate::voting::{KeypointVote, VotingConfig};
-use crate::Camera;
 
 /// Settings of the learned pipeline.
 #[derive(Debug, Clone, Copy, PartialEq)]

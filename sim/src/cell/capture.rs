@@ -9,6 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use super::error::CellError;
 use super::feeder::FeederPart;
 use super::model::CellModel;
+use crate::config::CellSpec;
 use crate::render::{RenderSettings, SensorModel, Window, render, window_covering};
 use crate::scene::{METER_SHARE, METER_TARGET, PlacedPart, nominal_scene};
 
@@ -27,17 +28,12 @@ pub struct FeederImage {
     pub window: Window,
 }
 
-/// Renders the feeder `parts` as the camera at `base_T_camera` (the true pose) sees them.
+/// The window of the camera image that shows the feeder (its rectangle plus a margin, up to the
+/// parts' height) for a camera at `table_T_camera`: what a capture renders, and the region a
+/// production pipeline searches.
 #[allow(non_snake_case)]
-pub(crate) fn render_feeder(
-    model: &CellModel,
-    parts: &[FeederPart],
-    base_T_camera: &Isometry3<f64>,
-    rng: &mut ChaCha8Rng,
-) -> Result<FeederImage, CellError> {
-    let camera = &model.spec.camera.intrinsics;
-    let table_T_camera = model.geometry.base_T_table.inverse() * base_T_camera;
-    let feeder = &model.spec.feeder;
+pub fn feeder_window(spec: &CellSpec, table_T_camera: &Isometry3<f64>) -> Option<Window> {
+    let feeder = &spec.feeder;
     let half = [
         0.5 * feeder.size[0] + FEEDER_MARGIN,
         0.5 * feeder.size[1] + FEEDER_MARGIN,
@@ -48,7 +44,20 @@ pub(crate) fn render_feeder(
         feeder.center[1] + half[1],
         PART_HEIGHT,
     );
-    let window = window_covering(camera, &table_T_camera, &lo, &hi)
+    window_covering(&spec.camera.intrinsics, table_T_camera, &lo, &hi)
+}
+
+/// Renders the feeder `parts` as the camera at `base_T_camera` (the true pose) sees them.
+#[allow(non_snake_case)]
+pub(crate) fn render_feeder(
+    model: &CellModel,
+    parts: &[FeederPart],
+    base_T_camera: &Isometry3<f64>,
+    rng: &mut ChaCha8Rng,
+) -> Result<FeederImage, CellError> {
+    let camera = &model.spec.camera.intrinsics;
+    let table_T_camera = model.geometry.base_T_table.inverse() * base_T_camera;
+    let window = feeder_window(&model.spec, &table_T_camera)
         .ok_or_else(|| CellError::Camera("the feeder is not in the camera's view".into()))?;
     let placed = parts
         .iter()

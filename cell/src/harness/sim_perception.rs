@@ -1,0 +1,154 @@
+//! Which perception a simulated episode runs: keypoint noise on the true scene, or the learned
+//! pipeline on the rendered feeder window. Learned pipelines hold ONNX Runtime sessions, so they
+//! are pooled across episodes: a worker takes one, runs its episode, and gives it back.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use nalgebra::Isometry3;
+use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline, PipelineConfig};
+use perception::onnx::Runtime;
+use perception::part::Catalog;
+use perception::{DetectedPart, Frame, PartPerception, PerceptionError};
+
+use super::{HarnessError, keypoint_noise_for};
+use crate::scenario::{PerceptionMode, Scenario};
+
+/// The folder of a scenario's learned models: `[perception] models`, relative to the scenario
+/// file.
+pub fn models_dir(scenario: &Scenario) -> Option<PathBuf> {
+    let models = scenario.spec.perception.models.as_ref()?;
+    let dir = scenario.path.parent().unwrap_or(std::path::Path::new("."));
+    Some(dir.join(models))
+}
+
+/// Learned pipelines for a scenario, built on demand and reused.
+pub struct PipelinePool {
+    models: LearnedModels,
+    catalog: Catalog,
+    #[allow(non_snake_case)]
+    base_T_table: Isometry3<f64>,
+    idle: Mutex<Vec<LearnedPipeline>>,
+}
+
+impl PipelinePool {
+    /// A pool for the scenario's models; they are checked against its catalog now.
+    pub fn new(scenario: &Scenario) -> Result<Self, HarnessError> {
+        let dir = models_dir(scenario).ok_or_else(|| {
+            HarnessError::Perception(PerceptionError::Settings(
+                "mode \"learned\" needs [perception] models (a folder of ONNX models)".into(),
+            ))
+        })?;
+        let models = LearnedModels::in_dir(&dir).map_err(PerceptionError::from)?;
+        models
+            .check_catalog(&scenario.catalog)
+            .map_err(PerceptionError::from)?;
+        Ok(Self {
+            models,
+            catalog: scenario.catalog.clone(),
+            base_T_table: scenario.spec.cell.base_T_table.isometry(),
+            idle: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// A pipeline for one episode: an idle one, or a new one (one ONNX Runtime thread each: the
+    /// runner already runs an episode per core).
+    fn take(&self) -> Result<LearnedPipeline, HarnessError> {
+        if let Some(p) = self.idle.lock().unwrap_or_else(|e| e.into_inner()).pop() {
+            return Ok(p);
+        }
+        let runtime = Runtime::get().map_err(|e| PerceptionError::Model(e.to_string()))?;
+        let config = PipelineConfig {
+            threads: 1,
+            ..PipelineConfig::default()
+        };
+        Ok(
+            LearnedPipeline::with_config(&self.models, &self.catalog, &runtime, config)
+                .map_err(PerceptionError::from)?,
+        )
+    }
+
+    fn give_back(&self, pipeline: LearnedPipeline) {
+        self.idle
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(pipeline);
+    }
+}
+
+/// How a scenario's simulated episodes perceive.
+pub enum SimPerception {
+    /// True keypoints with noise (the paper's ablation); the camera delivers the true scene.
+    KeypointNoise,
+    /// The learned pipeline on rendered pixels.
+    Learned(PipelinePool),
+}
+
+impl SimPerception {
+    /// The scenario's perception; learned models are loaded and checked now.
+    pub fn new(scenario: &Scenario) -> Result<Self, HarnessError> {
+        Ok(match scenario.spec.perception.mode {
+            PerceptionMode::KeypointNoise => SimPerception::KeypointNoise,
+            PerceptionMode::Learned => SimPerception::Learned(PipelinePool::new(scenario)?),
+        })
+    }
+
+    /// Whether the camera must deliver rendered pixels.
+    pub fn needs_pixels(&self) -> bool {
+        matches!(self, SimPerception::Learned(_))
+    }
+
+    /// The perception of `episode`.
+    pub fn for_episode<'a>(
+        &'a self,
+        scenario: &Scenario,
+        episode: u32,
+    ) -> Result<EpisodePerception<'a>, HarnessError> {
+        Ok(match self {
+            SimPerception::KeypointNoise => {
+                EpisodePerception::KeypointNoise(Box::new(keypoint_noise_for(scenario, episode)?))
+            }
+            SimPerception::Learned(pool) => EpisodePerception::Learned {
+                perception: Some(LearnedPerception::new(pool.take()?, pool.base_T_table)),
+                pool,
+            },
+        })
+    }
+}
+
+/// One episode's perception; a learned pipeline goes back to its pool when the episode ends.
+pub enum EpisodePerception<'a> {
+    /// Keypoint noise on the episode's perception stream.
+    KeypointNoise(Box<dyn PartPerception + 'a>),
+    /// A pooled learned pipeline.
+    Learned {
+        /// The pipeline behind the seam (always `Some` until dropped).
+        perception: Option<LearnedPerception>,
+        /// Where it returns.
+        pool: &'a PipelinePool,
+    },
+}
+
+impl PartPerception for EpisodePerception<'_> {
+    fn perceive(&mut self, frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
+        match self {
+            EpisodePerception::KeypointNoise(p) => p.perceive(frame),
+            EpisodePerception::Learned { perception, .. } => match perception {
+                Some(p) => p.perceive(frame),
+                None => Err(PerceptionError::Settings(
+                    "the pipeline was returned".into(),
+                )),
+            },
+        }
+    }
+}
+
+impl Drop for EpisodePerception<'_> {
+    fn drop(&mut self) {
+        if let EpisodePerception::Learned { perception, pool } = self
+            && let Some(p) = perception.take()
+        {
+            pool.give_back(p.into_pipeline());
+        }
+    }
+}
