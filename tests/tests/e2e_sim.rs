@@ -131,6 +131,7 @@ fn an_empty_feeder_shakes_the_bounded_number_of_times_then_aborts() {
     let setup = SimSetup {
         engine: base.engine.clone(),
         model,
+        perception: cell::harness::SimPerception::KeypointNoise,
     };
     let s = first_step(&setup);
     assert_eq!(s.outcome, StepOutcome::Aborted);

@@ -75,6 +75,7 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
                 yaw_deg: unit(seed, episode, 60 + i as u64) - 0.5,
             }),
             perception_error: None,
+            perception_verdict: None,
             sim_time_s: 4.0 + unit(seed, episode, 70 + i as u64),
         });
         if failed {
