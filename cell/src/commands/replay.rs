@@ -123,7 +123,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             .parent()
             .map_or_else(|| PathBuf::from(PICTURES_DIR), |p| p.join(PICTURES_DIR)),
     };
-    let pictures = failure_pictures(&loaded.scenario, r, Some(&feeder), &dir)?;
+    let mut pictures = failure_pictures(&loaded.scenario, r, Some(&feeder), &dir)?;
+    if !r.success && setup.perception.needs_pixels() {
+        pictures.extend(cell::report::capture_picture::capture_picture(
+            &setup, r, &dir,
+        )?);
+    }
     for p in &pictures {
         println!("wrote {}", p.display());
     }

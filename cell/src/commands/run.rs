@@ -84,6 +84,9 @@ fn draw_failures(
             .map(|c| c.feeder_parts().to_vec())
             .unwrap_or_default();
         failure_pictures(&loaded.scenario, r, Some(&feeder), &pictures)?;
+        if setup.perception.needs_pixels() {
+            cell::report::capture_picture::capture_picture(&setup, r, &pictures)?;
+        }
     }
     let summary = Summary::new(&results.header, records.values());
     cell::report::write_report(dir, &summary, &records)?;

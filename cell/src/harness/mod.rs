@@ -38,7 +38,7 @@ use sim::cell::{CellModel, SimCell};
 
 use crate::orchestrator::{EpisodeOutput, KnowledgeError, Setup, run_episode};
 use crate::scenario::{PerceptionMode, Scenario};
-use perception::PerceptionError;
+use perception::{PartPerception, PerceptionError};
 
 /// Why a simulated episode could not be set up (nothing ran).
 #[derive(Debug, thiserror::Error)]
@@ -120,9 +120,19 @@ pub async fn run_sim_episode(
     setup: &SimSetup,
     episode: u32,
 ) -> Result<EpisodeOutput, HarnessError> {
-    let mut cell = setup.model.limited(setup.sim_cell(episode)?)?;
     let mut perception = setup.perception.for_episode(setup.scenario(), episode)?;
-    Ok(run_episode(setup.engine.context(episode), &mut cell, &mut perception).await)
+    run_sim_episode_with(setup, episode, &mut perception).await
+}
+
+/// Runs `episode` in the in-process simulated cell with `perception` (e.g. one that records
+/// what it saw, to draw a failure).
+pub async fn run_sim_episode_with(
+    setup: &SimSetup,
+    episode: u32,
+    perception: &mut dyn PartPerception,
+) -> Result<EpisodeOutput, HarnessError> {
+    let mut cell = setup.model.limited(setup.sim_cell(episode)?)?;
+    Ok(run_episode(setup.engine.context(episode), &mut cell, perception).await)
 }
 
 /// [`run_sim_episode`] on a current-thread tokio runtime built for the call (for rayon workers).

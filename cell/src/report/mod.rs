@@ -2,6 +2,7 @@
 //! `report.html`, its plots as SVG files in `plots/`, linking each failed episode's event log
 //! (`events/`) and pictures (`pictures/`) where they exist.
 
+pub mod capture_picture;
 pub mod html;
 pub mod pictures;
 pub mod plots;
