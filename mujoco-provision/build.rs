@@ -49,6 +49,7 @@ fn main() {
         Ok(dir) => {
             println!("cargo::rustc-link-search=native={}", dir.display());
             println!("cargo::rustc-env=MUJOCO_PROVISIONED_DIR={}", dir.display());
+            println!("cargo::metadata=LIB_DIR={}", dir.display());
         }
         Err(e) => {
             eprintln!("error: MuJoCo {VERSION} is not available: {e}\n{HOW}.");
