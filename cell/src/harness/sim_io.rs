@@ -16,6 +16,18 @@ use crate::episode::StepOutcome;
 use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, Workcell};
 use perception::{DetectedPart, Frame, FrameContent, FrameImage, TruePart};
 
+/// The verdict when the insertion scorer failed: the step is aborted with the engine's reason,
+/// never judged as if the part had been released elsewhere.
+fn scorer_failed(cell: &SimCell) -> Option<InsertionCheck> {
+    cell.scorer_failure().map(|e| InsertionCheck {
+        outcome: StepOutcome::Aborted,
+        cause: Some(format!("the insertion scorer failed: {e}")),
+        sources: vec!["simulation.insertion_scorer".into()],
+        pose_error: None,
+        stop_height: None,
+    })
+}
+
 impl CellIo for SimCell {
     fn capture(&mut self) -> Result<Frame, CellIoError> {
         self.wait_for_feeder();
@@ -57,11 +69,17 @@ impl CellIo for SimCell {
     }
 
     fn insertion_check(&mut self) -> Option<InsertionCheck> {
+        if let Some(check) = scorer_failed(self) {
+            return Some(check);
+        }
         self.last_release().map(check_of)
     }
 
     fn seating_check(&mut self) -> Option<InsertionCheck> {
         self.held()?;
+        if let Some(check) = scorer_failed(self) {
+            return Some(check);
+        }
         Some(match self.held_insertion() {
             Some(r) => check_of(&r),
             // Held but never came down into the target: it stopped on whatever it met first.

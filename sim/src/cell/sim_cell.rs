@@ -145,6 +145,8 @@ pub struct SimCell {
     feeder_rest_at: f64,
     /// Whether captures are rendered images (learned perception) or the true scene.
     renders_captures: bool,
+    /// Why the insertion scorer could not score the last insertion, if it failed.
+    scorer_failure: Option<String>,
 }
 
 #[allow(non_snake_case)]
@@ -179,6 +181,7 @@ impl SimCell {
             gripper_actuations: 0,
             feeder_rest_at: 0.0,
             renders_captures: false,
+            scorer_failure: None,
         };
         cell.refill()?;
         Ok(cell)
@@ -202,6 +205,12 @@ impl SimCell {
     /// The calibrated (nominal) camera pose the orchestrator knows.
     pub fn base_T_camera_nominal(&self) -> Isometry3<f64> {
         self.model.geometry.base_T_camera_nominal
+    }
+
+    /// Why the insertion scorer failed on an insertion of this episode, if it did: the part was
+    /// then left unscored, and no verdict about it means anything.
+    pub fn scorer_failure(&self) -> Option<&str> {
+        self.scorer_failure.as_deref()
     }
 
     /// Makes captures rendered images (for learned perception) instead of the true scene.
@@ -553,11 +562,11 @@ impl SimCell {
             ins_T_part,
         };
         // Every part was checked against the scorer when the model was built; an engine that
-        // still fails leaves the part unscored (it is released away from any target).
+        // still fails leaves the part unscored and says why (`scorer_failure`).
         let scored = match self.model.insertion.score(&case) {
             Ok(scored) => scored,
             Err(e) => {
-                eprintln!("warning: step {step} insertion not scored: {e}");
+                self.scorer_failure = Some(format!("step {step}: {e}"));
                 return;
             }
         };
