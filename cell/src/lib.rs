@@ -4,6 +4,7 @@
 //! command-line layer over it.
 
 pub mod episode;
+pub mod camera;
 pub mod harness;
 pub mod orchestrator;
 pub mod prepare;
