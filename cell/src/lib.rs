@@ -3,8 +3,8 @@
 //! (`harness`), runs, reports and the regression gate. The `cell` binary is a thin
 //! command-line layer over it.
 
-pub mod episode;
 pub mod camera;
+pub mod episode;
 pub mod harness;
 pub mod orchestrator;
 pub mod prepare;

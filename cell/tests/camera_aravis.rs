@@ -96,8 +96,15 @@ fn the_fake_genicam_camera_delivers_frames_and_vanishes_cleanly() {
     drop(fake);
     let t = Instant::now();
     let e = cam.capture(Duration::from_millis(500)).unwrap_err();
+    eprintln!(
+        "{:.2} s after the camera went away: {e}",
+        t.elapsed().as_secs_f64()
+    );
     assert!(
-        matches!(e, CameraError::Vanished { .. } | CameraError::Timeout { .. }),
+        matches!(
+            e,
+            CameraError::Vanished { .. } | CameraError::Timeout { .. }
+        ),
         "{e}"
     );
     assert!(t.elapsed() < Duration::from_secs(10), "{:?}", t.elapsed());

@@ -64,7 +64,10 @@ fn a_folder_capture_takes_the_new_image_and_never_an_old_one() {
     });
     let shot = cam.capture(Duration::from_millis(800)).unwrap();
     writer.join().unwrap();
-    assert_eq!(shot.path.as_deref(), Some(dir.path().join("new.png").as_path()));
+    assert_eq!(
+        shot.path.as_deref(),
+        Some(dir.path().join("new.png").as_path())
+    );
     assert_eq!(shot.image.pixels, mono8(7));
     assert_eq!(shot.image.origin, [0, 0]);
     // The next capture again waits for a newer one: both files are old now.
@@ -72,8 +75,15 @@ fn a_folder_capture_takes_the_new_image_and_never_an_old_one() {
     let e = cam.capture(Duration::from_millis(120)).unwrap_err();
     assert!(matches!(e, CameraError::Timeout { .. }), "{e}");
     assert!(t.elapsed() >= Duration::from_millis(120));
-    assert!(t.elapsed() < Duration::from_millis(600), "{:?}", t.elapsed());
-    assert!(e.to_string().contains(&dir.path().display().to_string()), "{e}");
+    assert!(
+        t.elapsed() < Duration::from_millis(600),
+        "{:?}",
+        t.elapsed()
+    );
+    assert!(
+        e.to_string().contains(&dir.path().display().to_string()),
+        "{e}"
+    );
 }
 
 #[test]
@@ -95,7 +105,10 @@ fn a_folder_capture_refuses_an_image_moved_in_with_an_old_time() {
     match &e {
         CameraError::Stale { path, age } => {
             assert_eq!(path, &dir.path().join("grab.png"));
-            assert!(age.as_secs_f64() > 29.0 && age.as_secs_f64() < 31.0, "{age:?}");
+            assert!(
+                age.as_secs_f64() > 29.0 && age.as_secs_f64() < 31.0,
+                "{age:?}"
+            );
         }
         other => panic!("expected a stale image, got {other}"),
     }
@@ -215,11 +228,8 @@ fn a_command_capture_reads_the_image_the_command_wrote() {
 
 #[test]
 fn a_failing_command_reports_its_status_and_stderr() {
-    let mut cam = CommandCamera::open(
-        "sh -c 'echo no camera on bus 2 >&2; exit 3' {path}",
-        SENSOR,
-    )
-    .unwrap();
+    let mut cam =
+        CommandCamera::open("sh -c 'echo no camera on bus 2 >&2; exit 3' {path}", SENSOR).unwrap();
     let e = cam.capture(Duration::from_millis(900)).unwrap_err();
     match &e {
         CameraError::CommandFailed { status, stderr, .. } => {
@@ -253,7 +263,10 @@ fn a_hung_command_is_killed_within_the_deadline_with_what_it_started() {
     let took = t.elapsed();
     assert!(matches!(e, CameraError::CommandHung { .. }), "{e}");
     assert!(took < Duration::from_millis(1000), "{took:?}");
-    let pid = std::fs::read_to_string(&pid_file).unwrap().trim().to_string();
+    let pid = std::fs::read_to_string(&pid_file)
+        .unwrap()
+        .trim()
+        .to_string();
     // The sleep is gone (or a zombie waiting to be reaped), not sleeping on.
     std::thread::sleep(Duration::from_millis(50));
     let state = std::fs::read_to_string(format!("/proc/{pid}/stat"))
@@ -519,7 +532,11 @@ mod safety {
             assert!(cause.starts_with("camera: "), "{described}: {cause}");
             assert!(cause.contains(&why), "{described}: {cause}");
             let last = out.events.events().last().unwrap();
-            assert_eq!((last.from, last.to), (State::Capture, State::Done), "{described}");
+            assert_eq!(
+                (last.from, last.to),
+                (State::Capture, State::Done),
+                "{described}"
+            );
         }
     }
 

@@ -62,8 +62,14 @@ impl AravisCamera {
                 };
                 let described = format!(
                     "GenICam camera {} {} ({})",
-                    camera.vendor_name().map(|s| s.to_string()).unwrap_or_default(),
-                    camera.model_name().map(|s| s.to_string()).unwrap_or_default(),
+                    camera
+                        .vendor_name()
+                        .map(|s| s.to_string())
+                        .unwrap_or_default(),
+                    camera
+                        .model_name()
+                        .map(|s| s.to_string())
+                        .unwrap_or_default(),
                     camera
                         .device_id()
                         .map(|s| s.to_string())
@@ -88,10 +94,7 @@ impl AravisCamera {
             Err(_) => {
                 return Err(CameraError::Vanished {
                     source_name: name,
-                    reason: format!(
-                        "it did not open within {} s",
-                        OPEN_TIMEOUT.as_secs_f64()
-                    ),
+                    reason: format!("it did not open within {} s", OPEN_TIMEOUT.as_secs_f64()),
                 });
             }
         };
@@ -190,7 +193,9 @@ fn grab(camera: &Camera, name: &str, deadline: Duration) -> Frame {
         source_name: name.into(),
         reason: format!("{what}: {e}"),
     };
-    let payload = camera.payload().map_err(|e| gone("reading the payload size", e))?;
+    let payload = camera
+        .payload()
+        .map_err(|e| gone("reading the payload size", e))?;
     let stream = camera
         .create_stream()
         .map_err(|e| gone("opening the image stream", e))?;
@@ -201,7 +206,9 @@ fn grab(camera: &Camera, name: &str, deadline: Duration) -> Frame {
     camera
         .start_acquisition()
         .map_err(|e| gone("starting the acquisition", e))?;
-    let micros = u64::try_from(deadline.as_micros()).unwrap_or(u64::MAX).max(1);
+    let micros = u64::try_from(deadline.as_micros())
+        .unwrap_or(u64::MAX)
+        .max(1);
     let buffer = stream.timeout_pop_buffer(micros);
     let stopped = camera.stop_acquisition();
     let taken = SystemTime::now();

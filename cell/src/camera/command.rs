@@ -74,7 +74,10 @@ impl CameraSource for CommandCamera {
             let _ = std::fs::remove_file(old);
         }
         self.count += 1;
-        let path = self.dir.path().join(format!("capture-{:06}.png", self.count));
+        let path = self
+            .dir
+            .path()
+            .join(format!("capture-{:06}.png", self.count));
         let path_text = path.to_string_lossy();
         let words: Vec<String> = self
             .words
@@ -182,7 +185,11 @@ fn kill_group(child: &mut Child) {
 fn tail_of(bytes: Vec<u8>) -> String {
     let start = bytes.len().saturating_sub(STDERR_TAIL);
     let text = String::from_utf8_lossy(&bytes[start..]).trim().to_string();
-    if start > 0 { format!("…{text}") } else { text }
+    if start > 0 {
+        format!("…{text}")
+    } else {
+        text
+    }
 }
 
 /// Finds `program` as a shell would: a path when it holds a `/`, else on `PATH`; it must be an

@@ -36,9 +36,9 @@ impl FolderCamera {
                 spec: format!("folder:{}", dir.display()),
                 reason: "not a folder (use files:PATH to replay one image file)".into(),
             }),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(CameraError::Missing {
-                path: dir.into(),
-            }),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                Err(CameraError::Missing { path: dir.into() })
+            }
             Err(e) => Err(CameraError::Unreadable {
                 path: dir.into(),
                 message: e.to_string(),
@@ -120,8 +120,9 @@ impl CameraSource for FolderCamera {
                         }
                     }
                     // A wrong size or format will not get better: report it at once.
-                    Err(e @ (CameraError::WrongSize { .. }
-                    | CameraError::UnsupportedFormat { .. })) => return Err(e),
+                    Err(
+                        e @ (CameraError::WrongSize { .. } | CameraError::UnsupportedFormat { .. }),
+                    ) => return Err(e),
                     // A writer may have paused mid-file: try again if it changes.
                     Err(e) => {
                         failed.insert(path, (stamp, e));
