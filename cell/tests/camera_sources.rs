@@ -163,7 +163,7 @@ fn a_missing_or_vanished_folder_is_an_error() {
             path: missing.clone()
         }
     );
-    assert!(e.to_string().contains("grabs: does not exist"), "{e}");
+    assert!(e.to_string().ends_with("grabs: does not exist"), "{e}");
     std::fs::create_dir(&missing).unwrap();
     let mut cam = FolderCamera::open(&missing, SENSOR).unwrap();
     std::fs::remove_dir(&missing).unwrap();
@@ -259,10 +259,10 @@ fn a_hung_command_is_killed_within_the_deadline_with_what_it_started() {
     )
     .unwrap();
     let t = Instant::now();
-    let e = cam.capture(Duration::from_millis(300)).unwrap_err();
+    let e = cam.capture(Duration::from_millis(500)).unwrap_err();
     let took = t.elapsed();
     assert!(matches!(e, CameraError::CommandHung { .. }), "{e}");
-    assert!(took < Duration::from_millis(1000), "{took:?}");
+    assert!(took < Duration::from_millis(1500), "{took:?}");
     let pid = std::fs::read_to_string(&pid_file)
         .unwrap()
         .trim()

@@ -172,7 +172,7 @@ pub enum CameraError {
         reason: String,
     },
     /// The folder or file does not exist.
-    #[error("{}: does not exist", path.display())]
+    #[error("camera source {}: does not exist", path.display())]
     Missing {
         /// The path.
         path: PathBuf,
@@ -292,7 +292,7 @@ pub fn open(spec: &CameraSpec, sensor: Sensor) -> Result<Box<dyn CameraSource>, 
             return Err(CameraError::Invalid {
                 spec: spec.to_string(),
                 reason: "this build has no GenICam support; rebuild with `cargo build -p cell \
-                         --features aravis` (needs libaravis-dev 0.8)"
+                         --features aravis` (needs libaravis-dev >= 0.8.25)"
                     .into(),
             });
         }

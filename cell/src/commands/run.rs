@@ -53,7 +53,7 @@ pub struct Args {
     pub camera: Option<CameraSpec>,
     /// How long one capture may wait for its image (e.g. `5s`, `800ms`); a capture that gets
     /// no new image in time aborts the step before any motion.
-    #[arg(long, default_value = "5s", value_parser = parse_timeout)]
+    #[arg(long, default_value = "5s", value_name = "DURATION", value_parser = parse_timeout)]
     pub capture_timeout: std::time::Duration,
     /// Failed episodes to draw pictures of (the failing insertion from two views with its
     /// capture band, and the feeder), linked from the report; 0 for none.
