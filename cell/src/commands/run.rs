@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use cell::camera::CameraSpec;
 use cell::run::{Driver, LoadedScenario, RobotTarget, Shard, Summary, execute_on, production};
 
 /// Arguments of `cell run`.
@@ -42,14 +43,31 @@ pub struct Args {
     /// Production opt-in: allow a real arm to move (only with --robot ur://HOST).
     #[arg(long)]
     pub allow_motion: bool,
-    /// Production camera source: an image file or a folder of images (only with
-    /// --robot ur://HOST).
-    #[arg(long)]
-    pub camera: Option<PathBuf>,
+    /// Production camera source (only with --robot ur://HOST), one new full-sensor PNG or TIFF
+    /// image per capture: `folder:/path` (or a plain folder) waits for a new, fully written
+    /// image that a grab tool writes there; `cmd:'grab --out {path}'` runs the command per
+    /// capture and reads the image it writes to {path}; `files:/path` (or a plain image file)
+    /// replays recorded images in name order; `aravis:[DEVICE]` grabs from a GenICam camera
+    /// (builds with `--features aravis`).
+    #[arg(long, value_name = "SPEC")]
+    pub camera: Option<CameraSpec>,
+    /// How long one capture may wait for its image (e.g. `5s`, `800ms`); a capture that gets
+    /// no new image in time aborts the step before any motion.
+    #[arg(long, default_value = "5s", value_name = "DURATION", value_parser = parse_timeout)]
+    pub capture_timeout: std::time::Duration,
     /// Failed episodes to draw pictures of (the failing insertion from two views with its
     /// capture band, and the feeder), linked from the report; 0 for none.
     #[arg(long, default_value_t = 20)]
     pub pictures: usize,
+}
+
+/// A positive duration such as `5s` or `800ms`.
+pub fn parse_timeout(s: &str) -> Result<std::time::Duration, String> {
+    let d = humantime::parse_duration(s).map_err(|e| format!("{s:?}: {e}"))?;
+    if d.is_zero() {
+        return Err(format!("{s:?}: the capture timeout must be positive"));
+    }
+    Ok(d)
 }
 
 /// Draws the pictures of the first `limit` failed episodes of a simulated run into
@@ -124,7 +142,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             &loaded.scenario,
             &args.robot,
             args.allow_motion,
-            args.camera.as_deref(),
+            args.camera.as_ref(),
+            args.capture_timeout,
         )?,
         other => {
             anyhow::ensure!(

@@ -24,14 +24,15 @@
 //!   [`SplitCell`] of `robots::ur_robot::UrRobot` (a real controller, or `cell virtual-ur`) and
 //!   the cell's side channels.
 //! - Production: [`preflight`] refuses to start without the explicit opt-in, valid limits, a
-//!   camera source with images ([`ImageSource`]) and an image-reading perception mode; then
+//!   camera source that opens (`crate::camera`) and an image-reading perception mode; then
 //!   [`ProductionCellIo`] with `UrRobot` and the learned perception go through [`run_episode`].
 //!
 //! # Files
 //! `engine` (the state machine, one method per state), `step` (per-step state), `context`
 //! (setup, policies, the episode's context), `state` (states and their bounds), `events`,
 //! `cell_io` (the cell seams), `perception` (the perception seam), `selection`, `planning`,
-//! `geometry` (the planner's model of the cell), `production` (pre-flight and camera source).
+//! `geometry` (the planner's model of the cell), `production` (pre-flight, production side
+//! channels).
 
 #![allow(non_snake_case)]
 
@@ -55,7 +56,7 @@ pub use planning::{
     Motion, Plan, PlanError, Planner, PlanningConfig, SearchConfig, Speeds, grasped_offset,
 };
 pub use production::{
-    ImageSource, ProductionCellIo, ProductionError, ProductionOptions, preflight,
+    ProductionCellIo, ProductionError, ProductionOptions, open_camera, preflight,
 };
 pub use selection::{Rejection, Selection, SelectionConfig, SelectionResult, select};
 pub use state::{State, Timeouts};

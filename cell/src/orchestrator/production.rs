@@ -1,28 +1,28 @@
 //! Production: the pre-flight checks that must pass before the orchestrator drives a real arm,
-//! and the camera source (image files or a folder of them) it reads frames from.
+//! and the cell side channels that read frames from the camera source (`crate::camera`).
 //!
 //! A production run needs an explicit opt-in, the scenario's motion limits (checked for sanity:
-//! every target is tested against them before it is sent), a camera source with images, and a
-//! perception mode that reads images (keypoint-noise needs the simulated scene, so it is
-//! refused until the learned pipeline is available).
+//! every target is tested against them before it is sent), a camera source that opens (a
+//! watched folder, a grab command, recorded images or a GenICam camera), and a perception mode
+//! that reads images (keypoint-noise needs the simulated scene, so it is refused until the
+//! learned pipeline is available).
 
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use super::cell_io::{CellIo, CellIoError, InsertionCheck};
+use crate::camera::{self, CameraError, CameraSource, CameraSpec, Sensor};
 use crate::scenario::{PerceptionMode, Scenario};
-use perception::{Frame, FrameContent, FrameImage};
-
-/// Image file extensions a camera folder may hold.
-const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff"];
+use perception::{Frame, FrameContent};
 
 /// What the operator passed to start a production run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProductionOptions {
     /// The explicit opt-in that the arm will move (`--allow-motion` or similar).
     pub allow_motion: bool,
-    /// An image file or a folder of image files.
-    pub camera: PathBuf,
+    /// Where the images come from (`--camera`).
+    pub camera: CameraSpec,
+    /// How long one capture may wait for its image (`--capture-timeout`).
+    pub capture_timeout: Duration,
 }
 
 /// Why a production run refuses to start.
@@ -34,14 +34,12 @@ pub enum ProductionError {
     /// The scenario's limits are unusable.
     #[error("the scenario's [cell.limits] are invalid: {0}")]
     Limits(String),
-    /// The camera source has no images or cannot be read.
-    #[error("camera source {path}: {reason}")]
-    Camera {
-        /// The source.
-        path: PathBuf,
-        /// What is wrong.
-        reason: String,
-    },
+    /// The camera source cannot be opened.
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    /// The capture timeout is zero.
+    #[error("the capture timeout must be positive")]
+    CaptureTimeout,
     /// The perception mode cannot read camera images.
     #[error("perception mode {0:?} cannot read camera images")]
     Perception(PerceptionMode),
@@ -50,11 +48,12 @@ pub enum ProductionError {
     Unavailable(PerceptionMode),
 }
 
-/// Checks everything a production run needs before anything connects or moves.
+/// Checks everything a production run needs before anything connects or moves; opens the
+/// camera source for images of the scenario camera's full sensor.
 pub fn preflight(
     scenario: &Scenario,
     options: &ProductionOptions,
-) -> Result<ImageSource, ProductionError> {
+) -> Result<Box<dyn CameraSource>, ProductionError> {
     if !options.allow_motion {
         return Err(ProductionError::NotAllowed);
     }
@@ -64,97 +63,70 @@ pub fn preflight(
         .limits
         .validate()
         .map_err(|e| ProductionError::Limits(e.to_string()))?;
-    let source = ImageSource::open(&options.camera)?;
+    if options.capture_timeout.is_zero() {
+        return Err(ProductionError::CaptureTimeout);
+    }
+    let source = open_camera(scenario, &options.camera)?;
     if scenario.spec.perception.mode != PerceptionMode::Learned {
         return Err(ProductionError::Perception(scenario.spec.perception.mode));
     }
     Ok(source)
 }
 
-/// Camera frames from image files, in name order: one file, or every image in a folder.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ImageSource {
-    files: Vec<PathBuf>,
-    next: usize,
+/// Opens the camera source `spec` for images of `scenario`'s camera sensor (what
+/// [`preflight`] and `cell check --camera` do).
+pub fn open_camera(
+    scenario: &Scenario,
+    spec: &CameraSpec,
+) -> Result<Box<dyn CameraSource>, CameraError> {
+    camera::open(spec, Sensor::of(&scenario.spec.cell.camera.intrinsics))
 }
 
-impl ImageSource {
-    /// Lists the images at `path` (a file or a folder); fails when there are none.
-    pub fn open(path: &Path) -> Result<Self, ProductionError> {
-        let err = |reason: String| ProductionError::Camera {
-            path: path.into(),
-            reason,
-        };
-        let meta = std::fs::metadata(path).map_err(|e| err(e.to_string()))?;
-        let is_image = |p: &Path| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        };
-        let mut files = if meta.is_dir() {
-            std::fs::read_dir(path)
-                .map_err(|e| err(e.to_string()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.is_file() && is_image(p))
-                .collect::<Vec<_>>()
-        } else if is_image(path) {
-            vec![path.to_path_buf()]
-        } else {
-            return Err(err(format!(
-                "not an image (expected one of {IMAGE_EXTENSIONS:?})"
-            )));
-        };
-        files.sort();
-        if files.is_empty() {
-            return Err(err("no image files".into()));
-        }
-        Ok(Self { files, next: 0 })
-    }
-
-    /// The images, in the order they are delivered.
-    pub fn files(&self) -> &[PathBuf] {
-        &self.files
-    }
-
-    /// The next image, or `None` when every image was delivered.
-    pub fn next_image(&mut self) -> Option<PathBuf> {
-        let f = self.files.get(self.next).cloned();
-        self.next += usize::from(f.is_some());
-        f
-    }
-}
-
-/// A production cell's side channels: the camera from image files, the wall clock; no feeder
-/// shaker and no grasp or seating sensor are configured yet, so those report what they can't do.
+/// A production cell's side channels: the camera source, the wall clock; no feeder shaker and
+/// no grasp or seating sensor are configured yet, so those report what they can't do.
 pub struct ProductionCellIo {
     scenario: Scenario,
-    images: ImageSource,
+    camera: Box<dyn CameraSource>,
+    capture_timeout: Duration,
     start: Instant,
 }
 
 impl ProductionCellIo {
-    /// Side channels for a checked production run.
-    pub fn new(scenario: Scenario, images: ImageSource) -> Self {
+    /// Side channels for a checked production run; each capture waits up to `capture_timeout`.
+    pub fn new(
+        scenario: Scenario,
+        camera: Box<dyn CameraSource>,
+        capture_timeout: Duration,
+    ) -> Self {
         Self {
             scenario,
-            images,
+            camera,
+            capture_timeout,
             start: Instant::now(),
         }
     }
 }
 
 impl CellIo for ProductionCellIo {
+    /// One new image from the camera source; any camera error fails the capture (the engine
+    /// then aborts the step before any motion and records why).
     fn capture(&mut self) -> Result<Frame, CellIoError> {
-        let file = self.images.next_image().ok_or_else(|| {
-            CellIoError::Camera("every image of the camera source was used".into())
+        let shot = self.camera.capture(self.capture_timeout).map_err(|e| {
+            tracing::warn!(camera = %self.camera.describe(), "capture failed: {e}");
+            CellIoError::Camera(e.to_string())
         })?;
-        let pixels = image::open(&file)
-            .map_err(|e| CellIoError::Camera(format!("{}: {e}", file.display())))?;
+        tracing::info!(
+            camera = %self.camera.describe(),
+            path = ?shot.path,
+            "captured {} × {}",
+            shot.image.width(),
+            shot.image.height()
+        );
         let cam = &self.scenario.spec.cell.camera;
         Ok(Frame {
             camera: cam.intrinsics,
             base_T_camera: cam.base_T_camera.isometry(),
-            content: FrameContent::Image(FrameImage::full(pixels)),
+            content: FrameContent::Image(shot.image),
         })
     }
 
@@ -174,41 +146,5 @@ impl CellIo for ProductionCellIo {
 
     fn clock(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn image_folders_list_images_in_order_and_refuse_empty_ones() {
-        let dir = tempfile::tempdir().unwrap();
-        assert!(matches!(
-            ImageSource::open(dir.path()),
-            Err(ProductionError::Camera { .. })
-        ));
-        for name in ["b.png", "a.JPG", "notes.txt"] {
-            std::fs::write(dir.path().join(name), b"x").unwrap();
-        }
-        let mut s = ImageSource::open(dir.path()).unwrap();
-        let names: Vec<_> = s
-            .files()
-            .iter()
-            .map(|p| p.file_name().unwrap().to_str().unwrap().to_string())
-            .collect();
-        assert_eq!(names, ["a.JPG", "b.png"]);
-        assert!(s.next_image().is_some() && s.next_image().is_some());
-        assert_eq!(s.next_image(), None);
-        let missing = dir.path().join("missing");
-        assert!(matches!(
-            ImageSource::open(&missing),
-            Err(ProductionError::Camera { .. })
-        ));
-        let txt = dir.path().join("notes.txt");
-        assert!(matches!(
-            ImageSource::open(&txt),
-            Err(ProductionError::Camera { .. })
-        ));
     }
 }

@@ -5,11 +5,13 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use super::{
     LoadedScenario, ResultsStore, RobotTarget, RunError, RunOptions, RunOutcome, Shard, StoreError,
     Summary, results_dir, run_episodes,
 };
+use crate::camera::CameraSpec;
 use crate::episode::EpisodeRecord;
 use crate::harness::{
     HarnessError, OverRtdeError, SimSetup, models_dir, run_sim_episode_blocking,
@@ -295,13 +297,14 @@ impl Production {
 }
 
 /// Checks everything a real-controller run needs, before anything connects: the explicit
-/// opt-in, the scenario's limits, the camera source, and a perception mode that reads camera
-/// images and is available.
+/// opt-in, the scenario's limits, the camera source (opened; each capture waits up to
+/// `capture_timeout`), and a perception mode that reads camera images and is available.
 pub fn production(
     scenario: &Scenario,
     robot: &RobotTarget,
     allow_motion: bool,
-    camera: Option<&Path>,
+    camera: Option<&CameraSpec>,
+    capture_timeout: Duration,
 ) -> Result<Driver, ProductionRefusal> {
     let RobotTarget::Ur { host, port } = robot else {
         return Err(ProductionRefusal::NotAController(robot.clone()));
@@ -310,16 +313,24 @@ pub fn production(
         robot: robot.clone(),
         why,
     };
-    if allow_motion && camera.is_none() {
-        return Err(refuse(
-            "a production run needs --camera IMAGE_OR_FOLDER (the camera source)".into(),
-        ));
-    }
+    let camera = match camera {
+        Some(c) => c.clone(),
+        None if allow_motion => {
+            return Err(refuse(
+                "a production run needs --camera SPEC (the camera source: folder:/path, \
+                 cmd:'grab --out {path}', files:/path or aravis:[DEVICE])"
+                    .into(),
+            ));
+        }
+        // Refused below for the missing opt-in, before any camera is looked at.
+        None => CameraSpec::Folder(PathBuf::new()),
+    };
     let options = ProductionOptions {
         allow_motion,
-        camera: camera.map(Path::to_path_buf).unwrap_or_default(),
+        camera,
+        capture_timeout,
     };
-    let images = preflight(scenario, &options).map_err(|e| {
+    let camera = preflight(scenario, &options).map_err(|e| {
         refuse(match e {
             ProductionError::NotAllowed => {
                 "it moves a real arm: pass --allow-motion to allow motion".into()
@@ -339,7 +350,7 @@ pub fn production(
         host: host.clone(),
         port: *port,
         side: std::sync::Mutex::new(Some((
-            ProductionCellIo::new(scenario.clone(), images),
+            ProductionCellIo::new(scenario.clone(), camera, capture_timeout),
             perception,
         ))),
     })))
@@ -374,7 +385,7 @@ fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, Perc
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::orchestrator::ImageSource;
+    use crate::camera::{FilesCamera, Sensor};
     use perception::{DetectedPart, Frame, PerceptionError};
 
     /// Stands in for the learned perception, which has no trained models yet; the guarded run
@@ -417,7 +428,14 @@ mod tests {
             side: std::sync::Mutex::new(Some((
                 ProductionCellIo::new(
                     loaded.scenario.clone(),
-                    ImageSource::open(images.path()).unwrap(),
+                    Box::new(
+                        FilesCamera::open(
+                            images.path(),
+                            Sensor::of(&loaded.scenario.spec.cell.camera.intrinsics),
+                        )
+                        .unwrap(),
+                    ),
+                    Duration::from_millis(100),
                 ),
                 Box::new(NoModels),
             ))),
