@@ -3,7 +3,8 @@
 //! through the simulated sensor, then perceived from pixels only. Every part must be detected
 //! with its pose within bounds measured on these frames.
 //!
-//! Runs with the committed models (`scenarios/models/usbc/`); without them it says so and passes.
+//! Runs with the committed models (`scenarios/models/usbc/`, or `LEARNED_MODELS_DIR`); without
+//! them it says so and passes.
 //! `cargo test -p cell-tests --test learned_perception -- --ignored` rewrites the benchmark frame
 //! (`perception/tests/data/learned/feeder.png` + `feeder.toml`).
 
@@ -101,7 +102,10 @@ fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
 
 /// The committed models, or `None` (with a note) when they are not in the tree yet.
 fn committed_models() -> Option<LearnedModels> {
-    let dir = LearnedModels::default_dir();
+    // LEARNED_MODELS_DIR points at other models (e.g. a training run's) for local checks.
+    let dir = std::env::var_os("LEARNED_MODELS_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(LearnedModels::default_dir);
     if !dir.join("segmenter.toml").exists() {
         eprintln!(
             "no trained models in {}: the learned end-to-end test has nothing to run",
@@ -197,6 +201,7 @@ const ANGLE_MAX_DEG: f64 = 20.0;
 
 #[test]
 #[ignore = "rewrites the benchmark frame in perception/tests/data/learned"]
+#[allow(non_snake_case)]
 fn write_the_benchmark_feeder_frame() {
     let catalog = catalog();
     let feeder = render_feeder(&catalog, 11);
