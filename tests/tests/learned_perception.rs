@@ -136,8 +136,28 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
             base_T_camera: feeder.table_T_camera,
             content: FrameContent::Image(feeder.image.clone()),
         };
-        let found = perception.perceive(&frame).unwrap_or_else(|e| panic!("{e}"));
         let camera_T_table = feeder.table_T_camera.inverse();
+        // What each stage found, for the log.
+        let stages = perception
+            .pipeline()
+            .detect(&feeder.image, &feeder.camera, &camera_T_table, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        for d in &stages.detections {
+            eprintln!(
+                "seed {seed}: {} score {:.2} at ({:.0}, {:.0}), {} mask px: {}",
+                d.part,
+                d.score,
+                d.centre[0],
+                d.centre[1],
+                d.mask.area(),
+                match &d.pose {
+                    Ok(p) => format!("{} rms {:.2} px", p.stable_pose, p.rms_px),
+                    Err(e) => e.clone(),
+                }
+            );
+        }
+        eprintln!("seed {seed}: {:?}", stages.times);
+        let found = perception.perceive(&frame).unwrap_or_else(|e| panic!("{e}"));
         for (part, table_T_part) in &feeder.truth {
             // The detection of this part: same class, nearest in the table plane.
             let best = found
