@@ -40,8 +40,8 @@ fn bench(c: &mut Criterion) {
         return;
     }
     let models = LearnedModels::in_dir(&dir).unwrap_or_else(|e| panic!("{e}"));
-    let catalog = Catalog::load(&root.join("../scenarios/parts/usbc.toml"))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let catalog =
+        Catalog::load(&root.join("../scenarios/parts/usbc.toml")).unwrap_or_else(|e| panic!("{e}"));
     let runtime = Runtime::get().unwrap_or_else(|e| panic!("{e}"));
     let mut pipeline =
         LearnedPipeline::load(&models, &catalog, &runtime).unwrap_or_else(|e| panic!("{e}"));

@@ -29,7 +29,12 @@ fn runtime() -> Runtime {
 /// A copy of the fixture directory that a test may edit.
 fn fixture_copy() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    for f in ["segmenter.onnx", "segmenter.toml", "keypoints.onnx", "keypoints.toml"] {
+    for f in [
+        "segmenter.onnx",
+        "segmenter.toml",
+        "keypoints.onnx",
+        "keypoints.toml",
+    ] {
         std::fs::copy(fixture_dir().join(f), dir.path().join(f)).unwrap();
     }
     dir
@@ -83,7 +88,11 @@ fn the_fixture_models_load_and_a_frame_runs_through_every_stage() {
     assert!((d.score - p).abs() < 1e-4, "score {}", d.score);
     // The mask lies on the square (sensor pixels) and covers a good part of it.
     let (sx, sy) = (origin[0] + 100, origin[1] + 60);
-    assert!(d.mask.area() >= 400 && d.mask.area() <= 1600, "{}", d.mask.area());
+    assert!(
+        d.mask.area() >= 400 && d.mask.area() <= 1600,
+        "{}",
+        d.mask.area()
+    );
     for y in d.mask.origin[1]..d.mask.origin[1] + d.mask.height {
         for x in d.mask.origin[0]..d.mask.origin[0] + d.mask.width {
             if d.mask.contains(x, y) {
@@ -91,11 +100,22 @@ fn the_fixture_models_load_and_a_frame_runs_through_every_stage() {
             }
         }
     }
-    assert!((sx as f64..sx as f64 + 40.0).contains(&d.centre[0]), "{:?}", d.centre);
-    assert!((sy as f64..sy as f64 + 40.0).contains(&d.centre[1]), "{:?}", d.centre);
+    assert!(
+        (sx as f64..sx as f64 + 40.0).contains(&d.centre[0]),
+        "{:?}",
+        d.centre
+    );
+    assert!(
+        (sy as f64..sy as f64 + 40.0).contains(&d.centre[1]),
+        "{:?}",
+        d.centre
+    );
     assert_eq!(
         d.crop_origin,
-        [d.centre[0].round() as i64 - 64, d.centre[1].round() as i64 - 64]
+        [
+            d.centre[0].round() as i64 - 64,
+            d.centre[1].round() as i64 - 64
+        ]
     );
     // The fixture's constant vectors are parallel: voting finds no keypoints, and says so.
     assert!(d.keypoints.is_empty());
@@ -131,12 +151,24 @@ fn learned_perception_refuses_simulated_frames_and_bad_images() {
     let e = perception
         .perceive(&frame(FrameContent::Simulated(Vec::new())))
         .unwrap_err();
-    assert!(matches!(e, PerceptionError::UnsupportedFrame { mode: "learned", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            PerceptionError::UnsupportedFrame {
+                mode: "learned",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let float = DynamicImage::ImageRgb32F(Rgb32FImage::new(64, 64));
     let e = perception
         .perceive(&frame(FrameContent::Image(FrameImage::full(float))))
         .unwrap_err();
-    assert!(matches!(&e, PerceptionError::Frame(m) if m.contains("Rgb32F")), "{e}");
+    assert!(
+        matches!(&e, PerceptionError::Frame(m) if m.contains("Rgb32F")),
+        "{e}"
+    );
     let off_sensor = FrameImage {
         pixels: square_image(),
         origin: [5400, 0],
@@ -144,10 +176,16 @@ fn learned_perception_refuses_simulated_frames_and_bad_images() {
     let e = perception
         .perceive(&frame(FrameContent::Image(off_sensor)))
         .unwrap_err();
-    assert!(e.to_string().contains("does not fit the 5472 × 3648 sensor"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("does not fit the 5472 × 3648 sensor"),
+        "{e}"
+    );
     // A good frame: the fixture's keypoints fail to vote, so no part is reported (no error).
     let good = perception
-        .perceive(&frame(FrameContent::Image(FrameImage::full(square_image()))))
+        .perceive(&frame(FrameContent::Image(
+            FrameImage::full(square_image()),
+        )))
         .unwrap();
     assert!(good.is_empty());
 }
@@ -173,7 +211,10 @@ fn missing_corrupt_and_mis_hashed_models_are_named() {
     bytes[last] ^= 0x55;
     std::fs::write(&model, &bytes).unwrap();
     let e = load(dir.path()).err().unwrap();
-    assert!(matches!(e, LearnedError::Onnx(OnnxError::Checksum { .. })), "{e}");
+    assert!(
+        matches!(e, LearnedError::Onnx(OnnxError::Checksum { .. })),
+        "{e}"
+    );
     assert!(e.to_string().contains("keypoints.onnx: sha256 is"), "{e}");
 
     // Garbage with a matching checksum: ONNX Runtime refuses it.
@@ -194,37 +235,68 @@ fn missing_corrupt_and_mis_hashed_models_are_named() {
     };
     edit(&manifest, &old, &format!("sha256 = \"{actual}\""));
     let e = load(dir.path()).err().unwrap();
-    assert!(matches!(e, LearnedError::Onnx(OnnxError::Model { .. })), "{e}");
-    assert!(e.to_string().contains("segmenter.onnx: ONNX Runtime cannot load"), "{e}");
+    assert!(
+        matches!(e, LearnedError::Onnx(OnnxError::Model { .. })),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains("segmenter.onnx: ONNX Runtime cannot load"),
+        "{e}"
+    );
 }
 
 #[test]
 fn shapes_and_parts_off_the_contract_are_refused() {
     // The manifest promises a shape off the contract: refused before any model is opened.
     let dir = fixture_copy();
-    edit(&dir.path().join("keypoints.toml"), "[-1, 1, 64, 64]", "[-1, 1, 32, 32]");
+    edit(
+        &dir.path().join("keypoints.toml"),
+        "[-1, 1, 64, 64]",
+        "[-1, 1, 32, 32]",
+    );
     let e = LearnedModels::in_dir(dir.path()).unwrap_err();
     assert!(matches!(e, LearnedError::Contract { .. }), "{e}");
     let m = e.to_string();
-    assert!(m.contains("keypoints.toml: output mask: shape [-1, 1, 32, 32]"), "{m}");
+    assert!(
+        m.contains("keypoints.toml: output mask: shape [-1, 1, 32, 32]"),
+        "{m}"
+    );
 
     let dir = fixture_copy();
-    edit(&dir.path().join("segmenter.toml"), "name = \"offsets\"", "name = \"offset\"");
+    edit(
+        &dir.path().join("segmenter.toml"),
+        "name = \"offsets\"",
+        "name = \"offset\"",
+    );
     let e = LearnedModels::in_dir(dir.path()).unwrap_err();
-    assert!(e.to_string().contains("output \"offsets\" is missing"), "{e}");
+    assert!(
+        e.to_string().contains("output \"offsets\" is missing"),
+        "{e}"
+    );
 
     // Vector channels for a keypoint count other than the catalog's.
     let dir = fixture_copy();
-    edit(&dir.path().join("keypoints.toml"), "[-1, 18, 64, 64]", "[-1, 16, 64, 64]");
+    edit(
+        &dir.path().join("keypoints.toml"),
+        "[-1, 18, 64, 64]",
+        "[-1, 16, 64, 64]",
+    );
     let e = load(dir.path()).err().unwrap();
     assert!(matches!(e, LearnedError::Part { .. }), "{e}");
-    assert!(e.to_string().contains("has 9 keypoints, the keypoint net"), "{e}");
+    assert!(
+        e.to_string().contains("has 9 keypoints, the keypoint net"),
+        "{e}"
+    );
 
     let dir = fixture_copy();
     let kp = dir.path().join("keypoints.toml");
     edit(&kp, "[-1, 1, 64, 64]", "[-1, 1, -1, 64]");
     let e = LearnedModels::in_dir(dir.path()).unwrap_err();
-    assert!(e.to_string().contains("the contract needs [-1, 1, 64, 64]"), "{e}");
+    assert!(
+        e.to_string().contains("the contract needs [-1, 1, 64, 64]"),
+        "{e}"
+    );
 
     // Parts in another order than the catalog's.
     let dir = fixture_copy();
@@ -237,7 +309,11 @@ fn shapes_and_parts_off_the_contract_are_refused() {
     }
     let e = load(dir.path()).err().unwrap();
     assert!(matches!(e, LearnedError::Parts { .. }), "{e}");
-    assert!(e.to_string().contains("segmenter.toml: parts [\"insert_mold\""), "{e}");
+    assert!(
+        e.to_string()
+            .contains("segmenter.toml: parts [\"insert_mold\""),
+        "{e}"
+    );
 }
 
 #[test]
@@ -254,8 +330,14 @@ fn a_model_whose_graph_differs_from_its_manifest_is_refused() {
         .replace("file = \"keypoints.onnx\"", "file = \"segmenter.onnx\"");
     std::fs::write(&kp, text).unwrap();
     let e = load(dir.path()).err().unwrap();
-    assert!(matches!(e, LearnedError::Onnx(OnnxError::Signature { .. })), "{e}");
-    assert!(e.to_string().contains("segmenter.onnx: input 0 differs"), "{e}");
+    assert!(
+        matches!(e, LearnedError::Onnx(OnnxError::Signature { .. })),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("segmenter.onnx: input 0 differs"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -266,17 +348,24 @@ fn a_size_the_graph_leaves_dynamic_is_checked_on_every_run() {
     let dir = fixture_copy();
     let manifest = dir.path().join("segmenter.toml");
     edit(&manifest, "[-1, 4, -1, -1]", "[-1, 4, 8, 8]");
-    let mut session = BatchSession::open(&runtime(), &manifest, 1).unwrap_or_else(|e| panic!("{e}"));
-    let out = session.run_shaped(&[1, 3, 32, 32], &[0.5; 3 * 32 * 32]).unwrap();
+    let mut session =
+        BatchSession::open(&runtime(), &manifest, 1).unwrap_or_else(|e| panic!("{e}"));
+    let out = session
+        .run_shaped(&[1, 3, 32, 32], &[0.5; 3 * 32 * 32])
+        .unwrap();
     assert_eq!(out[0].shape, [1, 4, 8, 8]);
     let e = session
         .run_shaped(&[1, 3, 64, 64], &[0.5; 3 * 64 * 64])
         .unwrap_err();
     assert!(matches!(e, OnnxError::Run { .. }), "{e}");
     assert!(
-        e.to_string().contains("output logits has shape [1, 4, 16, 16], the manifest says [-1, 4, 8, 8]"),
+        e.to_string()
+            .contains("output logits has shape [1, 4, 16, 16], the manifest says [-1, 4, 8, 8]"),
         "{e}"
     );
     let e = session.run_shaped(&[1, 3, 32], &[0.5; 96]).unwrap_err();
-    assert!(e.to_string().contains("does not fit image [-1, 3, -1, -1]"), "{e}");
+    assert!(
+        e.to_string().contains("does not fit image [-1, 3, -1, -1]"),
+        "{e}"
+    );
 }

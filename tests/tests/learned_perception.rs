@@ -157,7 +157,9 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
             );
         }
         eprintln!("seed {seed}: {:?}", stages.times);
-        let found = perception.perceive(&frame).unwrap_or_else(|e| panic!("{e}"));
+        let found = perception
+            .perceive(&frame)
+            .unwrap_or_else(|e| panic!("{e}"));
         for (part, table_T_part) in &feeder.truth {
             // The detection of this part: same class, nearest in the table plane.
             let best = found
@@ -174,7 +176,12 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
                 panic!("seed {seed}: {part} at {table_T_part} not detected; found {found:?}")
             };
             let spec = catalog.part(part).unwrap();
-            let exact: Vec<_> = spec.symmetries.iter().filter(|s| s.exact).cloned().collect();
+            let exact: Vec<_> = spec
+                .symmetries
+                .iter()
+                .filter(|s| s.exact)
+                .cloned()
+                .collect();
             let group = symmetry_group(&exact);
             let angle = symmetric_angle(
                 &(camera_T_table * d.table_T_part).rotation,
@@ -206,7 +213,10 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
         mean(&angle_deg),
         max(&angle_deg)
     );
-    assert!(mean(&xy_mm) < XY_MEAN_MM && max(&xy_mm) < XY_MAX_MM, "{xy_mm:?}");
+    assert!(
+        mean(&xy_mm) < XY_MEAN_MM && max(&xy_mm) < XY_MAX_MM,
+        "{xy_mm:?}"
+    );
     assert!(
         mean(&angle_deg) < ANGLE_MEAN_DEG && max(&angle_deg) < ANGLE_MAX_DEG,
         "{angle_deg:?}"

@@ -170,7 +170,9 @@ mod tests {
     fn eight_bit_colour_is_scaled_and_padded_by_edge_replication() {
         let img = RgbImage::from_fn(5, 3, |x, y| Rgb([(10 * x + y) as u8, 100, 255]));
         let mut p = Preprocessor::default();
-        let [h, w] = p.prepare(&DynamicImage::ImageRgb8(img), [1, 1, 3, 2], 4).unwrap();
+        let [h, w] = p
+            .prepare(&DynamicImage::ImageRgb8(img), [1, 1, 3, 2], 4)
+            .unwrap();
         assert_eq!([h, w], [4, 4]);
         let t = p.tensor();
         // Row 0 col 0 = pixel (1, 1); col 3 replicates col 2 = pixel (3, 1); row 3 replicates row 1.
@@ -201,16 +203,23 @@ mod tests {
         let img = DynamicImage::ImageRgba16(rgba);
         let mut dst = vec![0.0; 3 * 4];
         sample_planar(&img, -3, 5, 2, 2, [0, 0, 1, 1], &mut dst).unwrap();
-        assert_eq!(dst, [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.2, 0.2, 0.2, 0.2]);
+        assert_eq!(
+            dst,
+            [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.2, 0.2, 0.2, 0.2]
+        );
     }
 
     #[test]
     fn float_images_and_bad_regions_are_refused_with_reasons() {
         let img = DynamicImage::ImageRgb32F(Rgb32FImage::new(4, 4));
-        let e = Preprocessor::default().prepare(&img, [0, 0, 4, 4], 16).unwrap_err();
+        let e = Preprocessor::default()
+            .prepare(&img, [0, 0, 4, 4], 16)
+            .unwrap_err();
         assert!(e.to_string().contains("Rgb32F is not supported"), "{e}");
         let img = DynamicImage::ImageLuma8(GrayImage::new(4, 4));
-        let e = Preprocessor::default().prepare(&img, [2, 0, 3, 4], 16).unwrap_err();
+        let e = Preprocessor::default()
+            .prepare(&img, [2, 0, 3, 4], 16)
+            .unwrap_err();
         assert!(
             e.to_string().contains("region of interest 3 × 4 at (2, 0)"),
             "{e}"

@@ -60,8 +60,8 @@ impl LearnedModels {
 
     /// Keypoints per part that the keypoint net votes for.
     pub fn keypoint_count(&self) -> usize {
-        (self.keypoints.outputs[output_index(&self.keypoints, "vectors").unwrap_or(0)].shape[1]
-            / 2) as usize
+        (self.keypoints.outputs[output_index(&self.keypoints, "vectors").unwrap_or(0)].shape[1] / 2)
+            as usize
     }
 
     /// Checks both signatures against the contract and that both models list the same parts.
@@ -83,11 +83,19 @@ impl LearnedModels {
             seg,
             "output",
             &seg.outputs,
-            &[("logits", &[-1, 1 + p, -1, -1]), ("offsets", &[-1, 2, -1, -1])],
+            &[
+                ("logits", &[-1, 1 + p, -1, -1]),
+                ("offsets", &[-1, 2, -1, -1]),
+            ],
         )?;
         let field = FIELD_SIZE as i64;
         let crop = CROP_SIZE as i64;
-        expect_io(kp, "input", &kp.inputs, &[("crop", &[-1, 3 + p, crop, crop])])?;
+        expect_io(
+            kp,
+            "input",
+            &kp.inputs,
+            &[("crop", &[-1, 3 + p, crop, crop])],
+        )?;
         let vectors = kp
             .outputs
             .iter()

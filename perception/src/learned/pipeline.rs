@@ -14,12 +14,12 @@ use super::instances::{InstanceConfig, InstanceGrouper};
 use super::keypoint_net::KeypointNet;
 use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
 use super::segmenter::{SegmentMap, Segmenter};
+use crate::Camera;
 use crate::estimate::{EstimatorConfig, Observation, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
 use crate::part::Catalog;
 use crate::voting::{KeypointVote, VotingConfig};
-use crate::Camera;
 
 /// Settings of the learned pipeline.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -355,10 +355,18 @@ mod tests {
                 mask: &mask,
                 vectors: &vectors,
             };
-            let votes: Vec<KeypointVote> =
-                voter.vote(&field).unwrap().iter().map(field_to_crop).collect();
+            let votes: Vec<KeypointVote> = voter
+                .vote(&field)
+                .unwrap()
+                .iter()
+                .map(field_to_crop)
+                .collect();
             for (v, p) in votes.iter().zip(&crop) {
-                assert!((v.position - p).norm() < 0.05, "{name}: {} vs {p}", v.position);
+                assert!(
+                    (v.position - p).norm() < 0.05,
+                    "{name}: {} vs {p}",
+                    v.position
+                );
                 assert!(v.position.x >= 0.0 && v.position.x < CROP_SIZE as f64);
             }
             let (kps, observations) = sensor_observations(&votes, origin);

@@ -210,8 +210,7 @@ impl BatchSession {
             path: self.model.clone(),
             message: e.to_string(),
         };
-        let tensor =
-            TensorRef::from_array_view((shape, data)).map_err(run_error)?;
+        let tensor = TensorRef::from_array_view((shape, data)).map_err(run_error)?;
         let results = self.session.run(ort::inputs![tensor]).map_err(run_error)?;
         for (i, out) in self.outputs.iter_mut().enumerate() {
             let value = results.get(&out.name).ok_or_else(|| OnnxError::Run {
