@@ -157,6 +157,21 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
             );
         }
         eprintln!("seed {seed}: {:?}", stages.times);
+        // Segmentation and grouping: every part is an instance of its class whose voted centre
+        // lies within 16 px of the projected part origin.
+        let mut missed = Vec::new();
+        for (part, table_T_part) in &feeder.truth {
+            let origin = Point3::from((camera_T_table * table_T_part).translation.vector);
+            let px = feeder.camera.project(&origin).unwrap();
+            let hit = stages.detections.iter().any(|d| {
+                &d.part == part
+                    && ((d.centre[0] - px.x).powi(2) + (d.centre[1] - px.y).powi(2)).sqrt() < 16.0
+            });
+            if !hit {
+                missed.push(format!("{part} at ({:.0}, {:.0})", px.x, px.y));
+            }
+        }
+        assert!(missed.is_empty(), "seed {seed}: no instance for {missed:?}");
         let found = perception
             .perceive(&frame)
             .unwrap_or_else(|e| panic!("{e}"));
