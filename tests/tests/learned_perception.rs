@@ -55,8 +55,10 @@ fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
             UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
         ),
     };
-    let mut rand = Randomisation::default();
-    rand.camera_height = Range::new(1.51, 1.51);
+    let rand = Randomisation {
+        camera_height: Range::new(1.51, 1.51),
+        ..Randomisation::default()
+    };
     let scene = sample_scene(&models, &request, &rand, &mut rng).unwrap_or_else(|e| panic!("{e}"));
     let camera = Camera::basler_seed();
     let (mut lo, mut hi) = (
