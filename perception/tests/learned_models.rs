@@ -339,3 +339,33 @@ fn a_model_whose_graph_differs_from_its_manifest_is_refused() {
         "{e}"
     );
 }
+
+#[test]
+fn a_size_the_graph_leaves_dynamic_is_checked_on_every_run() {
+    // The segmenter graph's logits are [n, 4, h4, w4]; a manifest may fix them (as exporters
+    // lose static sizes through reshapes) and each run checks the concrete size.
+    use perception::onnx::BatchSession;
+    let dir = fixture_copy();
+    let manifest = dir.path().join("segmenter.toml");
+    edit(&manifest, "[-1, 4, -1, -1]", "[-1, 4, 8, 8]");
+    let mut session =
+        BatchSession::open(&runtime(), &manifest, 1).unwrap_or_else(|e| panic!("{e}"));
+    let out = session
+        .run_shaped(&[1, 3, 32, 32], &[0.5; 3 * 32 * 32])
+        .unwrap();
+    assert_eq!(out[0].shape, [1, 4, 8, 8]);
+    let e = session
+        .run_shaped(&[1, 3, 64, 64], &[0.5; 3 * 64 * 64])
+        .unwrap_err();
+    assert!(matches!(e, OnnxError::Run { .. }), "{e}");
+    assert!(
+        e.to_string()
+            .contains("output logits has shape [1, 4, 16, 16], the manifest says [-1, 4, 8, 8]"),
+        "{e}"
+    );
+    let e = session.run_shaped(&[1, 3, 32], &[0.5; 96]).unwrap_err();
+    assert!(
+        e.to_string().contains("does not fit image [-1, 3, -1, -1]"),
+        "{e}"
+    );
+}

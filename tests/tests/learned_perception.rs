@@ -3,7 +3,8 @@
 //! through the simulated sensor, then perceived from pixels only. Every part must be detected
 //! with its pose within bounds measured on these frames.
 //!
-//! Runs with the committed models (`scenarios/models/usbc/`); without them it says so and passes.
+//! Runs with the committed models (`scenarios/models/usbc/`, or `LEARNED_MODELS_DIR`); without
+//! them it says so and passes.
 //! `cargo test -p cell-tests --test learned_perception -- --ignored` rewrites the benchmark frame
 //! (`perception/tests/data/learned/feeder.png` + `feeder.toml`).
 
@@ -54,8 +55,10 @@ fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
             UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
         ),
     };
-    let mut rand = Randomisation::default();
-    rand.camera_height = Range::new(1.51, 1.51);
+    let rand = Randomisation {
+        camera_height: Range::new(1.51, 1.51),
+        ..Randomisation::default()
+    };
     let scene = sample_scene(&models, &request, &rand, &mut rng).unwrap_or_else(|e| panic!("{e}"));
     let camera = Camera::basler_seed();
     let (mut lo, mut hi) = (
@@ -101,7 +104,10 @@ fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
 
 /// The committed models, or `None` (with a note) when they are not in the tree yet.
 fn committed_models() -> Option<LearnedModels> {
-    let dir = LearnedModels::default_dir();
+    // LEARNED_MODELS_DIR points at other models (e.g. a training run's) for local checks.
+    let dir = std::env::var_os("LEARNED_MODELS_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(LearnedModels::default_dir);
     if !dir.join("segmenter.toml").exists() {
         eprintln!(
             "no trained models in {}: the learned end-to-end test has nothing to run",
@@ -132,10 +138,45 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
             base_T_camera: feeder.table_T_camera,
             content: FrameContent::Image(feeder.image.clone()),
         };
+        let camera_T_table = feeder.table_T_camera.inverse();
+        // What each stage found, for the log.
+        let stages = perception
+            .pipeline()
+            .detect(&feeder.image, &feeder.camera, &camera_T_table, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        for d in &stages.detections {
+            eprintln!(
+                "seed {seed}: {} score {:.2} at ({:.0}, {:.0}), {} mask px: {}",
+                d.part,
+                d.score,
+                d.centre[0],
+                d.centre[1],
+                d.mask.area(),
+                match &d.pose {
+                    Ok(p) => format!("{} rms {:.2} px", p.stable_pose, p.rms_px),
+                    Err(e) => e.clone(),
+                }
+            );
+        }
+        eprintln!("seed {seed}: {:?}", stages.times);
+        // Segmentation and grouping: every part is an instance of its class whose voted centre
+        // lies within 16 px of the projected part origin.
+        let mut missed = Vec::new();
+        for (part, table_T_part) in &feeder.truth {
+            let origin = Point3::from((camera_T_table * table_T_part).translation.vector);
+            let px = feeder.camera.project(&origin).unwrap();
+            let hit = stages.detections.iter().any(|d| {
+                &d.part == part
+                    && ((d.centre[0] - px.x).powi(2) + (d.centre[1] - px.y).powi(2)).sqrt() < 16.0
+            });
+            if !hit {
+                missed.push(format!("{part} at ({:.0}, {:.0})", px.x, px.y));
+            }
+        }
+        assert!(missed.is_empty(), "seed {seed}: no instance for {missed:?}");
         let found = perception
             .perceive(&frame)
             .unwrap_or_else(|e| panic!("{e}"));
-        let camera_T_table = feeder.table_T_camera.inverse();
         for (part, table_T_part) in &feeder.truth {
             // The detection of this part: same class, nearest in the table plane.
             let best = found
@@ -199,7 +240,9 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     );
 }
 
-// Bounds from the measured errors of the committed models on these two frames.
+// Provisional bounds (the seed's 0.6 mm / 4° on single crops, with margin): not yet measured on
+// trained models. The models of 2026-11-23 17:10 (keypoint median error 24 px) give no pose
+// under the 4 px reprojection gate; set these from the first passing run's logged errors.
 const XY_MEAN_MM: f64 = 0.5;
 const XY_MAX_MM: f64 = 1.5;
 const ANGLE_MEAN_DEG: f64 = 5.0;
@@ -207,6 +250,7 @@ const ANGLE_MAX_DEG: f64 = 20.0;
 
 #[test]
 #[ignore = "rewrites the benchmark frame in perception/tests/data/learned"]
+#[allow(non_snake_case)]
 fn write_the_benchmark_feeder_frame() {
     let catalog = catalog();
     let feeder = render_feeder(&catalog, 11);

@@ -11,7 +11,8 @@ use super::segmenter::SegmentMap;
 /// Grouping settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InstanceConfig {
-    /// Two instance centres are at least this far apart, pixels (parts are ~60 px across).
+    /// Two instance centres are at least this far apart, pixels (parts are 60–80 px across;
+    /// overlapping parts' centres come ~30 px close in feeder frames).
     pub min_separation_px: f64,
     /// A cell joins a centre when its vote lands within this distance, pixels.
     pub assign_radius_px: f64,
@@ -26,11 +27,11 @@ pub struct InstanceConfig {
 impl Default for InstanceConfig {
     fn default() -> Self {
         Self {
-            min_separation_px: 40.0,
+            min_separation_px: 24.0,
             assign_radius_px: 24.0,
             refine_radius_px: 8.0,
             min_peak_votes: 8.0,
-            min_cells: 16,
+            min_cells: 40,
         }
     }
 }
@@ -273,10 +274,9 @@ mod tests {
 
     /// A map of two touching discs (classes 1 and 3) whose cells point at their centres with
     /// small deterministic offset noise, plus a 3-cell speck of class 2 far away.
-    fn two_touching_discs() -> (SegmentMap, [[f64; 2]; 2]) {
+    fn two_touching_discs(centres: [[f64; 2]; 2]) -> (SegmentMap, [[f64; 2]; 2]) {
         let (w, h) = (40, 30);
         let plane = w * h;
-        let centres = [[50.3, 61.7], [97.1, 58.2]]; // 46.9 px apart: the discs (r = 24) touch
         let mut map = SegmentMap {
             width: w,
             height: h,
@@ -323,7 +323,15 @@ mod tests {
 
     #[test]
     fn touching_instances_separate_by_their_voted_centres() {
-        let (map, centres) = two_touching_discs();
+        // 46.9 px apart: the discs (r = 24) touch; 28.2 px apart: they overlap (each keeps the
+        // cells nearer its own centre).
+        for centres in [[[50.3, 61.7], [97.1, 58.2]], [[50.3, 61.7], [78.1, 57.2]]] {
+            separate(centres);
+        }
+    }
+
+    fn separate(centres: [[f64; 2]; 2]) {
+        let (map, centres) = two_touching_discs(centres);
         let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
         assert_eq!(instances.len(), 2, "{instances:?}");
         let mut found: Vec<&Instance> = instances.iter().collect();

@@ -195,25 +195,9 @@ impl LearnedPipeline {
         let mut detections = Vec::with_capacity(instances.len());
         for ((inst, origin), votes) in instances.iter().zip(&origins).zip(votes) {
             let part = self.parts[inst.part].clone();
-            let shift = |v: &KeypointVote| KeypointVote {
-                position: Point2::new(
-                    v.position.x + origin[0] as f64,
-                    v.position.y + origin[1] as f64,
-                ),
-                ..*v
-            };
             let (keypoints, pose) = match votes {
                 Ok(v) => {
-                    let keypoints: Vec<KeypointVote> = v.iter().map(shift).collect();
-                    let observations: Vec<Observation> = keypoints
-                        .iter()
-                        .enumerate()
-                        .map(|(k, v)| Observation {
-                            keypoint: k,
-                            pixel: v.position,
-                            covariance: Some(v.covariance),
-                        })
-                        .collect();
+                    let (keypoints, observations) = sensor_observations(&v, *origin);
                     let pose = estimator
                         .estimate(&part, camera, &observations)
                         .map_err(|e| e.to_string());
@@ -240,6 +224,34 @@ impl LearnedPipeline {
     }
 }
 
+/// Votes in crop pixels → the same votes in sensor pixels (crop origin added) and the pose
+/// estimator's observations (keypoint k = vote k, with its covariance).
+pub fn sensor_observations(
+    votes: &[KeypointVote],
+    crop_origin: [i64; 2],
+) -> (Vec<KeypointVote>, Vec<Observation>) {
+    let keypoints: Vec<KeypointVote> = votes
+        .iter()
+        .map(|v| KeypointVote {
+            position: Point2::new(
+                v.position.x + crop_origin[0] as f64,
+                v.position.y + crop_origin[1] as f64,
+            ),
+            ..*v
+        })
+        .collect();
+    let observations = keypoints
+        .iter()
+        .enumerate()
+        .map(|(k, v)| Observation {
+            keypoint: k,
+            pixel: v.position,
+            covariance: Some(v.covariance),
+        })
+        .collect();
+    (keypoints, observations)
+}
+
 /// The pose estimator for the table at `camera_T_table`, rebuilt only when it moves.
 #[allow(non_snake_case)]
 fn estimator_for<'a>(
@@ -262,4 +274,108 @@ fn lap(t: &mut Instant) -> std::time::Duration {
     let d = now - *t;
     *t = now;
     d
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learned::crops::crop_camera;
+    use crate::learned::keypoint_net::field_to_crop;
+    use crate::learned::models::{CROP_SIZE, FIELD_SIZE};
+    use crate::voting::{VectorField, Voter};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+    use std::path::Path;
+
+    /// A perfect keypoint-net output (contract layout: cell (i, j) centre at crop pixel
+    /// (2j + 0.5, 2i + 0.5)) for keypoints at crop pixels `kps`, foreground within 28 px of `c`.
+    fn perfect_field(kps: &[Point2<f64>], c: Point2<f64>) -> (Vec<u8>, Vec<f32>) {
+        let n = FIELD_SIZE;
+        let mut mask = vec![0u8; n * n];
+        let mut vectors = vec![0f32; 2 * kps.len() * n * n];
+        for i in 0..n {
+            for j in 0..n {
+                let p = Point2::new(2.0 * j as f64 + 0.5, 2.0 * i as f64 + 0.5);
+                if (p - c).norm() > 28.0 {
+                    continue;
+                }
+                mask[i * n + j] = 1;
+                for (k, kp) in kps.iter().enumerate() {
+                    let d = (kp - p).normalize();
+                    vectors[2 * k * n * n + i * n + j] = d.x as f32;
+                    vectors[(2 * k + 1) * n * n + i * n + j] = d.y as f32;
+                }
+            }
+        }
+        (mask, vectors)
+    }
+
+    /// The glue between the nets and PnP: crop origin, field → crop pixels, crop → sensor pixels,
+    /// covariances and the estimator. A perfect field must give the true pose back.
+    #[test]
+    #[allow(non_snake_case)]
+    fn a_perfect_keypoint_field_gives_the_true_pose_back() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = Catalog::load(&root).unwrap();
+        let camera = Camera::basler_seed();
+        let table_T_camera = Isometry3::from_parts(
+            Translation3::new(0.01, -0.02, 1.51),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let camera_T_table = table_T_camera.inverse();
+        let estimator =
+            PoseEstimator::new(&catalog, camera_T_table, EstimatorConfig::with_gate(1.0)).unwrap();
+        let mut voter = Voter::new(VotingConfig::default());
+        for (name, x, y, yaw) in [
+            ("main_shell", 0.012, -0.008, 0.4),
+            ("insert_mold", -0.01, 0.015, 2.2),
+            ("top_shell", 0.003, 0.021, -1.3),
+        ] {
+            let part = catalog.part(name).unwrap();
+            let table_T_part = part.stable_poses[0].table_T_part(x, y, yaw);
+            let camera_T_part = camera_T_table * table_T_part;
+            let sensor: Vec<Point2<f64>> = part
+                .keypoint_points()
+                .iter()
+                .map(|k| camera.project(&(camera_T_part * k)).unwrap())
+                .collect();
+            let centre = sensor[8];
+            let origin = crop_origin([centre.x, centre.y]);
+            let shift = Vector3::new(origin[0] as f64, origin[1] as f64, 0.0).xy();
+            let crop: Vec<Point2<f64>> = sensor.iter().map(|p| p - shift).collect();
+            // The crop camera sees the keypoints where the crop holds them.
+            let cc = crop_camera(&camera, origin);
+            for (k, p) in part.keypoint_points().iter().zip(&crop) {
+                assert!((cc.project(&(camera_T_part * k)).unwrap() - p).norm() < 1e-9);
+            }
+            let (mask, vectors) = perfect_field(&crop, crop[8]);
+            let field = VectorField {
+                width: FIELD_SIZE,
+                height: FIELD_SIZE,
+                keypoints: crop.len(),
+                mask: &mask,
+                vectors: &vectors,
+            };
+            let votes: Vec<KeypointVote> = voter
+                .vote(&field)
+                .unwrap()
+                .iter()
+                .map(field_to_crop)
+                .collect();
+            for (v, p) in votes.iter().zip(&crop) {
+                assert!(
+                    (v.position - p).norm() < 0.05,
+                    "{name}: {} vs {p}",
+                    v.position
+                );
+                assert!(v.position.x >= 0.0 && v.position.x < CROP_SIZE as f64);
+            }
+            let (kps, observations) = sensor_observations(&votes, origin);
+            assert!((kps[8].position - sensor[8]).norm() < 0.05);
+            let pose = estimator.estimate(name, &camera, &observations).unwrap();
+            let err = pose.planar.table_T_part.translation.vector - table_T_part.translation.vector;
+            assert!(err.xy().norm() < 2e-5, "{name}: {err}");
+            assert_eq!(pose.stable_pose, part.stable_poses[0].name);
+            assert!(pose.rms_px < 0.1, "{name}: rms {}", pose.rms_px);
+        }
+    }
 }

@@ -212,7 +212,7 @@ impl BatchSession {
         };
         let tensor = TensorRef::from_array_view((shape, data)).map_err(run_error)?;
         let results = self.session.run(ort::inputs![tensor]).map_err(run_error)?;
-        for out in &mut self.outputs {
+        for (i, out) in self.outputs.iter_mut().enumerate() {
             let value = results.get(&out.name).ok_or_else(|| OnnxError::Run {
                 path: self.model.clone(),
                 message: format!("no output {}", out.name),
@@ -220,6 +220,22 @@ impl BatchSession {
             let (shape, data) = value.try_extract_tensor::<f32>().map_err(run_error)?;
             out.shape.clear();
             out.shape.extend(shape.iter().map(|&d| d.max(0) as usize));
+            let spec = &self.manifest.outputs[i];
+            let fits = out.shape.len() == spec.shape.len()
+                && out
+                    .shape
+                    .iter()
+                    .zip(&spec.shape)
+                    .all(|(&d, &s)| s == -1 || d as i64 == s);
+            if !fits {
+                return Err(OnnxError::Run {
+                    path: self.model.clone(),
+                    message: format!(
+                        "output {} has shape {:?}, the manifest says {:?}",
+                        spec.name, out.shape, spec.shape
+                    ),
+                });
+            }
             out.data.clear();
             out.data.extend_from_slice(data);
         }
@@ -293,7 +309,14 @@ fn check_outlet(outlet: &ort::value::Outlet, spec: &TensorSpec) -> Result<(), St
         return Err(format!("{}: type: manifest f32, model {dtype}", spec.name));
     }
     let shape: Vec<i64> = dtype.tensor_shape().map(|s| s.to_vec()).unwrap_or_default();
-    if shape != spec.shape {
+    // A dimension the graph leaves dynamic may be fixed by the manifest (exporters lose static
+    // sizes through reshapes); every run then checks the concrete size.
+    let compatible = shape.len() == spec.shape.len()
+        && shape
+            .iter()
+            .zip(&spec.shape)
+            .all(|(&m, &s)| m == s || m == -1);
+    if !compatible {
         return Err(format!(
             "{}: shape: manifest {:?}, model {:?}",
             spec.name, spec.shape, shape
