@@ -4,6 +4,7 @@
 //! command-line layer over it.
 
 pub mod episode;
+pub mod eval;
 pub mod harness;
 pub mod orchestrator;
 pub mod prepare;
