@@ -350,9 +350,12 @@ pub struct StageMs {
     pub total: f64,
 }
 
+/// A stage's name and how to read its time.
+pub type Stage = (&'static str, fn(&StageMs) -> f64);
+
 impl StageMs {
     /// Stage names in pipeline order, with their accessors.
-    pub const STAGES: [(&'static str, fn(&StageMs) -> f64); 8] = [
+    pub const STAGES: [Stage; 8] = [
         ("preprocess", |s| s.preprocess),
         ("segment", |s| s.segment),
         ("instances", |s| s.instances),
