@@ -161,9 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         args.dataset.display(),
         split,
         elapsed,
-        args.out
-            .join(cell::eval::report_html::JSON_FILE)
-            .display(),
+        args.out.join(cell::eval::report_html::JSON_FILE).display(),
         html.display()
     );
     Ok(ExitCode::SUCCESS)

@@ -53,14 +53,45 @@ impl GalleryItem {
     }
 }
 
-/// Keeps the `capacity` items with the largest keys, building an item only when it gets in.
-#[derive(Debug)]
-pub struct GalleryKeeper {
-    capacity: usize,
-    items: Vec<(f64, GalleryItem)>,
+/// A matched detection that got no pose, for the gallery of failures.
+#[derive(Debug, Clone)]
+pub struct FailedCrop {
+    /// Scene id.
+    pub scene: usize,
+    /// Image id.
+    pub image: usize,
+    /// Detection index in the frame.
+    pub detection: usize,
+    /// Part name.
+    pub part: String,
+    /// Detection score.
+    pub score: f64,
+    /// Mask IoU with the ground truth.
+    pub iou: f64,
+    /// Why there is no pose.
+    pub reason: String,
+    /// The annotated crop, `CROP·ZOOM` pixels square.
+    pub crop: RgbImage,
 }
 
-impl GalleryKeeper {
+impl FailedCrop {
+    /// File name of its picture.
+    pub fn file_name(&self) -> String {
+        format!(
+            "failed-scene{:06}-image{:06}-det{:03}-{}.png",
+            self.scene, self.image, self.detection, self.part
+        )
+    }
+}
+
+/// Keeps the `capacity` items with the largest keys, building an item only when it gets in.
+#[derive(Debug)]
+pub struct GalleryKeeper<T = GalleryItem> {
+    capacity: usize,
+    items: Vec<(f64, T)>,
+}
+
+impl<T> GalleryKeeper<T> {
     /// A keeper of `capacity` items (0 keeps none).
     pub fn new(capacity: usize) -> Self {
         Self {
@@ -70,7 +101,7 @@ impl GalleryKeeper {
     }
 
     /// Offers an item of error `key` (NaN counts as the worst).
-    pub fn offer(&mut self, key: f64, make: impl FnOnce() -> GalleryItem) {
+    pub fn offer(&mut self, key: f64, make: impl FnOnce() -> T) {
         if self.capacity == 0 {
             return;
         }
@@ -84,7 +115,7 @@ impl GalleryKeeper {
     }
 
     /// The kept items, worst first.
-    pub fn into_items(self) -> Vec<GalleryItem> {
+    pub fn into_items(self) -> Vec<T> {
         self.items.into_iter().map(|(_, i)| i).collect()
     }
 }
@@ -224,7 +255,7 @@ mod tests {
         let order: Vec<usize> = k.into_items().iter().map(|i| i.image).collect();
         assert_eq!(order, vec![4, 1, 5], "NaN first, then 5.0 and 4.0");
         assert_eq!(built, 5, "0.5 arrived when three larger ones were kept");
-        let mut none = GalleryKeeper::new(0);
+        let mut none: GalleryKeeper = GalleryKeeper::new(0);
         none.offer(1.0, || unreachable!("capacity 0 builds nothing"));
         assert!(none.into_items().is_empty());
     }

@@ -27,7 +27,7 @@ use perception::{Camera, Distortion, FrameImage};
 use serde::{Deserialize, Serialize};
 use sim::dataset::{BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop};
 
-use gallery::{GalleryItem, GalleryKeeper};
+use gallery::{FailedCrop, GalleryItem, GalleryKeeper};
 use matching::{Candidate, Truth, greedy_match, mask_from_raster, touching_flags};
 
 /// The split read when none is named: full-resolution feeder windows.
@@ -451,6 +451,8 @@ pub struct EvalRun {
     pub frames: Vec<FrameRecord>,
     /// The worst crops, worst first.
     pub gallery: Vec<GalleryItem>,
+    /// Matched detections without a pose, highest score first.
+    pub failures: Vec<FailedCrop>,
 }
 
 /// Runs `detector` over the images of `dataset` (at most `options.limit`), calling `progress`
@@ -468,6 +470,7 @@ pub fn evaluate(
         .min(options.limit.unwrap_or(usize::MAX));
     let mut frames = Vec::with_capacity(total);
     let mut keeper = GalleryKeeper::new(options.gallery);
+    let mut failed = GalleryKeeper::new(options.gallery.div_ceil(3));
     for (i, (scene, image)) in dataset.images().take(total).enumerate() {
         frames.push(evaluate_image(
             dataset,
@@ -476,12 +479,14 @@ pub fn evaluate(
             detector,
             options,
             &mut keeper,
+            &mut failed,
         )?);
         progress(i + 1, total);
     }
     Ok(EvalRun {
         frames,
         gallery: keeper.into_items(),
+        failures: failed.into_items(),
     })
 }
 
@@ -494,6 +499,7 @@ fn evaluate_image(
     detector: &mut dyn FrameDetector,
     options: &EvalOptions,
     keeper: &mut GalleryKeeper,
+    failed: &mut GalleryKeeper<FailedCrop>,
 ) -> Result<FrameRecord, EvalError> {
     let scene_camera = scene.dir.join("scene_camera.json");
     let at = |message: String| EvalError::Mismatch {
@@ -636,6 +642,24 @@ fn evaluate_image(
                 .refine(truth)
                 .ok()
                 .map(|p| part.stable_poses[p.class].name.clone());
+            if let (Err(reason), false) = (&det.pose, truths[m.truth].ignored) {
+                failed.offer(det.score, || FailedCrop {
+                    scene: scene.id,
+                    image: image.id,
+                    detection: d,
+                    part: part.name.clone(),
+                    score: det.score,
+                    iou: m.iou,
+                    reason: reason.clone(),
+                    crop: gallery::draw_crop(
+                        &frame_image.pixels,
+                        &camera,
+                        det,
+                        &part.keypoints,
+                        truth,
+                    ),
+                });
+            }
             if let Ok(pose) = &det.pose {
                 let raw = &pose.pnp.camera_T_part;
                 let refined = &pose.planar.camera_T_part;

@@ -10,7 +10,7 @@ use image::codecs::png::PngEncoder;
 use plotters::prelude::*;
 use serde::Serialize;
 
-use super::gallery::GalleryItem;
+use super::gallery::{FailedCrop, GalleryItem};
 use super::table1::{
     EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, SEED_AVERAGE, SEED_TABLE1, Table1Row,
 };
@@ -133,7 +133,13 @@ pub fn write_eval_report(
         write(&rel, &encode_png(&rel, &item.crop)?)?;
         pictures.push((rel, item));
     }
-    let html = render(meta, summary, &plots, &pictures);
+    let mut failed = Vec::new();
+    for item in &run.failures {
+        let rel = format!("{GALLERY_DIR}/{}", item.file_name());
+        write(&rel, &encode_png(&rel, &item.crop)?)?;
+        failed.push((rel, item));
+    }
+    let html = render(meta, summary, &plots, &pictures, &failed);
     write(HTML_FILE, html.as_bytes())?;
     Ok(out.join(HTML_FILE))
 }
@@ -316,6 +322,7 @@ fn render(
     s: &EvalSummary,
     plots: &[(String, &str)],
     pictures: &[(String, &GalleryItem)],
+    failed: &[(String, &FailedCrop)],
 ) -> String {
     let mut h = String::new();
     let _ = write!(
@@ -533,6 +540,30 @@ fn render(
             item.raw.z_mm,
             escape(&item.stable_pose),
             escape(item.true_stable_pose.as_deref().unwrap_or("?"))
+        );
+    }
+    if !failed.is_empty() {
+        let _ = write!(
+            h,
+            "<h2>Matched detections without a pose ({} of {}, highest score first)</h2>",
+            failed.len(),
+            s.pooled.pose_failures
+        );
+    }
+    for (rel, item) in failed {
+        let _ = write!(
+            h,
+            "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{} — scene {} image {} det {}; score \
+             {:.2}, IoU {:.2}<br>{}</figcaption></figure>",
+            escape(rel),
+            escape(&item.part),
+            escape(&item.part),
+            item.scene,
+            item.image,
+            item.detection,
+            item.score,
+            item.iou,
+            escape(&item.reason)
         );
     }
     h.push_str("</html>\n");
