@@ -137,6 +137,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         100.0 * p.refined.ar_mspd,
         100.0 * p.raw.ar_mspd
     );
+    if !p.pose_failure_kinds.is_empty() {
+        let kinds: Vec<String> = p
+            .pose_failure_kinds
+            .iter()
+            .map(|(k, n)| format!("{n} × {k}"))
+            .collect();
+        println!("without a pose: {}", kinds.join("; "));
+    }
     let stages: Vec<String> = summary
         .stages
         .iter()

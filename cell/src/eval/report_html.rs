@@ -481,6 +481,16 @@ fn render(
         );
     }
     h.push_str("</table>");
+    for p in &s.parts {
+        for (kind, n) in &p.pose_failure_kinds {
+            let _ = write!(
+                h,
+                "<p>{}: {n} without a pose: {}</p>",
+                escape(&p.part),
+                escape(kind)
+            );
+        }
+    }
 
     // Timing.
     h.push_str(

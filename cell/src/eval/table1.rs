@@ -140,6 +140,8 @@ pub struct PartSummary {
     pub recall_isolated: f64,
     /// Matched detections without a pose (PnP, refinement or the reprojection gate failed).
     pub pose_failures: usize,
+    /// The pose failures by kind (the reason with its numbers replaced by `#`), most first.
+    pub pose_failure_kinds: Vec<(String, usize)>,
     /// Matched detections with a pose.
     pub poses: usize,
     /// Raw PnP errors.
@@ -197,6 +199,24 @@ pub struct Table1Entry {
     pub outliers_dropped: bool,
     /// The numbers.
     pub row: Table1Row,
+}
+
+/// A failure reason with its numbers replaced by `#`, so that reasons of one kind count together.
+pub fn failure_kind(reason: &str) -> String {
+    let mut out = String::with_capacity(reason.len());
+    let mut in_number = false;
+    for c in reason.chars() {
+        if c.is_ascii_digit() || (in_number && c == '.') {
+            if !in_number {
+                out.push('#');
+                in_number = true;
+            }
+        } else {
+            in_number = false;
+            out.push(c);
+        }
+    }
+    out
 }
 
 fn ratio(a: usize, b: usize) -> f64 {
@@ -274,6 +294,7 @@ fn part_summary(
         (0, 0, 0, 0, 0);
     let (mut detections, mut tp, mut fp, mut pose_failures, mut stable_right) = (0, 0, 0, 0, 0);
     let mut estimates = Vec::new();
+    let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
     for f in frames {
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
             if t.ignored {
@@ -308,7 +329,11 @@ fn part_summary(
                         refined,
                     });
                 }
-                _ => pose_failures += 1,
+                _ => {
+                    pose_failures += 1;
+                    let reason = d.pose_failure.as_deref().unwrap_or("no pose given");
+                    *kinds.entry(failure_kind(reason)).or_default() += 1;
+                }
             }
         }
     }
@@ -339,6 +364,11 @@ fn part_summary(
         recall_touching: ratio(recalled_touching, touching),
         recall_isolated: ratio(recalled - recalled_touching, truths - touching),
         pose_failures,
+        pose_failure_kinds: {
+            let mut v: Vec<(String, usize)> = kinds.into_iter().collect();
+            v.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+            v
+        },
         poses: estimates.len(),
         raw,
         refined,
@@ -620,6 +650,11 @@ mod tests {
         assert!((a.recall_touching - 1.0).abs() < 1e-12);
         assert!((a.recall_isolated - 1.0 / 3.0).abs() < 1e-12);
         assert_eq!((a.poses, a.pose_failures), (2, 1));
+        assert_eq!(a.pose_failure_kinds, vec![("PnP failed".to_string(), 1)]);
+        assert_eq!(
+            failure_kind("reprojection RMS 35.36 px exceeds the gate of 4.00 px."),
+            "reprojection RMS # px exceeds the gate of # px."
+        );
         let b = &s.parts[1];
         assert_eq!((b.truths, b.false_positives, b.recall), (1, 1, 0.0));
         assert_eq!(b.precision, 0.0);
