@@ -5,6 +5,7 @@
 
 pub mod camera;
 pub mod episode;
+pub mod eval;
 pub mod harness;
 pub mod orchestrator;
 pub mod prepare;

@@ -51,6 +51,10 @@ enum Command {
     /// Synthetic images and labels in the BOP format (overviews with all parts) plus the keypoint
     /// crop set (128 × 128 crops with shifted intrinsics); deterministic, resumable, parallel.
     Dataset(commands::dataset::Args),
+    /// The learned perception pipeline against a BOP test split: the paper's Table 1 (raw PnP and
+    /// refined, outliers counted), detection precision / recall, stable-pose rate, MSSD / MSPD,
+    /// time per stage and the worst crops; writes eval.json and eval.html.
+    Eval(commands::eval::Args),
     /// Run a scenario's episodes, resumably (runs/<scenario>/<shard>/episodes.jsonl), then write
     /// summary.json and report.html: in the in-process simulation (parallel), the simulation
     /// behind a loopback virtual UR over RTDE (`--robot virtual-ur`), or a real controller
@@ -83,6 +87,7 @@ fn main() -> std::process::ExitCode {
         Command::Ablate(args) => commands::ablate::run(args),
         Command::VirtualUr(args) => commands::virtual_ur::run(args),
         Command::Dataset(args) => commands::dataset::run(args),
+        Command::Eval(args) => commands::eval::run(args),
         Command::Run(args) => commands::run::run(args),
         Command::Merge(args) => commands::merge::run(args),
         Command::Replay(args) => commands::replay::run(args),

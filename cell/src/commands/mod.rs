@@ -4,6 +4,7 @@
 pub mod ablate;
 pub mod check;
 pub mod dataset;
+pub mod eval;
 pub mod merge;
 pub mod parts;
 pub mod regress;

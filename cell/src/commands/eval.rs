@@ -1,0 +1,176 @@
+//! `cell eval`: the learned perception pipeline against a BOP test split (the paper's Table 1,
+//! detection precision / recall, stable-pose rate, MSSD / MSPD, stage times, worst crops). The
+//! work lives in `cell::eval`; this file parses arguments, loads the models and prints.
+
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::Context;
+use cell::eval::report_html::{EvalMeta, write_eval_report};
+use cell::eval::table1::{summarise, text_table};
+use cell::eval::{EvalDataset, EvalOptions, FrameDetector, evaluate, resolve_split};
+use nalgebra::Isometry3;
+use perception::learned::{LearnedDetections, LearnedModels, LearnedPipeline};
+use perception::part::Catalog;
+use perception::{Camera, FrameImage};
+
+/// Arguments of `cell eval`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The BOP dataset folder (written by `cell dataset`).
+    pub dataset: PathBuf,
+    /// Split folder to read (default: test_feeder, or test when the dataset has no
+    /// test_feeder).
+    #[arg(long)]
+    pub split: Option<String>,
+    /// Folder of the models (segmenter.toml, keypoints.toml).
+    #[arg(long, default_value = "scenarios/models/usbc")]
+    pub models: PathBuf,
+    /// Part catalog the dataset was made from (object id = catalog index + 1).
+    #[arg(long, default_value = "scenarios/parts/usbc.toml")]
+    pub catalog: PathBuf,
+    /// Output folder for eval.json, eval.html, plots/ and gallery/.
+    #[arg(long, default_value = "target/eval")]
+    pub out: PathBuf,
+    /// Evaluate at most this many images.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Worst crops shown in the gallery.
+    #[arg(long, default_value_t = 24)]
+    pub gallery: usize,
+    /// Mask IoU a detection needs to match a ground-truth instance.
+    #[arg(long, default_value_t = 0.5)]
+    pub min_iou: f64,
+    /// Ground-truth instances less visible than this fraction are ignored.
+    #[arg(long, default_value_t = 0.1)]
+    pub min_visib: f64,
+    /// No progress line.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// The learned pipeline as the detector under evaluation (the whole image, no ROI).
+struct Learned(LearnedPipeline);
+
+impl FrameDetector for Learned {
+    #[allow(non_snake_case)]
+    fn detect(
+        &mut self,
+        image: &FrameImage,
+        camera: &Camera,
+        camera_T_table: &Isometry3<f64>,
+    ) -> Result<LearnedDetections, String> {
+        self.0
+            .detect(image, camera, camera_T_table, None)
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// Runs the evaluation and writes its report.
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let options = EvalOptions {
+        min_iou: args.min_iou,
+        min_visib_fract: args.min_visib,
+        gallery: args.gallery,
+        limit: args.limit,
+        ..EvalOptions::default()
+    };
+    let catalog = Catalog::load(&args.catalog)?;
+    let split = resolve_split(&args.dataset, args.split.as_deref());
+    let dataset = EvalDataset::open(&args.dataset, &split, &catalog, &options)?;
+    let models = LearnedModels::in_dir(&args.models)
+        .with_context(|| format!("loading the models in {}", args.models.display()))?;
+    let runtime = perception::onnx::Runtime::get().context("loading ONNX Runtime")?;
+    let pipeline = LearnedPipeline::load(&models, &catalog, &runtime)
+        .with_context(|| format!("loading the models in {}", args.models.display()))?;
+    let mut detector = Learned(pipeline);
+    let started = Instant::now();
+    let quiet = args.quiet;
+    let run = evaluate(&dataset, &mut detector, &options, |done, total| {
+        if !quiet {
+            eprint!("\r{done}/{total} images");
+            let _ = std::io::stderr().flush();
+        }
+    })?;
+    if !quiet {
+        eprintln!();
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    let parts: Vec<(String, f64)> = dataset
+        .parts
+        .values()
+        .map(|p| (p.name.clone(), p.diameter_mm))
+        .collect();
+    let summary = summarise(&run.frames, &parts, &options);
+    let meta = EvalMeta {
+        dataset: args.dataset.clone(),
+        split: split.clone(),
+        catalog: args.catalog.clone(),
+        models: args.models.clone(),
+        options,
+    };
+    let html = write_eval_report(&args.out, &meta, &summary, &run)?;
+    print!("{}", text_table(&summary));
+    let p = &summary.pooled;
+    println!(
+        "\ndetection (IoU ≥ {}): precision {:.1} %, recall {:.1} % ({} of {} instances; touching \
+         {:.1} % of {}), {} false positives",
+        options.min_iou,
+        100.0 * p.precision,
+        100.0 * p.recall,
+        p.true_positives,
+        p.truths,
+        100.0 * p.recall_touching,
+        p.touching,
+        p.false_positives
+    );
+    println!(
+        "poses: {} matched with a pose, {} without; stable pose right {:.1} %; AR_MSSD {:.1} % \
+         (PnP {:.1} %), AR_MSPD {:.1} % (PnP {:.1} %)",
+        p.poses,
+        p.pose_failures,
+        100.0 * p.stable_pose_rate,
+        100.0 * p.refined.ar_mssd,
+        100.0 * p.raw.ar_mssd,
+        100.0 * p.refined.ar_mspd,
+        100.0 * p.raw.ar_mspd
+    );
+    if !p.pose_failure_kinds.is_empty() {
+        let kinds: Vec<String> = p
+            .pose_failure_kinds
+            .iter()
+            .map(|(k, n)| format!("{n} × {k}"))
+            .collect();
+        println!("without a pose: {}", kinds.join("; "));
+    }
+    let stages: Vec<String> = summary
+        .stages
+        .iter()
+        .map(|s| format!("{} {:.1}", s.stage, s.mean_ms))
+        .collect();
+    println!(
+        "time per frame, mean ms: {}; {:.1} frames/s",
+        stages.join(", "),
+        summary.frames_per_s
+    );
+    if summary.frame_failures > 0 {
+        println!(
+            "{} of {} frames failed, e.g. {}",
+            summary.frame_failures,
+            summary.frames,
+            summary.failure_examples.join("; ")
+        );
+    }
+    println!(
+        "{} images of {}/{} in {:.1} s; wrote {} and {}",
+        summary.frames,
+        args.dataset.display(),
+        split,
+        elapsed,
+        args.out.join(cell::eval::report_html::JSON_FILE).display(),
+        html.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,707 @@
+//! `cell eval`: the learned perception pipeline against a BOP test split with ground truth.
+//!
+//! For each image the camera (K, distortion, size) and `camera_T_table` come from
+//! scene_camera.json; the detector runs; detections are matched to ground-truth instances (same
+//! part, visible-mask IoU ≥ 0.5, greedy by score, each instance at most once); matched poses are
+//! scored with [`perception::metrics`] raw (PnP) and after planar refinement. [`table1`] turns the
+//! records into the seed's Table 1 (outliers counted, statistics both with and without them),
+//! detection precision / recall, stable-pose rate, BOP MSSD / MSPD recall and stage times;
+//! [`report_html`] writes eval.json, eval.html, plots and the [`gallery`] of the worst crops.
+
+pub mod gallery;
+pub mod matching;
+pub mod report_html;
+pub mod table1;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
+use perception::learned::{InstanceMask, LearnedDetections, StageTimes};
+use perception::metrics::{PoseErrors, pose_errors};
+use perception::part::{Catalog, PartRole, StablePose, Symmetry};
+use perception::planar::{PlanarConfig, PlanarRefiner};
+use perception::symmetry::{symmetric_angle, symmetry_group};
+use perception::{Camera, Distortion, FrameImage};
+use serde::{Deserialize, Serialize};
+use sim::dataset::{BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop};
+
+use gallery::{FailedCrop, GalleryItem, GalleryKeeper};
+use matching::{Candidate, Truth, greedy_match, mask_from_raster, touching_flags};
+
+/// The split read when none is named: full-resolution feeder windows.
+pub const DEFAULT_SPLIT: &str = "test_feeder";
+/// The split read when [`DEFAULT_SPLIT`] does not exist: the reduced-scale overview test images.
+pub const FALLBACK_SPLIT: &str = "test";
+
+/// Why an evaluation could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// The dataset could not be read (the message names the file, and line and column or the
+    /// key where the JSON is wrong).
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    /// The dataset does not fit the catalog or holds impossible values.
+    #[error("{path}: {message}")]
+    Mismatch {
+        /// The file or folder.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A part of the catalog could not be used.
+    #[error("part {part}: {message}")]
+    Part {
+        /// The part.
+        part: String,
+        /// Why.
+        message: String,
+    },
+    /// The settings are unusable.
+    #[error("{0}")]
+    Options(String),
+}
+
+/// The detector under evaluation: the learned pipeline, or in tests a stand-in built from the
+/// ground truth.
+pub trait FrameDetector {
+    /// Detects the parts in one image of `camera` (the image covers the camera's whole sensor)
+    /// looking at the table at `camera_T_table`.
+    #[allow(non_snake_case)]
+    fn detect(
+        &mut self,
+        image: &FrameImage,
+        camera: &Camera,
+        camera_T_table: &Isometry3<f64>,
+    ) -> Result<LearnedDetections, String>;
+}
+
+/// Evaluation settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EvalOptions {
+    /// Mask IoU a detection needs to match a ground-truth instance.
+    pub min_iou: f64,
+    /// Ground-truth instances less visible than this (BOP's visib_fract) are ignored: not
+    /// counted as missed, and a detection matching one is not a false positive.
+    pub min_visib_fract: f64,
+    /// Two instances touch when their visible masks come within this many pixels.
+    pub touch_gap_px: u32,
+    /// Angle above which an estimate is an outlier (the seed's 10°), degrees.
+    pub outlier_deg: f64,
+    /// Worst crops kept for the gallery.
+    pub gallery: usize,
+    /// Evaluate at most this many images (in scene, image order).
+    pub limit: Option<usize>,
+    /// Surface points sampled per part for ADD(-S), MSSD and MSPD.
+    pub model_points: usize,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self {
+            min_iou: 0.5,
+            min_visib_fract: 0.1,
+            touch_gap_px: 2,
+            outlier_deg: 10.0,
+            gallery: 24,
+            limit: None,
+            model_points: 1000,
+        }
+    }
+}
+
+impl EvalOptions {
+    /// Checks the ranges.
+    pub fn validate(&self) -> Result<(), EvalError> {
+        if !(self.min_iou > 0.0 && self.min_iou <= 1.0) {
+            return Err(EvalError::Options(format!(
+                "the IoU threshold must be in (0, 1], got {}",
+                self.min_iou
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.min_visib_fract) {
+            return Err(EvalError::Options(format!(
+                "the visibility threshold must be in [0, 1], got {}",
+                self.min_visib_fract
+            )));
+        }
+        if !(self.outlier_deg.is_finite() && self.outlier_deg > 0.0) {
+            return Err(EvalError::Options(format!(
+                "the outlier angle must be > 0°, got {}",
+                self.outlier_deg
+            )));
+        }
+        if self.model_points < 8 {
+            return Err(EvalError::Options(format!(
+                "at least 8 model points are needed, got {}",
+                self.model_points
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What evaluation needs of one part.
+#[derive(Debug, Clone)]
+pub struct PartData {
+    /// Catalog name.
+    pub name: String,
+    /// BOP object id (catalog index + 1, as `cell dataset` writes them).
+    pub obj_id: u32,
+    /// Model keypoints, part frame, metres.
+    pub keypoints: Vec<Point3<f64>>,
+    /// Surface samples for the distance metrics, part frame, metres.
+    pub points: Vec<Point3<f64>>,
+    /// Exact symmetry group (what the metrics and the refiner use).
+    pub group: Vec<UnitQuaternion<f64>>,
+    /// Group of every declared symmetry, exact or not: an error within the outlier angle of a
+    /// near-symmetric equivalent is a symmetry flip.
+    pub near_group: Vec<UnitQuaternion<f64>>,
+    /// Stable poses, in the order classes refer to.
+    pub stable_poses: Vec<StablePose>,
+    /// Diameter from models_info.json, mm.
+    pub diameter_mm: f64,
+}
+
+/// A BOP split opened for evaluation against a catalog.
+#[derive(Debug, Clone)]
+pub struct EvalDataset {
+    /// The dataset (cameras, ground truth, scenes).
+    pub bop: BopDataset,
+    /// The split read.
+    pub split: String,
+    /// Parts by BOP object id.
+    pub parts: BTreeMap<u32, PartData>,
+}
+
+/// The split to read: `requested`, or [`DEFAULT_SPLIT`] when it exists, else [`FALLBACK_SPLIT`].
+pub fn resolve_split(root: &Path, requested: Option<&str>) -> String {
+    match requested {
+        Some(s) => s.to_string(),
+        None if root.join(DEFAULT_SPLIT).is_dir() => DEFAULT_SPLIT.into(),
+        None => FALLBACK_SPLIT.into(),
+    }
+}
+
+impl EvalDataset {
+    /// Opens split `split` of the dataset at `root` for the parts of `catalog` (object id =
+    /// catalog index + 1); checks that each object's model size matches the catalog mesh.
+    pub fn open(
+        root: &Path,
+        split: &str,
+        catalog: &Catalog,
+        options: &EvalOptions,
+    ) -> Result<Self, EvalError> {
+        options.validate()?;
+        let split_dir = root.join(split);
+        if !split_dir.is_dir() {
+            return Err(EvalError::Mismatch {
+                path: split_dir,
+                message: "no such split folder (name one with --split)".into(),
+            });
+        }
+        let bop = BopDataset::load(root, split)?;
+        let models_info = root.join("models").join("models_info.json");
+        let mut parts = BTreeMap::new();
+        for (&obj_id, info) in &bop.models {
+            let mismatch = |message: String| EvalError::Mismatch {
+                path: models_info.clone(),
+                message,
+            };
+            let spec = obj_id
+                .checked_sub(1)
+                .and_then(|i| catalog.parts.get(i as usize))
+                .ok_or_else(|| {
+                    mismatch(format!(
+                        "object {obj_id} has no part in catalog {} ({} parts)",
+                        catalog.file.display(),
+                        catalog.parts.len()
+                    ))
+                })?;
+            if spec.role == PartRole::Fixture {
+                return Err(mismatch(format!(
+                    "object {obj_id} is {}, a fixture in catalog {}",
+                    spec.name,
+                    catalog.file.display()
+                )));
+            }
+            let part_err = |message: String| EvalError::Part {
+                part: spec.name.clone(),
+                message,
+            };
+            let mesh = catalog
+                .load_mesh(spec)
+                .map_err(|e| part_err(e.to_string()))?;
+            let (lo, hi) = mesh.aabb();
+            let size = (hi - lo) * 1000.0;
+            for (axis, ours, theirs) in [
+                ("x", size.x, info.size_x),
+                ("y", size.y, info.size_y),
+                ("z", size.z, info.size_z),
+            ] {
+                if (ours - theirs).abs() > 0.01 {
+                    return Err(mismatch(format!(
+                        "object {obj_id}: size_{axis} is {theirs:.3} mm but part {} of catalog {} \
+                         measures {ours:.3} mm: the dataset was made from another catalog",
+                        spec.name,
+                        catalog.file.display()
+                    )));
+                }
+            }
+            if spec.keypoints.len() < 4 || spec.stable_poses.is_empty() {
+                return Err(part_err(format!(
+                    "not prepared (keypoints and stable poses); run `cell parts prepare {}`",
+                    catalog.file.display()
+                )));
+            }
+            let exact: Vec<Symmetry> = spec
+                .symmetries
+                .iter()
+                .filter(|s| s.exact)
+                .cloned()
+                .collect();
+            let all: Vec<Symmetry> = spec
+                .symmetries
+                .iter()
+                .map(|s| Symmetry {
+                    exact: true,
+                    ..s.clone()
+                })
+                .collect();
+            parts.insert(
+                obj_id,
+                PartData {
+                    name: spec.name.clone(),
+                    obj_id,
+                    keypoints: spec.keypoint_points(),
+                    points: perception::part::sample_surface(&mesh, options.model_points, 1),
+                    group: symmetry_group(&exact),
+                    near_group: symmetry_group(&all),
+                    stable_poses: spec.stable_poses.clone(),
+                    diameter_mm: info.diameter,
+                },
+            );
+        }
+        Ok(Self {
+            bop,
+            split: split.into(),
+            parts,
+        })
+    }
+
+    /// Images of the split, in scene and image order.
+    pub fn images(&self) -> impl Iterator<Item = (&BopScene, &BopImage)> {
+        self.bop
+            .scenes
+            .iter()
+            .flat_map(|s| s.images.iter().map(move |i| (s, i)))
+    }
+
+    /// Part names in object-id order.
+    pub fn part_names(&self) -> Vec<String> {
+        self.parts.values().map(|p| p.name.clone()).collect()
+    }
+}
+
+/// The camera of an image from its scene_camera.json entry.
+pub fn camera_of(cam: &SceneCamera) -> Result<Camera, String> {
+    let k = &cam.cam_K;
+    if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
+        return Err(format!("cam_K {k:?} is not [fx 0 cx; 0 fy cy; 0 0 1]"));
+    }
+    let d = cam.dist_coeffs;
+    Camera::new(
+        k[0],
+        k[4],
+        k[2],
+        k[5],
+        cam.width,
+        cam.height,
+        Distortion {
+            k1: d[0],
+            k2: d[1],
+            p1: d[2],
+            p2: d[3],
+            k3: d[4],
+        },
+    )
+    .map_err(|e| e.to_string())
+}
+
+/// Stage times of one frame, milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StageMs {
+    /// Image → segmenter input.
+    pub preprocess: f64,
+    /// Segmenter network.
+    pub segment: f64,
+    /// Grouping into instances.
+    pub instances: f64,
+    /// Cutting crops.
+    pub crops: f64,
+    /// Keypoint network.
+    pub keypoint_net: f64,
+    /// Voting.
+    pub voting: f64,
+    /// PnP and refinement.
+    pub pose: f64,
+    /// The whole frame.
+    pub total: f64,
+}
+
+/// A stage's name and how to read its time.
+pub type Stage = (&'static str, fn(&StageMs) -> f64);
+
+impl StageMs {
+    /// Stage names in pipeline order, with their accessors.
+    pub const STAGES: [Stage; 8] = [
+        ("preprocess", |s| s.preprocess),
+        ("segment", |s| s.segment),
+        ("instances", |s| s.instances),
+        ("crops", |s| s.crops),
+        ("keypoint_net", |s| s.keypoint_net),
+        ("voting", |s| s.voting),
+        ("pose", |s| s.pose),
+        ("total", |s| s.total),
+    ];
+}
+
+impl From<&StageTimes> for StageMs {
+    fn from(t: &StageTimes) -> Self {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        Self {
+            preprocess: ms(t.preprocess),
+            segment: ms(t.segment),
+            instances: ms(t.instances),
+            crops: ms(t.crops),
+            keypoint_net: ms(t.keypoint_net),
+            voting: ms(t.voting),
+            pose: ms(t.pose),
+            total: ms(t.total),
+        }
+    }
+}
+
+/// One ground-truth instance of a frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthRecord {
+    /// Part name.
+    pub part: String,
+    /// Visible fraction (BOP visib_fract).
+    pub visib_fract: f64,
+    /// Visible pixels.
+    pub visible_px: usize,
+    /// Whether its visible mask touches another instance's.
+    pub touching: bool,
+    /// Too little visible to count (see [`EvalOptions::min_visib_fract`]).
+    pub ignored: bool,
+    /// Index of the detection matched to it.
+    pub detection: Option<usize>,
+}
+
+/// One detection of a frame and how it scored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DetectionRecord {
+    /// Part name.
+    pub part: String,
+    /// Detection score.
+    pub score: f64,
+    /// Matched ground-truth instance.
+    pub truth: Option<usize>,
+    /// Mask IoU with it.
+    pub iou: Option<f64>,
+    /// Why the detector gave no pose, if it gave none.
+    pub pose_failure: Option<String>,
+    /// Errors of the raw PnP pose (matched, with a pose).
+    pub raw: Option<PoseErrors>,
+    /// Errors after planar refinement.
+    pub refined: Option<PoseErrors>,
+    /// Stable pose the detector chose.
+    pub stable_pose: Option<String>,
+    /// Stable pose the refiner assigns to the true pose.
+    pub true_stable_pose: Option<String>,
+    /// Raw angle error to the nearest near-symmetric equivalent of the truth, degrees.
+    pub raw_flip_deg: Option<f64>,
+    /// Refined angle error to the nearest near-symmetric equivalent of the truth, degrees.
+    pub refined_flip_deg: Option<f64>,
+}
+
+/// One evaluated image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Scene id.
+    pub scene: usize,
+    /// Image id.
+    pub image: usize,
+    /// Why the detector failed on the whole frame, if it did.
+    pub failure: Option<String>,
+    /// Stage times (absent when the detector failed).
+    pub times: Option<StageMs>,
+    /// Ground-truth instances, in scene_gt.json order.
+    pub truths: Vec<TruthRecord>,
+    /// Detections, in the detector's order.
+    pub detections: Vec<DetectionRecord>,
+}
+
+/// Every frame's records and the gallery.
+#[derive(Debug, Clone)]
+pub struct EvalRun {
+    /// Per-frame records.
+    pub frames: Vec<FrameRecord>,
+    /// The worst crops, worst first.
+    pub gallery: Vec<GalleryItem>,
+    /// Matched detections without a pose, highest score first.
+    pub failures: Vec<FailedCrop>,
+}
+
+/// Runs `detector` over the images of `dataset` (at most `options.limit`), calling `progress`
+/// after each with (done, total).
+pub fn evaluate(
+    dataset: &EvalDataset,
+    detector: &mut dyn FrameDetector,
+    options: &EvalOptions,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<EvalRun, EvalError> {
+    options.validate()?;
+    let total = dataset
+        .images()
+        .count()
+        .min(options.limit.unwrap_or(usize::MAX));
+    let mut frames = Vec::with_capacity(total);
+    let mut keeper = GalleryKeeper::new(options.gallery);
+    let mut failed = GalleryKeeper::new(options.gallery.div_ceil(3));
+    for (i, (scene, image)) in dataset.images().take(total).enumerate() {
+        frames.push(evaluate_image(
+            dataset,
+            scene,
+            image,
+            detector,
+            options,
+            &mut keeper,
+            &mut failed,
+        )?);
+        progress(i + 1, total);
+    }
+    Ok(EvalRun {
+        frames,
+        gallery: keeper.into_items(),
+        failures: failed.into_items(),
+    })
+}
+
+/// Evaluates one image.
+#[allow(non_snake_case)]
+fn evaluate_image(
+    dataset: &EvalDataset,
+    scene: &BopScene,
+    image: &BopImage,
+    detector: &mut dyn FrameDetector,
+    options: &EvalOptions,
+    keeper: &mut GalleryKeeper,
+    failed: &mut GalleryKeeper<FailedCrop>,
+) -> Result<FrameRecord, EvalError> {
+    let scene_camera = scene.dir.join("scene_camera.json");
+    let at = |message: String| EvalError::Mismatch {
+        path: scene_camera.clone(),
+        message: format!("image {}: {message}", image.id),
+    };
+    let camera = camera_of(&image.camera).map_err(at)?;
+    let camera_T_table = pose_from_bop(&image.camera.cam_R_w2c, &image.camera.cam_t_w2c)
+        .ok_or_else(|| at("cam_R_w2c is not a rotation".into()))?;
+    let rgb = scene.rgb(image.id)?;
+    if (rgb.width(), rgb.height()) != (camera.width, camera.height) {
+        return Err(EvalError::Mismatch {
+            path: scene.dir.join("rgb").join(format!("{:06}.png", image.id)),
+            message: format!(
+                "the image is {} × {} but scene_camera.json gives {} × {}",
+                rgb.width(),
+                rgb.height(),
+                camera.width,
+                camera.height
+            ),
+        });
+    }
+
+    // Ground truth: part, pose, visible mask.
+    let mut truth_masks: Vec<InstanceMask> = Vec::with_capacity(image.gt.len());
+    let mut truth_poses = Vec::with_capacity(image.gt.len());
+    let mut truth_parts: Vec<&PartData> = Vec::with_capacity(image.gt.len());
+    for (k, gt) in image.gt.iter().enumerate() {
+        let part = dataset
+            .parts
+            .get(&gt.obj_id)
+            .ok_or_else(|| EvalError::Mismatch {
+                path: scene.dir.join("scene_gt.json"),
+                message: format!(
+                    "image {}: object {} is not a known part",
+                    image.id, gt.obj_id
+                ),
+            })?;
+        let bits = scene.mask(image.id, k, true)?;
+        if bits.len() != (camera.width * camera.height) as usize {
+            return Err(EvalError::Mismatch {
+                path: scene
+                    .dir
+                    .join("mask_visib")
+                    .join(format!("{:06}_{k:06}.png", image.id)),
+                message: format!("the mask is not {} × {}", camera.width, camera.height),
+            });
+        }
+        truth_masks.push(mask_from_raster(&bits, camera.width, camera.height));
+        truth_poses.push(
+            image
+                .camera_T_part(k)
+                .expect("the reader checked rotations"),
+        );
+        truth_parts.push(part);
+    }
+    let touching = touching_flags(&truth_masks, options.touch_gap_px);
+    let mut truths: Vec<TruthRecord> = image
+        .gt
+        .iter()
+        .enumerate()
+        .map(|(k, _)| {
+            let info = &image.info[k];
+            TruthRecord {
+                part: truth_parts[k].name.clone(),
+                visib_fract: info.visib_fract,
+                visible_px: truth_masks[k].area(),
+                touching: touching[k],
+                ignored: info.visib_fract < options.min_visib_fract || truth_masks[k].area() == 0,
+                detection: None,
+            }
+        })
+        .collect();
+
+    let frame_image = FrameImage::full(image::DynamicImage::ImageRgb8(rgb));
+    let found = match detector.detect(&frame_image, &camera, &camera_T_table) {
+        Ok(found) => found,
+        Err(message) => {
+            return Ok(FrameRecord {
+                scene: scene.id,
+                image: image.id,
+                failure: Some(message),
+                times: None,
+                truths,
+                detections: Vec::new(),
+            });
+        }
+    };
+
+    let candidates: Vec<Candidate<'_>> = found
+        .detections
+        .iter()
+        .map(|d| Candidate {
+            part: &d.part,
+            score: d.score,
+            mask: &d.mask,
+        })
+        .collect();
+    let truth_refs: Vec<Truth<'_>> = truths
+        .iter()
+        .zip(&truth_masks)
+        .map(|(t, m)| Truth {
+            part: &t.part,
+            mask: m,
+        })
+        .collect();
+    let matches = greedy_match(&candidates, &truth_refs, options.min_iou);
+
+    let mut detections = Vec::with_capacity(found.detections.len());
+    for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {
+        let mut rec = DetectionRecord {
+            part: det.part.clone(),
+            score: det.score,
+            truth: m.map(|m| m.truth),
+            iou: m.map(|m| m.iou),
+            pose_failure: det.pose.as_ref().err().cloned(),
+            raw: None,
+            refined: None,
+            stable_pose: det.pose.as_ref().ok().map(|p| p.stable_pose.clone()),
+            true_stable_pose: None,
+            raw_flip_deg: None,
+            refined_flip_deg: None,
+        };
+        if let Some(m) = m {
+            truths[m.truth].detection = Some(d);
+            let part = truth_parts[m.truth];
+            let truth = &truth_poses[m.truth];
+            let refiner = PlanarRefiner::new(
+                camera_T_table,
+                &part.stable_poses,
+                &part.group,
+                PlanarConfig::default(),
+            )
+            .map_err(|e| EvalError::Part {
+                part: part.name.clone(),
+                message: e.to_string(),
+            })?;
+            // The class the refiner assigns to the true pose is the true stable pose.
+            rec.true_stable_pose = refiner
+                .refine(truth)
+                .ok()
+                .map(|p| part.stable_poses[p.class].name.clone());
+            if let (Err(reason), false) = (&det.pose, truths[m.truth].ignored) {
+                failed.offer(det.score, || FailedCrop {
+                    scene: scene.id,
+                    image: image.id,
+                    detection: d,
+                    part: part.name.clone(),
+                    score: det.score,
+                    iou: m.iou,
+                    reason: reason.clone(),
+                    crop: gallery::draw_crop(
+                        &frame_image.pixels,
+                        &camera,
+                        det,
+                        &part.keypoints,
+                        truth,
+                    ),
+                });
+            }
+            if let Ok(pose) = &det.pose {
+                let raw = &pose.pnp.camera_T_part;
+                let refined = &pose.planar.camera_T_part;
+                let raw_e = pose_errors(&camera, &part.points, &part.group, truth, raw);
+                let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
+                let flip = |est: &Isometry3<f64>| {
+                    symmetric_angle(&est.rotation, &truth.rotation, &part.near_group).to_degrees()
+                };
+                rec.raw_flip_deg = Some(flip(raw));
+                rec.refined_flip_deg = Some(flip(refined));
+                rec.raw = Some(raw_e);
+                rec.refined = Some(refined_e);
+                if !truths[m.truth].ignored {
+                    keeper.offer(refined_e.mssd_mm, || GalleryItem {
+                        scene: scene.id,
+                        image: image.id,
+                        detection: d,
+                        part: part.name.clone(),
+                        iou: m.iou,
+                        raw: raw_e,
+                        refined: refined_e,
+                        stable_pose: pose.stable_pose.clone(),
+                        true_stable_pose: rec.true_stable_pose.clone(),
+                        crop: gallery::draw_crop(
+                            &frame_image.pixels,
+                            &camera,
+                            det,
+                            &part.keypoints,
+                            truth,
+                        ),
+                    });
+                }
+            }
+        }
+        detections.push(rec);
+    }
+    Ok(FrameRecord {
+        scene: scene.id,
+        image: image.id,
+        failure: None,
+        times: Some(StageMs::from(&found.times)),
+        truths,
+        detections,
+    })
+}

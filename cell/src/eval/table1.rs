@@ -1,0 +1,751 @@
+//! Aggregation of the per-frame records: the seed's Table 1 (mean ± σ of |e_x|, |e_y|, |e_z| in
+//! mm and e_θ in degrees, raw PnP and after planar refinement; outliers θ > 10° counted and
+//! reported, statistics both over all estimates and seed-style without the outliers), detection
+//! precision / recall (also for touching instances), stable-pose rate, BOP MSSD / MSPD recall,
+//! stage times and the compact text table with the seed's numbers beside ours.
+
+use std::fmt::Write as _;
+
+use perception::metrics::{ErrorSummary, PoseErrors, Summary, SummaryOptions};
+use serde::{Deserialize, Serialize};
+
+use super::{DetectionRecord, EvalOptions, FrameRecord, StageMs};
+
+/// The seed's Table 1 (raw PnP, θ > 10° dropped): part, then (mean, σ) of x, y, z (mm), θ (deg).
+pub const SEED_TABLE1: [(&str, [(f64, f64); 4]); 3] = [
+    (
+        "insert_mold",
+        [(0.60, 0.45), (0.59, 0.42), (63.80, 17.24), (2.74, 1.60)],
+    ),
+    (
+        "main_shell",
+        [(0.46, 0.37), (0.47, 0.38), (51.74, 19.38), (6.19, 2.52)],
+    ),
+    (
+        "top_shell",
+        [(0.74, 0.54), (0.71, 0.54), (75.90, 23.13), (3.31, 2.09)],
+    ),
+];
+/// The seed's average row.
+pub const SEED_AVERAGE: [(f64, f64); 4] =
+    [(0.60, 0.45), (0.59, 0.45), (63.81, 19.92), (4.08, 2.07)];
+
+/// BOP MSSD thresholds, fractions of the object diameter.
+pub const MSSD_FRACTIONS: [f64; 10] = [0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.35, 0.40, 0.45, 0.50];
+/// MSPD thresholds, pixels of the evaluated images (BOP uses 5r … 50r with r = width / 640 for
+/// its 640-pixel-wide images; ours are full-resolution crops, so r = 1).
+pub const MSPD_PX: [f64; 10] = [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0, 50.0];
+
+/// One row of Table 1: mean and σ of each error, sample count and outliers.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Table1Row {
+    /// Estimates summarised (after dropping outliers, seed-style).
+    pub n: usize,
+    /// Estimates with θ above the outlier angle (whether dropped or not).
+    pub outliers: usize,
+    /// |e_x| mean, σ (mm).
+    pub x_mm: [f64; 2],
+    /// |e_y| mean, σ (mm).
+    pub y_mm: [f64; 2],
+    /// |e_z| mean, σ (mm).
+    pub z_mm: [f64; 2],
+    /// e_θ mean, σ (deg).
+    pub angle_deg: [f64; 2],
+}
+
+impl Table1Row {
+    /// The row of a summary.
+    pub fn of(s: &ErrorSummary) -> Self {
+        let ms = |x: &Summary| [x.mean, x.std];
+        Self {
+            n: s.angle_deg.count,
+            outliers: s.outliers,
+            x_mm: ms(&s.x_mm),
+            y_mm: ms(&s.y_mm),
+            z_mm: ms(&s.z_mm),
+            angle_deg: ms(&s.angle_deg),
+        }
+    }
+
+    /// The seed's way of averaging parts: the mean of their means and of their σs (parts
+    /// without estimates left out); counts add up.
+    pub fn average(rows: &[Table1Row]) -> Self {
+        let with: Vec<&Table1Row> = rows.iter().filter(|r| r.n > 0).collect();
+        let avg = |f: fn(&Table1Row) -> [f64; 2]| {
+            if with.is_empty() {
+                return [f64::NAN; 2];
+            }
+            let n = with.len() as f64;
+            [
+                with.iter().map(|r| f(r)[0]).sum::<f64>() / n,
+                with.iter().map(|r| f(r)[1]).sum::<f64>() / n,
+            ]
+        };
+        Self {
+            n: rows.iter().map(|r| r.n).sum(),
+            outliers: rows.iter().map(|r| r.outliers).sum(),
+            x_mm: avg(|r| r.x_mm),
+            y_mm: avg(|r| r.y_mm),
+            z_mm: avg(|r| r.z_mm),
+            angle_deg: avg(|r| r.angle_deg),
+        }
+    }
+}
+
+/// Pose errors of one method (raw or refined) over a set of estimates.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseStats {
+    /// Every metric over all estimates (outliers kept).
+    pub all: ErrorSummary,
+    /// Every metric without the outliers, as the seed reports.
+    pub seed_style: ErrorSummary,
+    /// Outliers that lie within the outlier angle of a near-symmetric equivalent of the truth
+    /// (180° flips of the nearly symmetric parts).
+    pub symmetry_flips: usize,
+    /// Fraction of the counted ground-truth instances recalled with MSSD below each of
+    /// [`MSSD_FRACTIONS`] × diameter.
+    pub mssd_recall: Vec<f64>,
+    /// The same for MSPD below each of [`MSPD_PX`].
+    pub mspd_recall: Vec<f64>,
+    /// BOP average recall AR_MSSD (mean of `mssd_recall`).
+    pub ar_mssd: f64,
+    /// BOP average recall AR_MSPD.
+    pub ar_mspd: f64,
+}
+
+/// Everything reported for one part (or all parts pooled).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartSummary {
+    /// Part name, or "all".
+    pub part: String,
+    /// Ground-truth instances counted (not ignored).
+    pub truths: usize,
+    /// Ground-truth instances ignored for low visibility.
+    pub ignored: usize,
+    /// Counted instances whose mask touches another.
+    pub touching: usize,
+    /// Detections of this part.
+    pub detections: usize,
+    /// Detections matched to a counted instance.
+    pub true_positives: usize,
+    /// Detections matched to nothing.
+    pub false_positives: usize,
+    /// true positives / (true positives + false positives).
+    pub precision: f64,
+    /// true positives / counted instances.
+    pub recall: f64,
+    /// Recall over the touching instances only.
+    pub recall_touching: f64,
+    /// Recall over the instances that touch nothing.
+    pub recall_isolated: f64,
+    /// Matched detections without a pose (PnP, refinement or the reprojection gate failed).
+    pub pose_failures: usize,
+    /// The pose failures by kind (the reason with its numbers replaced by `#`), most first.
+    pub pose_failure_kinds: Vec<(String, usize)>,
+    /// Matched detections with a pose.
+    pub poses: usize,
+    /// Raw PnP errors.
+    pub raw: PoseStats,
+    /// Errors after planar refinement.
+    pub refined: PoseStats,
+    /// Matched poses whose stable pose is the one the refiner gives the true pose.
+    pub stable_pose_right: usize,
+    /// `stable_pose_right / poses`.
+    pub stable_pose_rate: f64,
+}
+
+/// Mean, median and p95 of one stage, ms.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageSummary {
+    /// Stage name.
+    pub stage: String,
+    /// Mean, ms.
+    pub mean_ms: f64,
+    /// Median, ms.
+    pub median_ms: f64,
+    /// 95th percentile, ms.
+    pub p95_ms: f64,
+}
+
+/// The whole evaluation in numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvalSummary {
+    /// Images evaluated.
+    pub frames: usize,
+    /// Images on which the detector failed outright.
+    pub frame_failures: usize,
+    /// The first few of those failures.
+    pub failure_examples: Vec<String>,
+    /// Per part, in object-id order.
+    pub parts: Vec<PartSummary>,
+    /// All parts pooled.
+    pub pooled: PartSummary,
+    /// Table 1 rows per part: raw seed-style, raw all, refined seed-style, refined all.
+    pub table1: Vec<Table1Entry>,
+    /// Time per stage.
+    pub stages: Vec<StageSummary>,
+    /// Frames per second of the pipeline (1 / mean total time).
+    pub frames_per_s: f64,
+}
+
+/// One row of Table 1 with its label.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Table1Entry {
+    /// Part name or "average" (the seed's mean of part means and σs).
+    pub part: String,
+    /// "pnp" or "refined".
+    pub method: String,
+    /// Outliers dropped (seed-style) or kept.
+    pub outliers_dropped: bool,
+    /// The numbers.
+    pub row: Table1Row,
+}
+
+/// A failure reason with its numbers replaced by `#`, so that reasons of one kind count together.
+pub fn failure_kind(reason: &str) -> String {
+    let mut out = String::with_capacity(reason.len());
+    let mut in_number = false;
+    for c in reason.chars() {
+        if c.is_ascii_digit() || (in_number && c == '.') {
+            if !in_number {
+                out.push('#');
+                in_number = true;
+            }
+        } else {
+            in_number = false;
+            out.push(c);
+        }
+    }
+    out
+}
+
+fn ratio(a: usize, b: usize) -> f64 {
+    if b == 0 {
+        f64::NAN
+    } else {
+        a as f64 / b as f64
+    }
+}
+
+/// One matched estimate with its truth's context.
+struct Estimate<'a> {
+    det: &'a DetectionRecord,
+    raw: PoseErrors,
+    refined: PoseErrors,
+}
+
+fn pose_stats(
+    estimates: &[Estimate<'_>],
+    pick: fn(&Estimate<'_>) -> (PoseErrors, Option<f64>),
+    counted_truths: usize,
+    diameter_mm: &dyn Fn(&str) -> f64,
+    options: &EvalOptions,
+) -> PoseStats {
+    let errors: Vec<PoseErrors> = estimates.iter().map(|e| pick(e).0).collect();
+    let opts = |drop_outliers| SummaryOptions {
+        drop_outliers,
+        outlier_deg: options.outlier_deg,
+    };
+    let symmetry_flips = estimates
+        .iter()
+        .map(pick)
+        .filter(|(e, flip)| {
+            e.angle_deg > options.outlier_deg && flip.is_some_and(|f| f <= options.outlier_deg)
+        })
+        .count();
+    let mssd_recall: Vec<f64> = MSSD_FRACTIONS
+        .iter()
+        .map(|f| {
+            let hits = estimates
+                .iter()
+                .filter(|e| pick(e).0.mssd_mm < f * diameter_mm(&e.det.part))
+                .count();
+            ratio(hits, counted_truths)
+        })
+        .collect();
+    let mspd_recall: Vec<f64> = MSPD_PX
+        .iter()
+        .map(|t| {
+            let hits = estimates.iter().filter(|e| pick(e).0.mspd_px < *t).count();
+            ratio(hits, counted_truths)
+        })
+        .collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    PoseStats {
+        all: ErrorSummary::of(&errors, opts(false)),
+        seed_style: ErrorSummary::of(&errors, opts(true)),
+        symmetry_flips,
+        ar_mssd: mean(&mssd_recall),
+        ar_mspd: mean(&mspd_recall),
+        mssd_recall,
+        mspd_recall,
+    }
+}
+
+/// Summarises one part (`Some(name)`) or all parts pooled (`None`).
+fn part_summary(
+    frames: &[FrameRecord],
+    part: Option<&str>,
+    diameter_mm: &dyn Fn(&str) -> f64,
+    options: &EvalOptions,
+) -> PartSummary {
+    let mine = |p: &str| part.is_none_or(|n| n == p);
+    let (mut truths, mut ignored, mut touching, mut recalled, mut recalled_touching) =
+        (0, 0, 0, 0, 0);
+    let (mut detections, mut tp, mut fp, mut pose_failures, mut stable_right) = (0, 0, 0, 0, 0);
+    let mut estimates = Vec::new();
+    let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
+    for f in frames {
+        for t in f.truths.iter().filter(|t| mine(&t.part)) {
+            if t.ignored {
+                ignored += 1;
+                continue;
+            }
+            truths += 1;
+            touching += usize::from(t.touching);
+            if t.detection.is_some() {
+                recalled += 1;
+                recalled_touching += usize::from(t.touching);
+            }
+        }
+        for d in f.detections.iter().filter(|d| mine(&d.part)) {
+            detections += 1;
+            let Some(t) = d.truth else {
+                fp += 1;
+                continue;
+            };
+            if f.truths[t].ignored {
+                continue;
+            }
+            tp += 1;
+            match (d.raw, d.refined) {
+                (Some(raw), Some(refined)) => {
+                    if d.stable_pose.is_some() && d.stable_pose == d.true_stable_pose {
+                        stable_right += 1;
+                    }
+                    estimates.push(Estimate {
+                        det: d,
+                        raw,
+                        refined,
+                    });
+                }
+                _ => {
+                    pose_failures += 1;
+                    let reason = d.pose_failure.as_deref().unwrap_or("no pose given");
+                    *kinds.entry(failure_kind(reason)).or_default() += 1;
+                }
+            }
+        }
+    }
+    let raw = pose_stats(
+        &estimates,
+        |e| (e.raw, e.det.raw_flip_deg),
+        truths,
+        diameter_mm,
+        options,
+    );
+    let refined = pose_stats(
+        &estimates,
+        |e| (e.refined, e.det.refined_flip_deg),
+        truths,
+        diameter_mm,
+        options,
+    );
+    PartSummary {
+        part: part.unwrap_or("all").into(),
+        truths,
+        ignored,
+        touching,
+        detections,
+        true_positives: tp,
+        false_positives: fp,
+        precision: ratio(tp, tp + fp),
+        recall: ratio(recalled, truths),
+        recall_touching: ratio(recalled_touching, touching),
+        recall_isolated: ratio(recalled - recalled_touching, truths - touching),
+        pose_failures,
+        pose_failure_kinds: {
+            let mut v: Vec<(String, usize)> = kinds.into_iter().collect();
+            v.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+            v
+        },
+        poses: estimates.len(),
+        raw,
+        refined,
+        stable_pose_right: stable_right,
+        stable_pose_rate: ratio(stable_right, estimates.len()),
+    }
+}
+
+/// Summarises the frames for the parts `parts` (name, diameter in mm), in that order.
+pub fn summarise(
+    frames: &[FrameRecord],
+    parts: &[(String, f64)],
+    options: &EvalOptions,
+) -> EvalSummary {
+    let diameter = |name: &str| {
+        parts
+            .iter()
+            .find(|(n, _)| n == name)
+            .map_or(f64::NAN, |(_, d)| *d)
+    };
+    let per_part: Vec<PartSummary> = parts
+        .iter()
+        .map(|(n, _)| part_summary(frames, Some(n), &diameter, options))
+        .collect();
+    let pooled = part_summary(frames, None, &diameter, options);
+    let mut table1 = Vec::new();
+    for method in ["pnp", "refined"] {
+        for dropped in [true, false] {
+            let rows: Vec<Table1Row> = per_part
+                .iter()
+                .map(|p| {
+                    let s = if method == "pnp" { &p.raw } else { &p.refined };
+                    Table1Row::of(if dropped { &s.seed_style } else { &s.all })
+                })
+                .collect();
+            for (p, row) in per_part.iter().zip(&rows) {
+                table1.push(Table1Entry {
+                    part: p.part.clone(),
+                    method: method.into(),
+                    outliers_dropped: dropped,
+                    row: *row,
+                });
+            }
+            table1.push(Table1Entry {
+                part: "average".into(),
+                method: method.into(),
+                outliers_dropped: dropped,
+                row: Table1Row::average(&rows),
+            });
+        }
+    }
+    let times: Vec<StageMs> = frames.iter().filter_map(|f| f.times).collect();
+    let stages = StageMs::STAGES
+        .iter()
+        .map(|(name, get)| {
+            let s = Summary::of(times.iter().map(get));
+            StageSummary {
+                stage: (*name).into(),
+                mean_ms: s.mean,
+                median_ms: s.p50,
+                p95_ms: s.p95,
+            }
+        })
+        .collect::<Vec<_>>();
+    let mean_total = stages.last().map_or(f64::NAN, |s| s.mean_ms);
+    let failures: Vec<&FrameRecord> = frames.iter().filter(|f| f.failure.is_some()).collect();
+    EvalSummary {
+        frames: frames.len(),
+        frame_failures: failures.len(),
+        failure_examples: failures
+            .iter()
+            .take(5)
+            .map(|f| {
+                format!(
+                    "scene {} image {}: {}",
+                    f.scene,
+                    f.image,
+                    f.failure.as_deref().unwrap_or_default()
+                )
+            })
+            .collect(),
+        parts: per_part,
+        pooled,
+        table1,
+        stages,
+        frames_per_s: 1e3 / mean_total,
+    }
+}
+
+fn ms(v: [f64; 2], decimals: usize) -> String {
+    if v[0].is_nan() {
+        "–".into()
+    } else {
+        format!("{:.d$} ± {:.d$}", v[0], v[1], d = decimals)
+    }
+}
+
+/// Table 1 as compact text: per part the seed's row, then ours (PnP and refined, seed-style
+/// and with every estimate), with sample and outlier counts.
+pub fn text_table(summary: &EvalSummary) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Table 1: |error| in the camera frame, mean ± σ; \"seed-style\" drops θ > 10° (counted in \"out\")"
+    );
+    let _ = writeln!(
+        s,
+        "{:<12} {:<22} {:>6} {:>5}  {:>14} {:>14} {:>16} {:>14}",
+        "part", "estimate", "n", "out", "x (mm)", "y (mm)", "z (mm)", "θ (deg)"
+    );
+    let mut parts: Vec<&str> = summary.parts.iter().map(|p| p.part.as_str()).collect();
+    parts.push("average");
+    for part in parts {
+        let seed = if part == "average" {
+            Some(SEED_AVERAGE)
+        } else {
+            SEED_TABLE1
+                .iter()
+                .find(|(n, _)| *n == part)
+                .map(|(_, r)| *r)
+        };
+        if let Some(r) = seed {
+            let _ = writeln!(
+                s,
+                "{:<12} {:<22} {:>6} {:>5}  {:>14} {:>14} {:>16} {:>14}",
+                part,
+                "seed paper, PnP",
+                if part == "average" { 6000 } else { 2000 },
+                "?",
+                ms([r[0].0, r[0].1], 2),
+                ms([r[1].0, r[1].1], 2),
+                ms([r[2].0, r[2].1], 2),
+                ms([r[3].0, r[3].1], 2)
+            );
+        }
+        for (method, dropped, label) in [
+            ("pnp", true, "ours PnP, seed-style"),
+            ("pnp", false, "ours PnP, all"),
+            ("refined", true, "ours refined, seed-st."),
+            ("refined", false, "ours refined, all"),
+        ] {
+            let Some(e) = summary
+                .table1
+                .iter()
+                .find(|e| e.part == part && e.method == method && e.outliers_dropped == dropped)
+            else {
+                continue;
+            };
+            let r = &e.row;
+            let _ = writeln!(
+                s,
+                "{:<12} {:<22} {:>6} {:>5}  {:>14} {:>14} {:>16} {:>14}",
+                if seed.is_some() { "" } else { part },
+                label,
+                r.n,
+                r.outliers,
+                ms(r.x_mm, 2),
+                ms(r.y_mm, 2),
+                ms(r.z_mm, 2),
+                ms(r.angle_deg, 2)
+            );
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::{DetectionRecord, FrameRecord, TruthRecord};
+
+    fn errors(x: f64, angle: f64) -> PoseErrors {
+        PoseErrors {
+            x_mm: x,
+            y_mm: x,
+            z_mm: 10.0 * x,
+            angle_deg: angle,
+            sym_angle_deg: angle,
+            add_mm: x,
+            adds_mm: x,
+            mssd_mm: x,
+            mspd_px: 4.0 * x,
+        }
+    }
+
+    fn truth(part: &str, detection: Option<usize>, touching: bool, ignored: bool) -> TruthRecord {
+        TruthRecord {
+            part: part.into(),
+            visib_fract: if ignored { 0.05 } else { 0.9 },
+            visible_px: 100,
+            touching,
+            ignored,
+            detection,
+        }
+    }
+
+    fn det(part: &str, truth: Option<usize>, pose: Option<(f64, f64)>) -> DetectionRecord {
+        DetectionRecord {
+            part: part.into(),
+            score: 0.9,
+            truth,
+            iou: truth.map(|_| 0.8),
+            pose_failure: if pose.is_none() && truth.is_some() {
+                Some("PnP failed".into())
+            } else {
+                None
+            },
+            raw: pose.map(|(x, a)| errors(x, a)),
+            refined: pose.map(|(x, a)| errors(x / 2.0, a / 2.0)),
+            stable_pose: pose.map(|_| "+z".into()),
+            true_stable_pose: pose.map(|(_, a)| if a < 15.0 { "+z" } else { "-z" }.into()),
+            raw_flip_deg: pose.map(|(_, a)| if a > 100.0 { 180.0 - a } else { a }),
+            refined_flip_deg: pose.map(|(_, a)| a / 2.0),
+        }
+    }
+
+    /// Two frames: part "a" with 5 counted instances (2 touching), 1 ignored; part "b" with 1.
+    fn frames() -> Vec<FrameRecord> {
+        vec![
+            FrameRecord {
+                scene: 0,
+                image: 0,
+                failure: None,
+                times: Some(StageMs {
+                    preprocess: 1.0,
+                    segment: 2.0,
+                    instances: 1.0,
+                    crops: 1.0,
+                    keypoint_net: 3.0,
+                    voting: 1.0,
+                    pose: 1.0,
+                    total: 10.0,
+                }),
+                truths: vec![
+                    truth("a", Some(0), true, false),
+                    truth("a", Some(1), true, false),
+                    truth("a", Some(2), false, false),
+                    truth("a", Some(4), false, true),
+                    truth("b", None, false, false),
+                ],
+                detections: vec![
+                    det("a", Some(0), Some((1.0, 2.0))),
+                    det("a", Some(1), Some((3.0, 170.0))),
+                    det("a", Some(2), None),
+                    det("b", None, None),
+                    det("a", Some(3), Some((9.0, 9.0))),
+                ],
+            },
+            FrameRecord {
+                scene: 0,
+                image: 1,
+                failure: Some("bad frame".into()),
+                times: None,
+                truths: vec![
+                    truth("a", None, false, false),
+                    truth("a", None, false, false),
+                ],
+                detections: vec![],
+            },
+        ]
+    }
+
+    #[test]
+    fn detection_counts_precision_and_recall() {
+        let s = summarise(
+            &frames(),
+            &[("a".into(), 10.0), ("b".into(), 10.0)],
+            &EvalOptions::default(),
+        );
+        let a = &s.parts[0];
+        assert_eq!((a.truths, a.ignored, a.touching), (5, 1, 2));
+        // The detection on the ignored instance counts neither way.
+        assert_eq!(
+            (a.detections, a.true_positives, a.false_positives),
+            (4, 3, 0)
+        );
+        assert!((a.precision - 1.0).abs() < 1e-12);
+        assert!((a.recall - 3.0 / 5.0).abs() < 1e-12);
+        assert!((a.recall_touching - 1.0).abs() < 1e-12);
+        assert!((a.recall_isolated - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!((a.poses, a.pose_failures), (2, 1));
+        assert_eq!(a.pose_failure_kinds, vec![("PnP failed".to_string(), 1)]);
+        assert_eq!(
+            failure_kind("reprojection RMS 35.36 px exceeds the gate of 4.00 px."),
+            "reprojection RMS # px exceeds the gate of # px."
+        );
+        let b = &s.parts[1];
+        assert_eq!((b.truths, b.false_positives, b.recall), (1, 1, 0.0));
+        assert_eq!(b.precision, 0.0);
+        assert_eq!(s.pooled.truths, 6);
+        assert_eq!(s.pooled.false_positives, 1);
+        assert_eq!((s.frames, s.frame_failures), (2, 1));
+        assert!(s.failure_examples[0].contains("image 1: bad frame"));
+    }
+
+    #[test]
+    fn table1_counts_outliers_and_drops_them_only_seed_style() {
+        let s = summarise(&frames(), &[("a".into(), 10.0)], &EvalOptions::default());
+        let a = &s.parts[0];
+        // Raw: angles 2° and 170° → one outlier, a symmetry flip (10° from the flipped truth).
+        assert_eq!((a.raw.all.samples, a.raw.all.outliers), (2, 1));
+        assert_eq!(a.raw.symmetry_flips, 1);
+        assert!((a.raw.all.x_mm.mean - 2.0).abs() < 1e-12);
+        assert!((a.raw.seed_style.x_mm.mean - 1.0).abs() < 1e-12);
+        assert_eq!(a.raw.seed_style.x_mm.count, 1);
+        // Refined halves everything: 1° and 85° → still one outlier, not a flip (85° away).
+        assert_eq!((a.refined.all.outliers, a.refined.symmetry_flips), (1, 0));
+        let row = |method: &str, dropped: bool| {
+            s.table1
+                .iter()
+                .find(|e| e.part == "a" && e.method == method && e.outliers_dropped == dropped)
+                .unwrap()
+                .row
+        };
+        let r = row("pnp", false);
+        assert_eq!((r.n, r.outliers), (2, 1));
+        assert!((r.x_mm[0] - 2.0).abs() < 1e-12 && (r.x_mm[1] - 1.0).abs() < 1e-12);
+        assert!((r.z_mm[0] - 20.0).abs() < 1e-12);
+        assert!((r.angle_deg[0] - 86.0).abs() < 1e-12);
+        let r = row("pnp", true);
+        assert_eq!((r.n, r.outliers), (1, 1));
+        assert!((r.angle_deg[0] - 2.0).abs() < 1e-12 && r.angle_deg[1] == 0.0);
+        // Stable pose: the 2° estimate agrees ("+z"), the 170° one does not ("-z").
+        assert_eq!(a.stable_pose_right, 1);
+        assert!((a.stable_pose_rate - 0.5).abs() < 1e-12);
+        // MSSD: raw 1 mm and 3 mm against a 10 mm diameter, over 5 counted instances.
+        assert_eq!(a.raw.mssd_recall[0], 0.0, "0.5 mm threshold");
+        assert_eq!(a.raw.mssd_recall[1], 0.0, "1.0 mm is not < 1.0 mm");
+        assert!(
+            (a.raw.mssd_recall[3] - 0.2).abs() < 1e-12,
+            "2 mm: only the 1 mm one"
+        );
+        assert!((a.raw.mssd_recall[6] - 0.4).abs() < 1e-12, "3.5 mm: both");
+        // MSPD: 4 px and 12 px.
+        assert!((a.raw.mspd_recall[0] - 0.2).abs() < 1e-12);
+        assert!((a.raw.mspd_recall[2] - 0.4).abs() < 1e-12);
+        assert!((a.raw.ar_mspd - (0.2 + 0.2 + 8.0 * 0.4) / 10.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn averages_follow_the_seed_and_timing_is_summarised() {
+        let rows = [
+            Table1Row {
+                n: 2,
+                outliers: 1,
+                x_mm: [1.0, 0.5],
+                y_mm: [1.0, 0.5],
+                z_mm: [10.0, 2.0],
+                angle_deg: [2.0, 1.0],
+            },
+            Table1Row {
+                n: 4,
+                outliers: 0,
+                x_mm: [3.0, 1.5],
+                y_mm: [1.0, 0.5],
+                z_mm: [30.0, 4.0],
+                angle_deg: [4.0, 3.0],
+            },
+            Table1Row {
+                n: 0,
+                outliers: 2,
+                x_mm: [f64::NAN; 2],
+                y_mm: [f64::NAN; 2],
+                z_mm: [f64::NAN; 2],
+                angle_deg: [f64::NAN; 2],
+            },
+        ];
+        let a = Table1Row::average(&rows);
+        assert_eq!((a.n, a.outliers), (6, 3));
+        assert_eq!(a.x_mm, [2.0, 1.0]);
+        assert_eq!(a.z_mm, [20.0, 3.0]);
+        let s = summarise(&frames(), &[("a".into(), 10.0)], &EvalOptions::default());
+        let total = s.stages.iter().find(|t| t.stage == "total").unwrap();
+        assert_eq!((total.mean_ms, total.median_ms), (10.0, 10.0));
+        assert!((s.frames_per_s - 100.0).abs() < 1e-9);
+        let text = text_table(&s);
+        assert!(text.contains("ours PnP, all"));
+        assert!(text.contains("2.00 ± 1.00"), "{text}");
+    }
+}
