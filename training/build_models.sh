@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Rebuilds the committed USB-C models from nothing: venv -> datasets (fixed seeds) -> segmenter
+# -> keypoint net -> ONNX + manifests in scenarios/models/usbc -> `cell eval` on the test set
+# (when that subcommand exists). See training/README.md. Sizes can be overridden by environment:
+#   TRAIN_CROPS (per part), TEST_CROPS, TRAIN_FEEDER, TEST_FEEDER, KP_EPOCHS, KP_MINUTES,
+#   SEG_STEPS, SEG_MINUTES, DATA (dataset folder), OUT (model folder).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+DATA="${DATA:-training/data}"
+OUT="${OUT:-scenarios/models/usbc}"
+TRAIN_SEED=1
+TEST_SEED=2
+TRAIN_CROPS="${TRAIN_CROPS:-4000}"
+TEST_CROPS="${TEST_CROPS:-300}"
+TRAIN_FEEDER="${TRAIN_FEEDER:-500}"
+TEST_FEEDER="${TEST_FEEDER:-100}"
+KP_EPOCHS="${KP_EPOCHS:-16}"
+KP_MINUTES="${KP_MINUTES:-35}"
+SEG_STEPS="${SEG_STEPS:-2500}"
+SEG_MINUTES="${SEG_MINUTES:-30}"
+
+training/provision.sh
+py="$root/training/.venv/bin/python"
+mkdir -p "$DATA" training/runs "$OUT"
+
+echo "== datasets (train seed $TRAIN_SEED, test seed $TEST_SEED)"
+cargo build --release -p cell
+cell="$root/target/release/cell"
+"$cell" dataset --out "$DATA/usbc_train" --seed "$TRAIN_SEED" --train-crops "$TRAIN_CROPS" \
+    --test-crops 0 --train-overviews 0 --test-overviews 0 --train-feeder "$TRAIN_FEEDER" --quiet \
+    --preview "$DATA/preview_train.png"
+"$cell" dataset --out "$DATA/usbc_test" --seed "$TEST_SEED" --train-crops 0 \
+    --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" --quiet
+
+echo "== segmenter"
+(cd training && "$py" train_segmenter.py --train "$root/$DATA/usbc_train" --test "$root/$DATA/usbc_test" \
+    --out "$root/$OUT" --dataset-seed "$TRAIN_SEED" --steps "$SEG_STEPS" --max-minutes "$SEG_MINUTES" \
+    --checkpoint "$root/training/runs/segmenter.pt")
+
+echo "== keypoint net"
+(cd training && "$py" train_keypoints.py --train "$root/$DATA/usbc_train" --test "$root/$DATA/usbc_test" \
+    --out "$root/$OUT" --dataset-seed "$TRAIN_SEED" --epochs "$KP_EPOCHS" --max-minutes "$KP_MINUTES" \
+    --checkpoint "$root/training/runs/keypoints.pt")
+
+echo "== evaluation"
+if "$cell" eval --help >/dev/null 2>&1; then
+    "$cell" eval "$DATA/usbc_test" --split test_feeder --models "$OUT" --out "$DATA/eval"
+else
+    echo "skipped: this build of cell has no 'eval' subcommand"
+fi
+ls -l "$OUT"
