@@ -110,7 +110,7 @@ class Segmenter(nn.Module):
     OFFSET_SCALE = 32.0
     """Offsets are predicted in units of this many pixels (keeps the regression well scaled)."""
 
-    def __init__(self, w=(16, 24, 48, 72)):
+    def __init__(self, w=(12, 16, 32, 64)):
         super().__init__()
         self.norm = Normalise()
         self.s2 = block(3, w[0], 2)

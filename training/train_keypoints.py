@@ -238,11 +238,12 @@ def main(argv=None):
             print(f"stopped at the {args.max_minutes} min budget", flush=True)
             break
     curve.close()
+    train_minutes = (time.time() - t_train) / 60
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
 
     met = evaluate(model, test, device, voting=True)
-    met["train_minutes"] = (time.time() - t_train) / 60
+    met["train_minutes"] = train_minutes
     met["mmac_per_crop"] = macs / 1e6
     for k_, v_ in met.items():
         print(f"  {k_} = {v_:.4g}")

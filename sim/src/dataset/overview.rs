@@ -121,7 +121,7 @@ pub(crate) fn write_bop_image(
     )?;
     write_depth(
         &scene_dir.join("depth").join(format!("{stem}.png")),
-        out.depth,
+        &out.depth,
         ww,
         wh,
         cfg.depth_scale,
@@ -154,7 +154,7 @@ pub(crate) fn write_bop_image(
             px_count_all: label.px_count_all as u64,
             px_count_valid: full
                 .iter()
-                .zip(out.depth)
+                .zip(&out.depth)
                 .filter(|(f, d)| **f && **d > 0.0)
                 .count() as u64,
             px_count_visib: label.px_count_visib as u64,
