@@ -135,3 +135,19 @@ class Curve:
 
     def close(self):
         self.f.close()
+
+
+def progress_lr(opt, max_lr, step, total_steps, elapsed_s, budget_s, warmup=0.03):
+    """Sets and returns the learning rate for training progress = max(step share, time share):
+    linear warm-up over the first `warmup`, then cosine decay to zero, so the rate anneals
+    whether the step count or the time budget ends the run. Returns (lr, progress)."""
+    import math
+
+    progress = max(step / total_steps, elapsed_s / budget_s)
+    if progress < warmup:
+        lr = max_lr * (0.1 + 0.9 * progress / warmup)
+    else:
+        lr = max_lr * 0.5 * (1 + math.cos(math.pi * min(1.0, (progress - warmup) / (1 - warmup))))
+    for g in opt.param_groups:
+        g["lr"] = lr
+    return lr, progress

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, code_commit, export_onnx, ort_check, setup, write_manifest
+from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
 from data import load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
@@ -168,9 +168,10 @@ def main(argv=None):
     ap.add_argument("--limit", type=int, default=None, help="crops per part to load (smoke tests)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--checkpoint", help="also save the torch weights here")
+    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
     args = ap.parse_args(argv)
 
-    device = setup(args.seed)
+    device = setup(args.seed, args.threads)
     t0 = time.time()
     train = prepare(load_crops(args.train, "train", args.limit), device)
     test = prepare(load_crops(args.test, "test", args.limit), device)
@@ -183,7 +184,6 @@ def main(argv=None):
     n = len(train["part"])
     steps_per_epoch = max(1, n // args.batch)
     total = steps_per_epoch * args.epochs
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=total, pct_start=0.05)
     cx, cy = cell_centres(device)
     gen = torch.Generator().manual_seed(args.seed)
     os.makedirs(args.out, exist_ok=True)
@@ -200,6 +200,7 @@ def main(argv=None):
         perm = torch.randperm(n, generator=gen)
         acc = np.zeros(3)
         for s in range(steps_per_epoch):
+            lr, progress = progress_lr(opt, args.lr, step, total, time.time() - t_train, 60 * args.max_minutes)
             idx = perm[s * args.batch : (s + 1) * args.batch]
             x = make_input(train["rgb_t"][idx], train["part_t"][idx], device, augment=True, gen=gen)
             mask_t = train["mask64_t"][idx].to(device)
@@ -210,10 +211,9 @@ def main(argv=None):
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            sched.step()
             step += 1
             acc += [loss.item(), l_mask.item(), l_vec.item()]
-            if (time.time() - t_train) / 60 > args.max_minutes:
+            if (time.time() - t_train) / 60 >= args.max_minutes:
                 stopped = True
                 break
         k = s + 1
@@ -222,7 +222,7 @@ def main(argv=None):
             epoch=epoch + 1,
             step=step,
             elapsed_s=time.time() - t_train,
-            lr=sched.get_last_lr()[0],
+            lr=lr,
             train_loss=acc[0] / k,
             train_mask_loss=acc[1] / k,
             train_vec_loss=acc[2] / k,

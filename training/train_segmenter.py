@@ -15,7 +15,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, code_commit, export_onnx, ort_check, setup, write_manifest
+from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
 from data import load_feeder, obj_ids
 from nets import PARTS, Segmenter, count_macs
 
@@ -171,11 +171,12 @@ def main(argv=None):
     ap.add_argument("--limit", type=int, default=None, help="frames to load per split (smoke tests)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--checkpoint", help="also save the torch weights here")
+    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
     args = ap.parse_args(argv)
     if args.size % 16:
         sys.exit(f"--size {args.size} must be a multiple of 16")
 
-    device = setup(args.seed)
+    device = setup(args.seed, args.threads)
     rng = np.random.default_rng(args.seed)
     t0 = time.time()
     mapping = obj_ids(args.train)
@@ -187,7 +188,6 @@ def main(argv=None):
     macs = count_macs(model, torch.zeros(1, 3, 448, 576, device=device))
     print(f"segmenter: {macs / 1e6:.0f} MMAC per 576x448 window, {sum(p.numel() for p in model.parameters())} parameters")
     opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=args.steps, pct_start=0.05)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "segmenter_curve.csv"
     curve = Curve(
@@ -199,6 +199,7 @@ def main(argv=None):
     k = 0
     for step in range(1, args.steps + 1):
         model.train()
+        lr, progress = progress_lr(opt, args.lr, step - 1, args.steps, time.time() - t_train, 60 * args.max_minutes)
         idx = rng.integers(0, len(train), args.batch)
         x, cls, off = batch_of(train, idx, args.size, rng, augment=True)
         logits, offsets = model(x.to(device))
@@ -207,16 +208,15 @@ def main(argv=None):
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        sched.step()
         acc += [loss.item(), l_cls.item(), l_off.item()]
         k += 1
-        out_of_time = (time.time() - t_train) / 60 > args.max_minutes
+        out_of_time = (time.time() - t_train) / 60 >= args.max_minutes
         if step % args.eval_every == 0 or step == args.steps or out_of_time:
             met = evaluate(model, test, device, max_frames=20)
             curve.row(
                 step=step,
                 elapsed_s=time.time() - t_train,
-                lr=sched.get_last_lr()[0],
+                lr=lr,
                 train_loss=acc[0] / k,
                 train_cls_loss=acc[1] / k,
                 train_offset_loss=acc[2] / k,

@@ -77,7 +77,10 @@ pub fn generate(
             }
         }
     }
-    for (split, n) in [(Split::Train, cfg.feeder_train), (Split::Test, cfg.feeder_test)] {
+    for (split, n) in [
+        (Split::Train, cfg.feeder_train),
+        (Split::Test, cfg.feeder_test),
+    ] {
         for i in 0..n {
             let dir = feeder_scene_dir(cfg, split, i);
             if i % cfg.images_per_scene == 0 {

@@ -85,7 +85,9 @@ pub(crate) fn write_overview(
         window,
         &cfg.render,
     );
-    write_bop_image(cfg, models, &scene, &camera, window, &out, &scene_dir, im, &mut rng)
+    write_bop_image(
+        cfg, models, &scene, &camera, window, &out, &scene_dir, im, &mut rng,
+    )
 }
 
 /// Labels `out` (a render of `window` of `camera` showing `scene`), passes it through the
