@@ -26,7 +26,7 @@ def load_crops(root, split, limit=None):
 
     Returns dict: rgb uint8 [N,128,128,3], mask bool [N,128,128], keypoints float32 [N,9,2]
     (crop px), part int64 [N]."""
-    rgbs, masks, kps, parts = [], [], [], []
+    rgbs, masks, kps, parts, poses = [], [], [], [], []
     for p, name in enumerate(PARTS):
         d = os.path.join(root, "crops", name, split)
         if not os.path.isdir(d):
@@ -51,7 +51,16 @@ def load_crops(root, split, limit=None):
             masks.append(mask)
             kps.append(kp)
             parts.append(p)
+            poses.append(
+                (
+                    np.asarray(label["cam_R_m2c"], dtype=np.float64).reshape(3, 3),
+                    np.asarray(label["cam_t_m2c"], dtype=np.float64),
+                    np.asarray(label["cam_K"], dtype=np.float64),
+                    np.asarray(label["dist_coeffs"], dtype=np.float64),
+                )
+            )
     return {
+        "poses": poses,
         "rgb": np.stack(rgbs),
         "mask": np.stack(masks),
         "keypoints": np.stack(kps),
@@ -161,3 +170,34 @@ def obj_ids(root):
         mapping = {i + 1: i for i in range(len(PARTS))}
         print(f"{root}: no crop labels to map obj ids; assuming catalog order", file=sys.stderr)
     return mapping
+
+
+def catalog_keypoints(path):
+    """The 9 keypoints (mm, part frame) of each part in PARTS order, from the catalog TOML."""
+    import tomllib
+
+    with open(path, "rb") as f:
+        cat = tomllib.load(f)
+    by_name = {p["name"]: p for p in cat.get("part", [])}
+    out = []
+    for name in PARTS:
+        kp = np.asarray(by_name[name]["keypoints"], dtype=np.float64) * 1000.0
+        if kp.shape != (9, 3):
+            raise ValueError(f"{path}: part {name} has {kp.shape[0]} keypoints, want 9")
+        out.append(kp)
+    return out
+
+
+def flipped_keypoints(data, kp3d):
+    """Per crop, the 2D keypoints of the pose turned 180 degrees about the part's z axis (the
+    parts' near symmetry), [N, 9, 2]; and the max reprojection difference of the unturned
+    keypoints from the labels (a check of the conventions), px."""
+    flip = np.diag([-1.0, -1.0, 1.0])
+    out = np.zeros_like(data["keypoints"], dtype=np.float64)
+    worst = 0.0
+    for i, (R, t, K, dist) in enumerate(data["poses"]):
+        p = kp3d[data["part"][i]]
+        same = project(K, dist, p @ R.T + t)
+        worst = max(worst, float(np.abs(same - data["keypoints"][i]).max()))
+        out[i] = project(K, dist, (p @ flip.T) @ R.T + t)
+    return out, worst

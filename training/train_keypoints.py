@@ -15,7 +15,7 @@ import torch
 import torch.nn.functional as F
 
 from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
-from data import load_crops, mask_cells
+from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
 GRID = 64  # output cells per side (stride 2 on 128 px)
@@ -126,14 +126,21 @@ def evaluate(model, data, device, voting=False):
     sel = np.broadcast_to(gt[:, None], ang.shape)
     metrics["vector_angle_mean_deg"] = float(ang[sel].mean())
     if voting:
-        rng = np.random.default_rng(0)
-        errs = np.stack([np.linalg.norm(vote(pred[i], v[i], rng) - data["keypoints"][i], axis=1) for i in range(len(v))])
+        votes = [vote(pred[i], v[i], np.random.default_rng(i)) for i in range(len(v))]
+        errs = np.stack([np.linalg.norm(votes[i] - data["keypoints"][i], axis=1) for i in range(len(v))])
         ok = np.isfinite(errs)
         errs_f = np.where(ok, errs, 1e3)  # a failed vote counts as a large error in the median
         metrics["keypoint_px_median"] = float(np.median(errs_f))
         metrics["keypoint_px_mean"] = float(errs[ok].mean()) if ok.any() else float("nan")
         metrics["centre_px_median"] = float(np.median(errs_f[:, 8]))
         metrics["vote_failed_fraction"] = float(1 - ok.mean())
+        if "flipped" in data:
+            # Up to the parts' near 180-degree symmetry: the better of the true and turned labels.
+            errs_t = np.stack([np.linalg.norm(votes[i] - data["flipped"][i], axis=1) for i in range(len(v))])
+            errs_t = np.where(np.isfinite(errs_t), errs_t, 1e3)
+            turned = errs_t.mean(1) < errs_f.mean(1)
+            metrics["flip_fraction"] = float(turned.mean())
+            metrics["keypoint_px_median_up_to_flip"] = float(np.median(np.where(turned[:, None], errs_t, errs_f)))
         for p, name in enumerate(PARTS):
             sel_p = data["part"] == p
             metrics[f"keypoint_px_median_{name}"] = float(np.median(errs_f[sel_p]))
@@ -169,6 +176,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--checkpoint", help="also save the torch weights here")
     ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
+    ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
+    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
     args = ap.parse_args(argv)
 
     device = setup(args.seed, args.threads)
@@ -176,6 +185,9 @@ def main(argv=None):
     train = prepare(load_crops(args.train, "train", args.limit), device)
     test = prepare(load_crops(args.test, "test", args.limit), device)
     print(f"loaded {len(train['part'])} train / {len(test['part'])} test crops in {time.time() - t0:.0f} s", flush=True)
+    test["flipped"], worst = flipped_keypoints(test, catalog_keypoints(args.catalog))
+    if worst > 0.05:
+        sys.exit(f"{args.catalog}: keypoints reproject {worst:.3f} px off the crop labels")
 
     model = KeypointNet().to(device)
     macs = count_macs(model, torch.zeros(1, 6, 128, 128, device=device))
@@ -188,7 +200,10 @@ def main(argv=None):
     gen = torch.Generator().manual_seed(args.seed)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "keypoints_curve.csv"
-    curve = Curve(
+    if args.eval_only:
+        model.load_state_dict(torch.load(args.eval_only, map_location=device))
+        args.epochs = 0
+    curve = None if args.eval_only else Curve(
         os.path.join(args.out, curve_name),
         ["epoch", "step", "elapsed_s", "lr", "train_loss", "train_mask_loss", "train_vec_loss", "test_mask_iou", "test_vector_angle_mean_deg"],
     )
@@ -237,13 +252,15 @@ def main(argv=None):
         if stopped:
             print(f"stopped at the {args.max_minutes} min budget", flush=True)
             break
-    curve.close()
+    if curve is not None:
+        curve.close()
     train_minutes = (time.time() - t_train) / 60
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
 
     met = evaluate(model, test, device, voting=True)
-    met["train_minutes"] = train_minutes
+    if not args.eval_only:
+        met["train_minutes"] = train_minutes
     met["mmac_per_crop"] = macs / 1e6
     for k_, v_ in met.items():
         print(f"  {k_} = {v_:.4g}")
