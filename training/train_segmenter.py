@@ -70,7 +70,7 @@ def pad16(rgb):
     return np.pad(rgb, ((0, (-H) % 16), (0, (-W) % 16), (0, 0)), mode="edge")
 
 
-def group(cls_pred, offsets, radius=12.0, min_votes=12):
+def group(cls_pred, offsets, radius=20.0, min_votes=30):
     """Instances from a class map [h, w] and offsets [2, h, w] (NumPy): every part cell votes
     for its centre (cell centre + offset); peaks of the vote histogram (4-px bins, 3x3 sum, at
     least `min_votes`) are the centres; each cell joins the nearest centre within `radius` px.
@@ -172,6 +172,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--checkpoint", help="also save the torch weights here")
     ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
+    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
+    ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a second, fine-tuning stage)")
     args = ap.parse_args(argv)
     if args.size % 16:
         sys.exit(f"--size {args.size} must be a multiple of 16")
@@ -190,7 +192,11 @@ def main(argv=None):
     opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "segmenter_curve.csv"
-    curve = Curve(
+    if args.eval_only or args.init:
+        model.load_state_dict(torch.load(args.eval_only or args.init, map_location=device))
+    if args.eval_only:
+        args.steps = 0
+    curve = None if args.eval_only else Curve(
         os.path.join(args.out, curve_name),
         ["step", "elapsed_s", "lr", "train_loss", "train_cls_loss", "train_offset_loss", "test_cell_accuracy", "test_instance_precision", "test_instance_recall"],
     )
@@ -235,13 +241,15 @@ def main(argv=None):
         if out_of_time:
             print(f"stopped at the {args.max_minutes} min budget", flush=True)
             break
-    curve.close()
+    if curve is not None:
+        curve.close()
     train_minutes = (time.time() - t_train) / 60
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
 
     met = evaluate(model, test, device)
-    met["train_minutes"] = train_minutes
+    if not args.eval_only:
+        met["train_minutes"] = train_minutes
     met["mmac_576x448"] = macs / 1e6
     for k_, v_ in met.items():
         print(f"  {k_} = {v_:.4g}")
