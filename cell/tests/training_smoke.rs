@@ -87,7 +87,10 @@ fn smoke_trains_and_exports_both_networks() {
         assert_eq!(names, outputs);
         let bytes = std::fs::read(m.model_path()).unwrap();
         use sha2::Digest;
-        let sha = format!("{:x}", sha2::Sha256::digest(&bytes));
+        let sha: String = sha2::Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
         assert_eq!(sha, m.sha256, "{name}: manifest checksum");
         let training = m.training.expect("trained models carry provenance");
         assert!(out.join(&training.curve).is_file());
