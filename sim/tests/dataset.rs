@@ -183,6 +183,85 @@ fn same_seed_same_bytes_resume_and_round_trip() {
 }
 
 #[test]
+fn feeder_frames_are_crowded_full_resolution_bop_scenes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let models = models(tmp.path());
+    let cfg = |out: PathBuf| {
+        let mut cfg = tiny(out);
+        cfg.crops_train = 0;
+        cfg.crops_test = 0;
+        cfg.overviews_train = 0;
+        cfg.overviews_test = 0;
+        cfg.feeder_train = 2;
+        cfg.feeder_test = 1;
+        cfg.feeder_camera_distance = Some(1.8);
+        cfg
+    };
+    let a = tmp.path().join("a");
+    let summary = generate(&cfg(a.clone()), &models).unwrap();
+    assert_eq!(summary.feeders_rendered, 3);
+    let b = tmp.path().join("b");
+    generate(&cfg(b.clone()), &models).unwrap();
+    assert_eq!(tree(&a), tree(&b), "same seed, different feeder frames");
+
+    let cam = perception::camera::Camera::basler_seed();
+    for (split, n) in [("train_feeder", 2), ("test_feeder", 1)] {
+        let ds = BopDataset::load(&a, split).unwrap();
+        let images: Vec<_> = ds.scenes.iter().flat_map(|s| &s.images).collect();
+        assert_eq!(images.len(), n, "{split}");
+        for im in images {
+            let c = &im.camera;
+            // Full resolution: the camera's focal length, principal point shifted to the window.
+            assert!((c.cam_K[0] - cam.fx).abs() < 1e-9 && (c.cam_K[4] - cam.fy).abs() < 1e-9);
+            assert_eq!(
+                (c.width % 16, c.height % 16),
+                (0, 0),
+                "{split}: {}x{}",
+                c.width,
+                c.height
+            );
+            assert!(
+                c.width <= 1024 && c.height <= 1024,
+                "{split}: window {}x{}",
+                c.width,
+                c.height
+            );
+            // 3–4 copies of each of the two parts, every one inside the window.
+            assert!(
+                (6..=8).contains(&im.gt.len()),
+                "{split}: {} parts",
+                im.gt.len()
+            );
+            let mut centres = Vec::new();
+            for (k, info) in im.info.iter().enumerate() {
+                let p = im.camera_T_part(k).unwrap().translation.vector;
+                let (u, v) = (
+                    c.cam_K[0] * p.x / p.z + c.cam_K[2],
+                    c.cam_K[4] * p.y / p.z + c.cam_K[5],
+                );
+                assert!(u > 0.0 && v > 0.0 && u < c.width as f64 && v < c.height as f64);
+                assert!(info.px_count_all > 0);
+                centres.push(p);
+            }
+            // Crowded: some pair of parts is closer than a part's width (they touch or nearly).
+            let closest = centres
+                .iter()
+                .enumerate()
+                .flat_map(|(i, p)| centres[i + 1..].iter().map(move |q| (p - q).norm()))
+                .fold(f64::INFINITY, f64::min);
+            assert!(closest < 0.009, "{split}: closest parts {closest} m apart");
+            if split == "test_feeder" {
+                // --camera-distance: the camera is 1.8 m above the table.
+                let r = nalgebra::Matrix3::from_row_slice(&c.cam_R_w2c);
+                let t = nalgebra::Vector3::from_row_slice(&c.cam_t_w2c);
+                let eye = -(r.transpose() * t);
+                assert!((eye.z - 1800.0).abs() < 1e-6, "camera height {} mm", eye.z);
+            }
+        }
+    }
+}
+
+#[test]
 fn bad_input_is_a_clear_error_and_leaves_nothing_half_written() {
     let tmp = tempfile::tempdir().unwrap();
     let models = models(tmp.path());

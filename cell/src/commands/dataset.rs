@@ -39,6 +39,17 @@ pub struct Args {
     /// Overview images for testing (BOP test; full set: 200).
     #[arg(long, default_value_t = 5)]
     pub test_overviews: usize,
+    /// Feeder frames for segmentation training (BOP train_feeder): 3–4 parts of each kind
+    /// dropped so several touch, at full camera resolution, through a window covering them.
+    #[arg(long, default_value_t = 0)]
+    pub train_feeder: usize,
+    /// Feeder frames for testing (BOP test_feeder, what `cell eval` reads).
+    #[arg(long, default_value_t = 0)]
+    pub test_feeder: usize,
+    /// Camera height above the table for the test feeder frames, metres (default: randomised
+    /// 1.4–1.9 m like the training frames), e.g. 1.4 or 1.8 to evaluate at those distances.
+    #[arg(long)]
+    pub camera_distance: Option<f64>,
     /// Fewest copies of each part per overview scene.
     #[arg(long, default_value_t = 1)]
     pub min_per_class: usize,
@@ -104,6 +115,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     cfg.overviews_train = args.train_overviews;
     cfg.overviews_test = args.test_overviews;
     cfg.parts_per_class = (args.min_per_class, args.max_per_class);
+    cfg.feeder_train = args.train_feeder;
+    cfg.feeder_test = args.test_feeder;
+    cfg.feeder_camera_distance = args.camera_distance;
     cfg.render.supersampling = args.supersampling;
     cfg.overview_scale = args.overview_scale;
     cfg.progress = !args.quiet;
@@ -123,9 +137,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         println!("{}: contact sheet", path.display());
     }
     println!(
-        "{}: {} overview images and {} crop drops rendered, {} items already complete, {:.1} s",
+        "{}: {} overview images, {} feeder frames and {} crop drops rendered, {} items already \
+         complete, {:.1} s",
         args.out.display(),
         summary.overviews_rendered,
+        summary.feeders_rendered,
         summary.crop_groups_rendered,
         summary.skipped,
         elapsed

@@ -73,6 +73,17 @@ pub struct DatasetConfig {
     pub overview_size: (u32, u32),
     /// Copies of each part per overview scene, inclusive range.
     pub parts_per_class: (usize, usize),
+    /// Feeder frames (crowded parts, full resolution, BOP `train_feeder/`) for training.
+    pub feeder_train: usize,
+    /// Feeder frames for testing (BOP `test_feeder/`).
+    pub feeder_test: usize,
+    /// Copies of each part per feeder frame, inclusive range.
+    pub feeder_per_class: (usize, usize),
+    /// Half-size of the square the feeder parts are dropped into, metres (small: they touch).
+    pub feeder_drop_half: f64,
+    /// Camera height above the table for the test feeder frames, metres (`None`: randomised
+    /// like the training frames).
+    pub feeder_camera_distance: Option<f64>,
     /// Randomisation ranges.
     pub randomisation: Randomisation,
     /// Render settings.
@@ -105,6 +116,11 @@ impl DatasetConfig {
             overview_scale: 0.4,
             overview_size: (1000, 700),
             parts_per_class: (1, 3),
+            feeder_train: 0,
+            feeder_test: 0,
+            feeder_per_class: (3, 4),
+            feeder_drop_half: 0.015,
+            feeder_camera_distance: None,
             randomisation: Randomisation::default(),
             render: RenderSettings::default(),
             depth_scale: 0.1,
@@ -129,6 +145,25 @@ impl DatasetConfig {
             return Err(DatasetError::Config(
                 "parts per class range is empty: it allows no parts (0..=0)".into(),
             ));
+        }
+        let (flo, fhi) = self.feeder_per_class;
+        if flo > fhi || fhi == 0 {
+            return Err(DatasetError::Config(format!(
+                "feeder parts per class range {flo}..={fhi} is inverted or empty"
+            )));
+        }
+        if !(self.feeder_drop_half.is_finite() && self.feeder_drop_half > 0.0) {
+            return Err(DatasetError::Config(format!(
+                "feeder drop half-size {} m must be positive",
+                self.feeder_drop_half
+            )));
+        }
+        if let Some(d) = self.feeder_camera_distance
+            && !(d.is_finite() && d >= 0.1)
+        {
+            return Err(DatasetError::Config(format!(
+                "feeder camera distance {d} m must be at least 0.1 m"
+            )));
         }
         if self.crop_size == 0 || self.crop_size > self.camera.width.min(self.camera.height) {
             return Err(DatasetError::Config(format!(

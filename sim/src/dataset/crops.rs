@@ -13,7 +13,8 @@ use super::config::item_seed;
 use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, Window, instance_mask, render};
-use crate::scene::{PartModel, SceneRequest, dress_scene, drop_parts, label_instance};
+use crate::scene::{PartModel, PlacedPart, SceneRequest, dress_scene, drop_parts, label_instance};
+use crate::stable_poses::{DropOutcome, leaning};
 
 /// Labels of one crop (crops/PART/SPLIT/NNNNNN.json); units mm and px, OpenCV camera frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -50,6 +51,21 @@ pub struct CropLabel {
     pub rgb: String,
     /// The visible-mask file, beside this one.
     pub mask: String,
+}
+
+/// Drops of a crop group redone at most this often while the target leans on a neighbour.
+const LEAN_RETRIES: usize = 30;
+
+/// Whether a placed part rests on a neighbour rather than on the table (see
+/// [`crate::stable_poses::leaning`]).
+pub(crate) fn target_leans(part: &PlacedPart, model: &PartModel) -> bool {
+    let outcome = DropOutcome {
+        rotation: part.table_T_part.rotation,
+        height: part.table_T_part.translation.z,
+        settled: true,
+        time: 0.0,
+    };
+    leaning(&[outcome], &model.mesh)[0]
 }
 
 /// Folder of a part's crops of a split.
@@ -92,8 +108,18 @@ pub(crate) fn write_crop_group(
         rng.random_range(-0.06..=0.06),
         rng.random_range(-0.06..=0.06),
     );
-    let parts = drop_parts(models, &counts, centre, 0.012, &mut rng)
+    // A target that came to rest on a neighbour is dropped again (up to LEAN_RETRIES times):
+    // the crops must show the parts' stable poses on the table with their probabilities, not
+    // the leaning poses a crowded drop adds (a quarter of the crops otherwise).
+    let mut parts = drop_parts(models, &counts, centre, 0.012, &mut rng)
         .map_err(crate::scene::SceneError::from)?;
+    for _ in 0..LEAN_RETRIES {
+        if !target_leans(&parts[target], &models[model]) {
+            break;
+        }
+        parts = drop_parts(models, &counts, centre, 0.012, &mut rng)
+            .map_err(crate::scene::SceneError::from)?;
+    }
     let request = SceneRequest {
         counts,
         drop_centre: centre,

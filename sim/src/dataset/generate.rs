@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::bop::{BopCamera, GtInfo, GtPose, SceneCamera, write_models};
 use super::crops::{crop_dir, write_crop_group};
+use super::feeder::{feeder_dir, feeder_scene_dir, write_feeder};
 use super::files::{create_dir, read_json, write_json};
 use super::overview::{Fragment, fragment_path, write_overview};
 use super::{DatasetConfig, DatasetError, Split};
@@ -17,6 +18,8 @@ use crate::scene::PartModel;
 pub struct GenerateSummary {
     /// Overview images rendered by this run.
     pub overviews_rendered: usize,
+    /// Feeder frames rendered by this run.
+    pub feeders_rendered: usize,
     /// Crop drops rendered by this run.
     pub crop_groups_rendered: usize,
     /// Work items found complete from an earlier run and skipped.
@@ -27,6 +30,7 @@ pub struct GenerateSummary {
 #[derive(Debug, Clone, Copy)]
 enum Work {
     Overview(Split, usize),
+    Feeder(Split, usize),
     CropGroup(usize, Split, usize, usize),
 }
 
@@ -73,6 +77,24 @@ pub fn generate(
             }
         }
     }
+    for (split, n) in [
+        (Split::Train, cfg.feeder_train),
+        (Split::Test, cfg.feeder_test),
+    ] {
+        for i in 0..n {
+            let dir = feeder_scene_dir(cfg, split, i);
+            if i % cfg.images_per_scene == 0 {
+                for sub in ["rgb", "depth", "mask", "mask_visib", ".labels"] {
+                    create_dir(&dir.join(sub))?;
+                }
+            }
+            if fragment_path(&dir, i % cfg.images_per_scene).exists() {
+                skipped += 1;
+            } else {
+                work.push(Work::Feeder(split, i));
+            }
+        }
+    }
     for (m, model) in models.iter().enumerate() {
         for (split, n) in [
             (Split::Train, cfg.crops_train),
@@ -99,13 +121,16 @@ pub fn generate(
     } else {
         ProgressBar::hidden()
     };
-    let done: Vec<(usize, usize)> = work
+    let done: Vec<(usize, usize, usize)> = work
         .par_iter()
         .map(|w| {
             let r = match *w {
-                Work::Overview(split, i) => write_overview(cfg, models, split, i).map(|_| (1, 0)),
+                Work::Overview(split, i) => {
+                    write_overview(cfg, models, split, i).map(|_| (1, 0, 0))
+                }
+                Work::Feeder(split, i) => write_feeder(cfg, models, split, i).map(|_| (0, 0, 1)),
                 Work::CropGroup(m, split, g, n) => {
-                    write_crop_group(cfg, models, m, split, g, n).map(|k| (0, k))
+                    write_crop_group(cfg, models, m, split, g, n).map(|k| (0, k, 0))
                 }
             };
             bar.inc(1);
@@ -115,6 +140,7 @@ pub fn generate(
     bar.finish_and_clear();
     let overviews_rendered = done.iter().map(|d| d.0).sum();
     let crop_groups_rendered: usize = done.iter().map(|d| d.1).sum();
+    let feeders_rendered = done.iter().map(|d| d.2).sum();
     let crop_groups_total = work
         .iter()
         .filter(|w| matches!(w, Work::CropGroup(..)))
@@ -122,20 +148,23 @@ pub fn generate(
     assemble_scenes(cfg)?;
     Ok(GenerateSummary {
         overviews_rendered,
+        feeders_rendered,
         crop_groups_rendered,
         skipped: skipped + crop_groups_total - crop_groups_rendered,
     })
 }
 
-/// Writes each scene folder's scene_camera.json, scene_gt.json and scene_gt_info.json from the
+/// Writes each scene folder's (overview and feeder) scene_camera.json, scene_gt.json and scene_gt_info.json from the
 /// label fragments of its images.
 fn assemble_scenes(cfg: &DatasetConfig) -> Result<(), DatasetError> {
-    for (split, n) in [
-        (Split::Train, cfg.overviews_train),
-        (Split::Test, cfg.overviews_test),
+    for (folder, n) in [
+        (Split::Train.bop_dir(), cfg.overviews_train),
+        (Split::Test.bop_dir(), cfg.overviews_test),
+        (feeder_dir(Split::Train), cfg.feeder_train),
+        (feeder_dir(Split::Test), cfg.feeder_test),
     ] {
         for scene in 0..n.div_ceil(cfg.images_per_scene) {
-            let dir = cfg.out.join(split.bop_dir()).join(format!("{scene:06}"));
+            let dir = cfg.out.join(folder).join(format!("{scene:06}"));
             let mut cameras: BTreeMap<usize, SceneCamera> = BTreeMap::new();
             let mut gts: BTreeMap<usize, Vec<GtPose>> = BTreeMap::new();
             let mut infos: BTreeMap<usize, Vec<GtInfo>> = BTreeMap::new();

@@ -1,6 +1,6 @@
 //! Datasets for training and evaluating perception: BOP-format scenes (overview images with all
 //! parts, for segmentation) and the keypoint crop set (128 × 128 crops with shifted intrinsics),
-//! written deterministically, in parallel, resumably and atomically; and a BOP reader.
+//! feeder frames (crowded parts at full resolution, for segmentation), written deterministically, in parallel, resumably and atomically; and a BOP reader.
 
 #![allow(non_snake_case)]
 
@@ -8,6 +8,7 @@ mod bop;
 mod config;
 mod crops;
 mod error;
+mod feeder;
 mod files;
 mod generate;
 mod overview;

@@ -12,8 +12,10 @@ use super::bop::{GtInfo, GtPose, SceneCamera, pose_to_bop, row_major};
 use super::config::item_seed;
 use super::files::{write_depth, write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
-use crate::render::{Window, render};
-use crate::scene::{PartModel, SceneRequest, label_instances, sample_scene};
+use perception::camera::Camera;
+
+use crate::render::{RenderOutput, Window, render};
+use crate::scene::{PartModel, SampledScene, SceneRequest, label_instances, sample_scene};
 
 /// The labels of one image, kept until its scene folder's JSON files are assembled.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -83,10 +85,31 @@ pub(crate) fn write_overview(
         window,
         &cfg.render,
     );
-    let labels = label_instances(&scene.parts, models, &camera, &scene.table_T_camera, &out);
+    write_bop_image(
+        cfg, models, &scene, &camera, window, &out, &scene_dir, im, &mut rng,
+    )
+}
+
+/// Labels `out` (a render of `window` of `camera` showing `scene`), passes it through the
+/// scene's sensor and writes it as image `im` of `scene_dir`: rgb, depth, masks and the label
+/// fragment (intrinsics shifted to the window origin).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn write_bop_image(
+    cfg: &DatasetConfig,
+    models: &[PartModel],
+    scene: &SampledScene,
+    camera: &Camera,
+    window: Window,
+    out: &RenderOutput,
+    scene_dir: &Path,
+    im: usize,
+    rng: &mut ChaCha8Rng,
+) -> Result<(), DatasetError> {
+    let camera_T_table = scene.table_T_camera.inverse();
+    let labels = label_instances(&scene.parts, models, camera, &scene.table_T_camera, out);
     let image = scene
-        .metered_sensor(&out)
-        .capture(&out, &mut rng)
+        .metered_sensor(out)
+        .capture(out, rng)
         .map_err(|e| DatasetError::Config(e.to_string()))?;
 
     let (ww, wh) = (window.width, window.height);
@@ -155,5 +178,5 @@ pub(crate) fn write_overview(
         gt,
         info,
     };
-    write_json(&fragment_path(&scene_dir, im), &fragment)
+    write_json(&fragment_path(scene_dir, im), &fragment)
 }

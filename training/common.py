@@ -1,0 +1,153 @@
+"""Shared training helpers: device and thread setup, ONNX export and check, manifests, curves."""
+
+import csv
+import hashlib
+import os
+import subprocess
+import time
+
+import numpy as np
+import torch
+
+from nets import PARTS
+
+OPSET = 17
+
+
+def setup(seed, threads=2):
+    """Seeds torch and NumPy, limits CPU threads; returns the device (CUDA when present)."""
+    torch.manual_seed(seed)
+    np.random.seed(seed)
+    torch.set_num_threads(threads)
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def code_commit():
+    """The git commit of the training code (HEAD of the repository holding this file), with
+    "-dirty" when training/ has uncommitted changes."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "."], cwd=here, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        return head + ("-dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def sha256(path):
+    """Lower-case hex sha256 of a file."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def export_onnx(model, dummy, path, input_names, output_names, dynamic):
+    """Exports with the TorchScript exporter (dynamo=False), opset 17, weights inside the file;
+    checks the graph with onnx.checker."""
+    import onnx
+
+    model = model.cpu().eval()
+    torch.onnx.export(
+        model,
+        dummy,
+        path,
+        input_names=input_names,
+        output_names=output_names,
+        dynamic_axes=dynamic,
+        opset_version=OPSET,
+        dynamo=False,
+        do_constant_folding=True,
+    )
+    onnx.checker.check_model(onnx.load(path), full_check=True)
+
+
+def ort_check(path, model, dummy, reps=20):
+    """When onnxruntime is importable: max abs difference between ONNX Runtime and torch on
+    `dummy`, and the median CPU latency (ms, 2 threads) over `reps` runs. None otherwise."""
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        return None
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 2
+    opts.inter_op_num_threads = 1
+    sess = ort.InferenceSession(path, opts, providers=["CPUExecutionProvider"])
+    name = sess.get_inputs()[0].name
+    x = dummy.numpy()
+    outs = sess.run(None, {name: x})
+    with torch.no_grad():
+        ref = model.cpu().eval()(dummy)
+    diff = max(float(np.abs(o - r.numpy()).max()) for o, r in zip(outs, ref))
+    times = []
+    for _ in range(reps):
+        t = time.perf_counter()
+        sess.run(None, {name: x})
+        times.append((time.perf_counter() - t) * 1000)
+    return {"max_abs_diff": diff, "latency_ms": float(np.median(times))}
+
+
+def write_manifest(path, name, onnx_file, inputs, outputs, training):
+    """Writes a perception::onnx::manifest::ModelManifest TOML next to the model."""
+    lines = [
+        f"# Trained by training/{training.pop('script')}; rebuild with training/build_models.sh.",
+        f'name = "{name}"',
+        "parts = [" + ", ".join(f'"{p}"' for p in PARTS) + "]",
+        f'file = "{os.path.basename(onnx_file)}"',
+        f'sha256 = "{sha256(onnx_file)}"',
+        f"opset = {OPSET}",
+    ]
+    for kind, specs in (("inputs", inputs), ("outputs", outputs)):
+        for n, shape in specs:
+            lines += ["", f"[[{kind}]]", f'name = "{n}"', f"shape = {list(shape)}", 'dtype = "f32"']
+    lines += [
+        "",
+        "[training]",
+        f"dataset_seed = {int(training['dataset_seed'])}",
+        f"dataset_size = {int(training['dataset_size'])}",
+        f'code_commit = "{training["code_commit"]}"',
+        f'curve = "{training["curve"]}"',
+        "",
+        "[training.test_metrics]",
+    ]
+    for k, v in sorted(training["test_metrics"].items()):
+        lines.append(f"{k} = {float(v):.6g}")
+    with open(path, "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+class Curve:
+    """A training curve written as CSV, one row per evaluation, flushed as it goes."""
+
+    def __init__(self, path, fields):
+        self.f = open(path, "w", newline="")
+        self.w = csv.DictWriter(self.f, fieldnames=fields)
+        self.w.writeheader()
+
+    def row(self, **values):
+        self.w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in values.items()})
+        self.f.flush()
+
+    def close(self):
+        self.f.close()
+
+
+def progress_lr(opt, max_lr, step, total_steps, elapsed_s, budget_s, warmup=0.03):
+    """Sets and returns the learning rate for training progress = max(step share, time share):
+    linear warm-up over the first `warmup`, then cosine decay to zero, so the rate anneals
+    whether the step count or the time budget ends the run. Returns (lr, progress)."""
+    import math
+
+    progress = max(step / total_steps, elapsed_s / budget_s)
+    if progress < warmup:
+        lr = max_lr * (0.1 + 0.9 * progress / warmup)
+    else:
+        lr = max_lr * 0.5 * (1 + math.cos(math.pi * min(1.0, (progress - warmup) / (1 - warmup))))
+    for g in opt.param_groups:
+        g["lr"] = lr
+    return lr, progress

@@ -1,0 +1,203 @@
+"""Loading what `cell dataset` writes: keypoint crops (crops/PART/SPLIT/) and feeder frames (BOP
+scenes under train_feeder/ or test_feeder/), into NumPy arrays with the training targets.
+
+Conventions (OpenCV): pixel centres at integer coordinates. A keypoint-net output cell (i, j)
+has its centre at crop pixel (2j + 0.5, 2i + 0.5); a segmenter cell (i, j) at window pixel
+(4j + 1.5, 4i + 1.5).
+"""
+
+import json
+import os
+import sys
+
+import numpy as np
+from PIL import Image
+
+from nets import PARTS
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def load_crops(root, split, limit=None):
+    """All crops of `split` ("train"/"test") under `root`/crops, in PARTS order.
+
+    Returns dict: rgb uint8 [N,128,128,3], mask bool [N,128,128], keypoints float32 [N,9,2]
+    (crop px), part int64 [N]."""
+    rgbs, masks, kps, parts, poses = [], [], [], [], []
+    for p, name in enumerate(PARTS):
+        d = os.path.join(root, "crops", name, split)
+        if not os.path.isdir(d):
+            raise FileNotFoundError(f"{d}: no crops of part {name} (run `cell dataset` first)")
+        stems = sorted(f[:-5] for f in os.listdir(d) if f.endswith(".json"))
+        if limit is not None:
+            stems = stems[:limit]
+        for stem in stems:
+            path = os.path.join(d, stem + ".json")
+            with open(path) as f:
+                label = json.load(f)
+            if label["part"] != name:
+                raise ValueError(f"{path}: part {label['part']!r} in the folder of {name!r}")
+            rgb = _png(os.path.join(d, label["rgb"]))
+            mask = _png(os.path.join(d, label["mask"])) > 127
+            if rgb.shape != (128, 128, 3) or mask.shape != (128, 128):
+                raise ValueError(f"{path}: crop is {rgb.shape}, mask {mask.shape}; want 128x128")
+            kp = np.asarray(label["keypoints"], dtype=np.float32)
+            if kp.shape != (9, 2):
+                raise ValueError(f"{path}: {kp.shape[0]} keypoints, want 9")
+            rgbs.append(rgb)
+            masks.append(mask)
+            kps.append(kp)
+            parts.append(p)
+            poses.append(
+                (
+                    np.asarray(label["cam_R_m2c"], dtype=np.float64).reshape(3, 3),
+                    np.asarray(label["cam_t_m2c"], dtype=np.float64),
+                    np.asarray(label["cam_K"], dtype=np.float64),
+                    np.asarray(label["dist_coeffs"], dtype=np.float64),
+                )
+            )
+    return {
+        "poses": poses,
+        "rgb": np.stack(rgbs),
+        "mask": np.stack(masks),
+        "keypoints": np.stack(kps),
+        "part": np.asarray(parts, dtype=np.int64),
+    }
+
+
+def mask_cells(mask, stride):
+    """Downsamples boolean masks [..., H, W] to cells of `stride` px: true where at least half
+    of the cell's pixels are set."""
+    h, w = mask.shape[-2:]
+    m = mask.reshape(*mask.shape[:-2], h // stride, stride, w // stride, stride)
+    return m.mean(axis=(-3, -1)) >= 0.5
+
+
+def project(K, dist, p_cam):
+    """OpenCV projection of camera-frame points [N,3] with distortion (k1, k2, p1, p2, k3)."""
+    x = p_cam[:, 0] / p_cam[:, 2]
+    y = p_cam[:, 1] / p_cam[:, 2]
+    k1, k2, p1, p2, k3 = dist
+    r2 = x * x + y * y
+    radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    K = np.asarray(K).reshape(3, 3)
+    return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
+
+
+def load_feeder(root, folder, obj_to_part, limit=None):
+    """Feeder frames of BOP split folder `folder` (train_feeder / test_feeder).
+
+    Each frame: rgb uint8 [H,W,3]; at stride 4: cls int64 [H/4,W/4] (0 background, 1+part),
+    inst int64 (-1 background, else instance index), offset float32 [2,H/4,W/4] (to the
+    instance centre, px); centres float32 [K,2] (projected part origins), inst_part [K].
+    Window sides not divisible by 4 are cropped to the multiple (the right/bottom rows)."""
+    base = os.path.join(root, folder)
+    if not os.path.isdir(base):
+        raise FileNotFoundError(f"{base}: no feeder frames (cell dataset --train-feeder/--test-feeder)")
+    frames = []
+    for scene in sorted(os.listdir(base)):
+        sdir = os.path.join(base, scene)
+        if not scene.isdigit() or not os.path.isdir(sdir):
+            continue
+        with open(os.path.join(sdir, "scene_camera.json")) as f:
+            cams = json.load(f)
+        with open(os.path.join(sdir, "scene_gt.json")) as f:
+            gts = json.load(f)
+        for key in sorted(cams, key=int):
+            if limit is not None and len(frames) >= limit:
+                return frames
+            cam = cams[key]
+            im = int(key)
+            rgb = _png(os.path.join(sdir, "rgb", f"{im:06d}.png"))
+            H, W = rgb.shape[0] // 4 * 4, rgb.shape[1] // 4 * 4
+            rgb = rgb[:H, :W]
+            gt = gts[key]
+            t = np.asarray([g["cam_t_m2c"] for g in gt], dtype=np.float64)
+            centres = project(cam["cam_K"], cam["dist_coeffs"], t).astype(np.float32)
+            inst_part = np.asarray([obj_to_part[g["obj_id"]] for g in gt], dtype=np.int64)
+            masks = np.stack(
+                [
+                    _png(os.path.join(sdir, "mask_visib", f"{im:06d}_{k:06d}.png"))[:H, :W] > 127
+                    for k in range(len(gt))
+                ]
+            )
+            # Share of each 4x4 cell per instance; background is what is left.
+            share = masks.reshape(len(gt), H // 4, 4, W // 4, 4).mean(axis=(2, 4))
+            bg = 1.0 - share.sum(axis=0)
+            best = share.argmax(axis=0)
+            fg = share.max(axis=0) > bg
+            inst = np.where(fg, best, -1)
+            cls = np.where(fg, inst_part[best] + 1, 0)
+            jj, ii = np.meshgrid(np.arange(W // 4), np.arange(H // 4))
+            cx = 4 * jj + 1.5
+            cy = 4 * ii + 1.5
+            offset = np.zeros((2, H // 4, W // 4), dtype=np.float32)
+            offset[0] = np.where(fg, centres[best, 0] - cx, 0)
+            offset[1] = np.where(fg, centres[best, 1] - cy, 0)
+            frames.append(
+                {
+                    "rgb": rgb,
+                    "cls": cls.astype(np.int64),
+                    "inst": inst.astype(np.int64),
+                    "offset": offset,
+                    "centres": centres,
+                    "inst_part": inst_part,
+                    "name": f"{folder}/{scene}/{im:06d}",
+                }
+            )
+    return frames
+
+
+def obj_ids(root):
+    """obj_id -> index in PARTS, from any crop label or the models' order under `root`."""
+    mapping = {}
+    for p, name in enumerate(PARTS):
+        for split in ("train", "test"):
+            d = os.path.join(root, "crops", name, split)
+            if os.path.isdir(d):
+                js = sorted(f for f in os.listdir(d) if f.endswith(".json"))
+                if js:
+                    with open(os.path.join(d, js[0])) as f:
+                        mapping[json.load(f)["obj_id"]] = p
+                    break
+    if len(mapping) != len(PARTS):
+        # Without crops: `cell dataset` numbers the parts 1.. in catalog order.
+        mapping = {i + 1: i for i in range(len(PARTS))}
+        print(f"{root}: no crop labels to map obj ids; assuming catalog order", file=sys.stderr)
+    return mapping
+
+
+def catalog_keypoints(path):
+    """The 9 keypoints (mm, part frame) of each part in PARTS order, from the catalog TOML."""
+    import tomllib
+
+    with open(path, "rb") as f:
+        cat = tomllib.load(f)
+    by_name = {p["name"]: p for p in cat.get("part", [])}
+    out = []
+    for name in PARTS:
+        kp = np.asarray(by_name[name]["keypoints"], dtype=np.float64) * 1000.0
+        if kp.shape != (9, 3):
+            raise ValueError(f"{path}: part {name} has {kp.shape[0]} keypoints, want 9")
+        out.append(kp)
+    return out
+
+
+def flipped_keypoints(data, kp3d):
+    """Per crop, the 2D keypoints of the pose turned 180 degrees about the part's z axis (the
+    parts' near symmetry), [N, 9, 2]; and the max reprojection difference of the unturned
+    keypoints from the labels (a check of the conventions), px."""
+    flip = np.diag([-1.0, -1.0, 1.0])
+    out = np.zeros_like(data["keypoints"], dtype=np.float64)
+    worst = 0.0
+    for i, (R, t, K, dist) in enumerate(data["poses"]):
+        p = kp3d[data["part"][i]]
+        same = project(K, dist, p @ R.T + t)
+        worst = max(worst, float(np.abs(same - data["keypoints"][i]).max()))
+        out[i] = project(K, dist, (p @ flip.T) @ R.T + t)
+    return out, worst

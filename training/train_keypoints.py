@@ -1,0 +1,303 @@
+"""Trains the keypoint net (one net for all three parts, part given as one-hot planes) on the
+crops of `cell dataset`, evaluates it on the test crops (mask IoU, keypoint error after RANSAC
+voting), exports keypoints.onnx and writes keypoints.toml + keypoints_curve.csv.
+
+Usage: python train_keypoints.py --train DATA_TRAIN --test DATA_TEST --out scenarios/models/usbc
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
+from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
+from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
+
+GRID = 64  # output cells per side (stride 2 on 128 px)
+
+
+def cell_centres(device):
+    """Crop-pixel centres of the output cells: x [64, 64], y [64, 64]."""
+    c = torch.arange(GRID, dtype=torch.float32, device=device) * 2 + 0.5
+    y, x = torch.meshgrid(c, c, indexing="ij")
+    return x, y
+
+
+def vector_targets(kp, cx, cy):
+    """Unit vectors [B, 18, 64, 64] from every cell centre to each keypoint (x, y per keypoint)."""
+    dx = kp[:, :, 0, None, None] - cx
+    dy = kp[:, :, 1, None, None] - cy
+    n = torch.sqrt(dx * dx + dy * dy).clamp_min(1e-6)
+    v = torch.stack([dx / n, dy / n], dim=2)  # B, 9, 2, 64, 64
+    return v.reshape(kp.shape[0], 2 * N_KEYPOINTS, GRID, GRID)
+
+
+def make_input(rgb_u8, part, device, augment=False, gen=None):
+    """[B, 6, 128, 128] float: RGB / 255 (optionally with gain and noise jitter) + one-hot planes."""
+    x = rgb_u8.to(device).float() / 255.0
+    b = x.shape[0]
+    if augment:
+        gain = 1 + 0.15 * (2 * torch.rand(b, 1, 1, 1, generator=gen) - 1)
+        tint = 1 + 0.05 * (2 * torch.rand(b, 3, 1, 1, generator=gen) - 1)
+        noise = 0.01 * torch.randn(x.shape, generator=gen)
+        x = (x * (gain * tint).to(device) + noise.to(device)).clamp(0, 1)
+    onehot = F.one_hot(part.to(device), len(PARTS)).float()[:, :, None, None].expand(b, len(PARTS), 128, 128)
+    return torch.cat([x, onehot], dim=1)
+
+
+def losses(mask_logit, vectors, mask_t, vec_t):
+    """PVNet loss: BCE on the mask + smooth-L1 on the vectors inside the true mask (1:1)."""
+    l_mask = F.binary_cross_entropy_with_logits(mask_logit, mask_t)
+    w = mask_t
+    l_vec = F.smooth_l1_loss(vectors * w, vec_t * w, reduction="sum") / (w.sum() * 2 * N_KEYPOINTS + 1.0)
+    return l_mask, l_vec
+
+
+def vote(mask, vectors, rng, hyps=128, cos_thr=0.99):
+    """RANSAC voting of one crop (NumPy): mask bool [64, 64], vectors [18, 64, 64] -> keypoints
+    [9, 2] in crop px (NaN where fewer than 8 foreground cells)."""
+    ii, jj = np.nonzero(mask)
+    out = np.full((N_KEYPOINTS, 2), np.nan)
+    if len(ii) < 8:
+        return out
+    p = np.stack([2 * jj + 0.5, 2 * ii + 0.5], axis=1)  # M, 2
+    v = vectors.reshape(N_KEYPOINTS, 2, GRID, GRID)[:, :, ii, jj].transpose(0, 2, 1)  # 9, M, 2
+    a = rng.integers(0, len(ii), hyps)
+    b = rng.integers(0, len(ii), hyps)
+    pa, pb = p[a], p[b]  # H, 2
+    va, vb = v[:, a], v[:, b]  # 9, H, 2
+    # pa + s va = pb + t vb  ->  [va, -vb] [s, t]^T = pb - pa
+    det = va[..., 0] * (-vb[..., 1]) - va[..., 1] * (-vb[..., 0])
+    r = pb - pa
+    s = (r[:, 0] * (-vb[..., 1]) - r[:, 1] * (-vb[..., 0])) / np.where(np.abs(det) < 1e-9, np.nan, det)
+    h = pa + s[..., None] * va  # 9, H, 2
+    d = h[:, :, None, :] - p[None, None]  # 9, H, M, 2
+    dn = np.linalg.norm(d, axis=-1) + 1e-9
+    cos = (d * v[:, None]).sum(-1) / dn
+    score = np.nan_to_num((cos > cos_thr).sum(-1) * np.isfinite(s), nan=0)
+    best = score.argmax(axis=1)
+    for k in range(N_KEYPOINTS):
+        inl = cos[k, best[k]] > cos_thr
+        if inl.sum() < 2:
+            continue
+        vk, pk = v[k, inl], p[inl]
+        n = np.stack([-vk[:, 1], vk[:, 0]], axis=1)  # line normals
+        A = n.T @ n
+        rhs = (n * (n * pk).sum(1, keepdims=True)).sum(0)
+        if abs(np.linalg.det(A)) < 1e-9:
+            out[k] = h[k, best[k]]
+        else:
+            out[k] = np.linalg.solve(A, rhs)
+    return out
+
+
+@torch.no_grad()
+def predict(model, data, device, batch=64):
+    """Mask logits [N, 64, 64] and vectors [N, 18, 64, 64] of a crop set."""
+    model.eval()
+    ms, vs = [], []
+    for s in range(0, len(data["part"]), batch):
+        x = make_input(data["rgb_t"][s : s + batch], data["part_t"][s : s + batch], device)
+        m, v = model(x)
+        ms.append(m[:, 0].cpu().numpy())
+        vs.append(v.cpu().numpy())
+    return np.concatenate(ms), np.concatenate(vs)
+
+
+def evaluate(model, data, device, voting=False):
+    """Test metrics: mask IoU (pooled over cells), mean vector angle error inside the true mask
+    (deg); with `voting`, keypoint errors (px) after RANSAC voting, overall and per part."""
+    m, v = predict(model, data, device)
+    pred = m > 0
+    gt = data["mask64"]
+    inter = (pred & gt).sum()
+    union = (pred | gt).sum()
+    metrics = {"mask_iou": float(inter / max(union, 1))}
+    ious = (pred & gt).sum((1, 2)) / np.maximum((pred | gt).sum((1, 2)), 1)
+    metrics["mask_iou_median"] = float(np.median(ious))
+    vt = data["vec64"]
+    dot = (v * vt).reshape(len(v), N_KEYPOINTS, 2, GRID, GRID).sum(2)
+    ang = np.degrees(np.arccos(np.clip(dot, -1, 1)))  # N, 9, 64, 64
+    sel = np.broadcast_to(gt[:, None], ang.shape)
+    metrics["vector_angle_mean_deg"] = float(ang[sel].mean())
+    if voting:
+        votes = [vote(pred[i], v[i], np.random.default_rng(i)) for i in range(len(v))]
+        errs = np.stack([np.linalg.norm(votes[i] - data["keypoints"][i], axis=1) for i in range(len(v))])
+        ok = np.isfinite(errs)
+        errs_f = np.where(ok, errs, 1e3)  # a failed vote counts as a large error in the median
+        metrics["keypoint_px_median"] = float(np.median(errs_f))
+        metrics["keypoint_px_mean"] = float(errs[ok].mean()) if ok.any() else float("nan")
+        metrics["centre_px_median"] = float(np.median(errs_f[:, 8]))
+        metrics["vote_failed_fraction"] = float(1 - ok.mean())
+        if "flipped" in data:
+            # Up to the parts' near 180-degree symmetry: the better of the true and turned labels.
+            errs_t = np.stack([np.linalg.norm(votes[i] - data["flipped"][i], axis=1) for i in range(len(v))])
+            errs_t = np.where(np.isfinite(errs_t), errs_t, 1e3)
+            turned = errs_t.mean(1) < errs_f.mean(1)
+            metrics["flip_fraction"] = float(turned.mean())
+            metrics["keypoint_px_median_up_to_flip"] = float(np.median(np.where(turned[:, None], errs_t, errs_f)))
+        for p, name in enumerate(PARTS):
+            sel_p = data["part"] == p
+            metrics[f"keypoint_px_median_{name}"] = float(np.median(errs_f[sel_p]))
+            metrics[f"mask_iou_median_{name}"] = float(np.median(ious[sel_p]))
+    return metrics
+
+
+def prepare(raw, device):
+    """Adds the tensors and stride-2 targets to a crop set."""
+    raw["rgb_t"] = torch.from_numpy(raw["rgb"]).permute(0, 3, 1, 2).contiguous()
+    raw["part_t"] = torch.from_numpy(raw["part"])
+    raw["mask64"] = mask_cells(raw["mask"], 2)
+    raw["mask64_t"] = torch.from_numpy(raw["mask64"]).float()[:, None]
+    raw["kp_t"] = torch.from_numpy(raw["keypoints"])
+    cx, cy = cell_centres("cpu")
+    raw["vec64"] = np.concatenate(
+        [vector_targets(raw["kp_t"][s : s + 256], cx, cy).numpy() for s in range(0, len(raw["part"]), 256)]
+    )
+    return raw
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--train", required=True, help="dataset root with crops/PART/train")
+    ap.add_argument("--test", required=True, help="dataset root with crops/PART/test")
+    ap.add_argument("--out", required=True, help="folder for keypoints.onnx/.toml/_curve.csv")
+    ap.add_argument("--dataset-seed", type=int, required=True, help="seed of the training set")
+    ap.add_argument("--epochs", type=int, default=20)
+    ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--lr", type=float, default=2e-3)
+    ap.add_argument("--max-minutes", type=float, default=30.0, help="stop training after this long")
+    ap.add_argument("--limit", type=int, default=None, help="crops per part to load (smoke tests)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--checkpoint", help="also save the torch weights here")
+    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
+    ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
+    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
+    args = ap.parse_args(argv)
+
+    device = setup(args.seed, args.threads)
+    t0 = time.time()
+    train = prepare(load_crops(args.train, "train", args.limit), device)
+    test = prepare(load_crops(args.test, "test", args.limit), device)
+    print(f"loaded {len(train['part'])} train / {len(test['part'])} test crops in {time.time() - t0:.0f} s", flush=True)
+    test["flipped"], worst = flipped_keypoints(test, catalog_keypoints(args.catalog))
+    if worst > 0.05:
+        sys.exit(f"{args.catalog}: keypoints reproject {worst:.3f} px off the crop labels")
+
+    model = KeypointNet().to(device)
+    macs = count_macs(model, torch.zeros(1, 6, 128, 128, device=device))
+    print(f"keypoint net: {macs / 1e6:.1f} MMAC per crop, {sum(p.numel() for p in model.parameters())} parameters")
+    opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
+    n = len(train["part"])
+    steps_per_epoch = max(1, n // args.batch)
+    total = steps_per_epoch * args.epochs
+    cx, cy = cell_centres(device)
+    gen = torch.Generator().manual_seed(args.seed)
+    os.makedirs(args.out, exist_ok=True)
+    curve_name = "keypoints_curve.csv"
+    if args.eval_only:
+        model.load_state_dict(torch.load(args.eval_only, map_location=device))
+        args.epochs = 0
+    curve = None if args.eval_only else Curve(
+        os.path.join(args.out, curve_name),
+        ["epoch", "step", "elapsed_s", "lr", "train_loss", "train_mask_loss", "train_vec_loss", "test_mask_iou", "test_vector_angle_mean_deg"],
+    )
+    t_train = time.time()
+    step = 0
+    stopped = False
+    for epoch in range(args.epochs):
+        model.train()
+        perm = torch.randperm(n, generator=gen)
+        acc = np.zeros(3)
+        for s in range(steps_per_epoch):
+            lr, progress = progress_lr(opt, args.lr, step, total, time.time() - t_train, 60 * args.max_minutes)
+            idx = perm[s * args.batch : (s + 1) * args.batch]
+            x = make_input(train["rgb_t"][idx], train["part_t"][idx], device, augment=True, gen=gen)
+            mask_t = train["mask64_t"][idx].to(device)
+            vec_t = vector_targets(train["kp_t"][idx].to(device), cx, cy)
+            m, v = model(x)
+            l_mask, l_vec = losses(m, v, mask_t, vec_t)
+            loss = l_mask + l_vec
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            step += 1
+            acc += [loss.item(), l_mask.item(), l_vec.item()]
+            if (time.time() - t_train) / 60 >= args.max_minutes:
+                stopped = True
+                break
+        k = s + 1
+        met = evaluate(model, test, device)
+        curve.row(
+            epoch=epoch + 1,
+            step=step,
+            elapsed_s=time.time() - t_train,
+            lr=lr,
+            train_loss=acc[0] / k,
+            train_mask_loss=acc[1] / k,
+            train_vec_loss=acc[2] / k,
+            test_mask_iou=met["mask_iou"],
+            test_vector_angle_mean_deg=met["vector_angle_mean_deg"],
+        )
+        print(
+            f"epoch {epoch + 1}/{args.epochs} step {step} {time.time() - t_train:.0f} s loss {acc[0] / k:.4f} "
+            f"(mask {acc[1] / k:.4f} vec {acc[2] / k:.4f}) test IoU {met['mask_iou']:.3f} angle {met['vector_angle_mean_deg']:.2f} deg",
+            flush=True,
+        )
+        if stopped:
+            print(f"stopped at the {args.max_minutes} min budget", flush=True)
+            break
+    if curve is not None:
+        curve.close()
+    train_minutes = (time.time() - t_train) / 60
+    if args.checkpoint:
+        torch.save(model.state_dict(), args.checkpoint)
+
+    met = evaluate(model, test, device, voting=True)
+    if not args.eval_only:
+        met["train_minutes"] = train_minutes
+    met["mmac_per_crop"] = macs / 1e6
+    for k_, v_ in met.items():
+        print(f"  {k_} = {v_:.4g}")
+
+    onnx_path = os.path.join(args.out, "keypoints.onnx")
+    dummy = make_input(test["rgb_t"][:2], test["part_t"][:2], "cpu")
+    export_onnx(
+        model,
+        dummy,
+        onnx_path,
+        ["crop"],
+        ["mask", "vectors"],
+        {"crop": {0: "n"}, "mask": {0: "n"}, "vectors": {0: "n"}},
+    )
+    chk = ort_check(onnx_path, model, make_input(test["rgb_t"][:12], test["part_t"][:12], "cpu"))
+    if chk is not None:
+        print(f"  onnxruntime: max |diff| {chk['max_abs_diff']:.2e}, {chk['latency_ms']:.2f} ms for 12 crops (2 threads)")
+        if chk["max_abs_diff"] > 1e-3:
+            sys.exit(f"{onnx_path}: ONNX Runtime disagrees with torch by {chk['max_abs_diff']}")
+        met["ort_ms_12_crops"] = chk["latency_ms"]
+    write_manifest(
+        os.path.join(args.out, "keypoints.toml"),
+        "usbc-keypoints",
+        onnx_path,
+        [("crop", [-1, 6, 128, 128])],
+        [("mask", [-1, 1, 64, 64]), ("vectors", [-1, 18, 64, 64])],
+        {
+            "script": "train_keypoints.py",
+            "dataset_seed": args.dataset_seed,
+            "dataset_size": n,
+            "code_commit": code_commit(),
+            "curve": curve_name,
+            "test_metrics": met,
+        },
+    )
+    print(f"wrote {onnx_path} and keypoints.toml")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,291 @@
+"""Trains the feeder segmenter (class logits + instance-centre offsets at stride 4) on the
+feeder frames of `cell dataset` (train_feeder/), evaluates it on test_feeder/ (per-class cell
+accuracy, instance precision/recall at IoU 0.5 after grouping cells by their voted centres),
+exports segmenter.onnx and writes segmenter.toml + segmenter_curve.csv.
+
+Usage: python train_segmenter.py --train DATA_TRAIN --test DATA_TEST --out scenarios/models/usbc
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
+from data import load_feeder, obj_ids
+from nets import PARTS, Segmenter, count_macs
+
+IGNORE = -100
+MIN_GT_CELLS = 16
+"""GT instances with fewer visible stride-4 cells (256 px, ~6 % of a part) are not counted."""
+
+
+def batch_of(frames, idx, size, rng, augment):
+    """Random `size` x `size` crops (origins on the 4-px grid) of the frames `idx`; frames
+    smaller than `size` are padded by edge replication with ignored labels."""
+    xs, cls, off = [], [], []
+    c = size // 4
+    for i in idx:
+        f = frames[i]
+        H, W = f["rgb"].shape[:2]
+        ph, pw = max(0, size - H), max(0, size - W)
+        rgb = f["rgb"]
+        lab = f["cls"]
+        o = f["offset"]
+        if ph or pw:
+            rgb = np.pad(rgb, ((0, ph), (0, pw), (0, 0)), mode="edge")
+            lab = np.pad(lab, ((0, ph // 4 + 1), (0, pw // 4 + 1)), constant_values=IGNORE)
+            o = np.pad(o, ((0, 0), (0, ph // 4 + 1), (0, pw // 4 + 1)))
+        Hp, Wp = rgb.shape[:2]
+        y0 = 4 * rng.integers(0, (Hp - size) // 4 + 1)
+        x0 = 4 * rng.integers(0, (Wp - size) // 4 + 1)
+        xs.append(rgb[y0 : y0 + size, x0 : x0 + size])
+        cls.append(lab[y0 // 4 : y0 // 4 + c, x0 // 4 : x0 // 4 + c])
+        off.append(o[:, y0 // 4 : y0 // 4 + c, x0 // 4 : x0 // 4 + c])
+    x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2).float() / 255.0
+    if augment:
+        b = x.shape[0]
+        gain = 1 + 0.15 * (2 * torch.from_numpy(rng.random((b, 1, 1, 1))).float() - 1)
+        tint = 1 + 0.05 * (2 * torch.from_numpy(rng.random((b, 3, 1, 1))).float() - 1)
+        x = (x * gain * tint + 0.01 * torch.from_numpy(rng.standard_normal(x.shape)).float()).clamp(0, 1)
+    return x, torch.from_numpy(np.stack(cls)), torch.from_numpy(np.stack(off))
+
+
+def losses(logits, offsets, cls, off):
+    """Cross entropy on the classes + smooth-L1 on the offsets (in units of 32 px) of part cells."""
+    l_cls = F.cross_entropy(logits, cls, ignore_index=IGNORE)
+    fg = (cls > 0).float()[:, None]
+    s = Segmenter.OFFSET_SCALE
+    l_off = F.smooth_l1_loss(offsets * fg / s, off * fg / s, reduction="sum") / (2 * fg.sum() + 1.0)
+    return l_cls, l_off
+
+
+def pad16(rgb):
+    """Pads an HxWx3 image to multiples of 16 by edge replication (what the Rust caller does)."""
+    H, W = rgb.shape[:2]
+    return np.pad(rgb, ((0, (-H) % 16), (0, (-W) % 16), (0, 0)), mode="edge")
+
+
+def group(cls_pred, offsets, radius=20.0, min_votes=30):
+    """Instances from a class map [h, w] and offsets [2, h, w] (NumPy): every part cell votes
+    for its centre (cell centre + offset); peaks of the vote histogram (4-px bins, 3x3 sum, at
+    least `min_votes`) are the centres; each cell joins the nearest centre within `radius` px.
+    Returns (instance map [h, w] with -1 for none, class of each instance)."""
+    h, w = cls_pred.shape
+    fg = cls_pred > 0
+    ii, jj = np.nonzero(fg)
+    inst = np.full((h, w), -1, dtype=np.int64)
+    if len(ii) == 0:
+        return inst, []
+    vx = 4 * jj + 1.5 + offsets[0, ii, jj]
+    vy = 4 * ii + 1.5 + offsets[1, ii, jj]
+    bx = np.clip(np.floor(vx / 4).astype(int), 0, w - 1)
+    by = np.clip(np.floor(vy / 4).astype(int), 0, h - 1)
+    hist = np.zeros((h + 2, w + 2))
+    np.add.at(hist, (by + 1, bx + 1), 1)
+    acc = sum(hist[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+    pad = np.pad(acc, 1, constant_values=-1)
+    neigh = np.stack([pad[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
+    # Local maxima; plateaus give several, merged below (centres closer than `radius`).
+    is_peak = (acc >= min_votes) & (acc >= neigh.max(0))
+    py, px = np.nonzero(is_peak)
+    if len(py) == 0:
+        return inst, []
+    order = np.argsort(-acc[py, px])
+    centres = []
+    for k in order:
+        c = np.array([4 * px[k] + 2.0, 4 * py[k] + 2.0])
+        if all(np.linalg.norm(c - q) > radius for q in centres):
+            centres.append(c)
+    centres = np.array(centres)
+    d = np.hypot(vx[:, None] - centres[None, :, 0], vy[:, None] - centres[None, :, 1])
+    near = d.argmin(1)
+    ok = d[np.arange(len(near)), near] <= radius
+    inst[ii[ok], jj[ok]] = near[ok]
+    classes = []
+    for k in range(len(centres)):
+        sel = inst == k
+        classes.append(int(np.bincount(cls_pred[sel], minlength=len(PARTS) + 1)[1:].argmax() + 1) if sel.any() else 0)
+    return inst, classes
+
+
+@torch.no_grad()
+def evaluate(model, frames, device, max_frames=None):
+    """Per-class cell accuracy (recall of each class's cells), overall cell accuracy, and
+    instance precision/recall at IoU >= 0.5 with the class required to match."""
+    model.eval()
+    n_cls = len(PARTS) + 1
+    conf = np.zeros((n_cls, n_cls), dtype=np.int64)
+    tp = n_pred = n_gt = 0
+    for f in frames[:max_frames]:
+        H, W = f["rgb"].shape[:2]
+        x = torch.from_numpy(pad16(f["rgb"])).permute(2, 0, 1)[None].float().to(device) / 255.0
+        logits, offsets = model(x)
+        h, w = H // 4, W // 4
+        pred = logits[0].argmax(0).cpu().numpy()[:h, :w]
+        off = offsets[0].cpu().numpy()[:, :h, :w]
+        conf += np.bincount(f["cls"].ravel() * n_cls + pred.ravel(), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
+        inst, classes = group(pred, off)
+        gt_ids = [k for k in range(len(f["inst_part"])) if (f["inst"] == k).sum() >= MIN_GT_CELLS]
+        n_gt += len(gt_ids)
+        n_pred += len(classes)
+        used = set()
+        for k in gt_ids:
+            g = f["inst"] == k
+            best, best_iou = None, 0.5
+            for q, c in enumerate(classes):
+                if q in used or c != f["inst_part"][k] + 1:
+                    continue
+                p = inst == q
+                iou = (g & p).sum() / max((g | p).sum(), 1)
+                if iou >= best_iou:
+                    best, best_iou = q, iou
+            if best is not None:
+                used.add(best)
+                tp += 1
+    m = {"cell_accuracy": float(np.trace(conf) / max(conf.sum(), 1))}
+    for c, name in enumerate(["background"] + PARTS):
+        m[f"cell_accuracy_{name}"] = float(conf[c, c] / max(conf[c].sum(), 1))
+    m["instance_precision"] = tp / max(n_pred, 1)
+    m["instance_recall"] = tp / max(n_gt, 1)
+    m["instances_gt"] = float(n_gt)
+    return m
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--train", required=True, help="dataset root with train_feeder/")
+    ap.add_argument("--test", required=True, help="dataset root with test_feeder/")
+    ap.add_argument("--out", required=True, help="folder for segmenter.onnx/.toml/_curve.csv")
+    ap.add_argument("--dataset-seed", type=int, required=True, help="seed of the training set")
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--batch", type=int, default=8)
+    ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
+    ap.add_argument("--lr", type=float, default=2e-3)
+    ap.add_argument("--eval-every", type=int, default=250)
+    ap.add_argument("--max-minutes", type=float, default=30.0, help="stop training after this long")
+    ap.add_argument("--limit", type=int, default=None, help="frames to load per split (smoke tests)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--checkpoint", help="also save the torch weights here")
+    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
+    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
+    ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a second, fine-tuning stage)")
+    args = ap.parse_args(argv)
+    if args.size % 16:
+        sys.exit(f"--size {args.size} must be a multiple of 16")
+
+    device = setup(args.seed, args.threads)
+    rng = np.random.default_rng(args.seed)
+    t0 = time.time()
+    mapping = obj_ids(args.train)
+    train = load_feeder(args.train, "train_feeder", mapping, args.limit)
+    test = load_feeder(args.test, "test_feeder", mapping, args.limit)
+    print(f"loaded {len(train)} train / {len(test)} test feeder frames in {time.time() - t0:.0f} s", flush=True)
+
+    model = Segmenter().to(device)
+    macs = count_macs(model, torch.zeros(1, 3, 448, 576, device=device))
+    print(f"segmenter: {macs / 1e6:.0f} MMAC per 576x448 window, {sum(p.numel() for p in model.parameters())} parameters")
+    opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
+    os.makedirs(args.out, exist_ok=True)
+    curve_name = "segmenter_curve.csv"
+    if args.eval_only or args.init:
+        model.load_state_dict(torch.load(args.eval_only or args.init, map_location=device))
+    if args.eval_only:
+        args.steps = 0
+    curve = None if args.eval_only else Curve(
+        os.path.join(args.out, curve_name),
+        ["step", "elapsed_s", "lr", "train_loss", "train_cls_loss", "train_offset_loss", "test_cell_accuracy", "test_instance_precision", "test_instance_recall"],
+    )
+    t_train = time.time()
+    acc = np.zeros(3)
+    k = 0
+    for step in range(1, args.steps + 1):
+        model.train()
+        lr, progress = progress_lr(opt, args.lr, step - 1, args.steps, time.time() - t_train, 60 * args.max_minutes)
+        idx = rng.integers(0, len(train), args.batch)
+        x, cls, off = batch_of(train, idx, args.size, rng, augment=True)
+        logits, offsets = model(x.to(device))
+        l_cls, l_off = losses(logits, offsets, cls.to(device), off.to(device))
+        loss = l_cls + l_off
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        acc += [loss.item(), l_cls.item(), l_off.item()]
+        k += 1
+        out_of_time = (time.time() - t_train) / 60 >= args.max_minutes
+        if step % args.eval_every == 0 or step == args.steps or out_of_time:
+            met = evaluate(model, test, device, max_frames=20)
+            curve.row(
+                step=step,
+                elapsed_s=time.time() - t_train,
+                lr=lr,
+                train_loss=acc[0] / k,
+                train_cls_loss=acc[1] / k,
+                train_offset_loss=acc[2] / k,
+                test_cell_accuracy=met["cell_accuracy"],
+                test_instance_precision=met["instance_precision"],
+                test_instance_recall=met["instance_recall"],
+            )
+            print(
+                f"step {step}/{args.steps} {time.time() - t_train:.0f} s loss {acc[0] / k:.4f} (cls {acc[1] / k:.4f} "
+                f"off {acc[2] / k:.4f}) test acc {met['cell_accuracy']:.3f} P {met['instance_precision']:.3f} "
+                f"R {met['instance_recall']:.3f}",
+                flush=True,
+            )
+            acc[:] = 0
+            k = 0
+        if out_of_time:
+            print(f"stopped at the {args.max_minutes} min budget", flush=True)
+            break
+    if curve is not None:
+        curve.close()
+    train_minutes = (time.time() - t_train) / 60
+    if args.checkpoint:
+        torch.save(model.state_dict(), args.checkpoint)
+
+    met = evaluate(model, test, device)
+    if not args.eval_only:
+        met["train_minutes"] = train_minutes
+    met["mmac_576x448"] = macs / 1e6
+    for k_, v_ in met.items():
+        print(f"  {k_} = {v_:.4g}")
+
+    onnx_path = os.path.join(args.out, "segmenter.onnx")
+    export_onnx(
+        model,
+        torch.zeros(1, 3, 256, 320),
+        onnx_path,
+        ["image"],
+        ["logits", "offsets"],
+        {"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h4", 3: "w4"}, "offsets": {0: "n", 2: "h4", 3: "w4"}},
+    )
+    chk = ort_check(onnx_path, model, torch.rand(1, 3, 448, 576))
+    if chk is not None:
+        print(f"  onnxruntime: max |diff| {chk['max_abs_diff']:.2e}, {chk['latency_ms']:.2f} ms per 576x448 window (2 threads)")
+        if chk["max_abs_diff"] > 1e-2:
+            sys.exit(f"{onnx_path}: ONNX Runtime disagrees with torch by {chk['max_abs_diff']}")
+        met["ort_ms_576x448"] = chk["latency_ms"]
+    write_manifest(
+        os.path.join(args.out, "segmenter.toml"),
+        "usbc-segmenter",
+        onnx_path,
+        [("image", [-1, 3, -1, -1])],
+        [("logits", [-1, 4, -1, -1]), ("offsets", [-1, 2, -1, -1])],
+        {
+            "script": "train_segmenter.py",
+            "dataset_seed": args.dataset_seed,
+            "dataset_size": len(train),
+            "code_commit": code_commit(),
+            "curve": curve_name,
+            "test_metrics": met,
+        },
+    )
+    print(f"wrote {onnx_path} and segmenter.toml")
+
+
+if __name__ == "__main__":
+    main()
