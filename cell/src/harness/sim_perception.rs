@@ -81,7 +81,7 @@ pub enum SimPerception {
     /// True keypoints with noise (the paper's ablation); the camera delivers the true scene.
     KeypointNoise,
     /// The learned pipeline on rendered pixels.
-    Learned(PipelinePool),
+    Learned(Box<PipelinePool>),
 }
 
 impl SimPerception {
@@ -89,7 +89,9 @@ impl SimPerception {
     pub fn new(scenario: &Scenario) -> Result<Self, HarnessError> {
         Ok(match scenario.spec.perception.mode {
             PerceptionMode::KeypointNoise => SimPerception::KeypointNoise,
-            PerceptionMode::Learned => SimPerception::Learned(PipelinePool::new(scenario)?),
+            PerceptionMode::Learned => {
+                SimPerception::Learned(Box::new(PipelinePool::new(scenario)?))
+            }
         })
     }
 
@@ -109,7 +111,10 @@ impl SimPerception {
                 EpisodePerception::KeypointNoise(Box::new(keypoint_noise_for(scenario, episode)?))
             }
             SimPerception::Learned(pool) => EpisodePerception::Learned {
-                perception: Some(LearnedPerception::new(pool.take()?, pool.base_T_table)),
+                perception: Some(Box::new(LearnedPerception::new(
+                    pool.take()?,
+                    pool.base_T_table,
+                ))),
                 pool,
             },
         })
@@ -123,7 +128,7 @@ pub enum EpisodePerception<'a> {
     /// A pooled learned pipeline.
     Learned {
         /// The pipeline behind the seam (always `Some` until dropped).
-        perception: Option<LearnedPerception>,
+        perception: Option<Box<LearnedPerception>>,
         /// Where it returns.
         pool: &'a PipelinePool,
     },
