@@ -150,6 +150,7 @@ fn oracle(root: &Path, split: &str, catalog: &Catalog, options: &EvalOptions) ->
                     pose: estimator
                         .estimate(&part.name, &camera, &observations)
                         .map_err(|e| e.to_string()),
+                    refused: None,
                 });
                 expect.detected += 1;
             }
@@ -166,6 +167,7 @@ fn oracle(root: &Path, split: &str, catalog: &Catalog, options: &EvalOptions) ->
                 crop_origin: [-61, -61],
                 keypoints: Vec::new(),
                 pose: Err("voting found no keypoints".into()),
+                refused: None,
             });
             frames.push_back(LearnedDetections {
                 detections,

@@ -296,3 +296,34 @@ fn help_shows_the_typical_flow_one_command_a_line() {
         );
     }
 }
+
+#[test]
+fn learned_models_for_other_parts_are_refused_by_check_at_their_line() {
+    let models = tempfile::tempdir().unwrap();
+    let from = scenarios().join("models/usbc");
+    for name in ["segmenter", "keypoints"] {
+        std::fs::copy(
+            from.join(format!("{name}.onnx")),
+            models.path().join(format!("{name}.onnx")),
+        )
+        .unwrap();
+        let manifest = std::fs::read_to_string(from.join(format!("{name}.toml"))).unwrap();
+        let other = manifest.replace(
+            "parts = [\"main_shell\", \"insert_mold\", \"top_shell\"]",
+            "parts = [\"lid\", \"gasket\", \"base\"]",
+        );
+        assert_ne!(other, manifest, "{name}.toml names the catalog's parts");
+        std::fs::write(models.path().join(format!("{name}.toml")), other).unwrap();
+    }
+    let line = format!("models = {:?}", models.path().display().to_string());
+    let t = nominal_text().replace(
+        "mode = \"keypoint-noise\"",
+        &format!("mode = \"learned\"\n{line}"),
+    );
+    let f = Temp::new(&scenarios(), "learned_other.toml", t.as_bytes());
+    let err = Scenario::load(&f.0).unwrap_err();
+    let p = &err.0[0];
+    assert_eq!(p.key.as_deref(), Some("perception.models"), "{err}");
+    assert_eq!(p.line, line_of(&t, &line), "{err}");
+    assert!(p.message.contains("lid"), "{err}");
+}

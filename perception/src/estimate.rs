@@ -90,6 +90,8 @@ pub enum EstimateError {
         rms_px: f64,
         /// The gate, pixels.
         gate_px: f64,
+        /// The refused estimate (evaluation still reports its raw PnP, as the paper's Table 1).
+        estimate: Box<PoseEstimate>,
     },
 }
 
@@ -204,17 +206,22 @@ impl PoseEstimator {
         )?;
         let rms_px = pixel_rms(camera, &planar.camera_T_part, &model, &pixels);
         let gate_px = self.config.max_rms_px;
-        if !(rms_px.is_finite() && rms_px <= gate_px) {
-            return Err(EstimateError::Rms { rms_px, gate_px });
-        }
         let consistency = (-0.5 * (rms_px / gate_px).powi(2)).exp();
-        Ok(PoseEstimate {
+        let estimate = PoseEstimate {
             stable_pose: m.refiner.stable_poses()[planar.class].name.clone(),
             confidence: planar.confidence * consistency,
             rms_px,
             pnp,
             planar,
-        })
+        };
+        if !(rms_px.is_finite() && rms_px <= gate_px) {
+            return Err(EstimateError::Rms {
+                rms_px,
+                gate_px,
+                estimate: Box::new(estimate),
+            });
+        }
+        Ok(estimate)
     }
 }
 
@@ -235,4 +242,92 @@ pub fn pixel_rms(
         }
     }
     (sum / model.len().max(1) as f64).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    use super::*;
+
+    #[allow(non_snake_case)]
+    fn setup() -> (PoseEstimator, Camera, Isometry3<f64>, Vec<Point3<f64>>) {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = Catalog::load(&path).unwrap();
+        // The seed's camera 1.5 m above the table, looking down.
+        let camera_T_table = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let estimator =
+            PoseEstimator::new(&catalog, camera_T_table, EstimatorConfig::with_gate(2.0)).unwrap();
+        let part = catalog.part("insert_mold").unwrap();
+        let table_T_part = part.stable_poses[0].table_T_part(0.01, -0.02, 0.7);
+        let keypoints = estimator.keypoints("insert_mold").unwrap().to_vec();
+        (
+            estimator,
+            Camera::basler_seed(),
+            camera_T_table * table_T_part,
+            keypoints,
+        )
+    }
+
+    fn observe(
+        camera: &Camera,
+        pose: &Isometry3<f64>,
+        keypoints: &[Point3<f64>],
+    ) -> Vec<Observation> {
+        keypoints
+            .iter()
+            .enumerate()
+            .map(|(keypoint, k)| Observation {
+                keypoint,
+                pixel: camera.project(&(pose * k)).unwrap(),
+                covariance: None,
+            })
+            .collect()
+    }
+
+    #[test]
+    #[allow(non_snake_case)]
+    fn exact_keypoints_give_the_pose_and_bad_ones_are_refused_with_their_estimate() {
+        let (estimator, camera, camera_T_part, keypoints) = setup();
+        let exact = observe(&camera, &camera_T_part, &keypoints);
+        let e = estimator.estimate("insert_mold", &camera, &exact).unwrap();
+        let dt =
+            (e.planar.camera_T_part.translation.vector - camera_T_part.translation.vector).norm();
+        assert!(dt < 1e-6 && e.rms_px < 1e-3, "{dt} m, {} px", e.rms_px);
+        assert_eq!(
+            e.stable_pose,
+            estimator.models["insert_mold"].refiner.stable_poses()[0].name
+        );
+        // Three corners 30 px off: the pose no longer explains them; the gate refuses it but
+        // keeps the estimate, so evaluation can still report raw PnP.
+        let mut bad = exact.clone();
+        for o in bad.iter_mut().take(3) {
+            o.pixel.x += 30.0;
+        }
+        match estimator.estimate("insert_mold", &camera, &bad) {
+            Err(EstimateError::Rms {
+                rms_px,
+                gate_px,
+                estimate,
+            }) => {
+                assert!(rms_px > gate_px && gate_px == 2.0, "{rms_px}");
+                assert_eq!(estimate.rms_px, rms_px);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            estimator.estimate("gasket", &camera, &exact),
+            Err(EstimateError::UnknownPart(_))
+        ));
+        let mut wrong = exact;
+        wrong[0].keypoint = 42;
+        assert!(matches!(
+            estimator.estimate("insert_mold", &camera, &wrong),
+            Err(EstimateError::BadKeypoint { keypoint: 42, .. })
+        ));
+    }
 }

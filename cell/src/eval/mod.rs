@@ -660,17 +660,20 @@ fn evaluate_image(
                     ),
                 });
             }
-            if let Ok(pose) = &det.pose {
-                let raw = &pose.pnp.camera_T_part;
-                let refined = &pose.planar.camera_T_part;
-                let raw_e = pose_errors(&camera, &part.points, &part.group, truth, raw);
-                let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
-                let flip = |est: &Isometry3<f64>| {
-                    symmetric_angle(&est.rotation, &truth.rotation, &part.near_group).to_degrees()
-                };
+            let flip = |est: &Isometry3<f64>| {
+                symmetric_angle(&est.rotation, &truth.rotation, &part.near_group).to_degrees()
+            };
+            // Raw PnP is reported for every estimate, also one the reprojection gate refused
+            // (the paper's Table 1 is ungated PnP); refined figures only for accepted poses.
+            if let Some(estimate) = det.pose.as_ref().ok().or(det.refused.as_ref()) {
+                let raw = &estimate.pnp.camera_T_part;
+                rec.raw = Some(pose_errors(&camera, &part.points, &part.group, truth, raw));
                 rec.raw_flip_deg = Some(flip(raw));
+            }
+            if let (Ok(pose), Some(raw_e)) = (&det.pose, rec.raw) {
+                let refined = &pose.planar.camera_T_part;
+                let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
                 rec.refined_flip_deg = Some(flip(refined));
-                rec.raw = Some(raw_e);
                 rec.refined = Some(refined_e);
                 if !truths[m.truth].ignored {
                     keeper.offer(refined_e.mssd_mm, || GalleryItem {

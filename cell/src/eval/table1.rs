@@ -228,27 +228,28 @@ fn ratio(a: usize, b: usize) -> f64 {
 }
 
 /// One matched estimate with its truth's context.
+/// One estimate's errors against the truth (raw PnP, or refined) and its error up to the
+/// part's near-symmetry.
 struct Estimate<'a> {
     det: &'a DetectionRecord,
-    raw: PoseErrors,
-    refined: PoseErrors,
+    errors: PoseErrors,
+    flip: Option<f64>,
 }
 
 fn pose_stats(
     estimates: &[Estimate<'_>],
-    pick: fn(&Estimate<'_>) -> (PoseErrors, Option<f64>),
     counted_truths: usize,
     diameter_mm: &dyn Fn(&str) -> f64,
     options: &EvalOptions,
 ) -> PoseStats {
-    let errors: Vec<PoseErrors> = estimates.iter().map(|e| pick(e).0).collect();
+    let errors: Vec<PoseErrors> = estimates.iter().map(|e| e.errors).collect();
     let opts = |drop_outliers| SummaryOptions {
         drop_outliers,
         outlier_deg: options.outlier_deg,
     };
     let symmetry_flips = estimates
         .iter()
-        .map(pick)
+        .map(|e| (e.errors, e.flip))
         .filter(|(e, flip)| {
             e.angle_deg > options.outlier_deg && flip.is_some_and(|f| f <= options.outlier_deg)
         })
@@ -258,7 +259,7 @@ fn pose_stats(
         .map(|f| {
             let hits = estimates
                 .iter()
-                .filter(|e| pick(e).0.mssd_mm < f * diameter_mm(&e.det.part))
+                .filter(|e| e.errors.mssd_mm < f * diameter_mm(&e.det.part))
                 .count();
             ratio(hits, counted_truths)
         })
@@ -266,7 +267,7 @@ fn pose_stats(
     let mspd_recall: Vec<f64> = MSPD_PX
         .iter()
         .map(|t| {
-            let hits = estimates.iter().filter(|e| pick(e).0.mspd_px < *t).count();
+            let hits = estimates.iter().filter(|e| e.errors.mspd_px < *t).count();
             ratio(hits, counted_truths)
         })
         .collect();
@@ -293,7 +294,7 @@ fn part_summary(
     let (mut truths, mut ignored, mut touching, mut recalled, mut recalled_touching) =
         (0, 0, 0, 0, 0);
     let (mut detections, mut tp, mut fp, mut pose_failures, mut stable_right) = (0, 0, 0, 0, 0);
-    let mut estimates = Vec::new();
+    let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
     for f in frames {
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
@@ -318,18 +319,27 @@ fn part_summary(
                 continue;
             }
             tp += 1;
-            match (d.raw, d.refined) {
-                (Some(raw), Some(refined)) => {
+            // Raw PnP counts for every estimate, also one the reprojection gate refused (the
+            // paper's Table 1 is ungated); refined only for accepted poses.
+            if let Some(raw) = d.raw {
+                raw_estimates.push(Estimate {
+                    det: d,
+                    errors: raw,
+                    flip: d.raw_flip_deg,
+                });
+            }
+            match d.refined {
+                Some(refined) => {
                     if d.stable_pose.is_some() && d.stable_pose == d.true_stable_pose {
                         stable_right += 1;
                     }
-                    estimates.push(Estimate {
+                    refined_estimates.push(Estimate {
                         det: d,
-                        raw,
-                        refined,
+                        errors: refined,
+                        flip: d.refined_flip_deg,
                     });
                 }
-                _ => {
+                None => {
                     pose_failures += 1;
                     let reason = d.pose_failure.as_deref().unwrap_or("no pose given");
                     *kinds.entry(failure_kind(reason)).or_default() += 1;
@@ -337,20 +347,8 @@ fn part_summary(
             }
         }
     }
-    let raw = pose_stats(
-        &estimates,
-        |e| (e.raw, e.det.raw_flip_deg),
-        truths,
-        diameter_mm,
-        options,
-    );
-    let refined = pose_stats(
-        &estimates,
-        |e| (e.refined, e.det.refined_flip_deg),
-        truths,
-        diameter_mm,
-        options,
-    );
+    let raw = pose_stats(&raw_estimates, truths, diameter_mm, options);
+    let refined = pose_stats(&refined_estimates, truths, diameter_mm, options);
     PartSummary {
         part: part.unwrap_or("all").into(),
         truths,
@@ -369,11 +367,11 @@ fn part_summary(
             v.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
             v
         },
-        poses: estimates.len(),
+        poses: refined_estimates.len(),
         raw,
         refined,
         stable_pose_right: stable_right,
-        stable_pose_rate: ratio(stable_right, estimates.len()),
+        stable_pose_rate: ratio(stable_right, refined_estimates.len()),
     }
 }
 

@@ -53,6 +53,8 @@ pub struct LearnedDetection {
     pub keypoints: Vec<KeypointVote>,
     /// The pose, or why there is none.
     pub pose: Result<PoseEstimate, String>,
+    /// An estimate the reprojection gate refused (evaluation still reports its raw PnP).
+    pub refused: Option<PoseEstimate>,
 }
 
 /// Wall time of each stage for one frame.

@@ -15,7 +15,7 @@ use super::keypoint_net::KeypointNet;
 use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
-use crate::estimate::{EstimatorConfig, Observation, PoseEstimator};
+use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
 use crate::part::Catalog;
@@ -195,15 +195,22 @@ impl LearnedPipeline {
         let mut detections = Vec::with_capacity(instances.len());
         for ((inst, origin), votes) in instances.iter().zip(&origins).zip(votes) {
             let part = self.parts[inst.part].clone();
-            let (keypoints, pose) = match votes {
+            let (keypoints, pose, refused) = match votes {
                 Ok(v) => {
                     let (keypoints, observations) = sensor_observations(&v, *origin);
-                    let pose = estimator
-                        .estimate(&part, camera, &observations)
-                        .map_err(|e| e.to_string());
-                    (keypoints, pose)
+                    match estimator.estimate(&part, camera, &observations) {
+                        Ok(pose) => (keypoints, Ok(pose), None),
+                        Err(e) => {
+                            let reason = e.to_string();
+                            let refused = match e {
+                                EstimateError::Rms { estimate, .. } => Some(*estimate),
+                                _ => None,
+                            };
+                            (keypoints, Err(reason), refused)
+                        }
+                    }
                 }
-                Err(e) => (Vec::new(), Err(format!("voting: {e}"))),
+                Err(e) => (Vec::new(), Err(format!("voting: {e}")), None),
             };
             detections.push(LearnedDetection {
                 part,
@@ -216,6 +223,7 @@ impl LearnedPipeline {
                 crop_origin: *origin,
                 keypoints,
                 pose,
+                refused,
             });
         }
         times.pose = lap(&mut t);
