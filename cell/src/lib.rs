@@ -7,6 +7,7 @@ pub mod camera;
 pub mod episode;
 pub mod eval;
 pub mod harness;
+pub mod learned;
 pub mod orchestrator;
 pub mod prepare;
 pub mod regress;

@@ -29,7 +29,7 @@ mod verdict;
 pub use keypoint_noise::{KeypointNoise, keypoint_noise_for};
 pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
 pub use sim_io::SimCellIo;
-pub use sim_perception::{EpisodePerception, PipelinePool, SimPerception, models_dir};
+pub use sim_perception::{EpisodePerception, PipelinePool, SimPerception};
 pub use verdict::{check_of, source_name};
 
 use std::sync::{Arc, Mutex};
@@ -52,8 +52,8 @@ pub enum HarnessError {
     /// Perception could not be set up.
     #[error(transparent)]
     Perception(#[from] PerceptionError),
-    /// The scenario asks for a perception mode the simulation cannot provide.
-    #[error("perception mode {0:?} is not available yet (no trained models)")]
+    /// Keypoint-noise perception was asked for a scenario in another perception mode.
+    #[error("keypoint-noise perception asked for, but the scenario's mode is {0:?}")]
     ModeUnavailable(PerceptionMode),
     /// No tokio runtime could be built.
     #[error("tokio runtime: {0}")]

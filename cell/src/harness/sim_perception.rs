@@ -2,30 +2,20 @@
 //! pipeline on the rendered feeder window. Learned pipelines hold ONNX Runtime sessions, so they
 //! are pooled across episodes: a worker takes one, runs its episode, and gives it back.
 
-use std::path::PathBuf;
 use std::sync::Mutex;
 
 use nalgebra::Isometry3;
-use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline, PipelineConfig};
-use perception::onnx::Runtime;
-use perception::part::Catalog;
+use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline};
 use perception::{DetectedPart, Frame, PartPerception, PerceptionError};
 
 use super::{HarnessError, keypoint_noise_for};
+use crate::learned;
 use crate::scenario::{PerceptionMode, Scenario};
-
-/// The folder of a scenario's learned models: `[perception] models`, relative to the scenario
-/// file.
-pub fn models_dir(scenario: &Scenario) -> Option<PathBuf> {
-    let models = scenario.spec.perception.models.as_ref()?;
-    let dir = scenario.path.parent().unwrap_or(std::path::Path::new("."));
-    Some(dir.join(models))
-}
 
 /// Learned pipelines for a scenario, built on demand and reused.
 pub struct PipelinePool {
+    scenario: Scenario,
     models: LearnedModels,
-    catalog: Catalog,
     #[allow(non_snake_case)]
     base_T_table: Isometry3<f64>,
     idle: Mutex<Vec<LearnedPipeline>>,
@@ -34,19 +24,10 @@ pub struct PipelinePool {
 impl PipelinePool {
     /// A pool for the scenario's models; they are checked against its catalog now.
     pub fn new(scenario: &Scenario) -> Result<Self, HarnessError> {
-        let dir = models_dir(scenario).ok_or_else(|| {
-            HarnessError::Perception(PerceptionError::Settings(
-                "mode \"learned\" needs [perception] models (a folder of ONNX models)".into(),
-            ))
-        })?;
-        let models = LearnedModels::in_dir(&dir).map_err(PerceptionError::from)?;
-        models
-            .check_catalog(&scenario.catalog)
-            .map_err(PerceptionError::from)?;
         Ok(Self {
-            models,
-            catalog: scenario.catalog.clone(),
+            models: learned::models(scenario)?,
             base_T_table: scenario.spec.cell.base_T_table.isometry(),
+            scenario: scenario.clone(),
             idle: Mutex::new(Vec::new()),
         })
     }
@@ -57,15 +38,7 @@ impl PipelinePool {
         if let Some(p) = self.idle.lock().unwrap_or_else(|e| e.into_inner()).pop() {
             return Ok(p);
         }
-        let runtime = Runtime::get().map_err(|e| PerceptionError::Model(e.to_string()))?;
-        let config = PipelineConfig {
-            threads: 1,
-            ..PipelineConfig::default()
-        };
-        Ok(
-            LearnedPipeline::with_config(&self.models, &self.catalog, &runtime, config)
-                .map_err(PerceptionError::from)?,
-        )
+        Ok(learned::pipeline(&self.scenario, &self.models, 1)?)
     }
 
     fn give_back(&self, pipeline: LearnedPipeline) {

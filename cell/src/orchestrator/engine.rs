@@ -270,9 +270,9 @@ impl<'a> Engine<'a> {
                     .iter()
                     .any(|(_, r)| !matches!(r, Rejection::OtherPart));
                 let part = self.step_part();
-                let detections = std::mem::take(&mut self.step.detections);
-                let missed = self.io().missed(&part, &detections).unwrap_or(0);
-                self.step.detections = detections;
+                let missed = (self.cell.io())
+                    .missed(&part, &self.step.detections)
+                    .unwrap_or(0);
                 let source = if missed > 0 {
                     PERCEPTION_MISSED
                 } else if any {

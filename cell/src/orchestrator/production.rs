@@ -43,9 +43,6 @@ pub enum ProductionError {
     /// The perception mode cannot read camera images.
     #[error("perception mode {0:?} cannot read camera images")]
     Perception(PerceptionMode),
-    /// The perception mode reads images but has no trained models yet.
-    #[error("perception mode {0:?} is not available yet (no trained models)")]
-    Unavailable(PerceptionMode),
 }
 
 /// Checks everything a production run needs before anything connects or moves; opens the

@@ -14,17 +14,16 @@ use super::{
 use crate::camera::CameraSpec;
 use crate::episode::EpisodeRecord;
 use crate::harness::{
-    HarnessError, OverRtdeError, SimSetup, models_dir, run_sim_episode_blocking,
-    sim_episode_over_rtde,
+    HarnessError, OverRtdeError, SimSetup, run_sim_episode_blocking, sim_episode_over_rtde,
 };
+use crate::learned;
 use crate::orchestrator::{
     EpisodeOutput, KnowledgeError, ProductionCellIo, ProductionError, ProductionOptions, Setup,
     SplitCell, preflight, run_episode,
 };
 use crate::report::{ReportError, ReportFiles, write_report};
 use crate::scenario::{PerceptionMode, Scenario};
-use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline};
-use perception::onnx::Runtime;
+use perception::learned::LearnedPerception;
 use perception::{PartPerception, PerceptionError};
 use sim::cell::feeder_window;
 
@@ -360,12 +359,7 @@ pub fn production(
 /// cores, searching the window of the full-sensor image that shows the feeder.
 #[allow(non_snake_case)]
 fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, PerceptionError> {
-    let dir = models_dir(scenario).ok_or_else(|| {
-        PerceptionError::Settings("mode \"learned\" needs [perception] models".into())
-    })?;
-    let models = LearnedModels::in_dir(&dir)?;
-    let runtime = Runtime::get().map_err(|e| PerceptionError::Model(e.to_string()))?;
-    let pipeline = LearnedPipeline::load(&models, &scenario.catalog, &runtime)?;
+    let pipeline = learned::pipeline(scenario, &learned::models(scenario)?, 2)?;
     let cell = &scenario.spec.cell;
     let base_T_table = cell.base_T_table.isometry();
     let table_T_camera = base_T_table.inverse() * cell.camera.base_T_camera.isometry();
