@@ -10,11 +10,9 @@ use std::time::Instant;
 use anyhow::Context;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{summarise, text_table};
-use cell::eval::{EvalDataset, EvalOptions, FrameDetector, evaluate, resolve_split};
-use nalgebra::Isometry3;
-use perception::learned::{LearnedDetections, LearnedModels, LearnedPipeline};
+use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
+use perception::learned::{LearnedModels, LearnedPipeline};
 use perception::part::Catalog;
-use perception::{Camera, FrameImage};
 
 /// Arguments of `cell eval`.
 #[derive(Debug, clap::Args)]
@@ -51,23 +49,6 @@ pub struct Args {
     pub quiet: bool,
 }
 
-/// The learned pipeline as the detector under evaluation (the whole image, no ROI).
-struct Learned(LearnedPipeline);
-
-impl FrameDetector for Learned {
-    #[allow(non_snake_case)]
-    fn detect(
-        &mut self,
-        image: &FrameImage,
-        camera: &Camera,
-        camera_T_table: &Isometry3<f64>,
-    ) -> Result<LearnedDetections, String> {
-        self.0
-            .detect(image, camera, camera_T_table, None)
-            .map_err(|e| e.to_string())
-    }
-}
-
 /// Runs the evaluation and writes its report.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let options = EvalOptions {
@@ -85,7 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let runtime = perception::onnx::Runtime::get().context("loading ONNX Runtime")?;
     let pipeline = LearnedPipeline::load(&models, &catalog, &runtime)
         .with_context(|| format!("loading the models in {}", args.models.display()))?;
-    let mut detector = Learned(pipeline);
+    let mut detector = pipeline;
     let started = Instant::now();
     let quiet = args.quiet;
     let run = evaluate(&dataset, &mut detector, &options, |done, total| {

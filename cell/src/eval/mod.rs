@@ -77,6 +77,19 @@ pub trait FrameDetector {
     ) -> Result<LearnedDetections, String>;
 }
 
+impl FrameDetector for perception::learned::LearnedPipeline {
+    #[allow(non_snake_case)]
+    fn detect(
+        &mut self,
+        image: &FrameImage,
+        camera: &Camera,
+        camera_T_table: &Isometry3<f64>,
+    ) -> Result<LearnedDetections, String> {
+        perception::learned::LearnedPipeline::detect(self, image, camera, camera_T_table, None)
+            .map_err(|e| e.to_string())
+    }
+}
+
 /// Evaluation settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct EvalOptions {
@@ -413,7 +426,7 @@ pub struct DetectionRecord {
     pub iou: Option<f64>,
     /// Why the detector gave no pose, if it gave none.
     pub pose_failure: Option<String>,
-    /// Errors of the raw PnP pose (matched, with a pose).
+    /// Errors of the raw PnP pose (matched, with an estimate, also one the gate refused).
     pub raw: Option<PoseErrors>,
     /// Errors after planar refinement.
     pub refined: Option<PoseErrors>,

@@ -11,9 +11,7 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::gallery::{FailedCrop, GalleryItem};
-use super::table1::{
-    EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, SEED_AVERAGE, SEED_TABLE1, Table1Row,
-};
+use super::table1::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, Table1Row, seed_row};
 use super::{EvalOptions, EvalRun, FrameRecord};
 use crate::report::html::escape;
 
@@ -369,14 +367,7 @@ fn render(
     let mut parts: Vec<&str> = s.parts.iter().map(|p| p.part.as_str()).collect();
     parts.push("average");
     for part in parts {
-        let seed = if part == "average" {
-            Some(SEED_AVERAGE)
-        } else {
-            SEED_TABLE1
-                .iter()
-                .find(|(n, _)| *n == part)
-                .map(|(_, r)| *r)
-        };
+        let seed = seed_row(part);
         if let Some(r) = seed {
             let _ = write!(
                 h,

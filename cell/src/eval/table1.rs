@@ -30,6 +30,17 @@ pub const SEED_TABLE1: [(&str, [(f64, f64); 4]); 3] = [
 pub const SEED_AVERAGE: [(f64, f64); 4] =
     [(0.60, 0.45), (0.59, 0.45), (63.81, 19.92), (4.08, 2.07)];
 
+/// The seed's Table 1 row for `part` ("average" for its average row), if it has one.
+pub fn seed_row(part: &str) -> Option<[(f64, f64); 4]> {
+    if part == "average" {
+        return Some(SEED_AVERAGE);
+    }
+    SEED_TABLE1
+        .iter()
+        .find(|(n, _)| *n == part)
+        .map(|(_, r)| *r)
+}
+
 /// BOP MSSD thresholds, fractions of the object diameter.
 pub const MSSD_FRACTIONS: [f64; 10] = [0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.35, 0.40, 0.45, 0.50];
 /// MSPD thresholds, pixels of the evaluated images (BOP uses 5r … 50r with r = width / 640 for
@@ -480,14 +491,7 @@ pub fn text_table(summary: &EvalSummary) -> String {
     let mut parts: Vec<&str> = summary.parts.iter().map(|p| p.part.as_str()).collect();
     parts.push("average");
     for part in parts {
-        let seed = if part == "average" {
-            Some(SEED_AVERAGE)
-        } else {
-            SEED_TABLE1
-                .iter()
-                .find(|(n, _)| *n == part)
-                .map(|(_, r)| *r)
-        };
+        let seed = seed_row(part);
         if let Some(r) = seed {
             let _ = writeln!(
                 s,
