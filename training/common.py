@@ -1,5 +1,6 @@
 """Shared training helpers: device and thread setup, ONNX export and check, manifests, curves."""
 
+import argparse
 import csv
 import hashlib
 import os
@@ -12,6 +13,25 @@ import torch
 from nets import PARTS
 
 OPSET = 17
+
+
+def training_args(doc, data, model, limit_what):
+    """The options both trainers share: data roots (`data` names what a root holds, e.g.
+    "crops/PART/{split}"), the output folder for `model`.onnx/.toml/_curve.csv, the dataset seed,
+    learning rate, time budget, load limit, seed, checkpoint, threads and evaluation-only runs."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    for split in ("train", "test"):
+        ap.add_argument(f"--{split}", required=True, help=f"dataset root with {data.format(split=split)}")
+    ap.add_argument("--out", required=True, help=f"folder for {model}.onnx/.toml/_curve.csv")
+    ap.add_argument("--dataset-seed", type=int, required=True, help="seed of the training set")
+    ap.add_argument("--lr", type=float, default=2e-3)
+    ap.add_argument("--max-minutes", type=float, default=30.0, help="stop training after this long")
+    ap.add_argument("--limit", type=int, default=None, help=f"{limit_what} to load (smoke tests)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--checkpoint", help="also save the torch weights here")
+    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
+    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
+    return ap
 
 
 def setup(seed, threads=2):

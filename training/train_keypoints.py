@@ -5,7 +5,6 @@ voting), exports keypoints.onnx and writes keypoints.toml + keypoints_curve.csv.
 Usage: python train_keypoints.py --train DATA_TRAIN --test DATA_TEST --out scenarios/models/usbc
 """
 
-import argparse
 import os
 import sys
 import time
@@ -14,7 +13,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
+from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, training_args, write_manifest
 from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
@@ -163,21 +162,10 @@ def prepare(raw, device):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--train", required=True, help="dataset root with crops/PART/train")
-    ap.add_argument("--test", required=True, help="dataset root with crops/PART/test")
-    ap.add_argument("--out", required=True, help="folder for keypoints.onnx/.toml/_curve.csv")
-    ap.add_argument("--dataset-seed", type=int, required=True, help="seed of the training set")
+    ap = training_args(__doc__, "crops/PART/{split}", "keypoints", "crops per part")
     ap.add_argument("--epochs", type=int, default=20)
     ap.add_argument("--batch", type=int, default=32)
-    ap.add_argument("--lr", type=float, default=2e-3)
-    ap.add_argument("--max-minutes", type=float, default=30.0, help="stop training after this long")
-    ap.add_argument("--limit", type=int, default=None, help="crops per part to load (smoke tests)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--checkpoint", help="also save the torch weights here")
-    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
     ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
-    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
     args = ap.parse_args(argv)
 
     device = setup(args.seed, args.threads)

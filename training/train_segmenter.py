@@ -6,7 +6,6 @@ exports segmenter.onnx and writes segmenter.toml + segmenter_curve.csv.
 Usage: python train_segmenter.py --train DATA_TRAIN --test DATA_TEST --out scenarios/models/usbc
 """
 
-import argparse
 import os
 import sys
 import time
@@ -15,7 +14,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, write_manifest
+from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, training_args, write_manifest
 from data import load_feeder, obj_ids
 from nets import PARTS, Segmenter, count_macs
 
@@ -157,22 +156,11 @@ def evaluate(model, frames, device, max_frames=None):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--train", required=True, help="dataset root with train_feeder/")
-    ap.add_argument("--test", required=True, help="dataset root with test_feeder/")
-    ap.add_argument("--out", required=True, help="folder for segmenter.onnx/.toml/_curve.csv")
-    ap.add_argument("--dataset-seed", type=int, required=True, help="seed of the training set")
+    ap = training_args(__doc__, "{split}_feeder/", "segmenter", "frames per split")
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
-    ap.add_argument("--lr", type=float, default=2e-3)
     ap.add_argument("--eval-every", type=int, default=250)
-    ap.add_argument("--max-minutes", type=float, default=30.0, help="stop training after this long")
-    ap.add_argument("--limit", type=int, default=None, help="frames to load per split (smoke tests)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--checkpoint", help="also save the torch weights here")
-    ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
-    ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
     ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a second, fine-tuning stage)")
     args = ap.parse_args(argv)
     if args.size % 16:
