@@ -420,6 +420,11 @@ pub struct DetectionRecord {
     pub part: String,
     /// Detection score.
     pub score: f64,
+    /// Image pixel of the keypoint crop's top-left corner (`[column, row]`), so that other
+    /// pipelines can be compared on exactly this crop.
+    pub crop_origin: [i64; 2],
+    /// Voted keypoints in image pixels, in the catalog's keypoint order.
+    pub keypoints_px: Vec<[f64; 2]>,
     /// Matched ground-truth instance.
     pub truth: Option<usize>,
     /// Mask IoU with it.
@@ -626,6 +631,12 @@ fn evaluate_image(
         let mut rec = DetectionRecord {
             part: det.part.clone(),
             score: det.score,
+            crop_origin: det.crop_origin,
+            keypoints_px: det
+                .keypoints
+                .iter()
+                .map(|k| [k.position.x, k.position.y])
+                .collect(),
             truth: m.map(|m| m.truth),
             iou: m.map(|m| m.iou),
             pose_failure: det.pose.as_ref().err().cloned(),

@@ -571,6 +571,8 @@ mod tests {
         DetectionRecord {
             part: part.into(),
             score: 0.9,
+            crop_origin: [0, 0],
+            keypoints_px: Vec::new(),
             truth,
             iou: truth.map(|_| 0.8),
             pose_failure: if pose.is_none() && truth.is_some() {
