@@ -193,7 +193,8 @@ def main(argv=None):
     ap.add_argument("--epochs", type=int, default=20)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop about its centre (augmentation)")
-    ap.add_argument("--widths", default="8,16,32,48,64", help="channels at strides 2, 4, 8, 16, 32")
+    ap.add_argument("--widths", default="16,24,48,64,96", help="channels at strides 2, 4, 8, 16, 32")
+    ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a further cycle)")
     ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
     args = ap.parse_args(argv)
 
@@ -218,6 +219,8 @@ def main(argv=None):
     gen = torch.Generator().manual_seed(args.seed)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "keypoints_curve.csv"
+    if args.init:
+        model.load_state_dict(torch.load(args.init, map_location=device))
     if args.eval_only:
         model.load_state_dict(torch.load(args.eval_only, map_location=device))
         args.epochs = 0
