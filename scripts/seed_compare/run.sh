@@ -63,6 +63,8 @@ rm -rf "$out/models.tmp" && mkdir "$out/models.tmp"
 cp "$models"/segmenter.{onnx,toml,pt} "$models"/keypoints.{onnx,toml,pt} "$out/models.tmp/"
 rm -rf "$out/models" && mv "$out/models.tmp" "$out/models"
 
+"$py" "$repo/scripts/seed_compare/compare.py" --models "$out/models" --check-models >&2
+
 load="$(cut -d' ' -f1-3 /proc/loadavg)"
 echo "cell eval on $dataset/$split (load average $load)" >&2
 (cd "$repo" && "${cell[@]}" eval "$dataset" --split "$split" --models "$out/models" \
