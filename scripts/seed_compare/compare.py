@@ -274,11 +274,12 @@ def run_seed(frames_json, dataset, split, seg, kpn, kp3d, rng):
         t7 = time.perf_counter()
         for name, a, b in zip(STAGES, (t0, t1, t2, t3, t4, t5, t6, t0), (t1, t2, t3, t4, t5, t6, t7, t7)):
             t[name] = (b - a) * 1e3
+        t["load1"] = os.getloadavg()[0]
         times.append(t)
         instance_counts.append((len(classes), n))
         gts = scene_json(sdir, "scene_gt.json")
         for di, (d, v, pose) in enumerate(zip(dets, votes, poses)):
-            res = {"keypoints_px": (v + np.asarray(d["crop_origin"])).tolist(), "errors": None, "kp_err_px": None}
+            res = {"keypoints_px": (v + np.asarray(d["crop_origin"])).tolist(), "errors": None}
             if d.get("truth") is not None:
                 gt = gts[key][d["truth"]]
                 r_gt = np.asarray(gt["cam_R_m2c"], dtype=np.float64).reshape(3, 3)
@@ -414,9 +415,15 @@ def main(argv=None):
         "opencv": cv2.__version__,
         "threads": THREADS,
         "torch_vs_onnxruntime_max_abs_diff": {"segmenter": seg_diff, "keypoints": kpn_diff},
+        "cpus": os.cpu_count(),
         "load_average": {"before_cell_eval": args.rust_load, "before_seed": list(load_before), "after_seed": list(load_after)},
         "seed_wall_s": wall,
         "stages": stage_rows,
+        "per_frame_ms": [
+            {"scene": f["scene"], "image": f["image"], "crops": len(f["detections"]),
+             "ours": f["times"], "seed": times[i]}
+            for i, f in enumerate(frames)
+        ],
         "speed_ratio_median": ratio,
         "speed_ratio_mean": ratio_mean,
         "instances": {"ours": ours_instances, "seed_grouping": seed_instances},
@@ -437,6 +444,11 @@ def main(argv=None):
           f"{THREADS} threads each")
     print(f"load average (1, 5, 15 min): before cell eval {args.rust_load or '?'}; before the seed's way "
           + " ".join(f"{v:.2f}" for v in load_before) + "; after " + " ".join(f"{v:.2f}" for v in load_after))
+    busy = [i for i in both if times[i]["load1"] > os.cpu_count()]
+    if busy:
+        print(f"WARNING: the 1-min load average exceeded the {os.cpu_count()} CPUs during {len(busy)} of "
+              f"{len(both)} frames of the seed's way (first at frame {busy[0]}); its times there are inflated "
+              "(see per_frame_ms in seed_compare.json)")
     print(f"\nTime per frame, ms (median over {len(both)} frames; mean in brackets)")
     print(f"{'stage':<13} {'ours (Rust)':>20} {'seed way (Python)':>22}")
     for r in stage_rows:
