@@ -225,7 +225,9 @@ def run_seed(frames_json, dataset, split, seg, kpn, kp3d, rng):
         except FileNotFoundError:
             raise InputError(f"{png}: no such file")
         if (rgb.shape[1], rgb.shape[0]) != (cam["width"], cam["height"]):
-            raise InputError(f"{png}: {rgb.shape[1]} × {rgb.shape[0]}, scene_camera.json says {cam['width']} × {cam['height']}")
+            raise InputError(
+                f"{png}: {rgb.shape[1]} × {rgb.shape[0]}, scene_camera.json says {cam['width']} × {cam['height']}"
+            )
         dets = fr["detections"]
         for d in dets:
             if d["part"] not in kp3d:
@@ -249,7 +251,8 @@ def run_seed(frames_json, dataset, split, seg, kpn, kp3d, rng):
             crops = np.stack([cut(rgb, d["crop_origin"]) for d in dets])
             batch = torch.from_numpy(crops).permute(0, 3, 1, 2).float() / 255.0
             part = torch.tensor([PARTS.index(d["part"]) for d in dets])
-            onehot = torch.nn.functional.one_hot(part, len(PARTS)).float()[:, :, None, None].expand(n, len(PARTS), CROP, CROP)
+            onehot = torch.nn.functional.one_hot(part, len(PARTS)).float()[:, :, None, None]
+            onehot = onehot.expand(n, len(PARTS), CROP, CROP)
             batch = torch.cat([batch, onehot], dim=1)
         t4 = time.perf_counter()
         if n:
@@ -339,7 +342,8 @@ def main(argv=None):
     run_seed(frames[:1], args.dataset, args.split, seg, kpn, kp3d, np.random.default_rng(args.seed + 1))
     load_before = os.getloadavg()
     started = time.perf_counter()
-    times, results, counts = run_seed(frames, args.dataset, args.split, seg, kpn, kp3d, np.random.default_rng(args.seed))
+    rng = np.random.default_rng(args.seed)
+    times, results, counts = run_seed(frames, args.dataset, args.split, seg, kpn, kp3d, rng)
     wall = time.perf_counter() - started
     load_after = os.getloadavg()
 
@@ -402,7 +406,9 @@ def main(argv=None):
 
     all_row = acc_rows[-1]
     o_all, s_all = all_row["ours"]["all"]["mean"], all_row["seed"]["all"]["mean"]
-    at_least_as_accurate = bool(all(o <= s for o, s in zip(o_all, s_all))) and all_row["ours"]["outliers"] <= all_row["seed"]["outliers"]
+    at_least_as_accurate = bool(all(o <= s for o, s in zip(o_all, s_all))) and (
+        all_row["ours"]["outliers"] <= all_row["seed"]["outliers"]
+    )
 
     out = {
         "eval_json": os.path.abspath(args.eval),
@@ -416,7 +422,11 @@ def main(argv=None):
         "threads": THREADS,
         "torch_vs_onnxruntime_max_abs_diff": {"segmenter": seg_diff, "keypoints": kpn_diff},
         "cpus": os.cpu_count(),
-        "load_average": {"before_cell_eval": args.rust_load, "before_seed": list(load_before), "after_seed": list(load_after)},
+        "load_average": {
+            "before_cell_eval": args.rust_load,
+            "before_seed": list(load_before),
+            "after_seed": list(load_after),
+        },
         "seed_wall_s": wall,
         "stages": stage_rows,
         "per_frame_ms": [
@@ -440,7 +450,8 @@ def main(argv=None):
         f.write("\n")
     os.replace(path + ".tmp", path)
 
-    print(f"{len(frames)} frames of {args.dataset}/{args.split}; torch {torch.__version__} eager, OpenCV {cv2.__version__}, "
+    print(f"{len(frames)} frames of {args.dataset}/{args.split}; torch {torch.__version__} eager, "
+          f"OpenCV {cv2.__version__}, "
           f"{THREADS} threads each")
     print(f"load average (1, 5, 15 min): before cell eval {args.rust_load or '?'}; before the seed's way "
           + " ".join(f"{v:.2f}" for v in load_before) + "; after " + " ".join(f"{v:.2f}" for v in load_after))
@@ -469,7 +480,9 @@ def main(argv=None):
             t = r[who]
             for style in ("all", "seed_style"):
                 m = t[style]["mean"]
-                print(f"{r['part'] if (who, style) == ('ours', 'all') else '':<12} {label + (', all' if style == 'all' else ', seed-style'):<26} "
+                name = r["part"] if (who, style) == ("ours", "all") else ""
+                method = label + (", all" if style == "all" else ", seed-style")
+                print(f"{name:<12} {method:<26} "
                       f"{t[style]['n']:>5} {t['outliers']:>4} {m[0]:>7.3f} {m[1]:>7.3f} {m[2]:>8.2f} {m[3]:>7.2f}")
     print(f"ours at least as accurate (all-paired means and outlier count): {'yes' if at_least_as_accurate else 'NO'}")
     k = kp_summary

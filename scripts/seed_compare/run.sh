@@ -55,7 +55,8 @@ done
 
 "$repo/training/provision.sh" >&2
 py="$repo/training/.venv/bin/python"
-"$py" -c "import cv2" 2>/dev/null || die "training/.venv has no cv2 (training/requirements.txt pins opencv-python-headless)"
+"$py" -c "import cv2" 2>/dev/null ||
+  die "training/.venv has no cv2 (training/requirements.txt pins opencv-python-headless)"
 
 # One snapshot of the models for both sides (the folder may be rewritten while this runs).
 mkdir -p "$out"
