@@ -52,6 +52,11 @@ impl PerceptionVerdict {
 /// kind that perception missed.
 pub const PERCEPTION_MISSED: &str = "perception.missed";
 
+/// Error-budget source of a step given up because the fingers closed on nothing every time,
+/// after perception named the right part in the right stable pose (its pose error, in the
+/// record, says how far off the pick was).
+pub const GRASP_MISSED: &str = "grasp.missed";
+
 /// True error of the held part relative to its target when insertion started.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PoseError {

@@ -3,6 +3,7 @@
 //! process's ONNX Runtime (provisioned on first use).
 
 use perception::PerceptionError;
+use perception::estimate::EstimatorConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig};
 use perception::onnx::Runtime;
 
@@ -23,7 +24,7 @@ pub fn models(scenario: &Scenario) -> Result<LearnedModels, PerceptionError> {
 }
 
 /// A pipeline for `models` and the scenario's catalog, with `threads` ONNX Runtime and voting
-/// threads.
+/// threads and the scenario's reprojection gate.
 pub fn pipeline(
     scenario: &Scenario,
     models: &LearnedModels,
@@ -32,6 +33,7 @@ pub fn pipeline(
     let runtime = Runtime::get().map_err(|e| PerceptionError::Model(e.to_string()))?;
     let config = PipelineConfig {
         threads,
+        estimator: EstimatorConfig::with_gate(scenario.spec.perception.max_rms_px),
         ..PipelineConfig::default()
     };
     Ok(LearnedPipeline::with_config(

@@ -16,7 +16,9 @@ use super::planning::{Motion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, select};
 use super::state::State;
 use super::step::StepState;
-use crate::episode::{EpisodeRecord, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome};
+use crate::episode::{
+    EpisodeRecord, GRASP_MISSED, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome,
+};
 use perception::{DetectedPart, PartPerception};
 
 /// Error-budget name of a step given up because the feeder held none of its part.
@@ -361,7 +363,12 @@ impl<'a> Engine<'a> {
             State::Retract
         } else {
             let cause = format!("grasp failed {} times", self.step.attempts);
-            self.finish_step(StepOutcome::Aborted, Some(cause), vec![], None)
+            self.finish_step(
+                StepOutcome::Aborted,
+                Some(cause),
+                vec![GRASP_MISSED.into()],
+                None,
+            )
         }
     }
 

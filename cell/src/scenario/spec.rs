@@ -111,6 +111,18 @@ pub struct PerceptionSpec {
     /// Folder with ONNX models (learned mode), relative to the scenario file.
     #[serde(default)]
     pub models: Option<PathBuf>,
+    /// Reprojection gate of the learned pipeline, pixels: poses whose keypoints reproject
+    /// further (RMS) are not reported. It trades missed parts against wrong poses, so it should
+    /// follow the keypoint net's measured accuracy.
+    #[serde(default = "learned_gate")]
+    pub max_rms_px: f64,
+}
+
+/// The learned pipeline's own default gate.
+fn learned_gate() -> f64 {
+    perception::learned::PipelineConfig::default()
+        .estimator
+        .max_rms_px
 }
 
 fn half() -> f64 {

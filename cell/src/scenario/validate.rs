@@ -131,6 +131,13 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
         spec.perception.keypoint_noise_px,
         "keypoint_noise_px",
     );
+    let gate = spec.perception.max_rms_px;
+    if !(gate.is_finite() && gate > 0.0) {
+        issues.push((
+            pp.key("max_rms_px"),
+            format!("max_rms_px must be positive, got {gate}"),
+        ));
+    }
     let f = spec.perception.outlier_fraction;
     if !(0.0..=1.0).contains(&f) {
         issues.push((
