@@ -131,6 +131,8 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     let mut perception = LearnedPerception::new(pipeline, Isometry3::identity());
     let (mut found, mut parts, mut accepted) = (0, 0, 0);
     let mut centre_px = Vec::new();
+    // Per found part, the median over its nine keypoints of the distance to the projected truth.
+    let mut keypoints_px = Vec::new();
     for seed in [11, 12] {
         let feeder = render_feeder(&catalog, seed);
         let frame = Frame {
@@ -180,6 +182,21 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
                     if let Some(c) = d.keypoints.last() {
                         centre_px.push(near(c.position.x, c.position.y));
                     }
+                    let spec = catalog.part(part).expect("a catalog part");
+                    let mut errs: Vec<f64> = spec
+                        .keypoints
+                        .iter()
+                        .zip(&d.keypoints)
+                        .map(|(k, v)| {
+                            let p = camera_T_table * table_T_part * Point3::from(*k);
+                            let px = feeder.camera.project(&p).unwrap();
+                            (v.position - px).norm()
+                        })
+                        .collect();
+                    if !errs.is_empty() {
+                        errs.sort_by(f64::total_cmp);
+                        keypoints_px.push(errs[errs.len() / 2]);
+                    }
                     accepted += usize::from(d.pose.is_ok());
                 }
                 None => missed.push(format!("{part} at ({:.0}, {:.0})", px.x, px.y)),
@@ -202,9 +219,12 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     }
     centre_px.sort_by(f64::total_cmp);
     let median = centre_px[centre_px.len() / 2];
+    keypoints_px.sort_by(f64::total_cmp);
+    let keypoints_median = keypoints_px[keypoints_px.len() / 2];
     eprintln!(
         "{found} of {parts} parts found; centre keypoint median {median:.2} px, max {:.2} px; \
-         {accepted} poses under the reprojection gate",
+         all nine keypoints median {keypoints_median:.2} px; {accepted} poses under the \
+         reprojection gate",
         centre_px.last().copied().unwrap_or(f64::NAN)
     );
     assert!(found >= MIN_FOUND, "{found} of {parts} parts found");
@@ -212,15 +232,20 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
         median <= CENTRE_MEDIAN_PX,
         "centre keypoint median {median:.2} px"
     );
+    assert!(
+        keypoints_median <= KEYPOINTS_MEDIAN_PX,
+        "all nine keypoints: median {keypoints_median:.2} px"
+    );
 }
 
-// Bounds measured with the committed models (21 of 24 parts, centre median 4.25 px) (2026-11-23: segmenter instance P 0.87 / R 0.82 on its
-// test frames; keypoint net centre 3.2 px, corner keypoints 24 px median on its test crops).
-// No pose bound yet: with corner keypoints that far off, every estimate fails the 4 px
-// reprojection gate (the count is printed); bound xy and angle once a retrained keypoint net
-// places the corners.
+// Bounds measured with the committed models (2026-11-23): 21 of 24 parts found (the misses: main
+// shells under top shells), centre keypoint median 3.21 px, all nine keypoints median 13.24 px
+// (the keypoint net's own test crops: 7.5 px). No pose bound here: at the pipeline's default
+// 4 px reprojection gate none of these 24 parts gets a pose (the count is printed); the learned
+// scenario runs at 12 px (e2e_learned).
 const MIN_FOUND: usize = 21;
-const CENTRE_MEDIAN_PX: f64 = 5.0;
+const CENTRE_MEDIAN_PX: f64 = 4.0;
+const KEYPOINTS_MEDIAN_PX: f64 = 15.0;
 
 #[test]
 #[ignore = "rewrites the benchmark frame in perception/tests/data/learned"]
