@@ -131,7 +131,7 @@ fn bench(c: &mut Criterion) {
         let pixels = decode_file(path, sensor).unwrap_or_else(|e| panic!("{e}"));
         let decoded = t.elapsed();
         let frame = Frame {
-            camera: camera.clone(),
+            camera,
             base_T_camera,
             content: FrameContent::Image(FrameImage {
                 pixels,
