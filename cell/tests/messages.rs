@@ -103,6 +103,25 @@ fn learned_perception_without_usable_models_is_refused_by_check_at_its_line() {
 }
 
 #[test]
+fn a_reprojection_gate_that_is_not_positive_is_refused_at_its_line() {
+    for bad in ["0.0", "-3.0", "nan"] {
+        let t = nominal_text().replace(
+            "mode = \"keypoint-noise\"",
+            &format!("mode = \"keypoint-noise\"\nmax_rms_px = {bad}"),
+        );
+        let f = Temp::new(&scenarios(), "gate.toml", t.as_bytes());
+        let err = Scenario::load(&f.0).unwrap_err();
+        let p = err
+            .0
+            .iter()
+            .find(|p| p.key.as_deref() == Some("perception.max_rms_px"))
+            .unwrap_or_else(|| panic!("{bad}: {err}"));
+        assert_eq!(p.line, line_of(&t, "max_rms_px"), "{err}");
+        assert!(p.message.contains("must be positive"), "{err}");
+    }
+}
+
+#[test]
 fn a_camera_that_cannot_see_the_feeder_or_resolve_the_parts_is_refused() {
     let pose = "base_T_camera = { translation = [0.0, -0.45, 1.51], rotation = [3.141592653589793, 0.0, 0.0] }";
     assert!(nominal_text().contains(pose));
