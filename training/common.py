@@ -5,6 +5,7 @@ import csv
 import hashlib
 import os
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -110,6 +111,19 @@ def ort_check(path, model, dummy, reps=20):
         sess.run(None, {name: x})
         times.append((time.perf_counter() - t) * 1000)
     return {"max_abs_diff": diff, "latency_ms": float(np.median(times))}
+
+
+def check_export(path, model, dummy, tolerance, what):
+    """Runs `ort_check` and prints it (`what` says what one run covers); exits when ONNX Runtime
+    and torch differ by more than `tolerance`. Returns the latency in ms, or None without
+    onnxruntime."""
+    chk = ort_check(path, model, dummy)
+    if chk is None:
+        return None
+    print(f"  onnxruntime: max |diff| {chk['max_abs_diff']:.2e}, {chk['latency_ms']:.2f} ms {what} (2 threads)")
+    if chk["max_abs_diff"] > tolerance:
+        sys.exit(f"{path}: ONNX Runtime disagrees with torch by {chk['max_abs_diff']}")
+    return chk["latency_ms"]
 
 
 def write_manifest(path, name, onnx_file, inputs, outputs, training):

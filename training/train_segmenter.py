@@ -14,7 +14,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, code_commit, export_onnx, ort_check, progress_lr, setup, training_args, write_manifest
+from common import Curve, check_export, code_commit, export_onnx, progress_lr, setup, training_args, write_manifest
 from data import load_feeder, obj_ids
 from nets import PARTS, Segmenter, count_macs
 
@@ -251,12 +251,9 @@ def main(argv=None):
         ["logits", "offsets"],
         {"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h4", 3: "w4"}, "offsets": {0: "n", 2: "h4", 3: "w4"}},
     )
-    chk = ort_check(onnx_path, model, torch.rand(1, 3, 448, 576))
-    if chk is not None:
-        print(f"  onnxruntime: max |diff| {chk['max_abs_diff']:.2e}, {chk['latency_ms']:.2f} ms per 576x448 window (2 threads)")
-        if chk["max_abs_diff"] > 1e-2:
-            sys.exit(f"{onnx_path}: ONNX Runtime disagrees with torch by {chk['max_abs_diff']}")
-        met["ort_ms_576x448"] = chk["latency_ms"]
+    ms = check_export(onnx_path, model, torch.rand(1, 3, 448, 576), 1e-2, "per 576x448 window")
+    if ms is not None:
+        met["ort_ms_576x448"] = ms
     write_manifest(
         os.path.join(args.out, "segmenter.toml"),
         "usbc-segmenter",

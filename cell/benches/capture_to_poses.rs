@@ -76,9 +76,7 @@ fn median(mut v: Vec<Duration>) -> f64 {
 #[allow(non_snake_case)]
 fn bench(c: &mut Criterion) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let dir = std::env::var_os("LEARNED_MODELS_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(LearnedModels::default_dir);
+    let dir = LearnedModels::dir_from_env();
     if !dir.join("segmenter.toml").exists() {
         eprintln!("no models in {}: nothing to benchmark", dir.display());
         return;

@@ -103,10 +103,7 @@ fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
 
 /// The committed models, or `None` (with a note) when they are not in the tree yet.
 fn committed_models() -> Option<LearnedModels> {
-    // LEARNED_MODELS_DIR points at other models (e.g. a training run's) for local checks.
-    let dir = std::env::var_os("LEARNED_MODELS_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(LearnedModels::default_dir);
+    let dir = LearnedModels::dir_from_env();
     if !dir.join("segmenter.toml").exists() {
         eprintln!(
             "no trained models in {}: the learned end-to-end test has nothing to run",

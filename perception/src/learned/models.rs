@@ -37,6 +37,14 @@ impl LearnedModels {
             .join("scenarios/models/usbc")
     }
 
+    /// The models tests and benches run: `LEARNED_MODELS_DIR` (e.g. a training run's output)
+    /// when set, else [`Self::default_dir`].
+    pub fn dir_from_env() -> PathBuf {
+        std::env::var_os("LEARNED_MODELS_DIR")
+            .map(PathBuf::from)
+            .unwrap_or_else(Self::default_dir)
+    }
+
     /// Reads `segmenter.toml` and `keypoints.toml` in `dir` and checks their signatures against
     /// the contract (the model files themselves are checked when the pipeline loads them).
     pub fn in_dir(dir: &Path) -> Result<Self, LearnedError> {
