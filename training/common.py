@@ -19,7 +19,8 @@ OPSET = 17
 def training_args(doc, data, model, limit_what):
     """The options both trainers share: data roots (`data` names what a root holds, e.g.
     "crops/PART/{split}"), the output folder for `model`.onnx/.toml/_curve.csv, the dataset seed,
-    learning rate, time budget, load limit, seed, checkpoint, threads and evaluation-only runs."""
+    learning rate, time budget, load limit, seed, checkpoint, threads, starting weights and
+    evaluation-only runs."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     for split in ("train", "test"):
         ap.add_argument(f"--{split}", required=True, help=f"dataset root with {data.format(split=split)}")
@@ -31,8 +32,16 @@ def training_args(doc, data, model, limit_what):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--checkpoint", help="also save the torch weights here")
     ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
+    ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a further training cycle)")
     ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
     return ap
+
+
+def load_start(model, args, device):
+    """Loads `--eval-only` or `--init` weights into `model`, if either is given."""
+    start = args.eval_only or args.init
+    if start:
+        model.load_state_dict(torch.load(start, map_location=device))
 
 
 def setup(seed, threads=2):

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, check_export, code_commit, export_onnx, progress_lr, setup, training_args, write_manifest
+from common import Curve, check_export, code_commit, export_onnx, load_start, progress_lr, setup, training_args, write_manifest
 from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
@@ -194,7 +194,6 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop about its centre (augmentation)")
     ap.add_argument("--widths", default="16,24,48,64,96", help="channels at strides 2, 4, 8, 16, 32")
-    ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a further cycle)")
     ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
     args = ap.parse_args(argv)
 
@@ -219,10 +218,8 @@ def main(argv=None):
     gen = torch.Generator().manual_seed(args.seed)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "keypoints_curve.csv"
-    if args.init:
-        model.load_state_dict(torch.load(args.init, map_location=device))
+    load_start(model, args, device)
     if args.eval_only:
-        model.load_state_dict(torch.load(args.eval_only, map_location=device))
         args.epochs = 0
     curve = None if args.eval_only else Curve(
         os.path.join(args.out, curve_name),

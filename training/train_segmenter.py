@@ -14,7 +14,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, check_export, code_commit, export_onnx, progress_lr, setup, training_args, write_manifest
+from common import Curve, check_export, code_commit, export_onnx, load_start, progress_lr, setup, training_args, write_manifest
 from data import load_feeder, obj_ids
 from nets import PARTS, Segmenter, count_macs
 
@@ -161,7 +161,6 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
     ap.add_argument("--eval-every", type=int, default=250)
-    ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a second, fine-tuning stage)")
     args = ap.parse_args(argv)
     if args.size % 16:
         sys.exit(f"--size {args.size} must be a multiple of 16")
@@ -180,8 +179,7 @@ def main(argv=None):
     opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "segmenter_curve.csv"
-    if args.eval_only or args.init:
-        model.load_state_dict(torch.load(args.eval_only or args.init, map_location=device))
+    load_start(model, args, device)
     if args.eval_only:
         args.steps = 0
     curve = None if args.eval_only else Curve(
