@@ -60,19 +60,7 @@ fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
     };
     let scene = sample_scene(&models, &request, &rand, &mut rng).unwrap_or_else(|e| panic!("{e}"));
     let camera = Camera::basler_seed();
-    let (mut lo, mut hi) = (
-        Point3::new(f64::INFINITY, f64::INFINITY, 0.0),
-        Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, 0.0),
-    );
-    for p in &scene.parts {
-        let r = models[p.model].mesh.extents().norm() / 2.0 + 0.003;
-        let c = p.table_T_part.translation.vector;
-        lo.x = lo.x.min(c.x - r);
-        lo.y = lo.y.min(c.y - r);
-        hi.x = hi.x.max(c.x + r);
-        hi.y = hi.y.max(c.y + r);
-        hi.z = hi.z.max(c.z + r);
-    }
+    let (lo, hi) = scene.footprint(&models, 0.003);
     let window: Window =
         window_covering(&camera, &scene.table_T_camera, &lo, &hi).expect("the parts are in view");
     let out = render(

@@ -4,7 +4,6 @@
 
 use std::path::PathBuf;
 
-use nalgebra::Point3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -87,20 +86,7 @@ pub(crate) fn write_feeder(
         rand.camera_height = Range::new(d, d);
     }
     let scene = sample_scene(models, &request, &rand, &mut rng)?;
-    // The window covers every part's footprint (centre ± half its diagonal) plus a margin.
-    let (mut lo_p, mut hi_p) = (
-        Point3::new(f64::INFINITY, f64::INFINITY, 0.0),
-        Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, 0.0),
-    );
-    for p in &scene.parts {
-        let r = models[p.model].mesh.extents().norm() / 2.0 + FEEDER_MARGIN;
-        let c = p.table_T_part.translation.vector;
-        lo_p.x = lo_p.x.min(c.x - r);
-        lo_p.y = lo_p.y.min(c.y - r);
-        hi_p.x = hi_p.x.max(c.x + r);
-        hi_p.y = hi_p.y.max(c.y + r);
-        hi_p.z = hi_p.z.max(c.z + r);
-    }
+    let (lo_p, hi_p) = scene.footprint(models, FEEDER_MARGIN);
     let window = window_covering(&cfg.camera, &scene.table_T_camera, &lo_p, &hi_p)
         .ok_or_else(|| DatasetError::Config(format!("feeder frame {index}: parts not in view")))?;
     let window = aligned(window, cfg.camera.width, cfg.camera.height);

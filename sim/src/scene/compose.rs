@@ -80,6 +80,24 @@ impl SampledScene {
         s.exposure = s.exposure.max(self.sensor.exposure * METER_FLOOR) * self.overexposure;
         s
     }
+
+    /// The table-frame box (low and high corners) holding every part's footprint: its centre ±
+    /// half its diagonal plus `margin`, up to the highest such top. What a window covering the
+    /// parts must show.
+    pub fn footprint(&self, models: &[PartModel], margin: f64) -> (Point3<f64>, Point3<f64>) {
+        let mut lo = Point3::new(f64::INFINITY, f64::INFINITY, 0.0);
+        let mut hi = Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, 0.0);
+        for p in &self.parts {
+            let r = models[p.model].mesh.extents().norm() / 2.0 + margin;
+            let c = p.table_T_part.translation.vector;
+            lo.x = lo.x.min(c.x - r);
+            lo.y = lo.y.min(c.y - r);
+            hi.x = hi.x.max(c.x + r);
+            hi.y = hi.y.max(c.y + r);
+            hi.z = hi.z.max(c.z + r);
+        }
+        (lo, hi)
+    }
 }
 
 /// Samples a scene: drops the parts, then draws lights, materials, camera and sensor.
