@@ -245,7 +245,8 @@ fn mujoco_verdict(
 }
 
 /// MuJoCo, the second contact engine, on the same pieces and wrist: it seats a perfect pose,
-/// does not seat one just beyond the capture band, and jams one tilted beyond the jam angle.
+/// does not seat one 5 µm beyond the capture band (its band lies within 1.6 µm of rapier's and
+/// the geometric one on every step and side), and jams one tilted beyond the jam angle.
 #[test]
 #[cfg(feature = "mujoco")]
 fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
@@ -261,7 +262,7 @@ fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
             "step {i}: seated {} m high",
             r.end.height
         );
-        let outside = Vector2::x() * (m.capture() + 3e-5);
+        let outside = Vector2::x() * (m.capture() + 5e-6);
         let pose = m.pose_with_error(outside, 0.0, 0.0, 0.0, Vector2::zeros());
         let r = mujoco_verdict(&m, held, &recv, &pose).result;
         assert_ne!(
@@ -280,8 +281,8 @@ fn mujoco_seats_a_perfect_pose_and_stops_bad_ones() {
 }
 
 /// MuJoCo against rapier on 150 boundary misalignments (50 per step): on every step they agree
-/// on at least 90 % (measured 92–98 % with this seed; the goal is 95 %, see the report) and
-/// where they differ it is MuJoCo seating a part rapier leaves on the rim.
+/// on at least 95 %, the goal (measured 100 / 96 / 100 % with this seed; 99.6 / 98.6 / 97.8 % over
+/// 1 500 samples), and the samples straddle the boundary.
 #[test]
 #[cfg(feature = "mujoco")]
 fn mujoco_and_rapier_agree_around_the_capture_boundary() {
@@ -296,7 +297,7 @@ fn mujoco_and_rapier_agree_around_the_capture_boundary() {
         eprintln!("{st:?}");
         assert_eq!(st.samples, 50);
         let rate = st.pair_rate("contact", "mujoco");
-        assert!(rate >= 0.9, "{}: agreement {rate}", st.part);
+        assert!(rate >= 0.95, "{}: agreement {rate}", st.part);
         let seated = st.seated["mujoco"];
         assert!(
             seated > 5 && seated < 45,

@@ -2,24 +2,32 @@
 //! the rapier scorer, in an independent engine.
 //!
 //! Generated model (see [`crate::mujoco::mjcf`]): the receivers' pieces are static world geoms;
-//! the wrist is a mocap body descending along the insertion axis; the part hangs on it by three
-//! slide joints and a ball joint whose anchors sit at the part's leading point (the compliance
-//! centre), so the joint coordinates are exactly the wrist spring's deflections. The lateral
-//! and rotational springs are joint stiffness and damping; the axial spring is a position
-//! actuator whose force is clamped to the push force. `implicitfast` integrates the damping
-//! implicitly (the 5 kHz rotational mode would be unstable explicitly at this step).
+//! the wrist is a heavy free body put back on its commanded path (pose and velocity) after every
+//! step; the part hangs on it by three slide joints and a ball joint whose anchors sit at the
+//! part's leading point (the compliance centre), so the joint coordinates are exactly the wrist
+//! spring's deflections. The lateral and rotational springs are joint stiffness and damping; the
+//! axial spring is a position actuator whose force is clamped to the push force. The part starts
+//! at rest in the world, as in rapier. `implicitfast` integrates the damping implicitly (the 5 kHz
+//! rotational mode would be unstable explicitly at this step).
+//!
+//! The wrist is not a mocap body: MuJoCo gives mocap bodies no velocity, so a part carried by
+//! one moved with the wrist only by being put somewhere new each step. It met the rim at zero
+//! approach speed in MuJoCo's eyes, so the contact's damping never acted and the part sank about
+//! two steps' travel (5 µm at 0.1 ms) into the rim's edge before it was pushed out, sideways
+//! into the chamfer when the overlap was smaller than that: MuJoCo seated parts that landed up
+//! to 5 µm beyond the capture band, where rapier (and geometry) leave them on the rim. With the
+//! wrist's real velocity the contact brakes the landing and the band lies within about 1 µm of
+//! rapier's on every step and side (`cell scorers`).
 //!
 //! Contact settings, each with its physical reason (not tuned toward rapier): the parts are
 //! rigid metal and plastic, so they must not sink into each other by more than a small part of
 //! the tens-of-micron capture margins. MuJoCo's soft contacts sink by `(1 − d)/d · a / k` with
-//! `k = 1/(τ² ζ²)` under a steady push, and by about `v τ` when the part lands at speed `v`;
+//! `k = 1/(τ² ζ²)` under a steady push, and by about `v τ / e` when the part lands at speed `v`;
 //! the defaults (τ = 20 ms, d = 0.9) sink millimetres. So τ is two time steps (MuJoCo's floor)
 //! and d = 0.99 (about 1 µm under the 5 N push), and the step is 0.1 ms so a part landing at
-//! 25 mm/s sinks about 5 µm: at 0.5 ms it sank 25 µm into a rim's edge and slid into the
-//! chamfer, seating parts that landed up to 30 µm beyond the capture band (a quarter of the
-//! boundary samples; 12 % at 0.2 ms, 6 % at 0.1 ms, no better at 0.05 ms). Flat faces touch
-//! over an area, so multi-point convex contacts are on (`multiccd`); friction is the parts'
-//! Coulomb friction with an elliptic cone (sliding only, like rapier).
+//! 25 mm/s sinks under 2 µm. Flat faces touch over an area, so multi-point convex contacts are on
+//! (`multiccd`); friction is the parts' Coulomb friction with an elliptic cone (sliding only,
+//! like rapier).
 
 use super::{InsertionCase, InsertionScorer, Scored, ScorerError, Wrist};
 use crate::mujoco::MujocoError;
@@ -100,6 +108,13 @@ type ModelCache = std::sync::Arc<
         std::collections::HashMap<String, std::sync::Arc<mujoco_rs::prelude::MjModel>>,
     >,
 >;
+
+/// Mass and inertia of the wrist body, kg and kg·m²: heavy enough that the 5 N push moves it a
+/// few nanometres within a step before it is put back on its commanded path, light enough to
+/// keep the contact solve well conditioned (at 1 kg the reset fed seated parts' chatter, and at
+/// 1 000 kg the 2·10⁴ mass ratio did: either kept some parts from ever coming to rest).
+#[cfg(feature = "mujoco")]
+const WRIST_MASS: f64 = 10.0;
 
 /// Most models kept: the agreement check has one per step, a simulated run one per step and
 /// arrangement of the parts already placed.
@@ -240,7 +255,9 @@ impl Mujoco {
             w.damping(ka, w.mass),
         );
         world += &format!(
-            "    <body name=\"wrist\" mocap=\"true\">\n      <body name=\"part\">\n        \
+            "    <body name=\"wrist\">\n      <freejoint name=\"wrist\"/>\n      \
+         <inertial pos=\"0 0 0\" mass=\"{WRIST_MASS}\" diaginertia=\"{WRIST_MASS} {WRIST_MASS} \
+         {WRIST_MASS}\"/>\n      <body name=\"part\">\n        \
          <inertial pos=\"0 0 0\" mass=\"{}\" diaginertia=\"{i} {i} {i}\"/>\n        \
          <joint name=\"x\" type=\"slide\" axis=\"1 0 0\" pos=\"{lead}\" stiffness=\"{kl}\" \
          damping=\"{cl}\"/>\n        <joint name=\"y\" type=\"slide\" axis=\"0 1 0\" \
@@ -261,10 +278,44 @@ impl Mujoco {
         let part = model
             .name_to_id(MjtObjBase::mjOBJ_BODY, "part")
             .ok_or_else(|| MujocoError::Compile("the generated model has no part body".into()))?;
+        let joint = |name: &str| {
+            model
+                .name_to_id(MjtObjBase::mjOBJ_JOINT, name)
+                .map(|id| {
+                    (
+                        model.jnt_qposadr()[id] as usize,
+                        model.jnt_dofadr()[id] as usize,
+                    )
+                })
+                .ok_or_else(|| {
+                    MujocoError::Compile(format!("the generated model has no joint {name:?}"))
+                })
+        };
+        let (wrist_q, wrist_v) = joint("wrist")?;
         let mut data = MjData::new(model);
-        // The wrist starts at the start pose (set here, not in the MJCF, so models are reused).
-        let q = start_pose.rotation.quaternion();
-        data.mocap_quat_mut()[0] = [q.w, q.i, q.j, q.k];
+        // The wrist follows its commanded path exactly, with its velocity (set here, not in the
+        // MJCF, so models are reused); the part starts at rest in the world, as in rapier: its
+        // slide joints move against the wrist's descent.
+        let set_wrist = |data: &mut MjData<&mujoco_rs::prelude::MjModel>, t: f64| {
+            let pose = w.pose_at(&start_pose, t);
+            let p = pose.translation.vector;
+            let q = pose.rotation.quaternion();
+            data.qpos_mut()[wrist_q..wrist_q + 7]
+                .copy_from_slice(&[p.x, p.y, p.z, q.w, q.i, q.j, q.k]);
+            let descent = if w.bottomed(&start_pose, t) {
+                0.0
+            } else {
+                w.speed
+            };
+            data.qvel_mut()[wrist_v..wrist_v + 6]
+                .copy_from_slice(&[0.0, 0.0, -descent, 0.0, 0.0, 0.0]);
+        };
+        set_wrist(&mut data, 0.0);
+        let rest = start_pose.rotation.inverse() * nalgebra::Vector3::new(0.0, 0.0, w.speed);
+        for (name, v) in [("x", rest.x), ("y", rest.y), ("z", rest.z)] {
+            let (_, dof) = joint(name)?;
+            data.qvel_mut()[dof] = v;
+        }
 
         let dt = settings.dt;
         let mut t = 0.0;
@@ -273,9 +324,8 @@ impl Mujoco {
         while t < w.max_time {
             t += dt;
             steps += 1;
-            let wrist = w.pose_at(&start_pose, t).translation.vector;
-            data.mocap_pos_mut()[0] = [wrist.x, wrist.y, wrist.z];
             data.step();
+            set_wrist(&mut data, t);
             let v = data.object_velocity(MjtObjBase::mjOBJ_BODY, part, false);
             let angular = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             let linear = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
