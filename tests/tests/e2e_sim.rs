@@ -9,7 +9,7 @@ use cell::harness::{SimSetup, run_sim_episode_blocking};
 use cell::orchestrator::State;
 use rayon::prelude::*;
 use sim::cell::CellModel;
-use sim::cell::insertion::Scorer;
+use sim::cell::insertion::{InsertionCase, InsertionScorer, Scored, Scorer, ScorerError};
 
 use e2e_support::{scenario_with, setup};
 
@@ -336,4 +336,43 @@ fn the_mujoco_scorer_is_chosen_by_the_scenario() {
         successes >= 2,
         "{successes} of 3 assembled with MuJoCo scoring"
     );
+}
+
+/// An insertion engine that fails on a model it accepted (as a diverging simulation does).
+#[derive(Debug)]
+struct DivergingEngine;
+
+impl InsertionScorer for DivergingEngine {
+    fn name(&self) -> &'static str {
+        "diverging"
+    }
+
+    fn score(&self, _case: &InsertionCase<'_>) -> Result<Scored, ScorerError> {
+        Err(ScorerError::Engine {
+            scorer: "diverging",
+            reason: "the part's velocity diverged after 12 steps".into(),
+        })
+    }
+}
+
+/// When the insertion scorer fails, the step is aborted with the engine's reason and blamed on
+/// `simulation.insertion_scorer`: never judged as if the part had been released elsewhere, and
+/// the episode goes no further.
+#[test]
+fn a_failing_insertion_scorer_aborts_the_step_with_its_reason() {
+    let mut setup = setup(|_| {});
+    std::sync::Arc::get_mut(&mut setup.model)
+        .expect("the set-up's model is not shared yet")
+        .insertion = std::sync::Arc::new(DivergingEngine);
+    let record = run_sim_episode_blocking(&setup, 0).unwrap().record;
+    assert!(!record.success);
+    assert_eq!(record.steps.len(), 1, "{:#?}", record.steps);
+    let step = &record.steps[0];
+    assert_eq!(step.outcome, StepOutcome::Aborted, "{step:#?}");
+    let cause = step.cause.as_deref().unwrap_or_default();
+    assert!(
+        cause.contains("insertion scorer") && cause.contains("velocity diverged after 12 steps"),
+        "{cause}"
+    );
+    assert_eq!(step.sources, ["simulation.insertion_scorer"], "{step:#?}");
 }

@@ -3,7 +3,7 @@
 
 #![allow(dead_code)]
 
-use std::ops::Deref;
+use std::ops::{Deref, DerefMut};
 use std::path::{Path, PathBuf};
 
 use cell::harness::SimSetup;
@@ -20,6 +20,12 @@ impl Deref for Setup {
     type Target = SimSetup;
     fn deref(&self) -> &SimSetup {
         &self.inner
+    }
+}
+
+impl DerefMut for Setup {
+    fn deref_mut(&mut self) -> &mut SimSetup {
+        &mut self.inner
     }
 }
 
