@@ -1,15 +1,15 @@
 //! Pixels in the loop: the nominal cell with learned perception. Every capture renders the
 //! feeder window from the true world and only those pixels (with the calibrated camera) reach
 //! the learned pipeline. A short run must end every episode cleanly with each failure blamed on
-//! its cause, and the production path (the virtual UR over loopback RTDE) must give the
-//! in-process outcomes.
+//! its cause, and the production path (the virtual UR over loopback RTDE, its captures read as
+//! full-sensor image files through the camera interface) must give the in-process outcomes.
 
 mod e2e_support;
 
 use std::time::Duration;
 
 use cell::episode::{EpisodeRecord, PERCEPTION_MISSED, PerceptionVerdict, StepOutcome};
-use cell::harness::{SimCellIo, connect_sim_over_rtde, run_sim_episode};
+use cell::harness::{connect_sim_over_rtde, run_sim_episode, sim_cell_io};
 use cell::orchestrator::{SplitCell, run_episode};
 
 use e2e_support::{Setup, setup};
@@ -77,7 +77,8 @@ async fn learned_episodes_over_rtde_match_the_in_process_run() {
             .await
             .unwrap();
         let (vur, mut robot) = (s.controller, s.robot);
-        let mut io = SimCellIo::new(s.cell);
+        // Captures reach perception as full-sensor image files, as a production camera's do.
+        let mut io = sim_cell_io(&setup, s.cell).unwrap();
         let mut perception = setup
             .perception
             .for_episode(setup.scenario(), episode)
@@ -102,4 +103,43 @@ async fn learned_episodes_over_rtde_match_the_in_process_run() {
         };
         assert_eq!(verdicts(&remote), verdicts(&local), "episode {episode}");
     }
+}
+
+/// The simulated camera of a virtual-UR run writes each capture as a full-sensor TIFF file and
+/// reads it back through the camera interface: the sensor's full size, the rendered window's
+/// pixels exactly where the in-memory capture of the same episode puts them, black elsewhere.
+#[test]
+fn the_simulated_camera_delivers_full_sensor_files_of_the_same_pixels() {
+    use cell::camera::CameraSource;
+    use cell::orchestrator::CellIo;
+    use image::GenericImageView;
+    use perception::FrameContent;
+
+    let setup = learned();
+    let memory = setup.cell(3).unwrap();
+    let FrameContent::Image(window) = memory.lock().unwrap().capture().unwrap().content else {
+        panic!("learned captures carry pixels");
+    };
+    let mut camera = cell::harness::SimulatedCamera::new(setup.cell(3).unwrap()).unwrap();
+    let shot = camera.capture(Duration::from_secs(5)).unwrap();
+    let path = shot.path.expect("read from a file");
+    assert_eq!(path.extension().and_then(|e| e.to_str()), Some("tif"));
+    let cam = &setup.scenario().spec.cell.camera.intrinsics;
+    assert_eq!(shot.image.origin, [0, 0]);
+    assert_eq!(
+        (shot.image.width(), shot.image.height()),
+        (cam.width, cam.height)
+    );
+    let [x0, y0] = window.origin;
+    let inside = shot
+        .image
+        .pixels
+        .view(x0, y0, window.width(), window.height())
+        .to_image();
+    assert!(
+        inside.as_raw() == window.pixels.to_rgba8().as_raw(),
+        "the window's pixels differ"
+    );
+    assert_eq!(shot.image.pixels.get_pixel(x0 - 1, y0).0, [0, 0, 0, 255]);
+    assert_eq!(shot.image.pixels.get_pixel(0, 0).0, [0, 0, 0, 255]);
 }

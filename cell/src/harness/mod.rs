@@ -22,12 +22,16 @@
 mod audit;
 mod keypoint_noise;
 mod over_rtde;
+mod sim_camera;
 mod sim_io;
 mod sim_perception;
 mod verdict;
 
 pub use keypoint_noise::{KeypointNoise, keypoint_noise_for};
-pub use over_rtde::{OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_episode_over_rtde};
+pub use over_rtde::{
+    OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_cell_io, sim_episode_over_rtde,
+};
+pub use sim_camera::SimulatedCamera;
 pub use sim_io::SimCellIo;
 pub use sim_perception::{EpisodePerception, PipelinePool, SimPerception};
 pub use verdict::{check_of, source_name};

@@ -15,6 +15,7 @@ use sim::cell::SimCell;
 use sim::cell::arm::SimArm;
 
 use super::{HarnessError, SimCellIo, SimSetup};
+use crate::camera::CameraError;
 use crate::orchestrator::{EpisodeOutput, SplitCell, run_episode};
 
 /// Why an episode over loopback RTDE could not run.
@@ -29,6 +30,9 @@ pub enum OverRtdeError {
     /// The RTDE client could not connect to the virtual controller or start our program.
     #[error("connecting to the virtual controller: {0}")]
     Connect(#[from] RobotError),
+    /// The simulated camera could not be set up.
+    #[error("simulated camera: {0}")]
+    Camera(#[from] CameraError),
 }
 
 /// One episode's simulated cell behind a running virtual controller, and the client connected
@@ -85,7 +89,7 @@ pub async fn sim_episode_over_rtde(
         mut robot,
         cell,
     } = connect_sim_over_rtde(setup, episode, VirtualUrConfig::default().unlock_delay).await?;
-    let mut io = SimCellIo::new(cell);
+    let mut io = sim_cell_io(setup, cell)?;
     let mut cell = SplitCell {
         robot: &mut robot,
         io: &mut io,
@@ -94,4 +98,15 @@ pub async fn sim_episode_over_rtde(
     drop(robot);
     drop(controller);
     Ok(out)
+}
+
+/// The side channels of an episode over RTDE: with learned perception its captures are
+/// full-sensor image files read through the camera interface, as in production; keypoint-noise
+/// perception reads the true scene.
+pub fn sim_cell_io(setup: &SimSetup, cell: Arc<Mutex<SimCell>>) -> Result<SimCellIo, CameraError> {
+    if setup.perception.needs_pixels() {
+        SimCellIo::through_files(cell)
+    } else {
+        Ok(SimCellIo::new(cell))
+    }
 }

@@ -10,8 +10,10 @@ use robots::limited::Limited;
 use robots::robot::Robot;
 use sim::cell::SimCell;
 
+use super::SimulatedCamera;
 use super::audit;
 use super::verdict::check_of;
+use crate::camera::{CameraError, CameraSource, DEFAULT_CAPTURE_TIMEOUT};
 use crate::episode::StepOutcome;
 use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, Workcell};
 use perception::{DetectedPart, Frame, FrameContent, FrameImage, TruePart};
@@ -117,15 +119,28 @@ impl Workcell for Limited<SimCell> {
 }
 
 /// The side channels of a simulated cell shared with the virtual UR controller (which moves its
-/// arm): each call locks the cell and asks its [`CellIo`].
+/// arm): each call locks the cell and asks its [`CellIo`]; captures may instead come through a
+/// production camera source.
 pub struct SimCellIo {
     cell: Arc<Mutex<SimCell>>,
+    camera: Option<Box<dyn CameraSource>>,
 }
 
 impl SimCellIo {
-    /// Side channels of a shared simulated cell.
+    /// Side channels of a shared simulated cell, its captures handed over in memory.
     pub fn new(cell: Arc<Mutex<SimCell>>) -> Self {
-        Self { cell }
+        Self { cell, camera: None }
+    }
+
+    /// Side channels of a shared simulated cell whose captures are full-sensor image files read
+    /// back through the camera interface, as a production run reads its camera's
+    /// ([`SimulatedCamera`]).
+    pub fn through_files(cell: Arc<Mutex<SimCell>>) -> Result<Self, CameraError> {
+        let camera = SimulatedCamera::new(cell.clone())?;
+        Ok(Self {
+            cell,
+            camera: Some(Box::new(camera)),
+        })
     }
 
     fn lock(&self) -> MutexGuard<'_, SimCell> {
@@ -137,7 +152,18 @@ impl SimCellIo {
 
 impl CellIo for SimCellIo {
     fn capture(&mut self) -> Result<Frame, CellIoError> {
-        self.lock().capture()
+        let Some(camera) = self.camera.as_mut() else {
+            return self.lock().capture();
+        };
+        let shot = camera
+            .capture(DEFAULT_CAPTURE_TIMEOUT)
+            .map_err(|e| CellIoError::Camera(e.to_string()))?;
+        let cell = self.lock();
+        Ok(Frame {
+            camera: cell.model().spec.camera.intrinsics,
+            base_T_camera: cell.base_T_camera_nominal(),
+            content: FrameContent::Image(shot.image),
+        })
     }
 
     fn shake_feeder(&mut self) -> Result<(), CellIoError> {

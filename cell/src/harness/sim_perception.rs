@@ -18,6 +18,8 @@ pub struct PipelinePool {
     models: LearnedModels,
     #[allow(non_snake_case)]
     base_T_table: Isometry3<f64>,
+    /// Where the calibrated camera sees the feeder (sensor pixels).
+    roi: [u32; 4],
     idle: Mutex<Vec<LearnedPipeline>>,
 }
 
@@ -27,6 +29,7 @@ impl PipelinePool {
         Ok(Self {
             models: learned::models(scenario)?,
             base_T_table: scenario.spec.cell.base_T_table.isometry(),
+            roi: learned::feeder_roi(scenario)?,
             scenario: scenario.clone(),
             idle: Mutex::new(Vec::new()),
         })
@@ -84,10 +87,9 @@ impl SimPerception {
                 EpisodePerception::KeypointNoise(Box::new(keypoint_noise_for(scenario, episode)?))
             }
             SimPerception::Learned(pool) => EpisodePerception::Learned {
-                perception: Some(Box::new(LearnedPerception::new(
-                    pool.take()?,
-                    pool.base_T_table,
-                ))),
+                perception: Some(Box::new(
+                    LearnedPerception::new(pool.take()?, pool.base_T_table).with_roi(pool.roi),
+                )),
                 pool,
             },
         })

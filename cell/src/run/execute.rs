@@ -25,7 +25,6 @@ use crate::report::{ReportError, ReportFiles, write_report};
 use crate::scenario::{PerceptionMode, Scenario};
 use perception::learned::LearnedPerception;
 use perception::{PartPerception, PerceptionError};
-use sim::cell::feeder_window;
 
 /// What can stop one episode from producing a record.
 #[derive(Debug, thiserror::Error)]
@@ -360,19 +359,9 @@ pub fn production(
 #[allow(non_snake_case)]
 fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, PerceptionError> {
     let pipeline = learned::pipeline(scenario, &learned::models(scenario)?, 2)?;
-    let cell = &scenario.spec.cell;
-    let base_T_table = cell.base_T_table.isometry();
-    let table_T_camera = base_T_table.inverse() * cell.camera.base_T_camera.isometry();
-    let window = feeder_window(cell, &table_T_camera).ok_or_else(|| {
-        PerceptionError::Settings("the feeder is not in the calibrated camera's view".into())
-    })?;
+    let base_T_table = scenario.spec.cell.base_T_table.isometry();
     Ok(Box::new(
-        LearnedPerception::new(pipeline, base_T_table).with_roi([
-            window.x0,
-            window.y0,
-            window.width,
-            window.height,
-        ]),
+        LearnedPerception::new(pipeline, base_T_table).with_roi(learned::feeder_roi(scenario)?),
     ))
 }
 

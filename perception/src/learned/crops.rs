@@ -44,10 +44,13 @@ impl CropBatch {
         self.channels = 3 + parts;
     }
 
-    /// Appends the crop of `image` at image pixel `origin` for part index `part`.
+    /// Appends the crop of `image` at image pixel `origin` for part index `part`; pixels
+    /// outside `roi` (`[x, y, width, height]` of `image`) repeat its edge, so a crop never
+    /// reads beyond the region the pipeline was asked to search.
     pub fn push(
         &mut self,
         image: &DynamicImage,
+        roi: [u32; 4],
         origin: [i64; 2],
         part: usize,
     ) -> Result<(), LearnedError> {
@@ -58,11 +61,8 @@ impl CropBatch {
             self.buffer.resize(start + item, 0.0);
         }
         let crop = &mut self.buffer[start..start + item];
-        let whole = [0, 0, image.width(), image.height()];
         let (rgb, onehot) = crop.split_at_mut(3 * plane);
-        sample_planar(
-            image, origin[0], origin[1], CROP_SIZE, CROP_SIZE, whole, rgb,
-        )?;
+        sample_planar(image, origin[0], origin[1], CROP_SIZE, CROP_SIZE, roi, rgb)?;
         for (k, p) in onehot.chunks_mut(plane).enumerate() {
             p.fill(if k == part { 1.0 } else { 0.0 });
         }
@@ -120,15 +120,24 @@ mod tests {
     }
 
     #[test]
-    fn crops_replicate_the_image_edge_and_carry_the_one_hot_part() {
+    fn crops_replicate_the_region_edge_and_carry_the_one_hot_part() {
         let img = DynamicImage::ImageRgb8(RgbImage::from_fn(200, 100, |x, y| {
             Rgb([(x % 256) as u8, (y % 256) as u8, 7])
         }));
         let mut batch = CropBatch::default();
         batch.clear(3);
-        batch.push(&img, crop_origin([10.2, 90.0]), 2).unwrap();
-        batch.push(&img, crop_origin([100.0, 50.0]), 0).unwrap();
-        assert_eq!(batch.shape(), [2, 6, 128, 128]);
+        let whole = [0, 0, 200, 100];
+        batch
+            .push(&img, whole, crop_origin([10.2, 90.0]), 2)
+            .unwrap();
+        batch
+            .push(&img, whole, crop_origin([100.0, 50.0]), 0)
+            .unwrap();
+        // Inside a region of interest, its edge repeats instead of the pixels beyond it.
+        batch
+            .push(&img, [20, 10, 100, 60], crop_origin([10.2, 90.0]), 1)
+            .unwrap();
+        assert_eq!(batch.shape(), [3, 6, 128, 128]);
         let plane = 128 * 128;
         let first = &batch.data()[..6 * plane];
         // Crop origin (−54, 26): column 0 replicates image column 0, row 127 image row 99.
@@ -138,9 +147,16 @@ mod tests {
         assert_eq!(first[plane], 26.0 / 255.0);
         assert!(first[3 * plane..5 * plane].iter().all(|&v| v == 0.0));
         assert!(first[5 * plane..].iter().all(|&v| v == 1.0));
-        let second = &batch.data()[6 * plane..];
+        let second = &batch.data()[6 * plane..12 * plane];
         assert_eq!(second[0], 36.0 / 255.0);
         assert!(second[3 * plane..4 * plane].iter().all(|&v| v == 1.0));
         assert!(second[4 * plane..].iter().all(|&v| v == 0.0));
+        // Crop origin (−54, 26) against the region x 20..120, y 10..70: column 0 is region
+        // column 20, row 0 (image row 26) is inside, row 127 repeats region row 69.
+        let third = &batch.data()[12 * plane..];
+        assert_eq!(third[0], 20.0 / 255.0);
+        assert_eq!(third[54 + 30], 30.0 / 255.0);
+        assert_eq!(third[plane], 26.0 / 255.0);
+        assert_eq!(third[plane + 127 * 128], 69.0 / 255.0);
     }
 }

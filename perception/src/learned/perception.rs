@@ -6,7 +6,7 @@ use nalgebra::Isometry3;
 
 use super::pipeline::LearnedPipeline;
 use crate::detection::DetectedPart;
-use crate::frame::{Frame, FrameContent};
+use crate::frame::{Frame, FrameContent, FrameImage};
 use crate::perceive::{PartPerception, PerceptionError};
 
 /// [`PartPerception`] by the learned pipeline, for a table at a calibrated pose.
@@ -29,10 +29,33 @@ impl LearnedPerception {
         }
     }
 
-    /// Restricts detection to `roi` (`[x, y, width, height]`, pixels of the frame image).
+    /// Restricts detection to `roi` (`[x, y, width, height]` in sensor pixels), whichever part
+    /// of the sensor a frame carries: a full-sensor image from a production camera and a
+    /// simulated capture of just that window give the pipeline the same pixels.
     pub fn with_roi(mut self, roi: [u32; 4]) -> Self {
         self.roi = Some(roi);
         self
+    }
+
+    /// The region of interest in pixels of `image` (its overlap with the sensor ROI), or the
+    /// whole image without one.
+    fn image_roi(&self, image: &FrameImage) -> Result<Option<[u32; 4]>, PerceptionError> {
+        let Some([x, y, w, h]) = self.roi else {
+            return Ok(None);
+        };
+        let [ox, oy] = image.origin;
+        let (x0, y0) = (x.max(ox), y.max(oy));
+        let x1 = (x + w).min(ox + image.width());
+        let y1 = (y + h).min(oy + image.height());
+        if x1 <= x0 || y1 <= y0 {
+            return Err(PerceptionError::Frame(format!(
+                "the {} × {} image at sensor pixel ({ox}, {oy}) does not overlap the region of \
+                 interest {w} × {h} at ({x}, {y})",
+                image.width(),
+                image.height()
+            )));
+        }
+        Ok(Some([x0 - ox, y0 - oy, x1 - x0, y1 - y0]))
     }
 
     /// Gives the pipeline back (to reuse its sessions and buffers).
@@ -62,9 +85,10 @@ impl PartPerception for LearnedPerception {
             .check_on_sensor(&frame.camera)
             .map_err(PerceptionError::Frame)?;
         let camera_T_table = frame.base_T_camera.inverse() * self.base_T_table;
+        let roi = self.image_roi(image)?;
         let found = self
             .pipeline
-            .detect(image, &frame.camera, &camera_T_table, self.roi)?;
+            .detect(image, &frame.camera, &camera_T_table, roi)?;
         let mut out = Vec::new();
         for d in found.detections {
             let Ok(pose) = d.pose else { continue };

@@ -168,7 +168,7 @@ impl LearnedPipeline {
                 inst.centre[1] + f64::from(region[1]),
             ];
             let origin = crop_origin(centre);
-            self.batch.push(&image.pixels, origin, inst.part)?;
+            self.batch.push(&image.pixels, roi, origin, inst.part)?;
             origins.push([
                 origin[0] + i64::from(image.origin[0]),
                 origin[1] + i64::from(image.origin[1]),

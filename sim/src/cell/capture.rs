@@ -47,7 +47,9 @@ pub fn feeder_window(spec: &CellSpec, table_T_camera: &Isometry3<f64>) -> Option
     window_covering(&spec.camera.intrinsics, table_T_camera, &lo, &hi)
 }
 
-/// Renders the feeder `parts` as the camera at `base_T_camera` (the true pose) sees them.
+/// Renders the feeder `parts` as the camera at `base_T_camera` (the true pose) sees them, over
+/// the window where the calibrated camera sees the feeder: the pixels a production pipeline
+/// searches in a full-sensor image, so both read the same pixels.
 #[allow(non_snake_case)]
 pub(crate) fn render_feeder(
     model: &CellModel,
@@ -56,9 +58,13 @@ pub(crate) fn render_feeder(
     rng: &mut ChaCha8Rng,
 ) -> Result<FeederImage, CellError> {
     let camera = &model.spec.camera.intrinsics;
-    let table_T_camera = model.geometry.base_T_table.inverse() * base_T_camera;
-    let window = feeder_window(&model.spec, &table_T_camera)
-        .ok_or_else(|| CellError::Camera("the feeder is not in the camera's view".into()))?;
+    let table_T =
+        |base_T_camera: &Isometry3<f64>| model.geometry.base_T_table.inverse() * base_T_camera;
+    let window = feeder_window(&model.spec, &table_T(&model.geometry.base_T_camera_nominal))
+        .ok_or_else(|| {
+            CellError::Camera("the feeder is not in the calibrated camera's view".into())
+        })?;
+    let table_T_camera = table_T(base_T_camera);
     let placed = parts
         .iter()
         .map(|p| {
