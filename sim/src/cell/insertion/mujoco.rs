@@ -2,22 +2,25 @@
 //! the rapier scorer, in an independent engine.
 //!
 //! Generated model (see [`crate::mujoco::mjcf`]): the receivers' pieces are static world geoms;
-//! the wrist is a heavy free body put back on its commanded path (pose and velocity) after every
-//! step; the part hangs on it by three slide joints and a ball joint whose anchors sit at the
-//! part's leading point (the compliance centre), so the joint coordinates are exactly the wrist
-//! spring's deflections. The lateral and rotational springs are joint stiffness and damping; the
-//! axial spring is a position actuator whose force is clamped to the push force. The part starts
-//! at rest in the world, as in rapier. `implicitfast` integrates the damping implicitly (the 5 kHz
-//! rotational mode would be unstable explicitly at this step).
+//! the wrist is a carriage sliding down the axis of a mocap body that holds the start
+//! orientation, its position and velocity set to the commanded path every step; the part hangs
+//! on it by three slide joints and a ball joint whose anchors sit at the part's leading point
+//! (the compliance centre), so the joint coordinates are exactly the wrist spring's deflections.
+//! The lateral and rotational springs are joint stiffness and damping; the axial spring is a
+//! position actuator whose force is clamped to the push force. The part starts at rest in the
+//! world, as in rapier. `implicitfast` integrates the damping implicitly (the 5 kHz rotational
+//! mode would be unstable explicitly at this step).
 //!
-//! The wrist is not a mocap body: MuJoCo gives mocap bodies no velocity, so a part carried by
-//! one moved with the wrist only by being put somewhere new each step. It met the rim at zero
-//! approach speed in MuJoCo's eyes, so the contact's damping never acted and the part sank about
-//! two steps' travel (5 µm at 0.1 ms) into the rim's edge before it was pushed out, sideways
-//! into the chamfer when the overlap was smaller than that: MuJoCo seated parts that landed up
-//! to 5 µm beyond the capture band, where rapier (and geometry) leave them on the rim. With the
-//! wrist's real velocity the contact brakes the landing and the band lies within about 1 µm of
-//! rapier's on every step and side (`cell scorers`).
+//! The wrist does not move by the mocap body alone: MuJoCo gives mocap bodies no velocity, so a
+//! part carried by one moved with the wrist only by being put somewhere new each step. It met
+//! the rim at zero approach speed in MuJoCo's eyes, so the contact's damping never acted and the
+//! part sank about two steps' travel (5 µm at 0.1 ms) into the rim's edge before it was pushed
+//! out, sideways into the chamfer when the overlap was smaller than that: MuJoCo seated parts
+//! that landed up to 5 µm beyond the capture band, where rapier (and geometry) leave them on the
+//! rim. With the carriage's real velocity the contact brakes the landing and the band lies
+//! within 1.6 µm of rapier's on every step and side (`cell scorers`). (The mocap still moves
+//! sideways by the carriage's drift along its tilted axis, at most 16 µm over a descent, at
+//! 0.1 mm/s: too slow to matter.)
 //!
 //! Contact settings, each with its physical reason (not tuned toward rapier): the parts are
 //! rigid metal and plastic, so they must not sink into each other by more than a small part of
@@ -109,10 +112,10 @@ type ModelCache = std::sync::Arc<
     >,
 >;
 
-/// Mass and inertia of the wrist body, kg and kg·m²: heavy enough that the 5 N push moves it a
-/// few nanometres within a step before it is put back on its commanded path, light enough to
-/// keep the contact solve well conditioned (at 1 kg the reset fed seated parts' chatter, and at
-/// 1 000 kg the 2·10⁴ mass ratio did: either kept some parts from ever coming to rest).
+/// Mass and inertia of the wrist's carriage, kg and kg·m²: heavy enough that the 5 N push moves
+/// it a few nanometres within a step before it is put back on its commanded path, light enough
+/// to keep the contact solve well conditioned (at 1 kg the reset fed seated parts' chatter, and
+/// at 1 000 kg the 2·10⁴ mass ratio did: either kept some parts from ever coming to rest).
 #[cfg(feature = "mujoco")]
 const WRIST_MASS: f64 = 10.0;
 
@@ -255,7 +258,8 @@ impl Mujoco {
             w.damping(ka, w.mass),
         );
         world += &format!(
-            "    <body name=\"wrist\">\n      <freejoint name=\"wrist\"/>\n      \
+            "    <body name=\"wrist\" mocap=\"true\">\n      <body name=\"carriage\">\n      \
+         <joint name=\"descent\" type=\"slide\" axis=\"0 0 1\"/>\n      \
          <inertial pos=\"0 0 0\" mass=\"{WRIST_MASS}\" diaginertia=\"{WRIST_MASS} {WRIST_MASS} \
          {WRIST_MASS}\"/>\n      <body name=\"part\">\n        \
          <inertial pos=\"0 0 0\" mass=\"{}\" diaginertia=\"{i} {i} {i}\"/>\n        \
@@ -264,7 +268,7 @@ impl Mujoco {
          pos=\"{lead}\" stiffness=\"{kl}\" damping=\"{cl}\"/>\n        <joint name=\"z\" \
          type=\"slide\" axis=\"0 0 1\" pos=\"{lead}\"/>\n        <joint name=\"r\" \
          type=\"ball\" pos=\"{lead}\" stiffness=\"{kr}\" damping=\"{cr}\"/>\n{held}      \
-         </body>\n    </body>\n",
+         </body>\n    </body>\n    </body>\n",
             w.mass,
             i = w.inertia,
         );
@@ -291,31 +295,31 @@ impl Mujoco {
                     MujocoError::Compile(format!("the generated model has no joint {name:?}"))
                 })
         };
-        let (wrist_q, wrist_v) = joint("wrist")?;
+        let (descent_q, descent_v) = joint("descent")?;
         let mut data = MjData::new(model);
         // The wrist follows its commanded path exactly, with its velocity (set here, not in the
-        // MJCF, so models are reused); the part starts at rest in the world, as in rapier: its
-        // slide joints move against the wrist's descent.
+        // MJCF, so models are reused): the mocap body holds the start orientation, the carriage
+        // slides down its axis at the descent speed, and the mocap is moved by the carriage's
+        // sideways drift (its axis is tilted with the start pose) so the wrist stays on its
+        // vertical path. The part starts at rest in the world, as in rapier.
+        let axis = start_pose.rotation * nalgebra::Vector3::z();
+        let q = start_pose.rotation.quaternion();
+        data.mocap_quat_mut()[0] = [q.w, q.i, q.j, q.k];
         let set_wrist = |data: &mut MjData<&mujoco_rs::prelude::MjModel>, t: f64| {
-            let pose = w.pose_at(&start_pose, t);
-            let p = pose.translation.vector;
-            let q = pose.rotation.quaternion();
-            data.qpos_mut()[wrist_q..wrist_q + 7]
-                .copy_from_slice(&[p.x, p.y, p.z, q.w, q.i, q.j, q.k]);
-            let descent = if w.bottomed(&start_pose, t) {
+            let path = w.pose_at(&start_pose, t).translation.vector;
+            let s = path.z - start_pose.translation.z;
+            let mocap = path - axis * s;
+            data.mocap_pos_mut()[0] = [mocap.x, mocap.y, mocap.z];
+            data.qpos_mut()[descent_q] = s;
+            data.qvel_mut()[descent_v] = if w.bottomed(&start_pose, t) {
                 0.0
             } else {
-                w.speed
+                -w.speed
             };
-            data.qvel_mut()[wrist_v..wrist_v + 6]
-                .copy_from_slice(&[0.0, 0.0, -descent, 0.0, 0.0, 0.0]);
         };
         set_wrist(&mut data, 0.0);
-        let rest = start_pose.rotation.inverse() * nalgebra::Vector3::new(0.0, 0.0, w.speed);
-        for (name, v) in [("x", rest.x), ("y", rest.y), ("z", rest.z)] {
-            let (_, dof) = joint(name)?;
-            data.qvel_mut()[dof] = v;
-        }
+        let (_, z_dof) = joint("z")?;
+        data.qvel_mut()[z_dof] = w.speed;
 
         let dt = settings.dt;
         let mut t = 0.0;
