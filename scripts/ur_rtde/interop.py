@@ -74,9 +74,11 @@ def main():
     q0 = receive.getActualQ()
     q = list(q0)
     for i in range(1, 201):
+        t = control.initPeriod()
         q = [q0[0] + 0.0005 * i] + list(q0[1:])
         control.servoJ(q, 0.0, 0.0, 0.002, 0.1, 300)
-        time.sleep(0.002)
+        # ur_rtde's own pacing: a steady 500 Hz stream, where time.sleep drifts and stalls.
+        control.waitPeriod(t)
     control.servoStop(4.0)
     time.sleep(0.2)
     report("servoJ", start=q0, last_target=q, q=receive.getActualQ())
