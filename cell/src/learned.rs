@@ -47,12 +47,8 @@ pub fn pipeline(
 /// The region of the sensor (`[x, y, width, height]`, pixels) where the scenario's calibrated
 /// camera sees the feeder: what learned perception searches, in simulated captures and in
 /// production's full-sensor images alike.
-#[allow(non_snake_case)]
 pub fn feeder_roi(scenario: &Scenario) -> Result<[u32; 4], PerceptionError> {
-    let cell = &scenario.spec.cell;
-    let table_T_camera =
-        cell.base_T_table.isometry().inverse() * cell.camera.base_T_camera.isometry();
-    let window = sim::cell::feeder_window(cell, &table_T_camera).ok_or_else(|| {
+    let window = sim::cell::calibrated_feeder_window(&scenario.spec.cell).ok_or_else(|| {
         PerceptionError::Settings("the feeder is not in the calibrated camera's view".into())
     })?;
     Ok([window.x0, window.y0, window.width, window.height])

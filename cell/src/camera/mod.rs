@@ -60,6 +60,17 @@ pub struct Capture {
     pub taken: SystemTime,
 }
 
+impl Capture {
+    /// The frame perception reads: these pixels, seen by the scenario's calibrated `camera`.
+    pub fn into_frame(self, camera: &sim::config::CameraSpec) -> perception::Frame {
+        perception::Frame {
+            camera: camera.intrinsics,
+            base_T_camera: camera.base_T_camera.isometry(),
+            content: perception::FrameContent::Image(self.image),
+        }
+    }
+}
+
 /// The size the images must have: the scenario camera's full sensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Sensor {

@@ -158,12 +158,7 @@ impl CellIo for SimCellIo {
         let shot = camera
             .capture(DEFAULT_CAPTURE_TIMEOUT)
             .map_err(|e| CellIoError::Camera(e.to_string()))?;
-        let cell = self.lock();
-        Ok(Frame {
-            camera: cell.model().spec.camera.intrinsics,
-            base_T_camera: cell.base_T_camera_nominal(),
-            content: FrameContent::Image(shot.image),
-        })
+        Ok(shot.into_frame(&self.lock().model().spec.camera))
     }
 
     fn shake_feeder(&mut self) -> Result<(), CellIoError> {

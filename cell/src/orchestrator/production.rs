@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use super::cell_io::{CellIo, CellIoError, InsertionCheck};
 use crate::camera::{self, CameraError, CameraSource, CameraSpec, Sensor};
 use crate::scenario::{PerceptionMode, Scenario};
-use perception::{Frame, FrameContent};
+use perception::Frame;
 
 /// What the operator passed to start a production run.
 #[derive(Debug, Clone, PartialEq)]
@@ -119,12 +119,7 @@ impl CellIo for ProductionCellIo {
             shot.image.width(),
             shot.image.height()
         );
-        let cam = &self.scenario.spec.cell.camera;
-        Ok(Frame {
-            camera: cam.intrinsics,
-            base_T_camera: cam.base_T_camera.isometry(),
-            content: FrameContent::Image(shot.image),
-        })
+        Ok(shot.into_frame(&self.scenario.spec.cell.camera))
     }
 
     fn shake_feeder(&mut self) -> Result<(), CellIoError> {

@@ -47,6 +47,15 @@ pub fn feeder_window(spec: &CellSpec, table_T_camera: &Isometry3<f64>) -> Option
     window_covering(&spec.camera.intrinsics, table_T_camera, &lo, &hi)
 }
 
+/// [`feeder_window`] for the scenario's calibrated camera: the region learned perception
+/// searches, and the window a simulated capture renders, so both read the same pixels.
+#[allow(non_snake_case)]
+pub fn calibrated_feeder_window(spec: &CellSpec) -> Option<Window> {
+    let table_T_camera =
+        spec.base_T_table.isometry().inverse() * spec.camera.base_T_camera.isometry();
+    feeder_window(spec, &table_T_camera)
+}
+
 /// Renders the feeder `parts` as the camera at `base_T_camera` (the true pose) sees them, over
 /// the window where the calibrated camera sees the feeder: the pixels a production pipeline
 /// searches in a full-sensor image, so both read the same pixels.
@@ -58,13 +67,10 @@ pub(crate) fn render_feeder(
     rng: &mut ChaCha8Rng,
 ) -> Result<FeederImage, CellError> {
     let camera = &model.spec.camera.intrinsics;
-    let table_T =
-        |base_T_camera: &Isometry3<f64>| model.geometry.base_T_table.inverse() * base_T_camera;
-    let window = feeder_window(&model.spec, &table_T(&model.geometry.base_T_camera_nominal))
-        .ok_or_else(|| {
-            CellError::Camera("the feeder is not in the calibrated camera's view".into())
-        })?;
-    let table_T_camera = table_T(base_T_camera);
+    let window = calibrated_feeder_window(&model.spec).ok_or_else(|| {
+        CellError::Camera("the feeder is not in the calibrated camera's view".into())
+    })?;
+    let table_T_camera = model.geometry.base_T_table.inverse() * base_T_camera;
     let placed = parts
         .iter()
         .map(|p| {

@@ -52,7 +52,7 @@ pub mod noise;
 pub mod pieces;
 mod sim_cell;
 
-pub use capture::{FeederImage, feeder_window};
+pub use capture::{FeederImage, calibrated_feeder_window, feeder_window};
 pub use error::CellError;
 pub use feasible::check_feasible;
 pub use model::CellModel;
