@@ -1,8 +1,8 @@
 //! Stable poses dropped in MuJoCo cross-check rapier's: for each USB-C part the same drop
-//! sequence (600 drops) gives class shares within 3 points and physics rest heights within
-//! 10 µm of the geometric ones. One known exception: the light plastic insert mold lands on its
-//! +z face about 6 points more often in MuJoCo (its oblique classes 2 points less each);
-//! that part's share bound is its measured gap, so the test still fails if it grows.
+//! sequence (3 000 drops at the default 1/2 400 s) gives class shares within 3 points (the
+//! issue's goal; measured 0.3 / 2.3 / 0.7 points at 5 000 drops) and physics rest heights
+//! within 10 µm of the geometric ones. With 3 000 drops one class's share varies by about
+//! 1.2 points between the engines from chaos alone, so fewer drops would not test 3 points.
 
 #![cfg(feature = "mujoco")]
 
@@ -30,15 +30,15 @@ fn share_gap(a: &StablePoseReport, b: &StablePoseReport) -> (f64, String) {
 #[test]
 fn mujoco_and_rapier_drops_give_the_same_stable_poses() {
     let settings = DropSettings {
-        drops: 600,
+        drops: 3000,
         seed: 3,
         ..DropSettings::default()
     };
     let mut failures = Vec::new();
-    for (name, mesh, density, bound) in [
-        ("main_shell", usbc::main_shell(), 8500.0, 0.03),
-        ("insert_mold", usbc::insert_mold(), 1400.0, 0.07),
-        ("top_shell", usbc::top_shell(), 8500.0, 0.03),
+    for (name, mesh, density) in [
+        ("main_shell", usbc::main_shell(), 8500.0),
+        ("insert_mold", usbc::insert_mold(), 1400.0),
+        ("top_shell", usbc::top_shell(), 8500.0),
     ] {
         let rapier = stable_poses(&mesh, density, &settings, None);
         let mujoco = stable_poses_mujoco(name, &mesh, density, &settings, None).unwrap();
@@ -62,7 +62,7 @@ fn mujoco_and_rapier_drops_give_the_same_stable_poses() {
                 ));
             }
         }
-        if gap > bound {
+        if gap > 0.03 {
             failures.push(format!(
                 "{name} {class}: shares differ by {:.1} points",
                 gap * 100.0

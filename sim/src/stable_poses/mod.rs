@@ -10,7 +10,7 @@ pub use drop::{
     DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch,
     stratified_rotation,
 };
-pub use mujoco::{DropEngine, stable_poses_mujoco, stable_poses_with};
+pub use mujoco::{DropEngine, restitution_dampratio, stable_poses_mujoco, stable_poses_with};
 
 use indicatif::ProgressBar;
 use perception::part::TriMesh;
