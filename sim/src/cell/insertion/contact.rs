@@ -47,6 +47,9 @@ pub struct ContactSettings {
     /// Fastest speed at which the solver pushes out a penetration, m/s (rapier's default of
     /// 3 length units per second is 0.3 mm/s here: a part that grazed a wall would stick to it).
     pub max_corrective_velocity: f64,
+    /// Fastest the part may move, m/s: a sanity bound only. (Rapier's default, 400 length units
+    /// per second, is 4 cm/s here: barely above the 2.5 cm/s descent.)
+    pub max_speed: f64,
 }
 
 impl Default for ContactSettings {
@@ -59,6 +62,7 @@ impl Default for ContactSettings {
             length_unit: 1e-4,
             prediction_distance: 3e-5,
             max_corrective_velocity: 0.05,
+            max_speed: 1.0,
         }
     }
 }
@@ -127,6 +131,8 @@ pub fn simulate(
         .integration_parameters
         .normalized_max_corrective_velocity =
         settings.max_corrective_velocity / settings.length_unit;
+    world.integration_parameters.normalized_max_linear_velocity =
+        settings.max_speed / settings.length_unit;
     // Recycled contacts may be a few microns stale: too coarse for tens-of-micron clearances.
     world.integration_parameters.contact_recycling = false;
     for softness in [
