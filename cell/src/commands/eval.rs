@@ -11,7 +11,8 @@ use anyhow::Context;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
-use perception::learned::{LearnedModels, LearnedPipeline};
+use perception::estimate::EstimatorConfig;
+use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig};
 use perception::part::Catalog;
 
 /// Arguments of `cell eval`.
@@ -44,6 +45,10 @@ pub struct Args {
     /// Ground-truth instances less visible than this fraction are ignored.
     #[arg(long, default_value_t = 0.1)]
     pub min_visib: f64,
+    /// Reprojection RMS gate of the pose estimator, pixels: poses above it are refused with
+    /// their reason (the learned scenario's `[perception] max_rms_px` is 12).
+    #[arg(long, default_value_t = 4.0)]
+    pub max_rms_px: f64,
     /// No progress line.
     #[arg(long)]
     pub quiet: bool,
@@ -64,7 +69,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let models = LearnedModels::in_dir(&args.models)
         .with_context(|| format!("loading the models in {}", args.models.display()))?;
     let runtime = perception::onnx::Runtime::get().context("loading ONNX Runtime")?;
-    let pipeline = LearnedPipeline::load(&models, &catalog, &runtime)
+    let config = PipelineConfig {
+        estimator: EstimatorConfig::with_gate(args.max_rms_px),
+        ..PipelineConfig::default()
+    };
+    let pipeline = LearnedPipeline::with_config(&models, &catalog, &runtime, config)
         .with_context(|| format!("loading the models in {}", args.models.display()))?;
     let mut detector = pipeline;
     let started = Instant::now();
