@@ -83,7 +83,6 @@ impl CameraSource for SimulatedCamera {
             path: path.clone(),
             message: format!("cannot write: {e}"),
         })?;
-        drop(bytes);
         let pixels = decode_file(&path, self.sensor);
         // Each image is read once; the folder goes with the camera.
         let _ = std::fs::remove_file(&path);

@@ -1,6 +1,6 @@
 //! Dropping a part onto a table with rapier until it rests: the physics half of stable poses.
 
-use nalgebra::{Point3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use perception::part::TriMesh;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -11,6 +11,7 @@ use rapier3d_f64::prelude::{
 
 use crate::convert::{
     rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
+    vector_from_vec,
 };
 
 /// How parts are dropped and when they count as resting.
@@ -178,9 +179,9 @@ const PARTS: Group = Group::GROUP_3;
 pub struct DropBody {
     hull: Vec<parry3d_f64::math::Vector>,
     facets: (Vec<parry3d_f64::math::Vector>, Vec<[u32; 3]>),
-    mass: MassProperties,
-    mesh: TriMesh,
-    diameter: f64,
+    pub(super) mass: MassProperties,
+    pub(super) mesh: TriMesh,
+    pub(super) diameter: f64,
 }
 
 impl DropBody {
@@ -202,6 +203,59 @@ impl DropBody {
     pub fn mass_and_com(&self) -> (f64, Point3<f64>) {
         let c = self.mass.local_com;
         (self.mass.mass(), Point3::new(c.x, c.y, c.z))
+    }
+}
+
+/// How a body moved in the last step, by the rest criterion of [`DropSettings`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Motion {
+    /// It left the pose it was holding (which it now holds instead).
+    Moved,
+    /// It holds its pose, not yet for [`DropSettings::rest_time`].
+    Still,
+    /// It has held its pose for [`DropSettings::rest_time`]: at rest.
+    Rested,
+}
+
+/// The rest criterion both engines judge their drops by: a body is at rest once it has stayed
+/// within [`DropSettings::rest_displacement`] and [`DropSettings::rest_rotation`] of one pose
+/// for [`DropSettings::rest_time`].
+pub(super) struct RestClock {
+    anchor: Vec<Isometry3<f64>>,
+    calm: Vec<f64>,
+}
+
+impl RestClock {
+    /// A clock for bodies starting at `poses`.
+    pub(super) fn new(poses: Vec<Isometry3<f64>>) -> Self {
+        Self {
+            calm: vec![0.0; poses.len()],
+            anchor: poses,
+        }
+    }
+
+    /// Body `k` is at `pose` after a step of `settings.dt`.
+    pub(super) fn tick(
+        &mut self,
+        k: usize,
+        pose: &Isometry3<f64>,
+        settings: &DropSettings,
+    ) -> Motion {
+        let anchor = &self.anchor[k];
+        let still = (pose.translation.vector - anchor.translation.vector).norm()
+            < settings.rest_displacement
+            && pose.rotation.angle_to(&anchor.rotation) < settings.rest_rotation;
+        if !still {
+            self.calm[k] = 0.0;
+            self.anchor[k] = *pose;
+            return Motion::Moved;
+        }
+        self.calm[k] += settings.dt;
+        if self.calm[k] >= settings.rest_time {
+            Motion::Rested
+        } else {
+            Motion::Still
+        }
     }
 }
 
@@ -315,20 +369,18 @@ pub fn simulate_batch(
     }
     let mut outcomes: Vec<Option<DropOutcome>> = vec![None; count];
     let mut removed = vec![false; count];
-    let mut calm = vec![0.0f64; count];
     let mut restless = vec![0usize; groups];
     for k in 0..count {
         restless[group_of(k)] += 1;
     }
-    let mut anchor: Vec<(Vector, UnitQuaternion<f64>)> = handles
-        .iter()
-        .map(|h| {
-            (
-                world.bodies[*h].translation(),
-                unit_quaternion_from_rot(world.bodies[*h].rotation()),
-            )
-        })
-        .collect();
+    let pose_of = |world: &PhysicsWorld, k: usize| {
+        let rb = &world.bodies[handles[k]];
+        Isometry3::from_parts(
+            vector_from_vec(rb.translation()).into(),
+            unit_quaternion_from_rot(rb.rotation()),
+        )
+    };
+    let mut clock = RestClock::new((0..count).map(|k| pose_of(&world, k)).collect());
     let mut remaining = groups;
     let mut t = 0.0;
     while remaining > 0 && t < settings.max_time {
@@ -338,27 +390,23 @@ pub fn simulate_batch(
             if removed[k] {
                 continue;
             }
-            let rb = &world.bodies[handles[k]];
-            let (p, q) = (rb.translation(), unit_quaternion_from_rot(rb.rotation()));
-            let still = (p - anchor[k].0).length() < settings.rest_displacement
-                && q.angle_to(&anchor[k].1) < settings.rest_rotation;
-            if still {
-                calm[k] += settings.dt;
-            } else {
-                calm[k] = 0.0;
-                anchor[k] = (p, q);
-                if outcomes[k].take().is_some() {
-                    restless[group_of(k)] += 1;
+            let pose = pose_of(&world, k);
+            match clock.tick(k, &pose, settings) {
+                Motion::Moved => {
+                    if outcomes[k].take().is_some() {
+                        restless[group_of(k)] += 1;
+                    }
                 }
-            }
-            if calm[k] >= settings.rest_time && outcomes[k].is_none() {
-                outcomes[k] = Some(DropOutcome {
-                    rotation: q,
-                    height: p.z,
-                    settled: true,
-                    time: t,
-                });
-                restless[group_of(k)] -= 1;
+                Motion::Rested if outcomes[k].is_none() => {
+                    outcomes[k] = Some(DropOutcome {
+                        rotation: pose.rotation,
+                        height: pose.translation.z,
+                        settled: true,
+                        time: t,
+                    });
+                    restless[group_of(k)] -= 1;
+                }
+                Motion::Rested | Motion::Still => {}
             }
         }
         // A group whose parts all rest leaves the world, so later steps cost less.

@@ -18,7 +18,7 @@ use indicatif::ProgressBar;
 use perception::part::TriMesh;
 use rayon::prelude::*;
 
-use super::{DropOutcome, DropSettings, StablePoseReport};
+use super::{DropBody, DropOutcome, DropSettings, StablePoseReport};
 use crate::mujoco::MujocoError;
 
 /// Which physics engine drops the parts.
@@ -68,22 +68,20 @@ pub fn stable_poses_mujoco(
     progress: Option<&ProgressBar>,
 ) -> Result<StablePoseReport, MujocoError> {
     crate::mujoco::ensure_available()?;
-    let body = super::DropBody::new(mesh, density);
+    let body = DropBody::new(mesh, density);
     let (mass, center_of_mass) = body.mass_and_com();
-    let dampratio = restitution_dampratio(part, mesh, density, settings)?;
+    let model = DropModel {
+        part,
+        body: &body,
+        settings,
+        dampratio: restitution_dampratio(part, &body, settings)?,
+    };
     let batch = settings.batch.max(1);
     let starts: Vec<usize> = (0..settings.drops).step_by(batch).collect();
     let batches: Vec<Vec<DropOutcome>> = starts
         .par_iter()
         .map(|&first| {
             let count = batch.min(settings.drops - first);
-            let model = DropModel {
-                part,
-                mesh,
-                density,
-                settings,
-                dampratio,
-            };
             let out = model.simulate_batch(first, count);
             if let Some(p) = progress {
                 p.inc(count as u64);
@@ -104,41 +102,40 @@ pub fn stable_poses_mujoco(
 /// Bounds of the damping-ratio search: critically damped up to heavily overdamped.
 const DAMPRATIO_RANGE: (f64, f64) = (1.0, 8.0);
 
-/// The contact damping ratio at which `part`, landing flat on its first hull face at the drop's
-/// impact speed `√(2 g h)`, rebounds with `settings.restitution` of that speed at
-/// `settings.dt` (see the module docs). Bisection over [`DAMPRATIO_RANGE`]: the rebound falls
-/// as damping rises. A restitution the range cannot reach gives the nearer end.
+/// The contact damping ratio at which `part` (its drop `body`), landing flat in its modelled
+/// orientation (part z up) at the drop's impact speed `√(2 g h)`, rebounds with
+/// `settings.restitution` of that speed at `settings.dt` (see the module docs). Bisection over
+/// [`DAMPRATIO_RANGE`]: the rebound falls as damping rises. A restitution the range cannot reach
+/// gives the nearer end.
 pub fn restitution_dampratio(
     part: &str,
-    mesh: &TriMesh,
-    density: f64,
+    body: &DropBody,
     settings: &DropSettings,
 ) -> Result<f64, MujocoError> {
     crate::mujoco::ensure_available()?;
+    let mut model = DropModel {
+        part,
+        body,
+        settings,
+        dampratio: 0.0,
+    };
     let (mut lo, mut hi) = DAMPRATIO_RANGE;
     for _ in 0..20 {
-        let mid = 0.5 * (lo + hi);
-        let model = DropModel {
-            part,
-            mesh,
-            density,
-            settings,
-            dampratio: mid,
-        };
+        model.dampratio = 0.5 * (lo + hi);
         if model.flat_rebound()? > settings.restitution {
-            lo = mid;
+            lo = model.dampratio;
         } else {
-            hi = mid;
+            hi = model.dampratio;
         }
     }
     Ok(0.5 * (lo + hi))
 }
 
-/// One MuJoCo drop model's inputs: the part, its drop settings and the contact damping.
+/// One MuJoCo drop model's inputs: the part, its drop body and settings, the contact damping.
+#[cfg_attr(not(feature = "mujoco"), allow(dead_code))]
 struct DropModel<'a> {
     part: &'a str,
-    mesh: &'a TriMesh,
-    density: f64,
+    body: &'a DropBody,
     settings: &'a DropSettings,
     dampratio: f64,
 }
@@ -167,18 +164,15 @@ impl DropModel<'_> {
         starts: &[nalgebra::Isometry3<f64>],
     ) -> Result<crate::mujoco::Compiled, MujocoError> {
         use nalgebra::{Isometry3, Vector3};
-        use rapier3d_f64::prelude::MassProperties;
 
-        use crate::convert::vec_from_point;
         use crate::mujoco::mjcf::{Mjcf, Options, pose_attrs};
 
-        let verts: Vec<_> = self.mesh.vertices.iter().map(vec_from_point).collect();
-        let props = MassProperties::from_trimesh(self.density, &verts, &self.mesh.triangles);
+        let props = &self.body.mass;
         let com = props.local_com;
         let frame = crate::convert::unit_quaternion_from_rot(&props.principal_inertia_local_frame);
         let inertia = props.principal_inertia();
         // The whole mesh is one convex piece, as rapier's drop uses the hull of every vertex.
-        let hull = [self.mesh.vertices.clone()];
+        let hull = [self.body.mesh.vertices.clone()];
         let mut mjcf = Mjcf::new(Options {
             timestep: self.settings.dt,
             gravity: Vector3::new(0.0, 0.0, -9.81),
@@ -190,8 +184,7 @@ impl DropModel<'_> {
             noslip_iterations: 0,
         });
         let geoms = mjcf.piece_geoms(self.part, &hull, &Isometry3::identity())?;
-        let (lo, hi) = self.mesh.aabb();
-        let spacing = 3.0 * (hi - lo).norm() + 0.01;
+        let spacing = 3.0 * self.body.diameter + 0.01;
         let side = (starts.len() as f64).sqrt().ceil() as usize;
         let half = spacing * side as f64;
         let mut world = format!(
@@ -226,8 +219,8 @@ impl DropModel<'_> {
         crate::mujoco::compile(&mjcf, xml)
     }
 
-    /// Rebound over impact speed of the part released 0.1 mm above the table on its first hull
-    /// face, moving down at the drop's impact speed.
+    /// Rebound over impact speed of the part released 0.1 mm above the table in its modelled
+    /// orientation (part z up), moving down at the drop's impact speed.
     fn flat_rebound(&self) -> Result<f64, MujocoError> {
         use mujoco_rs::prelude::MjData;
         use nalgebra::{Isometry3, UnitQuaternion, Vector3};
@@ -235,7 +228,7 @@ impl DropModel<'_> {
         use super::geometric_rest_height;
 
         let rotation = UnitQuaternion::identity();
-        let z = geometric_rest_height(self.mesh, &rotation) + 1e-4;
+        let z = geometric_rest_height(&self.body.mesh, &rotation) + 1e-4;
         let start = Isometry3::from_parts(Vector3::new(0.0, 0.0, z).into(), rotation);
         let compiled = self.compile(&[start])?;
         let mut data = MjData::new(&compiled.model);
@@ -258,6 +251,7 @@ impl DropModel<'_> {
         use rand::{RngExt, SeedableRng};
         use rand_chacha::ChaCha8Rng;
 
+        use super::drop::{Motion, RestClock};
         use super::{geometric_rest_height, stratified_rotation};
         use crate::mujoco::mjcf::pose_from;
 
@@ -267,7 +261,7 @@ impl DropModel<'_> {
         let starts: Vec<Isometry3<f64>> = (0..count)
             .map(|k| {
                 let rotation = stratified_rotation(first + k, shift);
-                let z = geometric_rest_height(self.mesh, &rotation) + settings.drop_height;
+                let z = geometric_rest_height(&self.body.mesh, &rotation) + settings.drop_height;
                 Isometry3::from_parts(Vector3::new(0.0, 0.0, z).into(), rotation)
             })
             .collect();
@@ -286,8 +280,7 @@ impl DropModel<'_> {
             pose_from(&data.xpos()[id], &data.xquat()[id])
         };
         let mut outcomes: Vec<Option<DropOutcome>> = vec![None; count];
-        let mut calm = vec![0.0f64; count];
-        let mut anchor: Vec<Isometry3<f64>> = ids.iter().map(|&id| pose_of(&data, id)).collect();
+        let mut clock = RestClock::new(ids.iter().map(|&id| pose_of(&data, id)).collect());
         let mut remaining = count;
         let mut t = 0.0;
         while remaining > 0 && t < settings.max_time {
@@ -304,16 +297,7 @@ impl DropModel<'_> {
                         first + k
                     )));
                 }
-                let still = (p.translation.vector - anchor[k].translation.vector).norm()
-                    < settings.rest_displacement
-                    && p.rotation.angle_to(&anchor[k].rotation) < settings.rest_rotation;
-                if still {
-                    calm[k] += settings.dt;
-                } else {
-                    calm[k] = 0.0;
-                    anchor[k] = p;
-                }
-                if calm[k] >= settings.rest_time {
+                if clock.tick(k, &p, settings) == Motion::Rested {
                     outcomes[k] = Some(DropOutcome {
                         rotation: p.rotation,
                         height: p.translation.z,
