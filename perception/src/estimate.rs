@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Matrix2, Point2, Point3, UnitQuaternion};
 
 use crate::Camera;
+use crate::contour::ContourFit;
 use crate::part::{Catalog, PartRole};
 use crate::perceive::PerceptionError;
 use crate::planar::{PlanarConfig, PlanarError, PlanarPose, PlanarRefiner};
@@ -59,6 +60,48 @@ pub struct PoseEstimate {
     pub rms_px: f64,
     /// Stable-pose posterior times reprojection consistency, in (0, 1].
     pub confidence: f64,
+    /// The contour alignment that moved `planar` onto the image's edges, when one ran and was
+    /// kept (learned perception only: keypoint noise has no pixels).
+    pub contour: Option<ContourRefinement>,
+}
+
+/// What contour alignment did to a keypoint estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContourRefinement {
+    /// The fit that now stands as the estimate's `planar` pose.
+    pub fit: ContourFit,
+    /// The planar pose from the keypoints alone, before the alignment.
+    pub keypoint_planar: PlanarPose,
+}
+
+impl PoseEstimate {
+    /// Replaces the planar pose by a contour fit on stable pose `class` of `refiner` (the
+    /// keypoint pose is kept in `contour`). The class posterior is the keypoints' when the class
+    /// stays, and the fit's edge support when contour alignment chose another one.
+    #[allow(non_snake_case)]
+    pub fn adopt_contour(&mut self, fit: ContourFit, class: usize, refiner: &PlanarRefiner) {
+        let keypoint_planar = self.planar.clone();
+        let table_T_part = fit.table_T_part;
+        let confidence = if class == keypoint_planar.class {
+            keypoint_planar.confidence
+        } else {
+            fit.support
+        };
+        self.planar = PlanarPose {
+            camera_T_part: refiner.camera_T_table() * table_T_part,
+            table_T_part,
+            class,
+            yaw: fit.yaw,
+            confidence,
+            ..keypoint_planar.clone()
+        };
+        self.stable_pose = refiner.stable_poses()[class].name.clone();
+        self.confidence *= confidence / keypoint_planar.confidence.max(1e-12);
+        self.contour = Some(ContourRefinement {
+            fit,
+            keypoint_planar,
+        });
+    }
 }
 
 /// Why one part's pose could not be estimated.
@@ -160,6 +203,11 @@ impl PoseEstimator {
         self.models.get(part).map(|m| m.keypoints.as_slice())
     }
 
+    /// A part's planar refiner (its stable poses on the calibrated table).
+    pub fn refiner(&self, part: &str) -> Option<&PlanarRefiner> {
+        self.models.get(part).map(|m| &m.refiner)
+    }
+
     /// Its settings.
     pub fn config(&self) -> &EstimatorConfig {
         &self.config
@@ -213,6 +261,7 @@ impl PoseEstimator {
             rms_px,
             pnp,
             planar,
+            contour: None,
         };
         if !(rms_px.is_finite() && rms_px <= gate_px) {
             return Err(EstimateError::Rms {

@@ -12,6 +12,7 @@ pub use detection::DetectedPart;
 pub use frame::{Frame, FrameContent, FrameImage, TruePart};
 pub use perceive::{PartPerception, PerceptionError};
 pub mod ablation;
+pub mod contour;
 pub mod detection;
 pub mod estimate;
 pub mod frame;

@@ -12,6 +12,7 @@ use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
 use perception::estimate::EstimatorConfig;
+use perception::contour::ContourConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig};
 use perception::part::Catalog;
 
@@ -49,6 +50,9 @@ pub struct Args {
     /// their reason (the learned scenario's `[perception] max_rms_px` is 12).
     #[arg(long, default_value_t = 4.0)]
     pub max_rms_px: f64,
+    /// Keypoint poses only: skip the contour alignment on the frame's edges (for comparison).
+    #[arg(long)]
+    pub no_contour: bool,
     /// No progress line.
     #[arg(long)]
     pub quiet: bool,
@@ -71,6 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let runtime = perception::onnx::Runtime::get().context("loading ONNX Runtime")?;
     let config = PipelineConfig {
         estimator: EstimatorConfig::with_gate(args.max_rms_px),
+        contour: (!args.no_contour).then(ContourConfig::default),
         ..PipelineConfig::default()
     };
     let pipeline = LearnedPipeline::with_config(&models, &catalog, &runtime, config)

@@ -4,6 +4,7 @@
 //!
 //! It reads pixels and calibration only: [`crate::FrameContent::Simulated`] is refused.
 
+mod contour_stage;
 pub mod crops;
 mod detection;
 mod error;

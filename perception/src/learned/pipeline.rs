@@ -7,6 +7,7 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Point2};
 
 use super::LearnedError;
+use super::contour_stage::ContourStage;
 use super::crops::{CropBatch, crop_origin};
 use super::detection::{LearnedDetection, LearnedDetections, StageTimes};
 use super::image::Preprocessor;
@@ -15,6 +16,7 @@ use super::keypoint_net::KeypointNet;
 use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
+use crate::contour::ContourConfig;
 use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
@@ -34,6 +36,8 @@ pub struct PipelineConfig {
     pub min_score: f64,
     /// Threads for ONNX Runtime (intra-op) and for voting.
     pub threads: usize,
+    /// Contour alignment of the keypoint poses on the frame's edges (`None`: keypoints only).
+    pub contour: Option<ContourConfig>,
 }
 
 impl Default for PipelineConfig {
@@ -44,6 +48,7 @@ impl Default for PipelineConfig {
             estimator: EstimatorConfig::with_gate(4.0),
             min_score: 0.3,
             threads: 2,
+            contour: Some(ContourConfig::default()),
         }
     }
 }
@@ -60,6 +65,7 @@ pub struct LearnedPipeline {
     grouper: InstanceGrouper,
     batch: CropBatch,
     estimator: Option<(Isometry3<f64>, PoseEstimator)>,
+    contour: Option<ContourStage>,
 }
 
 impl LearnedPipeline {
@@ -98,6 +104,10 @@ impl LearnedPipeline {
             keypoints: keypoints.manifest().clone(),
         }
         .check_catalog(catalog)?;
+        let contour = config
+            .contour
+            .map(|c| ContourStage::new(catalog, models.parts(), c))
+            .transpose()?;
         Ok(Self {
             parts: models.parts().to_vec(),
             catalog: catalog.clone(),
@@ -109,6 +119,7 @@ impl LearnedPipeline {
             grouper: InstanceGrouper::new(config.instances),
             batch: CropBatch::default(),
             estimator: None,
+            contour,
         })
     }
 
@@ -199,7 +210,14 @@ impl LearnedPipeline {
                 Ok(v) => {
                     let (keypoints, observations) = sensor_observations(&v, *origin);
                     match estimator.estimate(&part, camera, &observations) {
-                        Ok(pose) => (keypoints, Ok(pose), None),
+                        Ok(mut pose) => {
+                            if let Some(stage) = &self.contour {
+                                stage.refine(
+                                    &mut pose, inst.part, &part, estimator, image, camera, *origin,
+                                );
+                            }
+                            (keypoints, Ok(pose), None)
+                        }
                         Err(e) => {
                             let reason = e.to_string();
                             let refused = match e {

@@ -1,0 +1,460 @@
+//! Contour alignment: the last, sub-pixel step of a pose on the table. A part lying in a known
+//! stable pose has three degrees of freedom left (x, y, yaw); its projected outline, computed
+//! from the mesh, is pulled onto the image's intensity edges by a robust Gauss–Newton fit, as
+//! industrial shape matching and model-based trackers (RAPID, ViSP's moving edges) do.
+//!
+//! Keypoints from a network place a 9 mm part to a pixel or two; the outline has hundreds of
+//! edge samples, each measured to a fraction of a pixel, so it pins x, y and yaw far tighter.
+//! It also decides near-symmetric parts' 180° ambiguity: both yaws are aligned, and the one
+//! whose outline finds the image's edges (tabs, skirts) wins.
+
+use std::collections::HashMap;
+
+use image::DynamicImage;
+use nalgebra::{Isometry3, Matrix3, Point2, Point3, Vector2, Vector3};
+
+use crate::Camera;
+use crate::part::{StablePose, TriMesh};
+
+/// Settings of the contour fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContourConfig {
+    /// Search half-widths along the outline normals, pixels, one per round (coarse to fine).
+    pub search_px: [f64; 3],
+    /// Spacing of outline samples along the projected edges, pixels.
+    pub spacing_px: f64,
+    /// Smallest intensity step (0–1 grey levels per pixel) that counts as an edge.
+    pub min_contrast: f32,
+    /// Huber threshold of the residuals, pixels.
+    pub huber_px: f64,
+    /// Gauss–Newton iterations per round.
+    pub iterations: usize,
+    /// A fit is kept only if at least this share of its outline samples found an edge within
+    /// one pixel; otherwise the keypoint pose stands.
+    pub min_support: f64,
+}
+
+impl Default for ContourConfig {
+    fn default() -> Self {
+        Self {
+            search_px: [6.0, 3.0, 2.0],
+            spacing_px: 1.5,
+            min_contrast: 0.02,
+            huber_px: 0.75,
+            iterations: 4,
+            min_support: 0.5,
+        }
+    }
+}
+
+/// A part's outline model: its mesh with each edge's two triangles, in the part frame.
+#[derive(Debug, Clone)]
+pub struct PartOutline {
+    vertices: Vec<Point3<f64>>,
+    triangles: Vec<[u32; 3]>,
+    normals: Vec<Vector3<f64>>,
+    /// Edges (a, b) with the triangles on either side (`u32::MAX` where there is only one).
+    edges: Vec<([u32; 2], [u32; 2])>,
+}
+
+impl PartOutline {
+    /// The outline model of `mesh` (closed, counter-clockwise seen from outside).
+    pub fn new(mesh: &TriMesh) -> Self {
+        let mut by_edge: HashMap<[u32; 2], [u32; 2]> = HashMap::new();
+        let mut normals = Vec::with_capacity(mesh.triangles.len());
+        for (ti, t) in mesh.triangles.iter().enumerate() {
+            let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+            normals.push((b - a).cross(&(c - a)));
+            for k in 0..3 {
+                let (i, j) = (t[k], t[(k + 1) % 3]);
+                let slot = by_edge.entry([i.min(j), i.max(j)]).or_insert([u32::MAX; 2]);
+                if slot[0] == u32::MAX {
+                    slot[0] = ti as u32;
+                } else {
+                    slot[1] = ti as u32;
+                }
+            }
+        }
+        let mut edges: Vec<_> = by_edge.into_iter().collect();
+        edges.sort_unstable();
+        Self {
+            vertices: mesh.vertices.clone(),
+            triangles: mesh.triangles.clone(),
+            normals,
+            edges,
+        }
+    }
+
+    /// The outline of the part at `camera_T_part`: points on the mesh whose projections lie on
+    /// the boundary of the part's silhouette, every `spacing` pixels, with the outward normal.
+    #[allow(non_snake_case)]
+    fn outline(
+        &self,
+        camera: &Camera,
+        camera_T_part: &Isometry3<f64>,
+        spacing: f64,
+    ) -> Vec<OutlinePoint> {
+        let Some(pixels) = self
+            .vertices
+            .iter()
+            .map(|v| camera.project(&(camera_T_part * v)).ok())
+            .collect::<Option<Vec<Point2<f64>>>>()
+        else {
+            return Vec::new();
+        };
+        let front: Vec<bool> = self
+            .triangles
+            .iter()
+            .zip(&self.normals)
+            .map(|(t, n)| {
+                let p = camera_T_part * self.vertices[t[0] as usize];
+                (camera_T_part.rotation * n).dot(&p.coords) < 0.0
+            })
+            .collect();
+        let Some(mask) = Silhouette::rasterise(&pixels, &self.triangles, &front) else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        for ([a, b], [ta, tb]) in &self.edges {
+            let fa = front[*ta as usize];
+            let fb = if *tb == u32::MAX {
+                !fa
+            } else {
+                front[*tb as usize]
+            };
+            if fa == fb {
+                continue;
+            }
+            let (pa, pb) = (pixels[*a as usize], pixels[*b as usize]);
+            let d = pb - pa;
+            let len = d.norm();
+            if len < 1e-9 {
+                continue;
+            }
+            let normal = Vector2::new(d.y, -d.x) / len;
+            let n = (len / spacing).ceil().max(1.0) as usize;
+            for s in 0..n {
+                let t = (s as f64 + 0.5) / n as f64;
+                let pixel = pa + d * t;
+                let (inside_plus, inside_minus) = (
+                    mask.inside(pixel + normal * 1.5),
+                    mask.inside(pixel - normal * 1.5),
+                );
+                let outward = match (inside_plus, inside_minus) {
+                    (false, true) => normal,
+                    (true, false) => -normal,
+                    _ => continue,
+                };
+                let (va, vb) = (self.vertices[*a as usize], self.vertices[*b as usize]);
+                out.push(OutlinePoint {
+                    part: va + (vb - va) * t,
+                    pixel,
+                    normal: outward,
+                });
+            }
+        }
+        out
+    }
+}
+
+/// One outline sample: where on the part, where in the image, and which way is out.
+#[derive(Debug, Clone, Copy)]
+struct OutlinePoint {
+    part: Point3<f64>,
+    pixel: Point2<f64>,
+    normal: Vector2<f64>,
+}
+
+/// The projected part as a binary mask on the pixel grid (pixel centres at integers).
+struct Silhouette {
+    x0: i64,
+    y0: i64,
+    width: usize,
+    height: usize,
+    cells: Vec<bool>,
+}
+
+impl Silhouette {
+    /// Largest mask side, pixels: a part seen from so close is not what the fit is for.
+    const MAX_SIDE: usize = 1024;
+
+    fn rasterise(pixels: &[Point2<f64>], triangles: &[[u32; 3]], front: &[bool]) -> Option<Self> {
+        let (mut lo, mut hi) = (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN));
+        for p in pixels {
+            lo = lo.inf(&p.coords);
+            hi = hi.sup(&p.coords);
+        }
+        let (x0, y0) = (lo.x.floor() as i64 - 3, lo.y.floor() as i64 - 3);
+        let width = (hi.x.ceil() as i64 + 4 - x0) as usize;
+        let height = (hi.y.ceil() as i64 + 4 - y0) as usize;
+        if width > Self::MAX_SIDE || height > Self::MAX_SIDE {
+            return None;
+        }
+        let mut cells = vec![false; width * height];
+        for (t, _) in triangles.iter().zip(front).filter(|(_, f)| **f) {
+            let [a, b, c] = t.map(|i| pixels[i as usize]);
+            let area = cross(b - a, c - a);
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let (tlo, thi) = (a.coords.inf(&b.coords).inf(&c.coords), a.coords.sup(&b.coords).sup(&c.coords));
+            let (i0, i1) = (tlo.y.ceil() as i64, thi.y.floor() as i64);
+            let (j0, j1) = (tlo.x.ceil() as i64, thi.x.floor() as i64);
+            for i in i0..=i1 {
+                for j in j0..=j1 {
+                    let p = Point2::new(j as f64, i as f64);
+                    let w = [cross(b - a, p - a), cross(c - b, p - b), cross(a - c, p - c)];
+                    if w.iter().all(|w| w * area >= 0.0) {
+                        cells[(i - y0) as usize * width + (j - x0) as usize] = true;
+                    }
+                }
+            }
+        }
+        Some(Self {
+            x0,
+            y0,
+            width,
+            height,
+            cells,
+        })
+    }
+
+    fn inside(&self, p: Point2<f64>) -> bool {
+        let (j, i) = (p.x.round() as i64 - self.x0, p.y.round() as i64 - self.y0);
+        if i < 0 || j < 0 || i as usize >= self.height || j as usize >= self.width {
+            return false;
+        }
+        self.cells[i as usize * self.width + j as usize]
+    }
+}
+
+fn cross(a: Vector2<f64>, b: Vector2<f64>) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+
+/// Longest search along a normal, pixels.
+const MAX_REACH: usize = 16;
+
+/// A grey-level window of the frame (0–1), sampled bilinearly in sensor pixels.
+pub struct GreyPatch {
+    origin: [f64; 2],
+    width: usize,
+    height: usize,
+    values: Vec<f32>,
+}
+
+impl GreyPatch {
+    /// The grey levels of `image` (whose top-left pixel is sensor pixel `image_origin`) in the
+    /// sensor-pixel box `[x, y, width, height]`, clipped to the image.
+    pub fn cut(image: &DynamicImage, image_origin: [u32; 2], sensor_box: [i64; 4]) -> Self {
+        let x = (sensor_box[0] - i64::from(image_origin[0])).clamp(0, i64::from(image.width()));
+        let y = (sensor_box[1] - i64::from(image_origin[1])).clamp(0, i64::from(image.height()));
+        let w = sensor_box[2].min(i64::from(image.width()) - x).max(0);
+        let h = sensor_box[3].min(i64::from(image.height()) - y).max(0);
+        let grey = image.crop_imm(x as u32, y as u32, w as u32, h as u32).to_luma32f();
+        Self {
+            origin: [
+                (x + i64::from(image_origin[0])) as f64,
+                (y + i64::from(image_origin[1])) as f64,
+            ],
+            width: w as usize,
+            height: h as usize,
+            values: grey.into_raw(),
+        }
+    }
+
+    /// Bilinear grey level at a sensor pixel, or `None` outside the patch.
+    fn sample(&self, p: Point2<f64>) -> Option<f32> {
+        let (u, v) = (p.x - self.origin[0], p.y - self.origin[1]);
+        if !(u >= 0.0 && v >= 0.0) {
+            return None;
+        }
+        let (j, i) = (u.floor() as usize, v.floor() as usize);
+        if j + 1 >= self.width || i + 1 >= self.height {
+            return None;
+        }
+        let (fu, fv) = ((u - j as f64) as f32, (v - i as f64) as f32);
+        let at = |i: usize, j: usize| self.values[i * self.width + j];
+        let top = at(i, j) * (1.0 - fu) + at(i, j + 1) * fu;
+        let bottom = at(i + 1, j) * (1.0 - fu) + at(i + 1, j + 1) * fu;
+        Some(top * (1.0 - fv) + bottom * fv)
+    }
+
+    /// The strongest intensity step along `normal` within `reach` pixels of `pixel`: its
+    /// sub-pixel offset along the normal and its contrast.
+    fn edge_along(&self, pixel: Point2<f64>, normal: Vector2<f64>, reach: f64) -> Option<(f64, f32)> {
+        let n = reach.ceil() as i64;
+        // Grey levels half a pixel either side of each step, shared by neighbouring steps.
+        let mut levels = [0f32; 2 * MAX_REACH + 2];
+        let count = (2 * n + 2) as usize;
+        if count > levels.len() {
+            return None;
+        }
+        for (k, level) in levels[..count].iter_mut().enumerate() {
+            *level = self.sample(pixel + normal * (k as f64 - n as f64 - 0.5))?;
+        }
+        let steps: Vec<f32> = levels[..count]
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .collect();
+        let (k, &best) = steps
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))?;
+        // Parabolic peak through the neighbours (the ends keep the grid offset).
+        let mut offset = k as f64 - n as f64;
+        if k > 0 && k + 1 < steps.len() {
+            let (l, r) = (f64::from(steps[k - 1]), f64::from(steps[k + 1]));
+            let denom = l - 2.0 * f64::from(best) + r;
+            if denom < 0.0 {
+                offset += (0.5 * (l - r) / denom).clamp(-0.5, 0.5);
+            }
+        }
+        (offset.abs() <= reach).then_some((offset, best))
+    }
+}
+
+/// A contour-aligned pose on one stable pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(non_snake_case)]
+pub struct ContourFit {
+    /// The aligned pose in the table frame.
+    pub table_T_part: Isometry3<f64>,
+    /// Table x, y (metres) and yaw (radians) of that pose.
+    pub x: f64,
+    /// Table y, metres.
+    pub y: f64,
+    /// Yaw about the table normal, radians.
+    pub yaw: f64,
+    /// Share of outline samples that found an edge within one pixel at the end.
+    pub support: f64,
+    /// RMS distance of those samples to their edges, pixels.
+    pub rms_px: f64,
+    /// Outline samples at the end.
+    pub samples: usize,
+}
+
+/// Aligns part outlines with image edges on a calibrated table.
+#[derive(Debug, Clone)]
+#[allow(non_snake_case)]
+pub struct ContourAligner {
+    camera_T_table: Isometry3<f64>,
+    config: ContourConfig,
+}
+
+impl ContourAligner {
+    /// An aligner for the table at `camera_T_table`.
+    #[allow(non_snake_case)]
+    pub fn new(camera_T_table: Isometry3<f64>, config: ContourConfig) -> Self {
+        Self {
+            camera_T_table,
+            config,
+        }
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &ContourConfig {
+        &self.config
+    }
+
+    /// Fits x, y and yaw of `outline` lying in `stable` so its outline meets the edges of
+    /// `patch`, starting from `(x, y, yaw)`. `None` when too few samples find edges.
+    pub fn align(
+        &self,
+        outline: &PartOutline,
+        stable: &StablePose,
+        camera: &Camera,
+        patch: &GreyPatch,
+        start: (f64, f64, f64),
+    ) -> Option<ContourFit> {
+        let mut q = Vector3::new(start.0, start.1, start.2);
+        let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
+        for &reach in &self.config.search_px {
+            // The outline is re-found once per round; within a round its points move with the pose.
+            let points = outline.outline(camera, &pose(&q), self.config.spacing_px);
+            for _ in 0..self.config.iterations {
+                // The pose and its three nudges (x, y, yaw): the Jacobian by forward differences.
+                let poses = [
+                    pose(&q),
+                    pose(&(q + Vector3::new(STEP_M, 0.0, 0.0))),
+                    pose(&(q + Vector3::new(0.0, STEP_M, 0.0))),
+                    pose(&(q + Vector3::new(0.0, 0.0, STEP_RAD))),
+                ];
+                let (mut h, mut g) = (Matrix3::zeros(), Vector3::zeros());
+                let mut used = 0;
+                for p in &points {
+                    let Some([pixel, px, py, pyaw]) = project_all(camera, &poses, &p.part) else {
+                        continue;
+                    };
+                    let Some((offset, contrast)) = patch.edge_along(pixel, p.normal, reach) else {
+                        continue;
+                    };
+                    if contrast < self.config.min_contrast {
+                        continue;
+                    }
+                    let j = Vector3::new(
+                        p.normal.dot(&(px - pixel)) / STEP_M,
+                        p.normal.dot(&(py - pixel)) / STEP_M,
+                        p.normal.dot(&(pyaw - pixel)) / STEP_RAD,
+                    );
+                    // Residual: signed distance from the predicted outline to the edge.
+                    let r = -offset;
+                    let w = huber_weight(r, self.config.huber_px);
+                    h += j * j.transpose() * w;
+                    g += j * (r * w);
+                    used += 1;
+                }
+                if used < 12 {
+                    return None;
+                }
+                let step = h.try_inverse()? * -g;
+                q += step;
+                if step.xy().norm() < 1e-8 && step.z.abs() < 1e-6 {
+                    break;
+                }
+            }
+        }
+        let points = outline.outline(camera, &pose(&q), self.config.spacing_px);
+        let hits: Vec<f64> = points
+            .iter()
+            .filter_map(|p| patch.edge_along(p.pixel, p.normal, 1.0))
+            .filter(|(_, c)| *c >= self.config.min_contrast)
+            .map(|(o, _)| o)
+            .collect();
+        if points.is_empty() {
+            return None;
+        }
+        let rms = (hits.iter().map(|o| o * o).sum::<f64>() / hits.len().max(1) as f64).sqrt();
+        Some(ContourFit {
+            table_T_part: stable.table_T_part(q.x, q.y, q.z),
+            x: q.x,
+            y: q.y,
+            yaw: q.z,
+            support: hits.len() as f64 / points.len() as f64,
+            rms_px: rms,
+            samples: points.len(),
+        })
+    }
+}
+
+/// Forward-difference steps of the Jacobian: 1 µm and 10 µrad.
+const STEP_M: f64 = 1e-6;
+const STEP_RAD: f64 = 1e-5;
+
+/// Projections of a part point under each of `poses`.
+#[allow(non_snake_case)]
+fn project_all(
+    camera: &Camera,
+    poses: &[Isometry3<f64>; 4],
+    point: &Point3<f64>,
+) -> Option<[Point2<f64>; 4]> {
+    let mut out = [Point2::origin(); 4];
+    for (o, camera_T_part) in out.iter_mut().zip(poses) {
+        *o = camera.project(&(camera_T_part * point)).ok()?;
+    }
+    Some(out)
+}
+
+fn huber_weight(r: f64, k: f64) -> f64 {
+    if r.abs() <= k { 1.0 } else { k / r.abs() }
+}
