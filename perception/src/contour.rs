@@ -197,13 +197,20 @@ impl Silhouette {
             if area.abs() < 1e-12 {
                 continue;
             }
-            let (tlo, thi) = (a.coords.inf(&b.coords).inf(&c.coords), a.coords.sup(&b.coords).sup(&c.coords));
+            let (tlo, thi) = (
+                a.coords.inf(&b.coords).inf(&c.coords),
+                a.coords.sup(&b.coords).sup(&c.coords),
+            );
             let (i0, i1) = (tlo.y.ceil() as i64, thi.y.floor() as i64);
             let (j0, j1) = (tlo.x.ceil() as i64, thi.x.floor() as i64);
             for i in i0..=i1 {
                 for j in j0..=j1 {
                     let p = Point2::new(j as f64, i as f64);
-                    let w = [cross(b - a, p - a), cross(c - b, p - b), cross(a - c, p - c)];
+                    let w = [
+                        cross(b - a, p - a),
+                        cross(c - b, p - b),
+                        cross(a - c, p - c),
+                    ];
                     if w.iter().all(|w| w * area >= 0.0) {
                         cells[(i - y0) as usize * width + (j - x0) as usize] = true;
                     }
@@ -251,7 +258,9 @@ impl GreyPatch {
         let y = (sensor_box[1] - i64::from(image_origin[1])).clamp(0, i64::from(image.height()));
         let w = sensor_box[2].min(i64::from(image.width()) - x).max(0);
         let h = sensor_box[3].min(i64::from(image.height()) - y).max(0);
-        let grey = image.crop_imm(x as u32, y as u32, w as u32, h as u32).to_luma32f();
+        let grey = image
+            .crop_imm(x as u32, y as u32, w as u32, h as u32)
+            .to_luma32f();
         Self {
             origin: [
                 (x + i64::from(image_origin[0])) as f64,
@@ -282,7 +291,12 @@ impl GreyPatch {
 
     /// The strongest intensity step along `normal` within `reach` pixels of `pixel`: its
     /// sub-pixel offset along the normal and its contrast.
-    fn edge_along(&self, pixel: Point2<f64>, normal: Vector2<f64>, reach: f64) -> Option<(f64, f32)> {
+    fn edge_along(
+        &self,
+        pixel: Point2<f64>,
+        normal: Vector2<f64>,
+        reach: f64,
+    ) -> Option<(f64, f32)> {
         let n = reach.ceil() as i64;
         // Grey levels half a pixel either side of each step, shared by neighbouring steps.
         let mut levels = [0f32; 2 * MAX_REACH + 2];
@@ -297,10 +311,7 @@ impl GreyPatch {
             .windows(2)
             .map(|w| (w[1] - w[0]).abs())
             .collect();
-        let (k, &best) = steps
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))?;
+        let (k, &best) = steps.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
         // Parabolic peak through the neighbours (the ends keep the grid offset).
         let mut offset = k as f64 - n as f64;
         if k > 0 && k + 1 < steps.len() {

@@ -8,86 +8,16 @@
 //! `cargo test -p cell-tests --test learned_perception -- --ignored` rewrites the benchmark frame
 //! (`perception/tests/data/learned/feeder.png` + `feeder.toml`).
 
+mod feeder_support;
+
 use std::path::Path;
 
 use cell_tests::repo_root;
-use image::DynamicImage;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use feeder_support::{catalog, render_feeder};
+use nalgebra::{Isometry3, Point3};
 use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline};
 use perception::onnx::Runtime;
-use perception::part::Catalog;
-use perception::{Camera, Frame, FrameContent, FrameImage, PartPerception};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use sim::render::{RenderSettings, Window, render, window_covering};
-use sim::scene::{PartModel, Randomisation, Range, SceneRequest, sample_scene};
-
-const PARTS: [&str; 3] = ["main_shell", "insert_mold", "top_shell"];
-
-/// A rendered feeder frame and the truth behind it.
-#[allow(non_snake_case)]
-struct Feeder {
-    image: FrameImage,
-    camera: Camera,
-    table_T_camera: Isometry3<f64>,
-    /// (part, table_T_part) of every part dropped.
-    truth: Vec<(String, Isometry3<f64>)>,
-}
-
-fn catalog() -> Catalog {
-    Catalog::load(&repo_root().join("scenarios/parts/usbc.toml")).unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// Renders a feeder frame of four parts of each kind dropped into a 3 × 3 cm square, seen from
-/// 1.51 m, like `cell dataset`'s feeder frames.
-fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
-    let names: Vec<String> = PARTS.iter().map(|s| s.to_string()).collect();
-    let models = PartModel::from_catalog(catalog, &names).unwrap_or_else(|e| panic!("{e}"));
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let request = SceneRequest {
-        counts: vec![4; models.len()],
-        drop_centre: (0.0, 0.0),
-        drop_half: 0.015,
-        aim_at_part: Some(0),
-        nominal_table_T_camera: Isometry3::from_parts(
-            Translation3::new(0.0, 0.0, 1.51),
-            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-        ),
-    };
-    let rand = Randomisation {
-        camera_height: Range::new(1.51, 1.51),
-        ..Randomisation::default()
-    };
-    let scene = sample_scene(&models, &request, &rand, &mut rng).unwrap_or_else(|e| panic!("{e}"));
-    let camera = Camera::basler_seed();
-    let (lo, hi) = scene.footprint(&models, 0.003);
-    let window: Window =
-        window_covering(&camera, &scene.table_T_camera, &lo, &hi).expect("the parts are in view");
-    let out = render(
-        &scene.render,
-        &camera,
-        &scene.table_T_camera,
-        window,
-        &RenderSettings::default(),
-    );
-    let pixels = scene
-        .metered_sensor(&out)
-        .capture(&out, &mut rng)
-        .unwrap_or_else(|e| panic!("{e}"));
-    Feeder {
-        image: FrameImage {
-            pixels: DynamicImage::ImageRgb8(pixels),
-            origin: [window.x0, window.y0],
-        },
-        camera,
-        table_T_camera: scene.table_T_camera,
-        truth: scene
-            .parts
-            .iter()
-            .map(|p| (models[p.model].name.clone(), p.table_T_part))
-            .collect(),
-    }
-}
+use perception::{Frame, FrameContent, PartPerception};
 
 /// The committed models, or `None` (with a note) when they are not in the tree yet.
 fn committed_models() -> Option<LearnedModels> {

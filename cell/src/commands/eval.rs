@@ -11,8 +11,8 @@ use anyhow::Context;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
-use perception::estimate::EstimatorConfig;
 use perception::contour::ContourConfig;
+use perception::estimate::EstimatorConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig};
 use perception::part::Catalog;
 

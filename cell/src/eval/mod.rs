@@ -443,6 +443,12 @@ pub struct DetectionRecord {
     pub raw_flip_deg: Option<f64>,
     /// Refined angle error to the nearest near-symmetric equivalent of the truth, degrees.
     pub refined_flip_deg: Option<f64>,
+    /// Share of the outline that found the frame's edges, when contour alignment set the pose.
+    #[serde(default)]
+    pub contour_support: Option<f64>,
+    /// Errors of the keypoint-only planar pose, when contour alignment then moved it.
+    #[serde(default)]
+    pub keypoint_refined: Option<PoseErrors>,
 }
 
 /// One evaluated image.
@@ -646,6 +652,8 @@ fn evaluate_image(
             true_stable_pose: None,
             raw_flip_deg: None,
             refined_flip_deg: None,
+            contour_support: None,
+            keypoint_refined: None,
         };
         if let Some(m) = m {
             truths[m.truth].detection = Some(d);
@@ -699,6 +707,16 @@ fn evaluate_image(
                 let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
                 rec.refined_flip_deg = Some(flip(refined));
                 rec.refined = Some(refined_e);
+                if let Some(c) = &pose.contour {
+                    rec.contour_support = Some(c.fit.support);
+                    rec.keypoint_refined = Some(pose_errors(
+                        &camera,
+                        &part.points,
+                        &part.group,
+                        truth,
+                        &c.keypoint_planar.camera_T_part,
+                    ));
+                }
                 if !truths[m.truth].ignored {
                     keeper.offer(refined_e.mssd_mm, || GalleryItem {
                         scene: scene.id,

@@ -586,6 +586,8 @@ mod tests {
             true_stable_pose: pose.map(|(_, a)| if a < 15.0 { "+z" } else { "-z" }.into()),
             raw_flip_deg: pose.map(|(_, a)| if a > 100.0 { 180.0 - a } else { a }),
             refined_flip_deg: pose.map(|(_, a)| a / 2.0),
+            contour_support: None,
+            keypoint_refined: None,
         }
     }
 

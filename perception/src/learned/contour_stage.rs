@@ -86,12 +86,7 @@ impl ContourStage {
         let patch = GreyPatch::cut(
             &image.pixels,
             image.origin,
-            [
-                crop_origin[0] - MARGIN,
-                crop_origin[1] - MARGIN,
-                side,
-                side,
-            ],
+            [crop_origin[0] - MARGIN, crop_origin[1] - MARGIN, side, side],
         );
         let aligner = ContourAligner::new(*refiner.camera_T_table(), self.config);
         let planar = &estimate.planar;

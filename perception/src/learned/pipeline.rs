@@ -11,17 +11,17 @@ use super::contour_stage::ContourStage;
 use super::crops::{CropBatch, crop_origin};
 use super::detection::{LearnedDetection, LearnedDetections, StageTimes};
 use super::image::Preprocessor;
-use super::instances::{InstanceConfig, InstanceGrouper};
+use super::instances::{Instance, InstanceConfig, InstanceGrouper};
 use super::keypoint_net::KeypointNet;
 use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
 use crate::contour::ContourConfig;
-use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimator};
+use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
 use crate::part::Catalog;
-use crate::voting::{KeypointVote, VotingConfig};
+use crate::voting::{KeypointVote, VoteError, VotingConfig};
 
 /// Settings of the learned pipeline.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -203,35 +203,40 @@ impl LearnedPipeline {
             self.config.estimator,
             camera_T_table,
         )?;
-        let mut detections = Vec::with_capacity(instances.len());
-        for ((inst, origin), votes) in instances.iter().zip(&origins).zip(votes) {
-            let part = self.parts[inst.part].clone();
-            let (keypoints, pose, refused) = match votes {
-                Ok(v) => {
-                    let (keypoints, observations) = sensor_observations(&v, *origin);
-                    match estimator.estimate(&part, camera, &observations) {
-                        Ok(mut pose) => {
-                            if let Some(stage) = &self.contour {
-                                stage.refine(
-                                    &mut pose, inst.part, &part, estimator, image, camera, *origin,
-                                );
-                            }
-                            (keypoints, Ok(pose), None)
-                        }
-                        Err(e) => {
-                            let reason = e.to_string();
-                            let refused = match e {
-                                EstimateError::Rms { estimate, .. } => Some(*estimate),
-                                _ => None,
-                            };
-                            (keypoints, Err(reason), refused)
-                        }
-                    }
-                }
-                Err(e) => (Vec::new(), Err(format!("voting: {e}")), None),
+        let contour = self.contour.as_ref();
+        let parts = &self.parts;
+        let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
+        let pose_of = |((inst, origin), votes): &((&Instance, &[i64; 2]), _)| {
+            let ctx = PoseContext {
+                estimator,
+                contour,
+                image,
+                camera,
             };
+            ctx.pose(inst.part, &parts[inst.part], votes, **origin)
+        };
+        let threads = self.config.threads.min(jobs.len()).max(1);
+        let poses: Vec<PoseOutcome> = if threads <= 1 {
+            jobs.iter().map(pose_of).collect()
+        } else {
+            let chunk = jobs.len().div_ceil(threads);
+            std::thread::scope(|s| {
+                let handles: Vec<_> = jobs
+                    .chunks(chunk)
+                    .map(|c| s.spawn(move || c.iter().map(pose_of).collect::<Vec<_>>()))
+                    .collect();
+                handles
+                    .into_iter()
+                    .flat_map(|h| h.join().expect("a pose worker panicked"))
+                    .collect()
+            })
+        };
+        let mut detections = Vec::with_capacity(instances.len());
+        for ((inst, origin), (keypoints, pose, refused)) in
+            instances.iter().zip(&origins).zip(poses)
+        {
             detections.push(LearnedDetection {
-                part,
+                part: self.parts[inst.part].clone(),
                 score: inst.score,
                 mask: inst.mask(self.map.width, valid, sensor),
                 centre: [
@@ -247,6 +252,62 @@ impl LearnedPipeline {
         times.pose = lap(&mut t);
         times.total = start.elapsed();
         Ok(LearnedDetections { detections, times })
+    }
+}
+
+/// One detection's keypoints, its pose or why there is none, and an estimate the gate refused.
+type PoseOutcome = (
+    Vec<KeypointVote>,
+    Result<PoseEstimate, String>,
+    Option<PoseEstimate>,
+);
+
+/// What the pose stage of one frame shares between its workers.
+struct PoseContext<'a> {
+    estimator: &'a PoseEstimator,
+    contour: Option<&'a ContourStage>,
+    image: &'a FrameImage,
+    camera: &'a Camera,
+}
+
+impl PoseContext<'_> {
+    /// Keypoints → pose estimate → contour alignment for one detection of part `class`.
+    fn pose(
+        &self,
+        class: usize,
+        part: &str,
+        votes: &Result<Vec<KeypointVote>, VoteError>,
+        origin: [i64; 2],
+    ) -> PoseOutcome {
+        let v = match votes {
+            Ok(v) => v,
+            Err(e) => return (Vec::new(), Err(format!("voting: {e}")), None),
+        };
+        let (keypoints, observations) = sensor_observations(v, origin);
+        match self.estimator.estimate(part, self.camera, &observations) {
+            Ok(mut pose) => {
+                if let Some(stage) = self.contour {
+                    stage.refine(
+                        &mut pose,
+                        class,
+                        part,
+                        self.estimator,
+                        self.image,
+                        self.camera,
+                        origin,
+                    );
+                }
+                (keypoints, Ok(pose), None)
+            }
+            Err(e) => {
+                let reason = e.to_string();
+                let refused = match e {
+                    EstimateError::Rms { estimate, .. } => Some(*estimate),
+                    _ => None,
+                };
+                (keypoints, Err(reason), refused)
+            }
+        }
     }
 }
 
