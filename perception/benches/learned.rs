@@ -10,7 +10,8 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
-use perception::learned::{LearnedModels, LearnedPipeline, StageTimes};
+use perception::estimate::EstimatorConfig;
+use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, StageTimes};
 use perception::onnx::Runtime;
 use perception::part::Catalog;
 use perception::{Camera, FrameImage};
@@ -41,8 +42,13 @@ fn bench(c: &mut Criterion) {
     let catalog =
         Catalog::load(&root.join("../scenarios/parts/usbc.toml")).unwrap_or_else(|e| panic!("{e}"));
     let runtime = Runtime::get().unwrap_or_else(|e| panic!("{e}"));
-    let mut pipeline =
-        LearnedPipeline::load(&models, &catalog, &runtime).unwrap_or_else(|e| panic!("{e}"));
+    // The learned scenario's reprojection gate (12 px), so the poses the cell would use are timed.
+    let config = PipelineConfig {
+        estimator: EstimatorConfig::with_gate(12.0),
+        ..PipelineConfig::default()
+    };
+    let mut pipeline = LearnedPipeline::with_config(&models, &catalog, &runtime, config)
+        .unwrap_or_else(|e| panic!("{e}"));
     let data = root.join("tests/data/learned");
     let spec: FrameSpec = toml::from_str(
         &std::fs::read_to_string(data.join("feeder.toml")).unwrap_or_else(|e| panic!("{e}")),

@@ -38,7 +38,7 @@ impl Default for ContourConfig {
     fn default() -> Self {
         Self {
             search_px: [6.0, 3.0, 2.0],
-            spacing_px: 1.5,
+            spacing_px: 2.0,
             min_contrast: 0.02,
             huber_px: 0.75,
             iterations: 4,
@@ -378,9 +378,57 @@ impl ContourAligner {
         patch: &GreyPatch,
         start: (f64, f64, f64),
     ) -> Option<ContourFit> {
+        self.rounds(
+            outline,
+            stable,
+            camera,
+            patch,
+            start,
+            &self.config.search_px,
+        )
+    }
+
+    /// The first, coarsest round of [`Self::align`] only: a cheap fit whose support ranks
+    /// competing hypotheses before the best one is finished with [`Self::finish`].
+    pub fn screen(
+        &self,
+        outline: &PartOutline,
+        stable: &StablePose,
+        camera: &Camera,
+        patch: &GreyPatch,
+        start: (f64, f64, f64),
+    ) -> Option<ContourFit> {
+        let first = &self.config.search_px[..1];
+        self.rounds(outline, stable, camera, patch, start, first)
+    }
+
+    /// The remaining rounds of [`Self::align`] from a [`Self::screen`]ed fit.
+    pub fn finish(
+        &self,
+        outline: &PartOutline,
+        stable: &StablePose,
+        camera: &Camera,
+        patch: &GreyPatch,
+        screened: &ContourFit,
+    ) -> Option<ContourFit> {
+        let start = (screened.x, screened.y, screened.yaw);
+        let rest = &self.config.search_px[1..];
+        self.rounds(outline, stable, camera, patch, start, rest)
+    }
+
+    /// Gauss–Newton rounds at the given search reaches (pixels), then the fit's support.
+    fn rounds(
+        &self,
+        outline: &PartOutline,
+        stable: &StablePose,
+        camera: &Camera,
+        patch: &GreyPatch,
+        start: (f64, f64, f64),
+        reaches: &[f64],
+    ) -> Option<ContourFit> {
         let mut q = Vector3::new(start.0, start.1, start.2);
         let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
-        for &reach in &self.config.search_px {
+        for &reach in reaches {
             // The outline is re-found once per round; within a round its points move with the pose.
             let points = outline.outline(camera, &pose(&q), self.config.spacing_px);
             for _ in 0..self.config.iterations {

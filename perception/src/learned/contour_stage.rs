@@ -2,6 +2,8 @@
 //! the frame (and, for a near-symmetric part, so is its turned twin; the one whose outline finds
 //! the edges is kept).
 
+use std::f64::consts::PI;
+
 use nalgebra::{Isometry3, UnitQuaternion};
 
 use super::LearnedError;
@@ -11,7 +13,7 @@ use crate::contour::{ContourAligner, ContourConfig, ContourFit, GreyPatch, PartO
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::part::{Catalog, Symmetry};
-use crate::planar::PlanarPose;
+use crate::planar::best_yaw;
 use crate::symmetry::symmetry_group;
 
 /// Pixels around the keypoint crop that the outline search may reach.
@@ -90,32 +92,57 @@ impl ContourStage {
         );
         let aligner = ContourAligner::new(*refiner.camera_T_table(), self.config);
         let planar = &estimate.planar;
-        // The keypoint pose, then its near-symmetric twins snapped onto their own stable poses.
-        let start_of = |p: &PlanarPose| {
-            let t = &p.table_T_part.translation;
-            (p.class, (t.x, t.y, p.yaw))
-        };
-        let mut starts = vec![start_of(planar)];
+        // The keypoint pose and its half-turn, its near-symmetric twins snapped onto their own
+        // stable poses, and the runner-up stable pose with its half-turn: the outline decides.
+        let t = &planar.table_T_part.translation;
+        let (x, y) = (t.x, t.y);
+        let mut starts = vec![
+            (planar.class, (x, y, planar.yaw)),
+            (planar.class, (x, y, planar.yaw + PI)),
+        ];
         for g in &outlined.near {
             let twin: Isometry3<f64> = planar.camera_T_part * g;
             if let Ok(p) = refiner.refine(&twin) {
-                starts.push(start_of(&p));
+                starts.push((p.class, (x, y, p.yaw)));
             }
         }
+        if let Some(class) = planar.runner_up {
+            let table_r_part =
+                (refiner.camera_T_table().inverse() * estimate.pnp.camera_T_part).rotation;
+            let yaw = best_yaw(
+                &table_r_part,
+                &refiner.stable_poses()[class].rest_rotation(),
+            );
+            starts.push((class, (x, y, yaw)));
+            starts.push((class, (x, y, yaw + PI)));
+        }
+        starts.dedup_by(|a, b| a.0 == b.0 && angle_between(a.1.2, b.1.2) < 0.1);
         let mut best: Option<(usize, ContourFit)> = None;
+        // Every hypothesis gets the coarse round; only the best is finished.
         for (class, start) in starts {
             let stable = &refiner.stable_poses()[class];
-            let Some(fit) = aligner.align(&outlined.outline, stable, camera, &patch, start) else {
+            let Some(fit) = aligner.screen(&outlined.outline, stable, camera, &patch, start) else {
                 continue;
             };
             if best.as_ref().is_none_or(|(_, b)| fit.support > b.support) {
                 best = Some((class, fit));
             }
         }
+        let best = best.and_then(|(class, screened)| {
+            let stable = &refiner.stable_poses()[class];
+            let fit = aligner.finish(&outlined.outline, stable, camera, &patch, &screened)?;
+            Some((class, fit))
+        });
         if let Some((class, fit)) = best
             && fit.support >= self.config.min_support
         {
             estimate.adopt_contour(fit, class, refiner);
         }
     }
+}
+
+/// The absolute difference of two angles, radians in [0, π].
+fn angle_between(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::TAU);
+    d.min(std::f64::consts::TAU - d)
 }

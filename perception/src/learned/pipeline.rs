@@ -2,6 +2,7 @@
 //! voting → pose, timing every stage. Image pixels in the results are full-sensor pixels (the
 //! frame image's origin added).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point2};
@@ -219,17 +220,29 @@ impl LearnedPipeline {
         let poses: Vec<PoseOutcome> = if threads <= 1 {
             jobs.iter().map(pose_of).collect()
         } else {
-            let chunk = jobs.len().div_ceil(threads);
-            std::thread::scope(|s| {
-                let handles: Vec<_> = jobs
-                    .chunks(chunk)
-                    .map(|c| s.spawn(move || c.iter().map(pose_of).collect::<Vec<_>>()))
+            // Workers take the next detection as they free up: poses differ widely in cost
+            // (a refused estimate is not aligned).
+            let next = AtomicUsize::new(0);
+            let mut done: Vec<(usize, PoseOutcome)> = std::thread::scope(|s| {
+                let handles: Vec<_> = (0..threads)
+                    .map(|_| {
+                        s.spawn(|| {
+                            let mut mine = Vec::new();
+                            loop {
+                                let i = next.fetch_add(1, Ordering::Relaxed);
+                                let Some(job) = jobs.get(i) else { break mine };
+                                mine.push((i, pose_of(job)));
+                            }
+                        })
+                    })
                     .collect();
                 handles
                     .into_iter()
                     .flat_map(|h| h.join().expect("a pose worker panicked"))
                     .collect()
-            })
+            });
+            done.sort_unstable_by_key(|(i, _)| *i);
+            done.into_iter().map(|(_, p)| p).collect()
         };
         let mut detections = Vec::with_capacity(instances.len());
         for ((inst, origin), (keypoints, pose, refused)) in

@@ -69,6 +69,10 @@ impl BatchSession {
             .map_err(model_error)?
             .with_intra_threads(intra_threads.max(1))
             .map_err(|e| model_error(e.into()))?
+            // Idle workers sleep instead of spinning: voting and pose fitting run on the same
+            // cores right after each inference.
+            .with_intra_op_spinning(false)
+            .map_err(|e| model_error(e.into()))?
             .commit_from_memory(&bytes)
             .map_err(model_error)?;
         check_signature(&session, &manifest, &model)?;
