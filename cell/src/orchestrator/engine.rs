@@ -224,7 +224,7 @@ impl<'a> Engine<'a> {
             .step
             .detections
             .iter()
-            .filter(|d| !self.step.excluded.contains(&d.index))
+            .filter(|d| !self.step.excluded.contains(&d.index) && !self.step.missed_before(d))
             .cloned()
             .collect();
         // Grasp yaw and travel are judged from where the arm is now.
@@ -275,7 +275,14 @@ impl<'a> Engine<'a> {
                 let missed = (self.cell.io())
                     .missed(&part, &self.step.detections)
                     .unwrap_or(0);
-                let source = if missed > 0 {
+                let part_missed_grasp = self
+                    .step
+                    .detections
+                    .iter()
+                    .any(|d| d.part == part && self.step.missed_before(d));
+                let source = if part_missed_grasp {
+                    GRASP_MISSED
+                } else if missed > 0 {
                     PERCEPTION_MISSED
                 } else if any {
                     FEEDER_SHAKE_BOUND
@@ -295,7 +302,7 @@ impl<'a> Engine<'a> {
         let margin = self.ctx.settings.selection.finger_margin;
         self.step.detections.iter().any(|n| {
             n.index != chosen.detection.index
-                && self.step.excluded.contains(&n.index)
+                && (self.step.excluded.contains(&n.index) || self.step.missed_before(n))
                 && k.part(&n.part).is_some_and(|g| {
                     k.finger_distance(&chosen.base_T_grasp, g.hull.as_ref(), &n.base_T_part)
                         < margin
@@ -308,6 +315,7 @@ impl<'a> Engine<'a> {
         match self.io().shake_feeder() {
             Ok(()) => {
                 self.step.shakes += 1;
+                self.step.missed_at.clear();
                 State::Capture
             }
             Err(e) => self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None),
@@ -360,6 +368,10 @@ impl<'a> Engine<'a> {
             State::PlanInsert
         } else if self.step.attempts < self.ctx.settings.max_grasp_attempts {
             self.last_reason = "grasp failed: nothing between the fingers".into();
+            if let Some(sel) = &self.step.selection {
+                let at = sel.detection.base_T_part.translation.vector;
+                self.step.missed_at.push(at);
+            }
             State::Retract
         } else {
             let cause = format!("grasp failed {} times", self.step.attempts);

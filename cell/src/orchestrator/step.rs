@@ -3,7 +3,7 @@
 
 use std::collections::BTreeSet;
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Vector3};
 
 use super::planning::{Motion, Plan};
 use super::selection::Selection;
@@ -32,6 +32,10 @@ pub(super) struct StepState {
     pub detections: Vec<DetectedPart>,
     /// Detections of this frame ruled out (unplannable, or blocked by an excluded neighbour).
     pub excluded: BTreeSet<usize>,
+    /// Where (base frame) picks of this step closed on nothing since the feeder last moved:
+    /// the same pick there would miss again (an unseen neighbour, a pose the fingers cannot
+    /// take), so parts there wait for a shake.
+    pub missed_at: Vec<Vector3<f64>>,
     /// The instance chosen to pick.
     pub selection: Option<Selection>,
     /// The plan about to run.
@@ -42,7 +46,18 @@ pub(super) struct StepState {
     pub perception_verdict: Option<PerceptionVerdict>,
 }
 
+/// Detections closer than this (table plane) to a missed pick count as the same part, metres.
+const MISSED_RADIUS: f64 = 2e-3;
+
 impl StepState {
+    /// Whether `d` stands where a pick of this step missed since the feeder last moved.
+    pub fn missed_before(&self, d: &DetectedPart) -> bool {
+        let p = d.base_T_part.translation.vector;
+        self.missed_at
+            .iter()
+            .any(|m| (m - p).xy().norm() < MISSED_RADIUS)
+    }
+
     /// A fresh step starting at `start` with `shakes` already counted against it.
     pub fn new(start: f64, shakes: u32) -> Self {
         Self {
@@ -56,6 +71,7 @@ impl StepState {
             frame: None,
             detections: Vec::new(),
             excluded: BTreeSet::new(),
+            missed_at: Vec::new(),
             selection: None,
             plan: None,
             perception_error: None,
