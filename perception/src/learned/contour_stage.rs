@@ -96,14 +96,11 @@ impl ContourStage {
         // stable poses, and the runner-up stable pose with its half-turn: the outline decides.
         let t = &planar.table_T_part.translation;
         let (x, y) = (t.x, t.y);
-        let mut starts = vec![
-            (planar.class, (x, y, planar.yaw)),
-            (planar.class, (x, y, planar.yaw + PI)),
-        ];
+        let mut hypotheses = vec![(planar.class, planar.yaw), (planar.class, planar.yaw + PI)];
         for g in &outlined.near {
             let twin: Isometry3<f64> = planar.camera_T_part * g;
             if let Ok(p) = refiner.refine(&twin) {
-                starts.push((p.class, (x, y, p.yaw)));
+                hypotheses.push((p.class, p.yaw));
             }
         }
         if let Some(class) = planar.runner_up {
@@ -113,10 +110,18 @@ impl ContourStage {
                 &table_r_part,
                 &refiner.stable_poses()[class].rest_rotation(),
             );
-            starts.push((class, (x, y, yaw)));
-            starts.push((class, (x, y, yaw + PI)));
+            hypotheses.extend([(class, yaw), (class, yaw + PI)]);
         }
-        starts.dedup_by(|a, b| a.0 == b.0 && angle_between(a.1.2, b.1.2) < 0.1);
+        // A twin of a part lying flat is its own half-turn: each pose is tried once.
+        let mut starts: Vec<(usize, (f64, f64, f64))> = Vec::with_capacity(hypotheses.len());
+        for (class, yaw) in hypotheses {
+            if !starts
+                .iter()
+                .any(|(c, s)| *c == class && angle_between(s.2, yaw) < 0.1)
+            {
+                starts.push((class, (x, y, yaw)));
+            }
+        }
         let mut best: Option<(usize, ContourFit)> = None;
         // Every hypothesis gets the coarse round; only the best is finished.
         for (class, start) in starts {
