@@ -598,6 +598,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(non_snake_case)]
     fn the_outline_of_a_box_seen_from_above_is_its_rectangle_with_outward_normals() {
         let (outline, stable, camera, camera_T_table, _) = scene(0.002, -0.001, 0.3);
         let camera_T_part = camera_T_table * stable.table_T_part(0.002, -0.001, 0.3);
@@ -623,6 +624,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(non_snake_case)]
     fn a_box_is_aligned_to_a_hundredth_of_a_pixel_from_two_pixels_and_five_degrees_off() {
         let (x, y, yaw) = (0.002, -0.001, 0.3);
         let (outline, stable, camera, camera_T_table, patch) = scene(x, y, yaw);
