@@ -8,6 +8,9 @@ use sim::cell::noise::ErrorSource;
 use crate::episode::{PoseError, StepOutcome};
 use crate::orchestrator::InsertionCheck;
 
+/// Yaw at insertion beyond which a jam is a half-turn from perception, radians (90°).
+const HALF_TURN_SUSPECT: f64 = std::f64::consts::FRAC_PI_2;
+
 /// The scenario parameter name of a simulated error source.
 pub fn source_name(s: ErrorSource) -> &'static str {
     match s {
@@ -56,7 +59,14 @@ pub fn check_of(r: &ReleaseReport) -> InsertionCheck {
         Verdict::Missed => StepOutcome::Missed,
     };
     let mut sources = Vec::new();
-    if outcome != StepOutcome::Seated
+    if let InsertionCause::YawBeyondClearance { yaw, .. } = r.cause
+        && yaw.abs() > HALF_TURN_SUSPECT
+    {
+        // The lateral budget cannot speak for a part turned half a revolution: no calibration,
+        // robot or grasp error turns a part that far (the jaws square it modulo a half-turn),
+        // only a pose estimate that took a near-symmetric part the wrong way round.
+        sources.push(source_name(ErrorSource::PerceptionAndPlanning).to_string());
+    } else if outcome != StepOutcome::Seated
         && let Some(b) = &r.budget
     {
         let mut shares = b.shares.clone();
@@ -80,5 +90,35 @@ pub fn check_of(r: &ReleaseReport) -> InsertionCheck {
         sources,
         pose_error,
         stop_height: r.insertion.as_ref().map(|i| i.end.height),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector2;
+    use sim::cell::noise::ErrorBudget;
+
+    use super::*;
+
+    fn jam(yaw: f64) -> ReleaseReport {
+        ReleaseReport {
+            step: Some(2),
+            instance: 9,
+            part: "top_shell".into(),
+            insertion: None,
+            verdict: Verdict::Jammed,
+            cause: InsertionCause::YawBeyondClearance { yaw, limit: 0.0066 },
+            budget: Some(ErrorBudget::new(
+                vec![(ErrorSource::GraspResidual, Vector2::new(3e-5, 0.0))],
+                Vector2::new(4e-5, 0.0),
+            )),
+        }
+    }
+
+    #[test]
+    fn a_half_turn_jam_is_blamed_on_perception_a_small_yaw_on_the_lateral_budget() {
+        assert_eq!(check_of(&jam(3.13)).sources, ["perception"]);
+        assert_eq!(check_of(&jam(-3.12)).sources, ["perception"]);
+        assert_eq!(check_of(&jam(0.01)).sources, ["grasp_offset", "perception"]);
     }
 }
