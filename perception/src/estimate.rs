@@ -77,7 +77,8 @@ pub struct ContourRefinement {
 impl PoseEstimate {
     /// Replaces the planar pose by a contour fit on stable pose `class` of `refiner` (the
     /// keypoint pose is kept in `contour`). The class posterior is the keypoints' when the class
-    /// stays, and the fit's edge support when contour alignment chose another one.
+    /// stays, and the fit's edge support when contour alignment chose another one; tilt, margin
+    /// and runner-up stay those of the keypoint estimate's class decision.
     #[allow(non_snake_case)]
     pub fn adopt_contour(&mut self, fit: ContourFit, class: usize, refiner: &PlanarRefiner) {
         let keypoint_planar = self.planar.clone();
