@@ -325,13 +325,10 @@ impl GreyPatch {
     }
 }
 
-/// A contour-aligned pose on one stable pose.
+/// A contour-aligned pose on one stable pose: `stable.table_T_part(x, y, yaw)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[allow(non_snake_case)]
 pub struct ContourFit {
-    /// The aligned pose in the table frame.
-    pub table_T_part: Isometry3<f64>,
-    /// Table x, y (metres) and yaw (radians) of that pose.
+    /// Table x, metres.
     pub x: f64,
     /// Table y, metres.
     pub y: f64,
@@ -339,10 +336,20 @@ pub struct ContourFit {
     pub yaw: f64,
     /// Share of outline samples that found an edge within one pixel at the end.
     pub support: f64,
-    /// RMS distance of those samples to their edges, pixels.
-    pub rms_px: f64,
-    /// Outline samples at the end.
-    pub samples: usize,
+}
+
+/// What a fit aligns: a part's outline lying in one of its stable poses, seen by a camera,
+/// and the grey levels of the frame around it.
+#[derive(Clone, Copy)]
+pub struct ContourView<'a> {
+    /// The part's outline model.
+    pub outline: &'a PartOutline,
+    /// The stable pose it lies in.
+    pub stable: &'a StablePose,
+    /// The camera (whole sensor).
+    pub camera: &'a Camera,
+    /// The frame's grey levels around the part.
+    pub patch: &'a GreyPatch,
 }
 
 /// Aligns part outlines with image edges on a calibrated table.
@@ -363,69 +370,37 @@ impl ContourAligner {
         }
     }
 
-    /// Its settings.
-    pub fn config(&self) -> &ContourConfig {
-        &self.config
-    }
-
-    /// Fits x, y and yaw of `outline` lying in `stable` so its outline meets the edges of
-    /// `patch`, starting from `(x, y, yaw)`. `None` when too few samples find edges.
-    pub fn align(
-        &self,
-        outline: &PartOutline,
-        stable: &StablePose,
-        camera: &Camera,
-        patch: &GreyPatch,
-        start: (f64, f64, f64),
-    ) -> Option<ContourFit> {
-        self.rounds(
-            outline,
-            stable,
-            camera,
-            patch,
-            start,
-            &self.config.search_px,
-        )
+    /// Fits x, y and yaw of the part in `view` so its outline meets the frame's edges,
+    /// starting from `(x, y, yaw)`. `None` when too few samples find edges.
+    pub fn align(&self, view: ContourView<'_>, start: (f64, f64, f64)) -> Option<ContourFit> {
+        self.rounds(view, start, &self.config.search_px)
     }
 
     /// The first, coarsest round of [`Self::align`] only: a cheap fit whose support ranks
     /// competing hypotheses before the best one is finished with [`Self::finish`].
-    pub fn screen(
-        &self,
-        outline: &PartOutline,
-        stable: &StablePose,
-        camera: &Camera,
-        patch: &GreyPatch,
-        start: (f64, f64, f64),
-    ) -> Option<ContourFit> {
-        let first = &self.config.search_px[..1];
-        self.rounds(outline, stable, camera, patch, start, first)
+    pub fn screen(&self, view: ContourView<'_>, start: (f64, f64, f64)) -> Option<ContourFit> {
+        self.rounds(view, start, &self.config.search_px[..1])
     }
 
     /// The remaining rounds of [`Self::align`] from a [`Self::screen`]ed fit.
-    pub fn finish(
-        &self,
-        outline: &PartOutline,
-        stable: &StablePose,
-        camera: &Camera,
-        patch: &GreyPatch,
-        screened: &ContourFit,
-    ) -> Option<ContourFit> {
+    pub fn finish(&self, view: ContourView<'_>, screened: &ContourFit) -> Option<ContourFit> {
         let start = (screened.x, screened.y, screened.yaw);
-        let rest = &self.config.search_px[1..];
-        self.rounds(outline, stable, camera, patch, start, rest)
+        self.rounds(view, start, &self.config.search_px[1..])
     }
 
     /// Gauss–Newton rounds at the given search reaches (pixels), then the fit's support.
     fn rounds(
         &self,
-        outline: &PartOutline,
-        stable: &StablePose,
-        camera: &Camera,
-        patch: &GreyPatch,
+        view: ContourView<'_>,
         start: (f64, f64, f64),
         reaches: &[f64],
     ) -> Option<ContourFit> {
+        let ContourView {
+            outline,
+            stable,
+            camera,
+            patch,
+        } = view;
         let mut q = Vector3::new(start.0, start.1, start.2);
         let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
         for &reach in reaches {
@@ -474,24 +449,19 @@ impl ContourAligner {
             }
         }
         let points = outline.outline(camera, &pose(&q), self.config.spacing_px);
-        let hits: Vec<f64> = points
-            .iter()
-            .filter_map(|p| patch.edge_along(p.pixel, p.normal, 1.0))
-            .filter(|(_, c)| *c >= self.config.min_contrast)
-            .map(|(o, _)| o)
-            .collect();
         if points.is_empty() {
             return None;
         }
-        let rms = (hits.iter().map(|o| o * o).sum::<f64>() / hits.len().max(1) as f64).sqrt();
+        let hits = points
+            .iter()
+            .filter_map(|p| patch.edge_along(p.pixel, p.normal, 1.0))
+            .filter(|(_, c)| *c >= self.config.min_contrast)
+            .count();
         Some(ContourFit {
-            table_T_part: stable.table_T_part(q.x, q.y, q.z),
             x: q.x,
             y: q.y,
             yaw: q.z,
-            support: hits.len() as f64 / points.len() as f64,
-            rms_px: rms,
-            samples: points.len(),
+            support: hits as f64 / points.len() as f64,
         })
     }
 }
@@ -630,9 +600,13 @@ mod tests {
         let (outline, stable, camera, camera_T_table, patch) = scene(x, y, yaw);
         let aligner = ContourAligner::new(camera_T_table, ContourConfig::default());
         let start = (x + 2e-4, y - 2e-4, yaw + 5f64.to_radians());
-        let fit = aligner
-            .align(&outline, &stable, &camera, &patch, start)
-            .expect("the box is found");
+        let view = ContourView {
+            outline: &outline,
+            stable: &stable,
+            camera: &camera,
+            patch: &patch,
+        };
+        let fit = aligner.align(view, start).expect("the box is found");
         let px_per_m = camera.fx / 1.5;
         let err_px = (fit.x - x).hypot(fit.y - y) * px_per_m;
         let err_deg = (fit.yaw - yaw).to_degrees().abs();
@@ -640,7 +614,7 @@ mod tests {
         assert!(err_deg < 0.01, "yaw off by {err_deg:.4}°");
         assert!(fit.support > 0.95, "support {}", fit.support);
         // A half-turn of a box is the same box; a quarter turn is not.
-        let turned = aligner.align(&outline, &stable, &camera, &patch, (x, y, yaw + 1.4));
+        let turned = aligner.align(view, (x, y, yaw + 1.4));
         assert!(turned.is_none_or(|f| f.support < 0.6), "{turned:?}");
     }
 }

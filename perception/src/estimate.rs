@@ -82,7 +82,7 @@ impl PoseEstimate {
     #[allow(non_snake_case)]
     pub fn adopt_contour(&mut self, fit: ContourFit, class: usize, refiner: &PlanarRefiner) {
         let keypoint_planar = self.planar.clone();
-        let table_T_part = fit.table_T_part;
+        let table_T_part = refiner.stable_poses()[class].table_T_part(fit.x, fit.y, fit.yaw);
         let confidence = if class == keypoint_planar.class {
             keypoint_planar.confidence
         } else {

@@ -6,7 +6,7 @@ mod feeder_support;
 
 use feeder_support::{catalog, render_feeder};
 use nalgebra::Point3;
-use perception::contour::{ContourAligner, ContourConfig, GreyPatch, PartOutline};
+use perception::contour::{ContourAligner, ContourConfig, ContourView, GreyPatch, PartOutline};
 use perception::planar::{PlanarConfig, PlanarRefiner};
 
 #[test]
@@ -50,7 +50,13 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
             let t = table_T_part.translation.vector;
             // About 1.4 px and 1 px off (0.14 mm/px), and 4° turned.
             let start = (t.x + 2e-4, t.y - 1.5e-4, truth.yaw + 4f64.to_radians());
-            let Some(fit) = aligner.align(&outline, stable, &feeder.camera, &patch, start) else {
+            let view = ContourView {
+                outline: &outline,
+                stable,
+                camera: &feeder.camera,
+                patch: &patch,
+            };
+            let Some(fit) = aligner.align(view, start) else {
                 lost += 1;
                 continue;
             };

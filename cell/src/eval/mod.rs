@@ -20,9 +20,9 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Point3, UnitQuaternion};
 use perception::learned::{InstanceMask, LearnedDetections, StageTimes};
 use perception::metrics::{PoseErrors, pose_errors};
-use perception::part::{Catalog, PartRole, StablePose, Symmetry};
+use perception::part::{Catalog, PartRole, StablePose};
 use perception::planar::{PlanarConfig, PlanarRefiner};
-use perception::symmetry::{symmetric_angle, symmetry_group};
+use perception::symmetry::{ambiguity_group, symmetric_angle, symmetry_group};
 use perception::{Camera, Distortion, FrameImage};
 use serde::{Deserialize, Serialize};
 use sim::dataset::{BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop};
@@ -268,20 +268,6 @@ impl EvalDataset {
                     catalog.file.display()
                 )));
             }
-            let exact: Vec<Symmetry> = spec
-                .symmetries
-                .iter()
-                .filter(|s| s.exact)
-                .cloned()
-                .collect();
-            let all: Vec<Symmetry> = spec
-                .symmetries
-                .iter()
-                .map(|s| Symmetry {
-                    exact: true,
-                    ..s.clone()
-                })
-                .collect();
             parts.insert(
                 obj_id,
                 PartData {
@@ -289,8 +275,8 @@ impl EvalDataset {
                     obj_id,
                     keypoints: spec.keypoint_points(),
                     points: perception::part::sample_surface(&mesh, options.model_points, 1),
-                    group: symmetry_group(&exact),
-                    near_group: symmetry_group(&all),
+                    group: symmetry_group(&spec.symmetries),
+                    near_group: ambiguity_group(&spec.symmetries),
                     stable_poses: spec.stable_poses.clone(),
                     diameter_mm: info.diameter,
                 },

@@ -9,12 +9,14 @@ use nalgebra::{Isometry3, UnitQuaternion};
 use super::LearnedError;
 use super::models::CROP_SIZE;
 use crate::Camera;
-use crate::contour::{ContourAligner, ContourConfig, ContourFit, GreyPatch, PartOutline};
+use crate::contour::{
+    ContourAligner, ContourConfig, ContourFit, ContourView, GreyPatch, PartOutline,
+};
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
-use crate::part::{Catalog, Symmetry};
+use crate::part::Catalog;
 use crate::planar::best_yaw;
-use crate::symmetry::symmetry_group;
+use crate::symmetry::ambiguity_group;
 
 /// Pixels around the keypoint crop that the outline search may reach.
 const MARGIN: i64 = 8;
@@ -49,17 +51,12 @@ impl ContourStage {
                     part: name.clone(),
                     reason: format!("mesh for contour alignment: {e}"),
                 })?;
-                let all: Vec<Symmetry> = spec
-                    .symmetries
-                    .iter()
-                    .map(|s| Symmetry {
-                        exact: true,
-                        ..s.clone()
-                    })
-                    .collect();
                 Ok(OutlinedPart {
                     outline: PartOutline::new(&mesh),
-                    near: symmetry_group(&all).into_iter().skip(1).collect(),
+                    near: ambiguity_group(&spec.symmetries)
+                        .into_iter()
+                        .skip(1)
+                        .collect(),
                 })
             })
             .collect::<Result<_, LearnedError>>()?;
@@ -122,22 +119,24 @@ impl ContourStage {
                 starts.push((class, (x, y, yaw)));
             }
         }
+        let view = |class: usize| ContourView {
+            outline: &outlined.outline,
+            stable: &refiner.stable_poses()[class],
+            camera,
+            patch: &patch,
+        };
         let mut best: Option<(usize, ContourFit)> = None;
         // Every hypothesis gets the coarse round; only the best is finished.
         for (class, start) in starts {
-            let stable = &refiner.stable_poses()[class];
-            let Some(fit) = aligner.screen(&outlined.outline, stable, camera, &patch, start) else {
+            let Some(fit) = aligner.screen(view(class), start) else {
                 continue;
             };
             if best.as_ref().is_none_or(|(_, b)| fit.support > b.support) {
                 best = Some((class, fit));
             }
         }
-        let best = best.and_then(|(class, screened)| {
-            let stable = &refiner.stable_poses()[class];
-            let fit = aligner.finish(&outlined.outline, stable, camera, &patch, &screened)?;
-            Some((class, fit))
-        });
+        let best = best
+            .and_then(|(class, screened)| Some((class, aligner.finish(view(class), &screened)?)));
         if let Some((class, fit)) = best
             && fit.support >= self.config.min_support
         {
