@@ -23,5 +23,6 @@ pub mod onnx;
 pub mod perceive;
 pub mod planar;
 pub mod pnp;
+pub mod stacking;
 pub mod symmetry;
 pub mod voting;

@@ -53,6 +53,10 @@ pub struct Args {
     /// Keypoint poses only: skip the contour alignment on the frame's edges (for comparison).
     #[arg(long)]
     pub no_contour: bool,
+    /// Keep the poses of parts lying on or under another one (their estimates on the table
+    /// overlap), which the pipeline otherwise withdraws (for comparison).
+    #[arg(long)]
+    pub no_stacking_check: bool,
     /// No progress line.
     #[arg(long)]
     pub quiet: bool,
@@ -76,6 +80,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = PipelineConfig {
         estimator: EstimatorConfig::with_gate(args.max_rms_px),
         contour: (!args.no_contour).then(ContourConfig::default),
+        stacking_tolerance: PipelineConfig::default()
+            .stacking_tolerance
+            .filter(|_| !args.no_stacking_check),
         ..PipelineConfig::default()
     };
     let pipeline = LearnedPipeline::with_config(&models, &catalog, &runtime, config)

@@ -14,7 +14,7 @@ use crate::contour::{
 };
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
-use crate::part::Catalog;
+use crate::part::{Catalog, TriMesh};
 use crate::planar::best_yaw;
 use crate::symmetry::ambiguity_group;
 
@@ -34,25 +34,24 @@ pub(super) struct ContourStage {
 }
 
 impl ContourStage {
-    /// Outlines of `parts` (the models' class order) from `catalog`'s meshes.
+    /// Outlines of `parts` (the models' class order) from their `meshes`, with the
+    /// near-symmetries `catalog` declares.
     pub(super) fn new(
         catalog: &Catalog,
         parts: &[String],
+        meshes: &[TriMesh],
         config: ContourConfig,
     ) -> Result<Self, LearnedError> {
         let parts = parts
             .iter()
-            .map(|name| {
+            .zip(meshes)
+            .map(|(name, mesh)| {
                 let spec = catalog.part(name).ok_or_else(|| LearnedError::Part {
                     part: name.clone(),
                     reason: "not in the catalog".into(),
                 })?;
-                let mesh = catalog.load_mesh(spec).map_err(|e| LearnedError::Part {
-                    part: name.clone(),
-                    reason: format!("mesh for contour alignment: {e}"),
-                })?;
                 Ok(OutlinedPart {
-                    outline: PartOutline::new(&mesh),
+                    outline: PartOutline::new(mesh),
                     near: ambiguity_group(&spec.symmetries)
                         .into_iter()
                         .skip(1)

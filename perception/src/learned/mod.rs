@@ -1,6 +1,7 @@
 //! Learned perception, the seed's pipeline from pixels: instance segmentation of the feeder view
 //! → 128 × 128 crops with shifted intrinsics → PVNet keypoint net → RANSAC voting with covariances
-//! → [`crate::estimate::PoseEstimator`]. The networks run through ONNX Runtime (`crate::onnx`).
+//! → [`crate::estimate::PoseEstimator`] → contour alignment → [`crate::stacking`] (parts lying on
+//! one another are withdrawn). The networks run through ONNX Runtime (`crate::onnx`).
 //!
 //! It reads pixels and calibration only: [`crate::FrameContent::Simulated`] is refused.
 
@@ -23,5 +24,5 @@ pub use instances::{Instance, InstanceConfig, InstanceGrouper};
 pub use keypoint_net::KeypointNet;
 pub use models::LearnedModels;
 pub use perception::LearnedPerception;
-pub use pipeline::{LearnedPipeline, PipelineConfig};
+pub use pipeline::{LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
 pub use segmenter::{SegmentMap, Segmenter};

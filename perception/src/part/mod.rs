@@ -7,6 +7,7 @@ mod keypoints;
 mod mesh;
 mod mesh_io;
 mod mesh_repair;
+mod pieces;
 mod stable_pose;
 
 pub use catalog::{Catalog, Grasp, Material, PartRole, PartSpec, Symmetry, line_column};
@@ -15,4 +16,5 @@ pub use keypoints::{farthest_point_sample, sample_surface};
 pub use mesh::{MeshDefect, OpenRegion, TriMesh};
 pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};
 pub use mesh_repair::{MeshRepairs, WELD_TOLERANCE_REL};
+pub use pieces::{ConvexPieces, convex_pieces};
 pub use stable_pose::StablePose;

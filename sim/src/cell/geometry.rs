@@ -5,10 +5,9 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use parry3d_f64::shape::SharedShape;
-use perception::part::{Catalog, Grasp, StablePose, TriMesh};
+use perception::part::{Catalog, ConvexPieces, Grasp, StablePose, TriMesh, convex_pieces};
 
 use super::error::CellError;
-use super::pieces::{ConvexPieces, convex_pieces};
 use crate::config::{AssemblyStep, CellSpec, Destination};
 use crate::convert::vec_from_point;
 

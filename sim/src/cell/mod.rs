@@ -49,7 +49,6 @@ pub mod insertion;
 pub mod model;
 pub mod motion;
 pub mod noise;
-pub mod pieces;
 mod sim_cell;
 
 pub use capture::{FeederImage, calibrated_feeder_window, feeder_window};

@@ -1,6 +1,6 @@
-//! Convex pieces of a part mesh for contact simulation.
+//! Convex pieces of a part mesh, for contact simulation and for testing whether parts overlap.
 //!
-//! The project's meshes are built by [`crate::cad::solid::Solid`] from hexahedra (12 consecutive
+//! The project's meshes are built by the simulator's CAD (`sim::cad::solid::Solid`) from hexahedra (12 consecutive
 //! triangles each, in order, also after an OBJ round trip). The union of their convex hulls is
 //! the solid, chamfers and clearances included: a hexahedron's only non-planar faces are the
 //! mitres where two wall pieces of a ring meet, and the hull fills those inside the solid. A mesh
@@ -12,10 +12,10 @@
 //! sees it as a surface, and a part sliding down a wall a micron inside the tolerance would stop
 //! on the seam where the chamfer meets the wall.
 
+use super::TriMesh;
 use nalgebra::Point3;
 use parry3d_f64::math::Vector3;
 use parry3d_f64::transformation::convex_hull;
-use perception::part::TriMesh;
 
 /// Triangles per hexahedron in a `Solid`-built mesh.
 const HEX_TRIANGLES: usize = 12;
@@ -126,47 +126,4 @@ fn closed(triangles: &[[u32; 3]]) -> bool {
     edges
         .iter()
         .all(|&(a, b)| a == b || edges.binary_search(&(b, a)).is_ok())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::cad::usbc;
-
-    #[test]
-    fn usbc_parts_split_into_exact_convex_pieces() {
-        // The nest's chamfers merge with the walls below them, its plate cells with each other.
-        let nest = usbc::fixture_nest();
-        assert!(convex_pieces(&nest).pieces.len() < nest.triangles.len() / 12 / 2);
-        for mesh in [
-            usbc::main_shell(),
-            usbc::insert_mold(),
-            usbc::top_shell(),
-            usbc::fixture_nest(),
-        ] {
-            let p = convex_pieces(&mesh);
-            assert!(p.exact);
-            assert!(p.pieces.len() <= mesh.triangles.len() / 12);
-            // Merging keeps the solid: the merged hulls hold the volume of the hexahedra's hulls,
-            // which is the mesh's (up to the twisted mitres of rings with unequal wall
-            // thickness, whose hulls overlap a neighbour inside the solid by a few 1e-5).
-            let total = |pieces: &[Vec<Point3<f64>>]| pieces.iter().map(|q| hull(q).1).sum::<f64>();
-            let merged = total(&p.pieces);
-            let unmerged = total(&hexahedra(&mesh).unwrap());
-            assert!(
-                (merged - unmerged).abs() < 1e-9 * unmerged,
-                "{merged} vs {unmerged}"
-            );
-            let v = mesh.volume();
-            assert!((unmerged - v).abs() < 1e-4 * v, "{unmerged} vs {v}");
-        }
-    }
-
-    #[test]
-    fn a_non_convex_chunk_falls_back_to_the_hull() {
-        // A mesh whose triangles are not whole hexahedra is not cut into pieces.
-        let mut mesh = usbc::insert_mold();
-        mesh.triangles.truncate(11);
-        assert!(!convex_pieces(&mesh).exact);
-    }
 }
