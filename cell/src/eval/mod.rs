@@ -21,7 +21,7 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion};
 use perception::learned::{InstanceMask, LearnedDetections, StageTimes};
 use perception::metrics::{PoseErrors, pose_errors};
 use perception::part::{Catalog, PartRole, StablePose};
-use perception::planar::{PlanarConfig, PlanarRefiner};
+use perception::planar::{PlanarConfig, PlanarPose, PlanarRefiner};
 use perception::symmetry::{ambiguity_group, symmetric_angle, symmetry_group};
 use perception::{Camera, Distortion, FrameImage};
 use serde::{Deserialize, Serialize};
@@ -395,9 +395,25 @@ pub struct TruthRecord {
     pub touching: bool,
     /// Too little visible to count (see [`EvalOptions::min_visib_fract`]).
     pub ignored: bool,
+    /// Whether it rests on the table in a stable pose: tilted less than [`RESTING_TILT_DEG`]
+    /// from the nearest one, within [`RESTING_LIFT_MM`] of its height. A part leaning on or
+    /// lying on another one is in no stable pose, so no planar estimate of it can be right: it
+    /// is left out of the refined rows and counted apart.
+    #[serde(default = "resting_by_default")]
+    pub resting: bool,
     /// Index of the detection matched to it.
     pub detection: Option<usize>,
 }
+
+/// Records written before `resting` existed did not tell: every part counted as resting.
+fn resting_by_default() -> bool {
+    true
+}
+
+/// Tilt from the nearest stable pose beyond which a true pose is not resting, degrees.
+pub const RESTING_TILT_DEG: f64 = 1.0;
+/// Height above or below the nearest stable pose's beyond which a true pose is not resting, mm.
+pub const RESTING_LIFT_MM: f64 = 0.2;
 
 /// One detection of a frame and how it scored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -567,6 +583,35 @@ fn evaluate_image(
         truth_parts.push(part);
     }
     let touching = touching_flags(&truth_masks, options.touch_gap_px);
+    let refiners = truth_parts
+        .iter()
+        .map(|part| {
+            PlanarRefiner::new(
+                camera_T_table,
+                &part.stable_poses,
+                &part.group,
+                PlanarConfig::default(),
+            )
+            .map_err(|e| EvalError::Part {
+                part: part.name.clone(),
+                message: e.to_string(),
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    // The refiner's snap of each true pose: its stable pose, and whether it rests there.
+    let snapped: Vec<Option<PlanarPose>> = refiners
+        .iter()
+        .zip(&truth_poses)
+        .map(|(r, truth)| r.refine(truth).ok())
+        .collect();
+    let table_T_camera = camera_T_table.inverse();
+    let rests = |k: usize| {
+        snapped[k].as_ref().is_some_and(|p| {
+            let lift =
+                (table_T_camera * truth_poses[k]).translation.z - p.table_T_part.translation.z;
+            p.tilt.to_degrees() < RESTING_TILT_DEG && 1e3 * lift.abs() < RESTING_LIFT_MM
+        })
+    };
     let mut truths: Vec<TruthRecord> = image
         .gt
         .iter()
@@ -579,6 +624,7 @@ fn evaluate_image(
                 visible_px: truth_masks[k].area(),
                 touching: touching[k],
                 ignored: info.visib_fract < options.min_visib_fract || truth_masks[k].area() == 0,
+                resting: rests(k),
                 detection: None,
             }
         })
@@ -645,20 +691,9 @@ fn evaluate_image(
             truths[m.truth].detection = Some(d);
             let part = truth_parts[m.truth];
             let truth = &truth_poses[m.truth];
-            let refiner = PlanarRefiner::new(
-                camera_T_table,
-                &part.stable_poses,
-                &part.group,
-                PlanarConfig::default(),
-            )
-            .map_err(|e| EvalError::Part {
-                part: part.name.clone(),
-                message: e.to_string(),
-            })?;
             // The class the refiner assigns to the true pose is the true stable pose.
-            rec.true_stable_pose = refiner
-                .refine(truth)
-                .ok()
+            rec.true_stable_pose = snapped[m.truth]
+                .as_ref()
                 .map(|p| part.stable_poses[p.class].name.clone());
             if let (Err(reason), false) = (&det.pose, truths[m.truth].ignored) {
                 failed.offer(det.score, || FailedCrop {

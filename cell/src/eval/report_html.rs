@@ -437,10 +437,12 @@ fn render(
     let _ = write!(
         h,
         "<h2>Poses</h2><p>Stable pose right: the class chosen equals the class the planar \
-         refiner assigns to the true pose. Flips: outliers within {}° of a near-symmetric \
-         equivalent of the truth. AR: BOP average recall over the counted instances, MSSD at \
-         {}–{} × diameter, MSPD at {}–{} px.</p><table><tr><th class=l>part</th>\
-         <th>matched</th><th>no pose</th><th>stable pose right</th><th>θ p50 / p95 PnP</th>\
+         refiner assigns to the true pose. Refined figures cover the parts resting on the table; \
+         parts leaning on or lying on another one are in no stable pose and are counted apart \
+         (off the table: instances / of them posed). Flips: outliers within {}° of a \
+         near-symmetric equivalent of the truth. AR: BOP average recall over the counted \
+         instances, MSSD at {}–{} × diameter, MSPD at {}–{} px.</p><table><tr><th class=l>part</th>\
+         <th>matched</th><th>no pose</th><th>off the table</th><th>stable pose right</th><th>θ p50 / p95 PnP</th>\
          <th>θ p50 / p95 refined</th><th>flips PnP / refined</th><th>AR<sub>MSSD</sub> PnP / \
          refined</th><th>AR<sub>MSPD</sub> PnP / refined</th></tr>",
         meta.options.outlier_deg,
@@ -452,11 +454,13 @@ fn render(
     for p in &all {
         let _ = write!(
             h,
-            "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{} ({})</td><td>{} / {}</td>\
-             <td>{} / {}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td></tr>",
+            "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{} / {}</td><td>{} ({})</td>\
+             <td>{} / {}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td></tr>",
             escape(&p.part),
             p.true_positives,
             p.pose_failures,
+            p.not_resting,
+            p.not_resting_posed,
             pct(p.stable_pose_rate),
             p.stable_pose_right,
             num(p.raw.all.angle_deg.p50, 2),

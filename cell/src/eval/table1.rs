@@ -153,13 +153,20 @@ pub struct PartSummary {
     pub pose_failures: usize,
     /// The pose failures by kind (the reason with its numbers replaced by `#`), most first.
     pub pose_failure_kinds: Vec<(String, usize)>,
-    /// Matched detections with a pose.
+    /// Counted instances not resting on the table (leaning on or lying on another part).
+    #[serde(default)]
+    pub not_resting: usize,
+    /// Matched detections of those that still got a pose (left out of `refined`).
+    #[serde(default)]
+    pub not_resting_posed: usize,
+    /// Matched detections of resting instances with a pose (what `refined` covers).
     pub poses: usize,
     /// Raw PnP errors.
     pub raw: PoseStats,
-    /// Errors after planar refinement.
+    /// Errors after planar refinement, over the resting instances.
     pub refined: PoseStats,
-    /// Matched poses whose stable pose is the one the refiner gives the true pose.
+    /// Matched poses of resting instances whose stable pose is the one the refiner gives the
+    /// true pose.
     pub stable_pose_right: usize,
     /// `stable_pose_right / poses`.
     pub stable_pose_rate: f64,
@@ -306,6 +313,7 @@ fn part_summary(
         (0, 0, 0, 0, 0);
     let (mut detections, mut tp, mut fp, mut pose_failures, mut stable_right) = (0, 0, 0, 0, 0);
     let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
+    let (mut not_resting, mut not_resting_posed) = (0, 0);
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
     for f in frames {
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
@@ -315,6 +323,7 @@ fn part_summary(
             }
             truths += 1;
             touching += usize::from(t.touching);
+            not_resting += usize::from(!t.resting);
             if t.detection.is_some() {
                 recalled += 1;
                 recalled_touching += usize::from(t.touching);
@@ -340,6 +349,8 @@ fn part_summary(
                 });
             }
             match d.refined {
+                // No planar estimate of a part off the table can be right: counted apart.
+                Some(_) if !f.truths[t].resting => not_resting_posed += 1,
                 Some(refined) => {
                     if d.stable_pose.is_some() && d.stable_pose == d.true_stable_pose {
                         stable_right += 1;
@@ -378,6 +389,8 @@ fn part_summary(
             v.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
             v
         },
+        not_resting,
+        not_resting_posed,
         poses: refined_estimates.len(),
         raw,
         refined,
@@ -563,6 +576,7 @@ mod tests {
             visible_px: 100,
             touching,
             ignored,
+            resting: true,
             detection,
         }
     }
@@ -712,6 +726,22 @@ mod tests {
         assert!((a.raw.mspd_recall[0] - 0.2).abs() < 1e-12);
         assert!((a.raw.mspd_recall[2] - 0.4).abs() < 1e-12);
         assert!((a.raw.ar_mspd - (0.2 + 0.2 + 8.0 * 0.4) / 10.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn parts_off_the_table_keep_their_raw_pnp_but_leave_the_refined_rows() {
+        let mut frames = frames();
+        // The 170° estimate's truth leans on a neighbour.
+        frames[0].truths[1].resting = false;
+        let s = summarise(&frames, &[("a".into(), 10.0)], &EvalOptions::default());
+        let a = &s.parts[0];
+        assert_eq!((a.not_resting, a.not_resting_posed), (1, 1));
+        assert_eq!(a.raw.all.samples, 2);
+        assert_eq!((a.refined.all.samples, a.refined.all.outliers), (1, 0));
+        assert_eq!((a.poses, a.stable_pose_right), (1, 1));
+        assert!((a.stable_pose_rate - 1.0).abs() < 1e-12);
+        // Detection counts do not change.
+        assert_eq!((a.truths, a.true_positives, a.pose_failures), (5, 3, 1));
     }
 
     #[test]
