@@ -125,12 +125,21 @@ impl ContourStage {
             patch: &patch,
         };
         let mut best: Option<(usize, ContourFit)> = None;
-        // Every hypothesis gets the coarse round; only the best is finished.
-        for (class, start) in starts {
+        // Every hypothesis gets the coarse round; only the best is finished. The keypoint pose
+        // (the first) is replaced only by a hypothesis that beats it by the margin.
+        for (k, (class, start)) in starts.into_iter().enumerate() {
             let Some(fit) = aligner.screen(view(class), start) else {
                 continue;
             };
-            if best.as_ref().is_none_or(|(_, b)| fit.support > b.support) {
+            let bar = if k == 0 {
+                0.0
+            } else {
+                self.config.switch_margin
+            };
+            if best
+                .as_ref()
+                .is_none_or(|(_, b)| fit.support > b.support + bar)
+            {
                 best = Some((class, fit));
             }
         }
