@@ -112,6 +112,7 @@ class Segmenter(nn.Module):
 
     def __init__(self, w=(12, 16, 32, 64)):
         super().__init__()
+        self.widths = tuple(w)
         self.norm = Normalise()
         self.s2 = block(3, w[0], 2)
         self.s4 = nn.Sequential(block(w[0], w[1], 2), block(w[1], w[1]))

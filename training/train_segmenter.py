@@ -23,9 +23,21 @@ MIN_GT_CELLS = 16
 """GT instances with fewer visible stride-4 cells (256 px, ~6 % of a part) are not counted."""
 
 
-def batch_of(frames, idx, size, rng, augment):
-    """Random `size` x `size` crops (origins on the 4-px grid) of the frames `idx`; frames
-    smaller than `size` are padded by edge replication with ignored labels."""
+def quarter_turn(rgb, lab, off, k):
+    """Turns a square crop, its cell labels and its offsets by k quarter turns (np.rot90's
+    sense): a camera roll, exact because cell centres map onto cell centres and each offset
+    vector turns with the image (one turn: x' = y, y' = S - 1 - x, so (dx, dy) -> (dy, -dx))."""
+    rgb, lab = np.rot90(rgb, k), np.rot90(lab, k)
+    o = np.rot90(off, k, axes=(1, 2))
+    for _ in range(k % 4):
+        o = np.stack([o[1], -o[0]])
+    return rgb, lab, o
+
+
+def batch_of(frames, idx, size, rng, augment, turn=False):
+    """Random `size` x `size` crops (origins on the 4-px grid) of the frames `idx`, each turned
+    by a random number of quarter turns when `turn`; frames smaller than `size` are padded by
+    edge replication with ignored labels."""
     xs, cls, off = [], [], []
     c = size // 4
     for i in idx:
@@ -42,9 +54,16 @@ def batch_of(frames, idx, size, rng, augment):
         Hp, Wp = rgb.shape[:2]
         y0 = 4 * rng.integers(0, (Hp - size) // 4 + 1)
         x0 = 4 * rng.integers(0, (Wp - size) // 4 + 1)
-        xs.append(rgb[y0 : y0 + size, x0 : x0 + size])
-        cls.append(lab[y0 // 4 : y0 // 4 + c, x0 // 4 : x0 // 4 + c])
-        off.append(o[:, y0 // 4 : y0 // 4 + c, x0 // 4 : x0 // 4 + c])
+        crop = (
+            rgb[y0 : y0 + size, x0 : x0 + size],
+            lab[y0 // 4 : y0 // 4 + c, x0 // 4 : x0 // 4 + c],
+            o[:, y0 // 4 : y0 // 4 + c, x0 // 4 : x0 // 4 + c],
+        )
+        if turn:
+            crop = quarter_turn(*crop, int(rng.integers(0, 4)))
+        xs.append(np.ascontiguousarray(crop[0]))
+        cls.append(np.ascontiguousarray(crop[1]))
+        off.append(np.ascontiguousarray(crop[2]))
     x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2).float() / 255.0
     if augment:
         b = x.shape[0]
@@ -161,6 +180,7 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
     ap.add_argument("--eval-every", type=int, default=250)
+    ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop by random quarter turns (augmentation)")
     args = ap.parse_args(argv)
     if args.size % 16:
         sys.exit(f"--size {args.size} must be a multiple of 16")
@@ -193,7 +213,7 @@ def main(argv=None):
         model.train()
         lr, progress = progress_lr(opt, args.lr, step - 1, args.steps, time.time() - t_train, 60 * args.max_minutes)
         idx = rng.integers(0, len(train), args.batch)
-        x, cls, off = batch_of(train, idx, args.size, rng, augment=True)
+        x, cls, off = batch_of(train, idx, args.size, rng, augment=True, turn=bool(args.rotate))
         logits, offsets = model(x.to(device))
         l_cls, l_off = losses(logits, offsets, cls.to(device), off.to(device))
         loss = l_cls + l_off
@@ -232,6 +252,9 @@ def main(argv=None):
     train_minutes = (time.time() - t_train) / 60
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
+    # The torch weights travel with the ONNX file: scripts/seed_compare runs them in eager mode.
+    torch.save({"widths": list(model.widths), "state_dict": model.cpu().state_dict()}, os.path.join(args.out, "segmenter.pt"))
+    model.to(device)
 
     met = evaluate(model, test, device)
     if not args.eval_only:
