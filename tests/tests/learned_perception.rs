@@ -48,7 +48,7 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     let mut centre_px = Vec::new();
     // Per found part, the median over its nine keypoints of the distance to the projected truth.
     let mut keypoints_px = Vec::new();
-    for seed in [11, 12] {
+    for seed in 11..23 {
         let feeder = render_feeder(&catalog, seed);
         let frame = Frame {
             camera: feeder.camera,
@@ -153,13 +153,14 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     );
 }
 
-// Bounds measured with the committed models (2026-11-23): 21 of 24 parts found (the misses: main
-// shells under top shells), centre keypoint median 3.21 px, all nine keypoints median 13.24 px
-// (the keypoint net's own test crops: 7.5 px). No pose bound here: at the pipeline's default
-// 4 px reprojection gate none of these 24 parts gets a pose (the count is printed); the learned
-// scenario runs at 12 px (e2e_learned).
-const MIN_FOUND: usize = 21;
-const CENTRE_MEDIAN_PX: f64 = 4.0;
+// Bounds measured with the committed models (2026-11-25) on 12 frames: 133 of 144 parts found
+// (the misses: parts mostly under others), centre keypoint median 3.23 px, all nine keypoints
+// median 13.9 px (the keypoint net's own test crops: 5.9 px), 11 poses under the pipeline's
+// default 4 px reprojection gate (the learned scenario runs at 12 px: e2e_learned). Two frames
+// were too few for a median of per-part medians: on frames 11–12 alone the new net measured
+// 16.1 px against the previous one's 13.2, on all 12 frames 13.9 against 13.5.
+const MIN_FOUND: usize = 130;
+const CENTRE_MEDIAN_PX: f64 = 3.6;
 const KEYPOINTS_MEDIAN_PX: f64 = 15.0;
 
 #[test]
