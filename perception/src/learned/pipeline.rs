@@ -40,8 +40,9 @@ pub struct PipelineConfig {
     pub threads: usize,
     /// Contour alignment of the keypoint poses on the frame's edges (`None`: keypoints only).
     pub contour: Option<ContourConfig>,
-    /// Two estimates whose parts' hulls interpenetrate deeper than this, metres, are both
-    /// withdrawn: one part lies on the other, which no stable pose describes (`None`: no check).
+    /// Two estimates whose parts (their convex pieces) interpenetrate deeper than this, metres,
+    /// are both withdrawn: one part lies on the other, which no stable pose describes (`None`:
+    /// no check).
     pub stacking_tolerance: Option<f64>,
 }
 
@@ -241,7 +242,7 @@ impl LearnedPipeline {
             ctx.pose(inst.part, &parts[inst.part], votes, **origin)
         };
         let threads = self.config.threads.min(jobs.len()).max(1);
-        let poses: Vec<PoseOutcome> = if threads <= 1 {
+        let mut poses: Vec<PoseOutcome> = if threads <= 1 {
             jobs.iter().map(pose_of).collect()
         } else {
             // Workers take the next detection as they free up: poses differ widely in cost
@@ -268,7 +269,6 @@ impl LearnedPipeline {
             done.sort_unstable_by_key(|(i, _)| *i);
             done.into_iter().map(|(_, p)| p).collect()
         };
-        let mut poses = poses;
         if let Some(check) = &self.stacking {
             withdraw_stacked(check, &instances, sensor, &self.parts, &mut poses);
         }
