@@ -561,14 +561,13 @@ mod tests {
                 camera.project(&(camera_T_part * p)).unwrap()
             })
             .collect();
+        // Inside when the point is on the same side of all four edges, either winding.
         let inside = |p: Point2<f64>| {
-            (0..4).all(|k| {
+            let mut sides = (0..4).map(|k| {
                 let (a, b) = (corners[k], corners[(k + 1) % 4]);
-                cross(b - a, p - a) >= 0.0
-            }) || (0..4).all(|k| {
-                let (a, b) = (corners[k], corners[(k + 1) % 4]);
-                cross(b - a, p - a) <= 0.0
-            })
+                cross(b - a, p - a)
+            });
+            sides.clone().all(|c| c >= 0.0) || sides.all(|c| c <= 0.0)
         };
         let mut img = GrayImage::new(120, 120);
         for (j, i, px) in img.enumerate_pixels_mut() {

@@ -87,6 +87,22 @@ pub struct PlanarPose {
     pub symmetry: UnitQuaternion<f64>,
 }
 
+/// Tilt from its nearest stable pose below which a part rests in it, radians (1°).
+pub const RESTING_TILT: f64 = std::f64::consts::PI / 180.0;
+/// Height off its nearest stable pose's below which a part rests in it, metres (0.2 mm).
+pub const RESTING_LIFT: f64 = 2e-4;
+
+impl PlanarPose {
+    /// Whether `table_T_part`, the pose this one was snapped from, rests on the table in it:
+    /// tilted less than [`RESTING_TILT`] and within [`RESTING_LIFT`] of its height. A part
+    /// leaning on or lying on another one does not, and no planar estimate of it can be right.
+    #[allow(non_snake_case)]
+    pub fn rests(&self, table_T_part: &Isometry3<f64>) -> bool {
+        let lift = table_T_part.translation.z - self.table_T_part.translation.z;
+        self.tilt < RESTING_TILT && lift.abs() < RESTING_LIFT
+    }
+}
+
 /// Snaps pose estimates of one part onto the stable poses on a calibrated table.
 #[derive(Debug, Clone)]
 #[allow(non_snake_case)]

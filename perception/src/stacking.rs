@@ -162,39 +162,18 @@ fn pose(iso: &Isometry3<f64>) -> Pose {
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::{Point3, Translation3, UnitQuaternion};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     use super::*;
 
     /// A closed box `[0, sx] × [0, sy] × [0, sz]` metres (the frame at a corner, z up).
     fn block(sx: f64, sy: f64, sz: f64) -> TriMesh {
-        let vertices = (0..8)
-            .map(|k| {
-                Point3::new(
-                    if k & 1 == 0 { 0.0 } else { sx },
-                    if k & 2 == 0 { 0.0 } else { sy },
-                    if k & 4 == 0 { 0.0 } else { sz },
-                )
-            })
-            .collect();
-        let triangles = vec![
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ];
-        TriMesh {
-            vertices,
-            triangles,
+        let size = Vector3::new(sx, sy, sz);
+        let mut mesh = TriMesh::cuboid(size);
+        for v in &mut mesh.vertices {
+            *v += size / 2.0;
         }
+        mesh
     }
 
     fn at(x: f64, y: f64, yaw: f64) -> Isometry3<f64> {

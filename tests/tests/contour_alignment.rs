@@ -4,10 +4,10 @@
 
 mod feeder_support;
 
-use feeder_support::{catalog, render_feeder};
+use feeder_support::{catalog, render_feeder, snapped};
 use nalgebra::Point3;
 use perception::contour::{ContourAligner, ContourConfig, ContourView, GreyPatch, PartOutline};
-use perception::planar::{PlanarConfig, PlanarRefiner};
+use perception::planar::RESTING_TILT;
 
 #[test]
 #[allow(non_snake_case)]
@@ -23,18 +23,9 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
         for (name, table_T_part) in &feeder.truth {
             let spec = catalog.part(name).expect("a catalog part");
             let outline = PartOutline::new(&catalog.load_mesh(spec).expect("its mesh"));
-            let refiner = PlanarRefiner::new(
-                camera_T_table,
-                &spec.stable_poses,
-                &[],
-                PlanarConfig::default(),
-            )
-            .expect("a refiner");
             // The truth on its stable pose (parts leaning on a neighbour are not on one).
-            let truth = refiner
-                .refine(&(camera_T_table * table_T_part))
-                .expect("the truth snaps onto the table");
-            if truth.tilt > 1f64.to_radians() {
+            let truth = snapped(&catalog, &camera_T_table, name, table_T_part);
+            if truth.tilt > RESTING_TILT {
                 continue;
             }
             let stable = &spec.stable_poses[truth.class];

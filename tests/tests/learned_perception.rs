@@ -1,6 +1,6 @@
 //! The learned pipeline end to end on rendered feeder frames: a dozen parts dropped close together
 //! (several touching), rendered at full resolution through the window covering them and passed
-//! through the simulated sensor, then perceived from pixels only. Every part must be detected
+//! through the simulated sensor, then perceived from pixels only. Nearly every part must be detected
 //! with its pose within bounds measured on these frames.
 //!
 //! Runs with the committed models (`scenarios/models/usbc/`, or `LEARNED_MODELS_DIR`); without

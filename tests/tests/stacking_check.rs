@@ -5,9 +5,9 @@
 
 mod feeder_support;
 
-use feeder_support::{PARTS, catalog, render_feeder};
+use feeder_support::{PARTS, catalog, render_feeder, snapped};
 use perception::learned::STACKING_TOLERANCE;
-use perception::planar::{PlanarConfig, PlanarRefiner};
+use perception::planar::RESTING_TILT;
 use perception::stacking::StackingCheck;
 
 #[test]
@@ -27,31 +27,21 @@ fn parts_lying_on_another_put_flat_overlap_it_and_resting_parts_do_not() {
     for seed in 21..37 {
         let feeder = render_feeder(&catalog, seed);
         let camera_T_table = feeder.table_T_camera.inverse();
-        // Every part where planar refinement would put it, and whether it rests there (tilted
-        // less than 1° and within 0.2 mm of the table) or lies on another part.
+        // Every part where planar refinement would put it, and whether it rests there
+        // (`PlanarPose::rests`) or lies on another part.
         let mut flat = Vec::new();
         let mut rests = Vec::new();
         for (name, table_T_part) in &feeder.truth {
-            let spec = catalog.part(name).expect("a catalog part");
-            let refiner = PlanarRefiner::new(
-                camera_T_table,
-                &spec.stable_poses,
-                &[],
-                PlanarConfig::default(),
-            )
-            .expect("a refiner");
-            let snapped = refiner
-                .refine(&(camera_T_table * table_T_part))
-                .expect("the truth snaps onto the table");
+            let snapped = snapped(&catalog, &camera_T_table, name, table_T_part);
             let class = PARTS.iter().position(|p| p == name).expect("a feeder part");
             let lift = table_T_part.translation.z - snapped.table_T_part.translation.z;
             flat.push((class, snapped.table_T_part));
-            rests.push(snapped.tilt.to_degrees() < 1.0 && lift.abs() < 2e-4);
-            lying_on += usize::from(snapped.tilt.to_degrees() < 1.0 && lift > 1e-3);
+            rests.push(snapped.rests(table_T_part));
+            lying_on += usize::from(snapped.tilt < RESTING_TILT && lift > 1e-3);
         }
         let found = check.overlaps(&flat);
-        // The physics of the drop leaves an occasional pair interpenetrating (a thin wall through
-        // another part's solid): the check is right to flag those, so they are counted apart.
+        // The drop's physics leaves many pairs interpenetrating (60 of 192 parts here; see the
+        // README's known gaps): the check is right to flag those, so they are counted apart.
         let at_truth: Vec<_> = flat
             .iter()
             .zip(&feeder.truth)

@@ -13,7 +13,7 @@ use cell::eval::table1::{summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
-use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig};
+use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
 use perception::part::Catalog;
 
 /// Arguments of `cell eval`.
@@ -80,9 +80,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = PipelineConfig {
         estimator: EstimatorConfig::with_gate(args.max_rms_px),
         contour: (!args.no_contour).then(ContourConfig::default),
-        stacking_tolerance: PipelineConfig::default()
-            .stacking_tolerance
-            .filter(|_| !args.no_stacking_check),
+        stacking_tolerance: (!args.no_stacking_check).then_some(STACKING_TOLERANCE),
         ..PipelineConfig::default()
     };
     let pipeline = LearnedPipeline::with_config(&models, &catalog, &runtime, config)

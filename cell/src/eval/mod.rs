@@ -395,10 +395,10 @@ pub struct TruthRecord {
     pub touching: bool,
     /// Too little visible to count (see [`EvalOptions::min_visib_fract`]).
     pub ignored: bool,
-    /// Whether it rests on the table in a stable pose: tilted less than [`RESTING_TILT_DEG`]
-    /// from the nearest one, within [`RESTING_LIFT_MM`] of its height. A part leaning on or
-    /// lying on another one is in no stable pose, so no planar estimate of it can be right: it
-    /// is left out of the refined rows and counted apart.
+    /// Whether it rests on the table in a stable pose ([`PlanarPose::rests`]: within 1° and
+    /// 0.2 mm of the nearest one). A part leaning on or lying on another one is in no stable
+    /// pose, so no planar estimate of it can be right: it is left out of the refined rows and
+    /// counted apart.
     #[serde(default = "resting_by_default")]
     pub resting: bool,
     /// Index of the detection matched to it.
@@ -409,11 +409,6 @@ pub struct TruthRecord {
 fn resting_by_default() -> bool {
     true
 }
-
-/// Tilt from the nearest stable pose beyond which a true pose is not resting, degrees.
-pub const RESTING_TILT_DEG: f64 = 1.0;
-/// Height above or below the nearest stable pose's beyond which a true pose is not resting, mm.
-pub const RESTING_LIFT_MM: f64 = 0.2;
 
 /// One detection of a frame and how it scored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -583,34 +578,35 @@ fn evaluate_image(
         truth_parts.push(part);
     }
     let touching = touching_flags(&truth_masks, options.touch_gap_px);
-    let refiners = truth_parts
-        .iter()
-        .map(|part| {
-            PlanarRefiner::new(
-                camera_T_table,
-                &part.stable_poses,
-                &part.group,
-                PlanarConfig::default(),
-            )
-            .map_err(|e| EvalError::Part {
-                part: part.name.clone(),
-                message: e.to_string(),
-            })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    // The refiner's snap of each true pose: its stable pose, and whether it rests there.
-    let snapped: Vec<Option<PlanarPose>> = refiners
+    // One refiner per part kind in view; the snap of each true pose gives its stable pose and
+    // whether it rests there.
+    let mut refiners: BTreeMap<u32, PlanarRefiner> = BTreeMap::new();
+    for part in &truth_parts {
+        if let std::collections::btree_map::Entry::Vacant(slot) = refiners.entry(part.obj_id) {
+            slot.insert(
+                PlanarRefiner::new(
+                    camera_T_table,
+                    &part.stable_poses,
+                    &part.group,
+                    PlanarConfig::default(),
+                )
+                .map_err(|e| EvalError::Part {
+                    part: part.name.clone(),
+                    message: e.to_string(),
+                })?,
+            );
+        }
+    }
+    let snapped: Vec<Option<PlanarPose>> = truth_parts
         .iter()
         .zip(&truth_poses)
-        .map(|(r, truth)| r.refine(truth).ok())
+        .map(|(part, truth)| refiners[&part.obj_id].refine(truth).ok())
         .collect();
     let table_T_camera = camera_T_table.inverse();
     let rests = |k: usize| {
-        snapped[k].as_ref().is_some_and(|p| {
-            let lift =
-                (table_T_camera * truth_poses[k]).translation.z - p.table_T_part.translation.z;
-            p.tilt.to_degrees() < RESTING_TILT_DEG && 1e3 * lift.abs() < RESTING_LIFT_MM
-        })
+        snapped[k]
+            .as_ref()
+            .is_some_and(|p| p.rests(&(table_T_camera * truth_poses[k])))
     };
     let mut truths: Vec<TruthRecord> = image
         .gt

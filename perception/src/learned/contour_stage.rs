@@ -6,7 +6,6 @@ use std::f64::consts::PI;
 
 use nalgebra::{Isometry3, UnitQuaternion};
 
-use super::LearnedError;
 use super::models::CROP_SIZE;
 use crate::Camera;
 use crate::contour::{
@@ -14,7 +13,7 @@ use crate::contour::{
 };
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
-use crate::part::{Catalog, TriMesh};
+use crate::part::{PartSpec, TriMesh};
 use crate::planar::best_yaw;
 use crate::symmetry::ambiguity_group;
 
@@ -34,32 +33,21 @@ pub(super) struct ContourStage {
 }
 
 impl ContourStage {
-    /// Outlines of `parts` (the models' class order) from their `meshes`, with the
-    /// near-symmetries `catalog` declares.
-    pub(super) fn new(
-        catalog: &Catalog,
-        parts: &[String],
-        meshes: &[TriMesh],
-        config: ContourConfig,
-    ) -> Result<Self, LearnedError> {
-        let parts = parts
+    /// Outlines of the detectable parts (`specs` with their `meshes`, in the models' class
+    /// order) and their declared near-symmetries.
+    pub(super) fn new(specs: &[&PartSpec], meshes: &[TriMesh], config: ContourConfig) -> Self {
+        let parts = specs
             .iter()
             .zip(meshes)
-            .map(|(name, mesh)| {
-                let spec = catalog.part(name).ok_or_else(|| LearnedError::Part {
-                    part: name.clone(),
-                    reason: "not in the catalog".into(),
-                })?;
-                Ok(OutlinedPart {
-                    outline: PartOutline::new(mesh),
-                    near: ambiguity_group(&spec.symmetries)
-                        .into_iter()
-                        .skip(1)
-                        .collect(),
-                })
+            .map(|(spec, mesh)| OutlinedPart {
+                outline: PartOutline::new(mesh),
+                near: ambiguity_group(&spec.symmetries)
+                    .into_iter()
+                    .skip(1)
+                    .collect(),
             })
-            .collect::<Result<_, LearnedError>>()?;
-        Ok(Self { config, parts })
+            .collect();
+        Self { config, parts }
     }
 
     /// Aligns `estimate` of part `class` (whose keypoint crop starts at sensor pixel

@@ -21,7 +21,7 @@ use crate::contour::ContourConfig;
 use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
-use crate::part::{Catalog, TriMesh};
+use crate::part::Catalog;
 use crate::stacking::StackingCheck;
 use crate::voting::{KeypointVote, VoteError, VotingConfig};
 
@@ -125,11 +125,28 @@ impl LearnedPipeline {
                 config.stacking_tolerance
             )));
         }
-        let meshes = part_meshes(catalog, models.parts())?;
+        let specs = models
+            .parts()
+            .iter()
+            .map(|name| {
+                catalog.part(name).ok_or_else(|| LearnedError::Part {
+                    part: name.clone(),
+                    reason: "not in the catalog".into(),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let meshes = specs
+            .iter()
+            .map(|spec| {
+                catalog.load_mesh(spec).map_err(|e| LearnedError::Part {
+                    part: spec.name.clone(),
+                    reason: format!("mesh: {e}"),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let contour = config
             .contour
-            .map(|c| ContourStage::new(catalog, models.parts(), &meshes, c))
-            .transpose()?;
+            .map(|c| ContourStage::new(&specs, &meshes, c));
         let stacking = config
             .stacking_tolerance
             .map(|t| StackingCheck::new(&meshes, t));
@@ -355,6 +372,7 @@ impl PoseContext<'_> {
 /// Withdraws the poses of parts that lie on or under another detected part (their estimates on
 /// the table overlap): each becomes a refused estimate with the reason, which names the other
 /// part and its centre in sensor pixels (`sensor`: the sensor pixel of the instances' origin).
+#[allow(non_snake_case)]
 fn withdraw_stacked(
     check: &StackingCheck,
     instances: &[Instance],
@@ -362,14 +380,14 @@ fn withdraw_stacked(
     parts: &[String],
     poses: &mut [PoseOutcome],
 ) {
-    let posed: Vec<usize> = (0..poses.len()).filter(|&i| poses[i].1.is_ok()).collect();
-    let estimates: Vec<_> = posed
+    let (posed, estimates): (Vec<usize>, Vec<_>) = poses
         .iter()
-        .filter_map(|&i| {
-            let pose = poses[i].1.as_ref().ok()?;
-            Some((instances[i].part, pose.planar.table_T_part))
+        .enumerate()
+        .filter_map(|(i, (_, pose, _))| {
+            let table_T_part = pose.as_ref().ok()?.planar.table_T_part;
+            Some((i, (instances[i].part, table_T_part)))
         })
-        .collect();
+        .unzip();
     for (k, overlap) in check.overlaps(&estimates).into_iter().enumerate() {
         let Some(o) = overlap else { continue };
         let (i, other) = (posed[k], &instances[posed[o.other]]);
@@ -384,23 +402,6 @@ fn withdraw_stacked(
             poses[i].2 = Some(pose);
         }
     }
-}
-
-/// The meshes of `parts` (the models' class order) from `catalog`.
-fn part_meshes(catalog: &Catalog, parts: &[String]) -> Result<Vec<TriMesh>, LearnedError> {
-    parts
-        .iter()
-        .map(|name| {
-            let spec = catalog.part(name).ok_or_else(|| LearnedError::Part {
-                part: name.clone(),
-                reason: "not in the catalog".into(),
-            })?;
-            catalog.load_mesh(spec).map_err(|e| LearnedError::Part {
-                part: name.clone(),
-                reason: format!("mesh: {e}"),
-            })
-        })
-        .collect()
 }
 
 /// Votes in crop pixels → the same votes in sensor pixels (crop origin added) and the pose

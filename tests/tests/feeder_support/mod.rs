@@ -8,6 +8,7 @@ use cell_tests::repo_root;
 use image::DynamicImage;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::part::Catalog;
+use perception::planar::{PlanarConfig, PlanarPose, PlanarRefiner};
 use perception::{Camera, FrameImage};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -79,4 +80,25 @@ pub fn render_feeder(catalog: &Catalog, seed: u64) -> Feeder {
             .map(|p| (models[p.model].name.clone(), p.table_T_part))
             .collect(),
     }
+}
+
+/// Where planar refinement puts part `name` lying at `table_T_part` on a table seen through
+/// `camera_T_table`: its nearest stable pose, with how far the truth tilts from it.
+#[allow(non_snake_case)]
+pub fn snapped(
+    catalog: &Catalog,
+    camera_T_table: &Isometry3<f64>,
+    name: &str,
+    table_T_part: &Isometry3<f64>,
+) -> PlanarPose {
+    let spec = catalog.part(name).expect("a catalog part");
+    PlanarRefiner::new(
+        *camera_T_table,
+        &spec.stable_poses,
+        &[],
+        PlanarConfig::default(),
+    )
+    .expect("a refiner")
+    .refine(&(camera_T_table * table_T_part))
+    .expect("the truth snaps onto the table")
 }
