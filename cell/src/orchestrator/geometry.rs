@@ -6,7 +6,7 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d_f64::query::distance;
 use parry3d_f64::shape::{Cuboid, Shape};
-use robots::kinematics::{Joints, UrDh, UrKinematics};
+use robots::kinematics::{Joints, SingularityPolicy, UrDh, UrKinematics, joint_distance};
 use sim::cell::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
 use sim::config::{AssemblyStep, CellSpec, Destination, GripperSpec};
 use sim::convert::pose_from_isometry;
@@ -211,34 +211,37 @@ impl CellKnowledge {
         low
     }
 
-    /// The IK solution for `base_T_tcp` nearest `near` on the same arm branch (elbow and wrist
-    /// on the same side as at `near`), so a joint move between them does not swing the wrist or
-    /// elbow over; the nearest solution of any branch when that branch cannot reach the pose.
+    /// The IK solutions for `base_T_tcp` within the joint limits (each joint at its
+    /// 2π-equivalent nearest `near`), most preferred first: those on the same arm branch as
+    /// `near` (elbow and wrist on the same side), so a joint move between them does not swing
+    /// the wrist or elbow over, then the rest; nearest `near` first within each group. Never
+    /// empty.
     #[allow(non_snake_case)]
-    pub fn ik_same_branch(
+    pub fn ik_solutions(
         &self,
         base_T_tcp: &Isometry3<f64>,
         near: &Joints,
-    ) -> Result<Joints, robots::kinematics::IkError> {
-        let nearest = self.kinematics.inverse_nearest(base_T_tcp, near)?.joints;
+    ) -> Result<Vec<Joints>, robots::kinematics::IkError> {
+        let k = &self.kinematics;
+        // The nearest solution under the kinematics' singularity policy, or its error.
+        let nearest = k.inverse_nearest(base_T_tcp, near)?.joints;
+        let reject_singular = k.singularity_policy == SingularityPolicy::Reject;
         let branch = |q: &Joints| (q[2].sin() >= 0.0, q[4].sin() >= 0.0);
-        if branch(&nearest) == branch(near) {
-            return Ok(nearest);
-        }
-        let all = self.kinematics.inverse_all(base_T_tcp, near[5])?;
-        Ok(all
+        let mut all: Vec<Joints> = k
+            .inverse_all(base_T_tcp, near[5])?
             .iter()
-            .filter_map(|s| {
-                self.kinematics
-                    .joint_limits
-                    .wrap_nearest_all(&s.joints, near)
-            })
-            .filter(|q| branch(q) == branch(near))
-            .min_by(|a, b| {
-                robots::kinematics::joint_distance(a, near)
-                    .total_cmp(&robots::kinematics::joint_distance(b, near))
-            })
-            .unwrap_or(nearest))
+            .filter(|s| !(reject_singular && !s.singularities.is_empty()))
+            .filter_map(|s| k.joint_limits.wrap_nearest_all(&s.joints, near))
+            .collect();
+        if !all.contains(&nearest) {
+            all.push(nearest);
+        }
+        all.sort_by(|a, b| {
+            (branch(a) != branch(near))
+                .cmp(&(branch(b) != branch(near)))
+                .then(joint_distance(a, near).total_cmp(&joint_distance(b, near)))
+        });
+        Ok(all)
     }
 
     /// The joints that put the TCP where `current` puts it with the arm highest above the table

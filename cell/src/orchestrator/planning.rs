@@ -181,12 +181,14 @@ pub struct Planner<'a> {
 }
 
 impl Planner<'_> {
-    fn ik(
+    /// The IK solutions for `pose` (checked against the workspace limits), most preferred first
+    /// ([`CellKnowledge::ik_solutions`]); never empty.
+    fn ik_solutions(
         &self,
         waypoint: &'static str,
         pose: &Isometry3<f64>,
         near: &Joints,
-    ) -> Result<Joints, PlanError> {
+    ) -> Result<Vec<Joints>, PlanError> {
         self.knowledge
             .spec
             .limits
@@ -196,11 +198,21 @@ impl Planner<'_> {
                 reason: e.to_string(),
             })?;
         self.knowledge
-            .ik_same_branch(pose, near)
+            .ik_solutions(pose, near)
             .map_err(|e| PlanError::Unreachable {
                 waypoint,
                 reason: e.to_string(),
             })
+    }
+
+    /// The preferred IK solution for `pose` near `near`: on the same arm branch, nearest.
+    fn ik(
+        &self,
+        waypoint: &'static str,
+        pose: &Isometry3<f64>,
+        near: &Joints,
+    ) -> Result<Joints, PlanError> {
+        Ok(self.ik_solutions(waypoint, pose, near)?[0])
     }
 
     fn check_arm(&self, waypoint: &'static str, q: &Joints) -> Result<(), PlanError> {
@@ -284,36 +296,51 @@ impl Planner<'_> {
         Ok(())
     }
 
-    /// The motions from `start` to `pre`, the pose just above a goal, and the joints there: one
-    /// joint move straight to `pre` when that path is checked clear (plus `direct_check`), so the
-    /// arm does not stop above the goal; otherwise a joint move to `q_via` (higher, checked) and a
-    /// fast straight line down. `names` label the two motions.
+    /// The motions from `start` to `pre`, the pose just above a goal, the joints there and at
+    /// `via` (higher above the goal, where the arm returns to): one joint move straight to `pre`
+    /// when that path is checked clear (plus `direct_check`), so the arm does not stop above the
+    /// goal; otherwise a joint move to `via` (checked) and a fast straight line down. `names`
+    /// label the two motions. The arm configurations at `via` are tried in order of preference
+    /// ([`CellKnowledge::ik_solutions`]) until one has a clear path: the nearest one can lie
+    /// beyond a joint limit's wrap and swing the arm through the table.
+    #[allow(clippy::type_complexity)]
     fn down_to(
         &self,
         names: [&'static str; 2],
         start: &Joints,
-        q_via: Joints,
+        via: &Isometry3<f64>,
         pre: Isometry3<f64>,
         (held, placed): (Option<Held<'_>>, &Placed<'_>),
         direct_check: impl Fn(&Joints) -> Result<(), PlanError>,
-    ) -> Result<(Vec<NamedMotion>, Joints), PlanError> {
+    ) -> Result<(Vec<NamedMotion>, Joints, Joints), PlanError> {
         let [to_via, to_pre] = names;
-        let q_pre = self.ik(to_pre, &pre, &q_via)?;
         let s = &self.speeds;
-        let direct = self
-            .check_transit(to_pre, start, &q_pre, held, placed)
-            .and_then(|()| direct_check(&q_pre));
-        if direct.is_ok() {
-            return Ok((vec![(to_via, Motion::MoveJ(q_pre, s.joint))], q_pre));
+        let mut first_error = None;
+        for q_via in self.ik_solutions(to_via, via, start)? {
+            let attempt = self.ik(to_pre, &pre, &q_via).and_then(|q_pre| {
+                let direct = self
+                    .check_transit(to_pre, start, &q_pre, held, placed)
+                    .and_then(|()| direct_check(&q_pre));
+                if direct.is_ok() {
+                    return Ok((vec![(to_via, Motion::MoveJ(q_pre, s.joint))], q_pre));
+                }
+                self.check_transit(to_via, start, &q_via, held, placed)?;
+                Ok((
+                    vec![
+                        (to_via, Motion::MoveJ(q_via, s.joint)),
+                        (to_pre, Motion::MoveL(pre, s.fast)),
+                    ],
+                    q_pre,
+                ))
+            });
+            match attempt {
+                Ok((motions, q_pre)) => return Ok((motions, q_pre, q_via)),
+                Err(e) => {
+                    first_error.get_or_insert(e);
+                }
+            }
         }
-        self.check_transit(to_via, start, &q_via, held, placed)?;
-        Ok((
-            vec![
-                (to_via, Motion::MoveJ(q_via, s.joint)),
-                (to_pre, Motion::MoveL(pre, s.fast)),
-            ],
-            q_pre,
-        ))
+        Err(first_error.expect("ik_solutions is never empty"))
     }
 
     /// The pick of `selection` starting from joints `start`: one joint move to just above the
@@ -331,12 +358,11 @@ impl Planner<'_> {
         let grasp = selection.base_T_grasp;
         let approach = raised(&grasp, c.clearance_height);
         let pre = raised(&grasp, c.slow_distance);
-        let q_approach = self.ik("approach", &approach, start)?;
         let s = &self.speeds;
-        let (mut motions, q_pre) = self.down_to(
+        let (mut motions, q_pre, q_approach) = self.down_to(
             ["approach", "pre-grasp"],
             start,
-            q_approach,
+            &approach,
             pre,
             (None, placed),
             |q_pre| self.check_fingers("pre-grasp", start, q_pre, feeder),
@@ -381,14 +407,13 @@ impl Planner<'_> {
         // Slow from before the held part can first touch what it goes into (its engagement
         // depth, from the shapes) to seated.
         let pre = along(engagement + c.slow_distance);
-        let q_transfer = self.ik("transfer", &transfer, start)?;
         let s = &self.speeds;
         // One joint move straight to the pre-insert pose when that path is checked clear (no
         // stop above the target); otherwise transfer, then straight down.
-        let (mut motions, q_pre) = self.down_to(
+        let (mut motions, q_pre, q_transfer) = self.down_to(
             ["transfer", "pre-insert"],
             start,
-            q_transfer,
+            &transfer,
             pre,
             (Some(held), placed),
             |_| Ok(()),
@@ -444,4 +469,71 @@ pub fn grasped_offset(tcp_T_part_estimate: &Isometry3<f64>) -> Isometry3<f64> {
     let mut t = *tcp_T_part_estimate;
     t.translation.vector.y = 0.0;
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::scenario::Scenario;
+
+    #[test]
+    fn a_move_whose_nearest_configuration_swings_through_the_table_takes_another() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
+        let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let knowledge = CellKnowledge::new(&scenario).unwrap_or_else(|e| panic!("{e}"));
+        let config = PlanningConfig::default();
+        let planner = Planner {
+            knowledge: &knowledge,
+            config,
+            speeds: Speeds::within(&knowledge.spec.limits, config.slow_speed),
+        };
+        // From a learned-cell episode: the insert mold lifted off the feeder with the last wrist
+        // 0.11 rad short of its +2π limit, and the transfer above the shell needs 1.09 rad more.
+        // The nearest configuration within the limits turns the shoulder round instead, and
+        // its straight joint path ends 56 mm below the table.
+        let start = [
+            1.2086,
+            -1.4826,
+            2.4496,
+            -2.5378,
+            -std::f64::consts::FRAC_PI_2,
+            6.1709,
+        ];
+        let swung = [
+            -1.2026,
+            -3.6828,
+            1.5167,
+            0.5953,
+            -std::f64::consts::FRAC_PI_2,
+            5.0805,
+        ];
+        let transfer = knowledge.kinematics.forward_tcp(&swung);
+        let nearest = planner.ik("transfer", &transfer, &start).unwrap();
+        assert!(
+            knowledge.arm_lowest_height(&nearest) < 0.0,
+            "the nearest configuration {nearest:?} should be the one through the table"
+        );
+        let pre = raised(&transfer, -config.clearance_height + config.slow_distance);
+        let (motions, q_pre, q_via) = planner
+            .down_to(
+                ["transfer", "pre-insert"],
+                &start,
+                &transfer,
+                pre,
+                (None, &[]),
+                |_| Ok(()),
+            )
+            .unwrap_or_else(|e| panic!("no clear transfer: {e}"));
+        assert!(!motions.is_empty());
+        for q in [q_via, q_pre] {
+            assert!(knowledge.arm_lowest_height(&q) >= config.arm_table_margin);
+            let tcp = knowledge.kinematics.forward_tcp(&q);
+            let goal = if q == q_via { transfer } else { pre };
+            assert!((tcp.translation.vector - goal.translation.vector).norm() < 1e-6);
+        }
+        // It keeps the shoulder and turns the wrist back through its range instead.
+        assert!((q_via[0] - start[0]).abs() < 0.5, "{q_via:?}");
+    }
 }
