@@ -109,6 +109,9 @@ pub struct StepRecord {
     /// What the picked detection really was (simulation only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub perception_verdict: Option<PerceptionVerdict>,
+    /// Perception's confidence in the picked instance, in (0, 1].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<f64>,
     /// Simulated seconds the step took.
     pub sim_time_s: f64,
 }

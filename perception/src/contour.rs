@@ -366,6 +366,20 @@ pub struct ContourFit {
     pub support: f64,
 }
 
+impl ContourFit {
+    /// How far to trust the fit, in [0, 1]: 0 at a support of `min_support` or less, rising
+    /// quadratically to 1 at full support. Right fits find nearly all their edges (on the
+    /// seed-2 and test frames, 90 % of right fits of resting parts have a support above 0.91),
+    /// fits that settled on a neighbour's or a shadow's edges miss many (0.6–0.8), so this
+    /// weighs the pose's confidence and the cell picks parts whose outline it found.
+    pub fn quality(&self, min_support: f64) -> f64 {
+        let span = (1.0 - min_support).max(1e-9);
+        ((self.support - min_support) / span)
+            .clamp(0.0, 1.0)
+            .powi(2)
+    }
+}
+
 /// What a fit aligns: a part's outline lying in one of its stable poses, seen by a camera,
 /// and the grey levels of the frame around it.
 #[derive(Clone, Copy)]

@@ -20,7 +20,7 @@ pub struct DetectedPart {
     /// Name of the stable pose the part lies in.
     pub stable_pose: String,
     /// Confidence in (0, 1]: detection score times stable-pose posterior times reprojection
-    /// consistency.
+    /// consistency (times the contour fit's quality, where learned perception aligned one).
     pub confidence: f64,
     /// Reprojection RMS of the final pose, pixels.
     pub rms_px: f64,

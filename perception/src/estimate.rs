@@ -58,7 +58,8 @@ pub struct PoseEstimate {
     pub stable_pose: String,
     /// Reprojection RMS of the refined pose over the observed keypoints, pixels.
     pub rms_px: f64,
-    /// Stable-pose posterior times reprojection consistency, in (0, 1].
+    /// Stable-pose posterior times reprojection consistency (times the contour fit's quality
+    /// where one ran), in [0, 1].
     pub confidence: f64,
     /// The contour alignment that moved `planar` onto the image's edges, when one ran and was
     /// kept (learned perception only: keypoint noise has no pixels).
@@ -78,9 +79,16 @@ impl PoseEstimate {
     /// Replaces the planar pose by a contour fit on stable pose `class` of `refiner` (the
     /// keypoint pose is kept in `contour`). The class posterior is the keypoints' when the class
     /// stays, and the fit's edge support when contour alignment chose another one; tilt, margin
-    /// and runner-up stay those of the keypoint estimate's class decision.
+    /// and runner-up stay those of the keypoint estimate's class decision. The confidence is
+    /// then weighed by the fit's `quality` ([`ContourFit::quality`]).
     #[allow(non_snake_case)]
-    pub fn adopt_contour(&mut self, fit: ContourFit, class: usize, refiner: &PlanarRefiner) {
+    pub fn adopt_contour(
+        &mut self,
+        fit: ContourFit,
+        class: usize,
+        refiner: &PlanarRefiner,
+        quality: f64,
+    ) {
         let keypoint_planar = self.planar.clone();
         let table_T_part = refiner.stable_poses()[class].table_T_part(fit.x, fit.y, fit.yaw);
         let confidence = if class == keypoint_planar.class {
@@ -97,7 +105,7 @@ impl PoseEstimate {
             ..keypoint_planar.clone()
         };
         self.stable_pose = refiner.stable_poses()[class].name.clone();
-        self.confidence *= confidence / keypoint_planar.confidence.max(1e-12);
+        self.confidence *= quality * confidence / keypoint_planar.confidence.max(1e-12);
         self.contour = Some(ContourRefinement {
             fit,
             keypoint_planar,

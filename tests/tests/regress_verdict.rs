@@ -36,6 +36,7 @@ fn episode(i: u32, success: bool) -> EpisodeRecord {
             pose_error: None,
             perception_error: None,
             perception_verdict: None,
+            confidence: None,
             sim_time_s: 5.0,
         });
         if !seated {

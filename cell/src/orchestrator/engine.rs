@@ -251,6 +251,7 @@ impl<'a> Engine<'a> {
                 let audit = self.io().audit(&sel.detection);
                 self.step.perception_error = audit.and_then(|a| a.table_error);
                 self.step.perception_verdict = audit.map(|a| a.verdict);
+                self.step.confidence = Some(sel.detection.confidence);
                 self.step.selection = Some(sel);
                 Ok(State::PlanPick)
             }

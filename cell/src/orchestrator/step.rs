@@ -44,6 +44,8 @@ pub(super) struct StepState {
     pub perception_error: Option<[f64; 3]>,
     /// What the picked detection really was (simulation only).
     pub perception_verdict: Option<PerceptionVerdict>,
+    /// Perception's confidence in the picked instance.
+    pub confidence: Option<f64>,
 }
 
 /// Detections closer than this (table plane) to a missed pick count as the same part, metres.
@@ -76,6 +78,7 @@ impl StepState {
             plan: None,
             perception_error: None,
             perception_verdict: None,
+            confidence: None,
         }
     }
 
@@ -100,6 +103,7 @@ impl StepState {
             pose_error,
             perception_error: self.perception_error,
             perception_verdict: self.perception_verdict,
+            confidence: self.confidence,
             sim_time_s: now - self.start,
         }
     }

@@ -51,8 +51,9 @@ impl ContourStage {
     }
 
     /// Aligns `estimate` of part `class` (whose keypoint crop starts at sensor pixel
-    /// `crop_origin`) on the edges of `image`; keeps the keypoint pose when no hypothesis finds
-    /// enough of its outline.
+    /// `crop_origin`) on the edges of `image` and weighs its confidence by the fit's quality;
+    /// keeps the keypoint pose, with no confidence, when no hypothesis finds enough of its
+    /// outline.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
         &self,
@@ -133,10 +134,14 @@ impl ContourStage {
         }
         let best = best
             .and_then(|(class, screened)| Some((class, aligner.finish(view(class), &screened)?)));
-        if let Some((class, fit)) = best
-            && fit.support >= self.config.min_support
-        {
-            estimate.adopt_contour(fit, class, refiner);
+        match best {
+            Some((class, fit)) if fit.support >= self.config.min_support => {
+                let quality = fit.quality(self.config.min_support);
+                estimate.adopt_contour(fit, class, refiner, quality);
+            }
+            // The keypoint pose stands, but a pose whose outline is nowhere in the frame is
+            // not one to pick by (on the test frames, the few such poses were all wrong).
+            _ => estimate.confidence = 0.0,
         }
     }
 }
