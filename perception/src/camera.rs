@@ -4,7 +4,7 @@
 //! The simulator renders through [`Camera::project`] and perception inverts it with
 //! [`Camera::unproject`] and [`Camera::pixel_ray`], so the two cannot disagree.
 
-use nalgebra::{Matrix2, Matrix3, Point2, Point3, Unit, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix2x3, Matrix3, Point2, Point3, Unit, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Why a camera operation could not produce a result.
@@ -96,7 +96,9 @@ impl Distortion {
         Matrix2::new(dxx, dxy, dyx, dyy)
     }
 
-    /// Inverts [`Distortion::apply`] by damped Newton iterations from the distorted point itself.
+    /// Inverts [`Distortion::apply`] by damped Newton iterations from the distorted point moved
+    /// back by its own distortion (where that is closer; the renderer inverts every ray, so a
+    /// start one iteration nearer matters).
     ///
     /// Returns `None` when it does not converge to 1e-13 (normalised units), which happens only
     /// where the model folds over (far outside any real lens's field of view).
@@ -106,6 +108,11 @@ impl Distortion {
         }
         let mut p = distorted;
         let mut residual = self.apply(p) - distorted;
+        let nearer = distorted - residual;
+        let r = self.apply(nearer) - distorted;
+        if r.norm() < residual.norm() {
+            (p, residual) = (nearer, r);
+        }
         for _ in 0..50 {
             let err = residual.norm();
             if err < 1e-13 {
@@ -256,6 +263,19 @@ impl Camera {
         Ok(self.normalized_to_pixel(self.distortion.apply(ideal)))
     }
 
+    /// [`Camera::project`] with its Jacobian: the pixel and d(pixel)/d(point).
+    pub fn project_with_jacobian(
+        &self,
+        p: &Point3<f64>,
+    ) -> Result<(Point2<f64>, Matrix2x3<f64>), CameraError> {
+        let pixel = self.project(p)?;
+        let iz = 1.0 / p.z;
+        let ideal = Vector2::new(p.x * iz, p.y * iz);
+        let d_ideal = Matrix2x3::new(iz, 0.0, -ideal.x * iz, 0.0, iz, -ideal.y * iz);
+        let d_pixel = Matrix2::new(self.fx, 0.0, 0.0, self.fy) * self.distortion.jacobian(ideal);
+        Ok((pixel, d_pixel * d_ideal))
+    }
+
     /// The ideal (undistorted) normalised coordinates (x/z, y/z) seen at a pixel.
     pub fn unproject(&self, pixel: Point2<f64>) -> Result<Vector2<f64>, CameraError> {
         if !(pixel.x.is_finite() && pixel.y.is_finite()) {
@@ -333,6 +353,30 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn the_projection_jacobian_matches_finite_differences() {
+        let cam = Camera::basler_seed();
+        for p in [
+            Point3::new(0.0, 0.0, 1.5),
+            Point3::new(0.2, -0.15, 1.4),
+            Point3::new(-0.5, 0.3, 1.2),
+        ] {
+            let (pixel, j) = cam.project_with_jacobian(&p).unwrap();
+            assert_eq!(pixel, cam.project(&p).unwrap());
+            for axis in 0..3 {
+                let h = 1e-7;
+                let mut q = p;
+                q[axis] += h;
+                let numeric = (cam.project(&q).unwrap() - pixel) / h;
+                let analytic = j.column(axis);
+                assert!(
+                    (numeric - analytic).norm() < 1e-3 * analytic.norm().max(1.0),
+                    "axis {axis} at {p}: {numeric} vs {analytic}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn projection_round_trips_with_distortion_over_the_whole_image() {

@@ -431,6 +431,7 @@ impl ContourAligner {
     }
 
     /// Gauss–Newton rounds at the given search reaches (pixels), then the fit's support.
+    #[allow(non_snake_case)]
     fn rounds(
         &self,
         view: ContourView<'_>,
@@ -444,22 +445,23 @@ impl ContourAligner {
             patch,
         } = view;
         let mut q = Vector3::new(start.0, start.1, start.2);
+        let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
         let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
         for &reach in reaches {
             // The outline is re-found once per round; within a round its points move with the pose.
             let points = outline.outline(camera, &pose(&q), self.config.spacing_px);
             for _ in 0..self.config.iterations {
-                // The pose and its three nudges (x, y, yaw): the Jacobian by forward differences.
-                let poses = [
-                    pose(&q),
-                    pose(&(q + Vector3::new(STEP_M, 0.0, 0.0))),
-                    pose(&(q + Vector3::new(0.0, STEP_M, 0.0))),
-                    pose(&(q + Vector3::new(0.0, 0.0, STEP_RAD))),
-                ];
+                let table_T_part = stable.table_T_part(q.x, q.y, q.z);
                 let (mut h, mut g) = (Matrix3::zeros(), Vector3::zeros());
                 let mut used = 0;
                 for p in &points {
-                    let Some([pixel, px, py, pyaw]) = project_all(camera, &poses, &p.part) else {
+                    // d(table point)/d(x, y, yaw): the yaw turns it about the vertical through (x, y).
+                    let t = table_T_part * p.part;
+                    let d_table =
+                        Matrix3::new(1.0, 0.0, -(t.y - q.y), 0.0, 1.0, t.x - q.x, 0.0, 0.0, 0.0);
+                    let Ok((pixel, d_pixel)) =
+                        camera.project_with_jacobian(&(self.camera_T_table * t))
+                    else {
                         continue;
                     };
                     let Some((offset, contrast)) =
@@ -470,11 +472,7 @@ impl ContourAligner {
                     if contrast < self.config.min_contrast {
                         continue;
                     }
-                    let j = Vector3::new(
-                        p.normal.dot(&(px - pixel)) / STEP_M,
-                        p.normal.dot(&(py - pixel)) / STEP_M,
-                        p.normal.dot(&(pyaw - pixel)) / STEP_RAD,
-                    );
+                    let j = (p.normal.transpose() * d_pixel * camera_r_table * d_table).transpose();
                     // Residual: signed distance from the predicted outline to the edge.
                     let r = -offset;
                     let w = huber_weight(r, self.config.huber_px);
@@ -509,24 +507,6 @@ impl ContourAligner {
             support: hits as f64 / points.len() as f64,
         })
     }
-}
-
-/// Forward-difference steps of the Jacobian: 1 µm and 10 µrad.
-const STEP_M: f64 = 1e-6;
-const STEP_RAD: f64 = 1e-5;
-
-/// Projections of a part point under each of `poses`.
-#[allow(non_snake_case)]
-fn project_all(
-    camera: &Camera,
-    poses: &[Isometry3<f64>; 4],
-    point: &Point3<f64>,
-) -> Option<[Point2<f64>; 4]> {
-    let mut out = [Point2::origin(); 4];
-    for (o, camera_T_part) in out.iter_mut().zip(poses) {
-        *o = camera.project(&(camera_T_part * point)).ok()?;
-    }
-    Some(out)
 }
 
 fn huber_weight(r: f64, k: f64) -> f64 {
@@ -635,6 +615,24 @@ mod tests {
                 p.pixel
             );
         }
+    }
+
+    #[test]
+    fn a_fit_is_trusted_from_nothing_at_the_minimum_support_to_fully_at_full_support() {
+        let fit = |support| ContourFit {
+            x: 0.0,
+            y: 0.0,
+            yaw: 0.0,
+            support,
+        };
+        assert_eq!(fit(0.3).quality(0.5), 0.0);
+        assert_eq!(fit(0.5).quality(0.5), 0.0);
+        assert!((fit(0.75).quality(0.5) - 0.25).abs() < 1e-12);
+        assert_eq!(fit(1.0).quality(0.5), 1.0);
+        let q: Vec<f64> = (50..=100)
+            .map(|s| fit(f64::from(s) / 100.0).quality(0.5))
+            .collect();
+        assert!(q.windows(2).all(|w| w[0] < w[1]), "rises with the support");
     }
 
     #[test]
