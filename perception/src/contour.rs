@@ -205,28 +205,40 @@ impl Silhouette {
         }
         let mut cells = vec![false; width * height];
         for (t, _) in triangles.iter().zip(front).filter(|(_, f)| **f) {
-            let [a, b, c] = t.map(|i| pixels[i as usize]);
-            let area = cross(b - a, c - a);
-            if area.abs() < 1e-12 {
+            let corners = t.map(|i| pixels[i as usize]);
+            let [a, b, c] = corners;
+            if cross(b - a, c - a).abs() < 1e-12 {
                 continue;
             }
-            let (tlo, thi) = (
-                a.coords.inf(&b.coords).inf(&c.coords),
-                a.coords.sup(&b.coords).sup(&c.coords),
-            );
-            let (i0, i1) = (tlo.y.ceil() as i64, thi.y.floor() as i64);
-            let (j0, j1) = (tlo.x.ceil() as i64, thi.x.floor() as i64);
-            for i in i0..=i1 {
-                for j in j0..=j1 {
-                    let p = Point2::new(j as f64, i as f64);
-                    let w = [
-                        cross(b - a, p - a),
-                        cross(c - b, p - b),
-                        cross(a - c, p - c),
-                    ];
-                    if w.iter().all(|w| w * area >= 0.0) {
-                        cells[(i - y0) as usize * width + (j - x0) as usize] = true;
+            let (ylo, yhi) = (a.y.min(b.y).min(c.y), a.y.max(b.y).max(c.y));
+            for i in ylo.ceil() as i64..=yhi.floor() as i64 {
+                // The row's span inside the triangle, edges included: where it crosses the sides.
+                let y = i as f64;
+                let (mut xl, mut xr) = (f64::INFINITY, f64::NEG_INFINITY);
+                for k in 0..3 {
+                    let (p, q) = (corners[k], corners[(k + 1) % 3]);
+                    if (p.y - y) * (q.y - y) > 0.0 {
+                        continue;
                     }
+                    let xs = if p.y == q.y {
+                        [p.x, q.x]
+                    } else {
+                        let x = p.x + (y - p.y) * (q.x - p.x) / (q.y - p.y);
+                        [x, x]
+                    };
+                    xl = xl.min(xs[0]).min(xs[1]);
+                    xr = xr.max(xs[0]).max(xs[1]);
+                }
+                if xl > xr {
+                    continue;
+                }
+                let row = (i - y0) as usize * width;
+                let (j0, j1) = (
+                    (xl.ceil() as i64 - x0) as usize,
+                    (xr.floor() as i64 - x0) as usize,
+                );
+                if j0 <= j1 {
+                    cells[row + j0..=row + j1].fill(true);
                 }
             }
         }
@@ -291,7 +303,8 @@ impl GreyPatch {
         if !(u >= 0.0 && v >= 0.0) {
             return None;
         }
-        let (j, i) = (u.floor() as usize, v.floor() as usize);
+        // Truncation is the floor here (both are non-negative), without a libm call.
+        let (j, i) = (u as usize, v as usize);
         if j + 1 >= self.width || i + 1 >= self.height {
             return None;
         }
@@ -322,10 +335,12 @@ impl GreyPatch {
         for (k, level) in levels[..count].iter_mut().enumerate() {
             *level = self.sample(pixel + normal * (k as f64 - n as f64 - 0.5))?;
         }
-        let steps: Vec<f32> = levels[..count]
-            .windows(2)
-            .map(|w| (w[1] - w[0]).abs())
-            .collect();
+        let mut buffer = [0f32; 2 * MAX_REACH + 1];
+        let steps = &mut buffer[..count - 1];
+        for (step, w) in steps.iter_mut().zip(levels[..count].windows(2)) {
+            *step = (w[1] - w[0]).abs();
+        }
+        let steps = &*steps;
         let bar = share * steps.iter().copied().fold(0f32, f32::max);
         // The step nearest the predicted outline among the peaks at least `bar` strong.
         let (k, &best) = steps
