@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
-use cell::eval::table1::{summarise, text_table};
+use cell::eval::table1::{
+    ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, pick_confidence, summarise, text_table,
+};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
@@ -136,6 +138,20 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         100.0 * p.raw.ar_mssd,
         100.0 * p.refined.ar_mspd,
         100.0 * p.raw.ar_mspd
+    );
+    let percent = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
+    println!(
+        "assembly-grade poses (within {} mm and {}° of the truth): {} of {} ({:.1} %); of the {} \
+         confident enough for the cell to pick (≥ {}): {} ({:.1} %)",
+        ASSEMBLY_GRADE_MM,
+        ASSEMBLY_GRADE_DEG,
+        p.assembly_grade,
+        p.poses,
+        percent(p.assembly_grade, p.poses),
+        p.pickable,
+        pick_confidence(),
+        p.pickable_assembly_grade,
+        percent(p.pickable_assembly_grade, p.pickable)
     );
     println!(
         "parts not resting on the table (leaning on or lying on another part, in no stable pose): \

@@ -446,6 +446,9 @@ pub struct DetectionRecord {
     /// Errors of the keypoint-only planar pose, when contour alignment then moved it.
     #[serde(default)]
     pub keypoint_refined: Option<PoseErrors>,
+    /// The pose's confidence, what the cell ranks and gates its picks by (with a pose).
+    #[serde(default)]
+    pub confidence: Option<f64>,
 }
 
 /// One evaluated image.
@@ -681,6 +684,7 @@ fn evaluate_image(
             raw_flip_deg: None,
             refined_flip_deg: None,
             contour_support: None,
+            confidence: None,
             keypoint_refined: None,
         };
         if let Some(m) = m {
@@ -724,6 +728,7 @@ fn evaluate_image(
                 let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
                 rec.refined_flip_deg = Some(flip(refined));
                 rec.refined = Some(refined_e);
+                rec.confidence = det.confidence();
                 if let Some(c) = &pose.contour {
                     rec.contour_support = Some(c.fit.support);
                     rec.keypoint_refined = Some(pose_errors(

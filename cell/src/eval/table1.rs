@@ -161,6 +161,15 @@ pub struct PartSummary {
     pub not_resting_posed: usize,
     /// Matched detections of resting instances with a pose (what `refined` covers).
     pub poses: usize,
+    /// Those poses within [`ASSEMBLY_GRADE_MM`] and [`ASSEMBLY_GRADE_DEG`] of the truth.
+    #[serde(default)]
+    pub assembly_grade: usize,
+    /// Those poses confident enough for the cell to pick ([`pick_confidence`]).
+    #[serde(default)]
+    pub pickable: usize,
+    /// The pickable poses that are assembly-grade.
+    #[serde(default)]
+    pub pickable_assembly_grade: usize,
     /// Raw PnP errors.
     pub raw: PoseStats,
     /// Errors after planar refinement, over the resting instances.
@@ -170,6 +179,17 @@ pub struct PartSummary {
     pub stable_pose_right: usize,
     /// `stable_pose_right / poses`.
     pub stable_pose_rate: f64,
+}
+
+/// Lateral error (camera x, y) of a pose that the cell's insertions take with margin, mm: the
+/// learned scenario's capture bands are 0.145 mm (insert mold, top shell) to 0.33 mm.
+pub const ASSEMBLY_GRADE_MM: f64 = 0.1;
+/// Angle error of an assembly-grade pose, degrees.
+pub const ASSEMBLY_GRADE_DEG: f64 = 1.0;
+
+/// The smallest confidence of a detection the cell picks (its default selection settings).
+pub fn pick_confidence() -> f64 {
+    crate::orchestrator::SelectionConfig::default().min_confidence
 }
 
 /// Mean, median and p95 of one stage, ms.
@@ -314,6 +334,7 @@ fn part_summary(
     let (mut detections, mut tp, mut fp, mut pose_failures, mut stable_right) = (0, 0, 0, 0, 0);
     let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
     let (mut not_resting, mut not_resting_posed) = (0, 0);
+    let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
     for f in frames {
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
@@ -355,6 +376,12 @@ fn part_summary(
                     if d.stable_pose.is_some() && d.stable_pose == d.true_stable_pose {
                         stable_right += 1;
                     }
+                    let good = refined.x_mm.hypot(refined.y_mm) <= ASSEMBLY_GRADE_MM
+                        && d.refined_flip_deg.unwrap_or(refined.angle_deg) <= ASSEMBLY_GRADE_DEG;
+                    let picked = d.confidence.is_some_and(|c| c >= pick_confidence());
+                    assembly_grade += usize::from(good);
+                    pickable += usize::from(picked);
+                    pickable_assembly_grade += usize::from(good && picked);
                     refined_estimates.push(Estimate {
                         det: d,
                         errors: refined,
@@ -392,6 +419,9 @@ fn part_summary(
         not_resting,
         not_resting_posed,
         poses: refined_estimates.len(),
+        assembly_grade,
+        pickable,
+        pickable_assembly_grade,
         raw,
         refined,
         stable_pose_right: stable_right,
@@ -601,6 +631,7 @@ mod tests {
             raw_flip_deg: pose.map(|(_, a)| if a > 100.0 { 180.0 - a } else { a }),
             refined_flip_deg: pose.map(|(_, a)| a / 2.0),
             contour_support: None,
+            confidence: None,
             keypoint_refined: None,
         }
     }
@@ -742,6 +773,27 @@ mod tests {
         assert!((a.stable_pose_rate - 1.0).abs() < 1e-12);
         // Detection counts do not change.
         assert_eq!((a.truths, a.true_positives, a.pose_failures), (5, 3, 1));
+    }
+
+    #[test]
+    fn assembly_grade_poses_are_counted_with_and_without_the_pick_confidence() {
+        let mut frames = frames();
+        // Refined errors are half the given ones: 0.06 mm (0.085 mm laterally) at 0.4°, a
+        // confident pose; 0.1 mm (0.14 mm laterally) at 0.4°, confident; 0.02 mm at 0.4°,
+        // too unsure to pick.
+        frames[0].detections = vec![
+            det("a", Some(0), Some((0.12, 0.8))),
+            det("a", Some(1), Some((0.2, 0.8))),
+            det("a", Some(2), Some((0.04, 0.8))),
+        ];
+        for (d, c) in frames[0].detections.iter_mut().zip([0.9, 0.5, 0.1]) {
+            d.confidence = Some(c);
+        }
+        let s = summarise(&frames, &[("a".into(), 10.0)], &EvalOptions::default());
+        let a = &s.parts[0];
+        assert_eq!(a.poses, 3);
+        assert_eq!(a.assembly_grade, 2, "the 0.14 mm pose is not");
+        assert_eq!((a.pickable, a.pickable_assembly_grade), (2, 1));
     }
 
     #[test]

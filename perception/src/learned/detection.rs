@@ -58,6 +58,15 @@ pub struct LearnedDetection {
     pub refused: Option<PoseEstimate>,
 }
 
+impl LearnedDetection {
+    /// Confidence in the pose, in (0, 1]: the detection score times the pose's confidence
+    /// (what the cell ranks and gates picks by); `None` without a pose.
+    pub fn confidence(&self) -> Option<f64> {
+        let pose = self.pose.as_ref().ok()?;
+        Some((self.score * pose.confidence).clamp(f64::MIN_POSITIVE, 1.0))
+    }
+}
+
 /// Wall time of each stage for one frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StageTimes {

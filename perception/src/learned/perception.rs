@@ -91,6 +91,9 @@ impl PartPerception for LearnedPerception {
             .detect(image, &frame.camera, &camera_T_table, roi)?;
         let mut out = Vec::new();
         for d in found.detections {
+            let Some(confidence) = d.confidence() else {
+                continue;
+            };
             let Ok(pose) = d.pose else { continue };
             let table_T_part = pose.planar.table_T_part;
             out.push(DetectedPart {
@@ -100,7 +103,7 @@ impl PartPerception for LearnedPerception {
                 base_T_part: self.base_T_table * table_T_part,
                 table_T_part,
                 stable_pose: pose.stable_pose,
-                confidence: (d.score * pose.confidence).clamp(f64::MIN_POSITIVE, 1.0),
+                confidence,
                 rms_px: pose.rms_px,
                 covariance: pose.pnp.covariance,
             });
