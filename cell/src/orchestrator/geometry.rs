@@ -230,7 +230,7 @@ impl CellKnowledge {
         let mut all: Vec<Joints> = k
             .inverse_all(base_T_tcp, near[5])?
             .iter()
-            .filter(|s| !(reject_singular && !s.singularities.is_empty()))
+            .filter(|s| !reject_singular || s.singularities.is_empty())
             .filter_map(|s| k.joint_limits.wrap_nearest_all(&s.joints, near))
             .collect();
         if !all.contains(&nearest) {
