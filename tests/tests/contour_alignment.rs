@@ -72,9 +72,10 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
         "only {n} parts resting on a stable pose were aligned"
     );
     assert!(lost <= 1, "{lost} fits found too few edges");
-    assert!(xy50 < 70.0, "median xy error {xy50:.1} µm");
-    // Measured: 52 / 79 µm, 0.34 / 0.74° (17 parts).
+    // Measured: 39 / 79 µm, 0.30 / 0.73° (17 parts; 52 µm and 0.34° with a forward-difference
+    // Jacobian).
+    assert!(xy50 < 50.0, "median xy error {xy50:.1} µm");
     assert!(xy90 < 120.0, "90 % xy error {xy90:.1} µm");
-    assert!(yaw50 < 0.45, "median yaw error {yaw50:.3}°");
+    assert!(yaw50 < 0.40, "median yaw error {yaw50:.3}°");
     assert!(yaw90 < 1.0, "90 % yaw error {yaw90:.3}°");
 }
