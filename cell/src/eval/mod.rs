@@ -585,20 +585,20 @@ fn evaluate_image(
     // whether it rests there.
     let mut refiners: BTreeMap<u32, PlanarRefiner> = BTreeMap::new();
     for part in &truth_parts {
-        if let std::collections::btree_map::Entry::Vacant(slot) = refiners.entry(part.obj_id) {
-            slot.insert(
-                PlanarRefiner::new(
-                    camera_T_table,
-                    &part.stable_poses,
-                    &part.group,
-                    PlanarConfig::default(),
-                )
-                .map_err(|e| EvalError::Part {
-                    part: part.name.clone(),
-                    message: e.to_string(),
-                })?,
-            );
+        if refiners.contains_key(&part.obj_id) {
+            continue;
         }
+        let refiner = PlanarRefiner::new(
+            camera_T_table,
+            &part.stable_poses,
+            &part.group,
+            PlanarConfig::default(),
+        )
+        .map_err(|e| EvalError::Part {
+            part: part.name.clone(),
+            message: e.to_string(),
+        })?;
+        refiners.insert(part.obj_id, refiner);
     }
     let snapped: Vec<Option<PlanarPose>> = truth_parts
         .iter()

@@ -223,8 +223,6 @@ impl CellKnowledge {
         near: &Joints,
     ) -> Result<Vec<Joints>, robots::kinematics::IkError> {
         let k = &self.kinematics;
-        // The nearest solution under the kinematics' singularity policy, or its error.
-        let nearest = k.inverse_nearest(base_T_tcp, near)?.joints;
         let reject_singular = k.singularity_policy == SingularityPolicy::Reject;
         let branch = |q: &Joints| (q[2].sin() >= 0.0, q[4].sin() >= 0.0);
         let mut all: Vec<Joints> = k
@@ -233,8 +231,10 @@ impl CellKnowledge {
             .filter(|s| !reject_singular || s.singularities.is_empty())
             .filter_map(|s| k.joint_limits.wrap_nearest_all(&s.joints, near))
             .collect();
-        if !all.contains(&nearest) {
-            all.push(nearest);
+        if all.is_empty() || !near.iter().all(|v| v.is_finite()) {
+            // The kinematics say why: nothing within the limits and the singularity policy, or
+            // no current joints to be near.
+            return k.inverse_nearest(base_T_tcp, near).map(|s| vec![s.joints]);
         }
         all.sort_by(|a, b| {
             (branch(a) != branch(near))

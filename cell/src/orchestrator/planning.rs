@@ -170,6 +170,14 @@ fn raised(pose: &Isometry3<f64>, h: f64) -> Isometry3<f64> {
     Translation3::new(0.0, 0.0, h) * pose
 }
 
+/// The way down to just above a goal ([`Planner::down_to`]): its motions and the joints at
+/// the pose just above the goal and at the higher pose the arm returns to.
+struct Descent {
+    motions: Vec<NamedMotion>,
+    at_pre: Joints,
+    at_via: Joints,
+}
+
 /// Plans with the cell model.
 pub struct Planner<'a> {
     /// The cell.
@@ -303,7 +311,6 @@ impl Planner<'_> {
     /// label the two motions. The arm configurations at `via` are tried in order of preference
     /// ([`CellKnowledge::ik_solutions`]) until one has a clear path: the nearest one can lie
     /// beyond a joint limit's wrap and swing the arm through the table.
-    #[allow(clippy::type_complexity)]
     fn down_to(
         &self,
         names: [&'static str; 2],
@@ -312,29 +319,32 @@ impl Planner<'_> {
         pre: Isometry3<f64>,
         (held, placed): (Option<Held<'_>>, &Placed<'_>),
         direct_check: impl Fn(&Joints) -> Result<(), PlanError>,
-    ) -> Result<(Vec<NamedMotion>, Joints, Joints), PlanError> {
+    ) -> Result<Descent, PlanError> {
         let [to_via, to_pre] = names;
         let s = &self.speeds;
         let mut first_error = None;
         for q_via in self.ik_solutions(to_via, via, start)? {
-            let attempt = self.ik(to_pre, &pre, &q_via).and_then(|q_pre| {
+            let attempt = self.ik(to_pre, &pre, &q_via).and_then(|at_pre| {
                 let direct = self
-                    .check_transit(to_pre, start, &q_pre, held, placed)
-                    .and_then(|()| direct_check(&q_pre));
-                if direct.is_ok() {
-                    return Ok((vec![(to_via, Motion::MoveJ(q_pre, s.joint))], q_pre));
-                }
-                self.check_transit(to_via, start, &q_via, held, placed)?;
-                Ok((
+                    .check_transit(to_pre, start, &at_pre, held, placed)
+                    .and_then(|()| direct_check(&at_pre));
+                let motions = if direct.is_ok() {
+                    vec![(to_via, Motion::MoveJ(at_pre, s.joint))]
+                } else {
+                    self.check_transit(to_via, start, &q_via, held, placed)?;
                     vec![
                         (to_via, Motion::MoveJ(q_via, s.joint)),
                         (to_pre, Motion::MoveL(pre, s.fast)),
-                    ],
-                    q_pre,
-                ))
+                    ]
+                };
+                Ok(Descent {
+                    motions,
+                    at_pre,
+                    at_via: q_via,
+                })
             });
             match attempt {
-                Ok((motions, q_pre)) => return Ok((motions, q_pre, q_via)),
+                Ok(descent) => return Ok(descent),
                 Err(e) => {
                     first_error.get_or_insert(e);
                 }
@@ -359,7 +369,11 @@ impl Planner<'_> {
         let approach = raised(&grasp, c.clearance_height);
         let pre = raised(&grasp, c.slow_distance);
         let s = &self.speeds;
-        let (mut motions, q_pre, q_approach) = self.down_to(
+        let Descent {
+            mut motions,
+            at_pre: q_pre,
+            at_via: q_approach,
+        } = self.down_to(
             ["approach", "pre-grasp"],
             start,
             &approach,
@@ -410,7 +424,11 @@ impl Planner<'_> {
         let s = &self.speeds;
         // One joint move straight to the pre-insert pose when that path is checked clear (no
         // stop above the target); otherwise transfer, then straight down.
-        let (mut motions, q_pre, q_transfer) = self.down_to(
+        let Descent {
+            mut motions,
+            at_pre: q_pre,
+            at_via: q_transfer,
+        } = self.down_to(
             ["transfer", "pre-insert"],
             start,
             &transfer,
@@ -516,7 +534,11 @@ mod tests {
             "the nearest configuration {nearest:?} should be the one through the table"
         );
         let pre = raised(&transfer, -config.clearance_height + config.slow_distance);
-        let (motions, q_pre, q_via) = planner
+        let Descent {
+            motions,
+            at_pre: q_pre,
+            at_via: q_via,
+        } = planner
             .down_to(
                 ["transfer", "pre-insert"],
                 &start,

@@ -91,10 +91,9 @@ impl PartPerception for LearnedPerception {
             .detect(image, &frame.camera, &camera_T_table, roi)?;
         let mut out = Vec::new();
         for d in found.detections {
-            let Some(confidence) = d.confidence() else {
+            let (Some(confidence), Ok(pose)) = (d.confidence(), d.pose) else {
                 continue;
             };
-            let Ok(pose) = d.pose else { continue };
             let table_T_part = pose.planar.table_T_part;
             out.push(DetectedPart {
                 part: d.part,
