@@ -11,7 +11,9 @@ use perception::camera::Camera;
 use perception::part::Catalog;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use sim::render::{RenderSettings, SensorModel, Window, capture, render, window_covering};
+use sim::render::{
+    IncrementalRenderer, RenderSettings, SensorModel, Window, capture, render, window_covering,
+};
 use sim::scene::{
     PartModel, Randomisation, SceneRequest, dress_scene, drop_parts, label_instances,
     nominal_scene, sample_scene,
@@ -294,4 +296,108 @@ fn parts_keep_their_detail_at_the_default_exposure() {
             );
         }
     }
+}
+
+/// Asserts that two renders of one window have exactly the same pixels, ids and masks.
+fn assert_same_render(what: &str, a: &sim::render::RenderOutput, b: &sim::render::RenderOutput) {
+    assert_eq!(a.window, b.window, "{what}: windows");
+    let differing = (0..a.radiance.len())
+        .filter(|&i| {
+            a.radiance[i] != b.radiance[i]
+                || a.depth[i] != b.depth[i]
+                || a.visible[i] != b.visible[i]
+        })
+        .count();
+    assert_eq!(
+        differing, 0,
+        "{what}: {differing} pixels differ from a full render"
+    );
+    assert!(a.full_masks == b.full_masks, "{what}: full masks differ");
+}
+
+#[test]
+fn rendering_again_after_a_pick_equals_a_full_render_and_renders_a_small_share() {
+    let models = usbc_models();
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let mut parts = drop_parts(&models, &[4, 4, 4], (0.0, 0.05), 0.03, &mut rng).unwrap();
+    let camera = Camera::basler_seed();
+    let pose = nominal_pose();
+    let (lo, hi) = feeder_box();
+    let window = window_covering(&camera, &pose, &lo, &hi).unwrap();
+    let settings = RenderSettings::default();
+    let mut renderer = IncrementalRenderer::new();
+
+    let scene = nominal_scene(&models, &parts);
+    let first = renderer
+        .render(&scene, &camera, &pose, window, &settings)
+        .clone();
+    assert_eq!(
+        renderer.rendered_pixels(),
+        window.len(),
+        "nothing to reuse yet"
+    );
+    assert_same_render(
+        "first",
+        &first,
+        &render(&scene, &camera, &pose, window, &settings),
+    );
+
+    // A pick: one part leaves; ids of the later parts shift down by one.
+    parts.remove(5);
+    let scene = nominal_scene(&models, &parts);
+    let picked = renderer
+        .render(&scene, &camera, &pose, window, &settings)
+        .clone();
+    let share = renderer.rendered_pixels() as f64 / window.len() as f64;
+    println!(
+        "after a pick: {:.1} % of the window rendered",
+        share * 100.0
+    );
+    assert!(
+        share > 0.0 && share < 0.15,
+        "{:.1} % rendered",
+        share * 100.0
+    );
+    assert_same_render(
+        "after a pick",
+        &picked,
+        &render(&scene, &camera, &pose, window, &settings),
+    );
+
+    // A part nudged and a refill appended at the end.
+    parts[2].table_T_part.translation.vector.x += 0.004;
+    parts.push(sim::scene::PlacedPart {
+        model: 1,
+        table_T_part: Isometry3::translation(0.02, 0.07, 0.0),
+    });
+    let scene = nominal_scene(&models, &parts);
+    let moved = renderer
+        .render(&scene, &camera, &pose, window, &settings)
+        .clone();
+    assert!(renderer.rendered_pixels() < window.len());
+    assert_same_render(
+        "after a nudge and a refill",
+        &moved,
+        &render(&scene, &camera, &pose, window, &settings),
+    );
+
+    // Nothing changed: nothing rendered, the same pixels.
+    let again = renderer
+        .render(&scene, &camera, &pose, window, &settings)
+        .clone();
+    assert_eq!(renderer.rendered_pixels(), 0);
+    assert_same_render("unchanged", &again, &moved);
+
+    // Other light: everything is rendered again.
+    let mut lit = nominal_scene(&models, &parts);
+    lit.lights[0].position.x += 0.1;
+    let relit = renderer
+        .render(&lit, &camera, &pose, window, &settings)
+        .clone();
+    assert_eq!(renderer.rendered_pixels(), window.len());
+    assert_same_render(
+        "relit",
+        &relit,
+        &render(&lit, &camera, &pose, window, &settings),
+    );
 }

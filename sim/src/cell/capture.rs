@@ -10,7 +10,7 @@ use super::error::CellError;
 use super::feeder::FeederPart;
 use super::model::CellModel;
 use crate::config::CellSpec;
-use crate::render::{RenderSettings, SensorModel, Window, render, window_covering};
+use crate::render::{IncrementalRenderer, RenderSettings, SensorModel, Window, window_covering};
 use crate::scene::{METER_SHARE, METER_TARGET, PlacedPart, nominal_scene};
 
 /// Margin around the feeder rectangle that the window also covers (parts overhanging its edge),
@@ -64,6 +64,7 @@ pub(crate) fn render_feeder(
     model: &CellModel,
     parts: &[FeederPart],
     base_T_camera: &Isometry3<f64>,
+    renderer: &mut IncrementalRenderer,
     rng: &mut ChaCha8Rng,
 ) -> Result<FeederImage, CellError> {
     let camera = &model.spec.camera.intrinsics;
@@ -90,10 +91,10 @@ pub(crate) fn render_feeder(
         full_masks: false,
         ..RenderSettings::default()
     };
-    let output = render(&scene, camera, &table_T_camera, window, &settings);
-    let sensor = SensorModel::default().metered(&output, METER_TARGET, METER_SHARE);
+    let output = renderer.render(&scene, camera, &table_T_camera, window, &settings);
+    let sensor = SensorModel::default().metered(output, METER_TARGET, METER_SHARE);
     let image = sensor
-        .capture(&output, rng)
+        .capture(output, rng)
         .map_err(|e| CellError::Camera(e.to_string()))?;
     Ok(FeederImage { image, window })
 }

@@ -21,6 +21,7 @@ use super::model::CellModel;
 use super::motion::{move_j_time, move_l_time};
 use super::noise::{EpisodeStreams, ErrorBudget, ErrorSource, gauss3, true_camera_pose};
 use crate::config::{Destination, Placement};
+use crate::render::IncrementalRenderer;
 
 /// Samples along a motion's path checked for reachability and table clearance.
 const PATH_SAMPLES: usize = 12;
@@ -145,6 +146,8 @@ pub struct SimCell {
     feeder_rest_at: f64,
     /// Whether captures are rendered images (learned perception) or the true scene.
     renders_captures: bool,
+    /// The feeder window's last render, reused where the feeder did not change.
+    feeder_renderer: IncrementalRenderer,
     /// Why the insertion scorer could not score the last insertion, if it failed.
     scorer_failure: Option<String>,
 }
@@ -181,6 +184,7 @@ impl SimCell {
             gripper_actuations: 0,
             feeder_rest_at: 0.0,
             renders_captures: false,
+            feeder_renderer: IncrementalRenderer::new(),
             scorer_failure: None,
         };
         cell.refill()?;
@@ -231,6 +235,7 @@ impl SimCell {
             &self.model,
             &self.feeder,
             &self.base_T_camera,
+            &mut self.feeder_renderer,
             &mut self.streams.camera,
         )
     }

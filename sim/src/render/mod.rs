@@ -7,6 +7,7 @@
 mod appearance;
 mod capture;
 mod geometry;
+mod incremental;
 mod instance_grid;
 mod kernels;
 mod output;
@@ -18,6 +19,7 @@ mod tag_board;
 pub use appearance::Appearance;
 pub use capture::{Capture, capture, window_covering};
 pub use geometry::{Hit, Instance, PointLight, RenderMesh, RenderScene, SurfaceKind, Table};
+pub use incremental::IncrementalRenderer;
 pub use output::{InstanceMask, RenderOutput, Window};
 pub use renderer::{RenderSettings, instance_mask, render};
 pub use sensor::{SensorError, SensorModel};

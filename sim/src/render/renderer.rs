@@ -173,12 +173,23 @@ pub fn render(
         full_masks: Vec::new(),
     };
     if settings.full_masks {
-        out.full_masks = (0..scene.instances.len())
-            .into_par_iter()
-            .map(|i| instance_mask(scene, i, camera, table_T_camera, &out))
-            .collect();
+        out.full_masks = full_masks(scene, camera, table_T_camera, &out);
     }
     out
+}
+
+/// Every instance's full silhouette over the window of a render `out` of this scene and view.
+#[allow(non_snake_case)]
+pub(crate) fn full_masks(
+    scene: &RenderScene,
+    camera: &Camera,
+    table_T_camera: &Isometry3<f64>,
+    out: &RenderOutput,
+) -> Vec<InstanceMask> {
+    (0..scene.instances.len())
+        .into_par_iter()
+        .map(|i| instance_mask(scene, i, camera, table_T_camera, out))
+        .collect()
 }
 
 /// The rays of one render.
