@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d_f64::math::Vector as DVec3;
+use parry3d_f64::partitioning::BvhNode;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
@@ -73,27 +74,76 @@ impl RenderMesh {
         d: &Vector3<f64>,
         max_t: f64,
     ) -> Option<(f64, Vector3<f64>, bool)> {
-        let ray = Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z));
-        let hit = self
-            .mesh
-            .cast_local_ray_and_get_normal(&ray, max_t, false)?;
-        let n = self
-            .mesh
-            .triangle(hit.subshape)
-            .normal()
-            .unwrap_or(hit.normal);
-        let accent = self
-            .accent
-            .get(hit.subshape as usize)
-            .copied()
-            .unwrap_or(false);
+        let ray = BoxRay::new(o, d);
+        let (triangle, hit) = self.mesh.bvh().find_best(
+            max_t,
+            |node, best| ray.entry(node, best),
+            |triangle, best| {
+                self.mesh
+                    .triangle(triangle)
+                    .cast_local_ray_and_get_normal(&ray.ray, best, false)
+            },
+        )?;
+        let n = self.mesh.triangle(triangle).normal().unwrap_or(hit.normal);
+        let accent = self.accent.get(triangle as usize).copied().unwrap_or(false);
         Some((hit.time_of_impact, Vector3::new(n.x, n.y, n.z), accent))
     }
 
     /// Whether a part-frame ray hits the mesh before `max_t`.
     fn hits(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> bool {
-        let ray = Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z));
-        self.mesh.intersects_local_ray(&ray, max_t)
+        let ray = BoxRay::new(o, d);
+        self.mesh
+            .bvh()
+            .leaves(|node| ray.entry(node, max_t) < f64::MAX)
+            .any(|triangle| {
+                self.mesh
+                    .triangle(triangle)
+                    .intersects_local_ray(&ray.ray, max_t)
+            })
+    }
+}
+
+/// A ray with its direction's reciprocals, for the many box tests of a BVH traversal: parry's own
+/// box test (the same arithmetic, so the same hits and order), without its three divisions per box.
+struct BoxRay {
+    ray: Ray,
+    inv: [f64; 3],
+}
+
+impl BoxRay {
+    fn new(o: &Point3<f64>, d: &Vector3<f64>) -> Self {
+        Self {
+            ray: Ray::new(DVec3::new(o.x, o.y, o.z), DVec3::new(d.x, d.y, d.z)),
+            inv: [1.0 / d.x, 1.0 / d.y, 1.0 / d.z],
+        }
+    }
+
+    /// Where the ray enters a BVH node's box before `max_t` (0 when it starts inside), or
+    /// `f64::MAX` when it does not.
+    fn entry(&self, node: &BvhNode, max_t: f64) -> f64 {
+        let (lo, hi) = (node.mins(), node.maxs());
+        let (o, d) = (self.ray.origin, self.ray.dir);
+        let mut tmin: f64 = 0.0;
+        let mut tmax = max_t;
+        for (i, inv) in self.inv.iter().enumerate() {
+            if d[i] == 0.0 {
+                if o[i] < lo[i] || o[i] > hi[i] {
+                    return f64::MAX;
+                }
+            } else {
+                let mut near = (lo[i] - o[i]) * inv;
+                let mut far = (hi[i] - o[i]) * inv;
+                if near > far {
+                    std::mem::swap(&mut near, &mut far);
+                }
+                tmin = tmin.max(near);
+                tmax = tmax.min(far);
+                if tmin > tmax {
+                    return f64::MAX;
+                }
+            }
+        }
+        tmin
     }
 }
 
