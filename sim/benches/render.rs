@@ -1,6 +1,7 @@
 //! Renderer throughput on the real parts: 128 × 128 keypoint crops at full resolution with
 //! shadows, 1000 × 700 overview frames of the board at the default overview scale, the feeder
-//! window of the full 20 MP camera with 12 parts, and the physics drop.
+//! window of the full 20 MP camera with 12 parts (whole, with shared centre rays, and rendered
+//! again after a pick), and the physics drop.
 //!
 //! The machine is shared, so every case is measured twice: `render/…` in wall-clock time and
 //! `render_cpu/…` in CPU time of the whole process (all threads, from /proc), which does not
@@ -16,7 +17,10 @@ use perception::camera::Camera;
 use perception::part::Catalog;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use sim::render::{RenderSettings, SensorModel, Window, capture, render, window_covering};
+use sim::render::{
+    CentreRays, IncrementalRenderer, RenderSettings, SensorModel, Window, capture, render,
+    render_with_rays, window_covering,
+};
 use sim::scene::{
     PartModel, Randomisation, SampledScene, SceneRequest, drop_parts, nominal_scene, sample_scene,
 };
@@ -160,6 +164,24 @@ fn bench(c: &mut Criterion) {
             },
         );
     }
+
+    // The cell's captures: the episode shares the window's centre rays with every other
+    // episode, and after a pick renders again only what the picked part changed.
+    let rays = CentreRays::new(&camera, window);
+    let name = format!("feeder_{}x{}_12_parts_ss2", window.width, window.height);
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    both(c, &format!("{name}_shared_centre_rays"), 20, || {
+        let output = render_with_rays(&feeder, &camera, &pose, window, &run_settings, Some(&rays));
+        sensor.capture(&output, &mut rng).expect("capture");
+    });
+    let mut primed = IncrementalRenderer::new();
+    primed.render(&feeder, &camera, &pose, window, &run_settings, Some(&rays));
+    let picked = nominal_scene(&models, &parts[1..]);
+    both(c, &format!("{name}_after_a_pick"), 20, || {
+        let mut renderer = primed.clone();
+        let output = renderer.render(&picked, &camera, &pose, window, &run_settings, Some(&rays));
+        sensor.capture(output, &mut rng).expect("capture");
+    });
 
     both(c, "drop_6_parts", 10, || {
         scene(&models, vec![2, 2, 2]);

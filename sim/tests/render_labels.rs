@@ -12,7 +12,8 @@ use perception::part::Catalog;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sim::render::{
-    IncrementalRenderer, RenderSettings, SensorModel, Window, capture, render, window_covering,
+    CentreRays, IncrementalRenderer, RenderSettings, SensorModel, Window, capture, render,
+    window_covering,
 };
 use sim::scene::{
     PartModel, Randomisation, SceneRequest, dress_scene, drop_parts, label_instances,
@@ -326,10 +327,12 @@ fn rendering_again_after_a_pick_equals_a_full_render_and_renders_a_small_share()
     let window = window_covering(&camera, &pose, &lo, &hi).unwrap();
     let settings = RenderSettings::default();
     let mut renderer = IncrementalRenderer::new();
+    // Shared centre rays, as a cell's episodes use them.
+    let rays = Some(&CentreRays::new(&camera, window));
 
     let scene = nominal_scene(&models, &parts);
     let first = renderer
-        .render(&scene, &camera, &pose, window, &settings)
+        .render(&scene, &camera, &pose, window, &settings, rays)
         .clone();
     assert_eq!(
         renderer.rendered_pixels(),
@@ -346,7 +349,7 @@ fn rendering_again_after_a_pick_equals_a_full_render_and_renders_a_small_share()
     parts.remove(5);
     let scene = nominal_scene(&models, &parts);
     let picked = renderer
-        .render(&scene, &camera, &pose, window, &settings)
+        .render(&scene, &camera, &pose, window, &settings, rays)
         .clone();
     let share = renderer.rendered_pixels() as f64 / window.len() as f64;
     println!(
@@ -372,7 +375,7 @@ fn rendering_again_after_a_pick_equals_a_full_render_and_renders_a_small_share()
     });
     let scene = nominal_scene(&models, &parts);
     let moved = renderer
-        .render(&scene, &camera, &pose, window, &settings)
+        .render(&scene, &camera, &pose, window, &settings, rays)
         .clone();
     assert!(renderer.rendered_pixels() < window.len());
     assert_same_render(
@@ -383,7 +386,7 @@ fn rendering_again_after_a_pick_equals_a_full_render_and_renders_a_small_share()
 
     // Nothing changed: nothing rendered, the same pixels.
     let again = renderer
-        .render(&scene, &camera, &pose, window, &settings)
+        .render(&scene, &camera, &pose, window, &settings, rays)
         .clone();
     assert_eq!(renderer.rendered_pixels(), 0);
     assert_same_render("unchanged", &again, &moved);
@@ -392,7 +395,7 @@ fn rendering_again_after_a_pick_equals_a_full_render_and_renders_a_small_share()
     let mut lit = nominal_scene(&models, &parts);
     lit.lights[0].position.x += 0.1;
     let relit = renderer
-        .render(&lit, &camera, &pose, window, &settings)
+        .render(&lit, &camera, &pose, window, &settings, rays)
         .clone();
     assert_eq!(renderer.rendered_pixels(), window.len());
     assert_same_render(

@@ -91,7 +91,8 @@ pub(crate) fn render_feeder(
         full_masks: false,
         ..RenderSettings::default()
     };
-    let output = renderer.render(&scene, camera, &table_T_camera, window, &settings);
+    let rays = model.feeder_rays();
+    let output = renderer.render(&scene, camera, &table_T_camera, window, &settings, rays);
     let sensor = SensorModel::default().metered(output, METER_TARGET, METER_SHARE);
     let image = sensor
         .capture(output, rng)

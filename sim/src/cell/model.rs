@@ -1,6 +1,6 @@
 //! What stays the same across episodes of a scenario: specs, shapes, kinematics, home pose.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::part::Catalog;
@@ -10,11 +10,13 @@ use robots::limits::InvalidLimits;
 use robots::robot::Robot;
 use robots::ur_arm::UrArm;
 
+use super::capture::calibrated_feeder_window;
 use super::error::CellError;
 use super::feasible::check_feasible;
 use super::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
 use super::insertion::{InsertionScorer, Scorer};
 use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec};
+use crate::render::CentreRays;
 use crate::scene::PartModel;
 
 /// Height of the home TCP above the feeder centre, metres.
@@ -87,6 +89,9 @@ pub struct CellModel {
     pub home: Joints,
     /// Render and physics models of the feeder's parts (dropped placement, rendered captures).
     pub part_models: Vec<PartModel>,
+    /// The camera's centre rays over the feeder window, computed by the first rendered capture
+    /// and shared by every episode's.
+    feeder_rays: OnceLock<Option<CentreRays>>,
 }
 
 impl CellModel {
@@ -138,6 +143,7 @@ impl CellModel {
             kinematics,
             home,
             part_models,
+            feeder_rays: OnceLock::new(),
         }))
     }
 
@@ -145,6 +151,17 @@ impl CellModel {
     /// kinematics, so every commanded target is checked: how the cell is driven as a robot.
     pub fn limited<R: Robot>(&self, robot: R) -> Result<Limited<R>, InvalidLimits> {
         Limited::new(robot, self.spec.limits.clone(), self.kinematics.clone())
+    }
+
+    /// The centre rays of the window a rendered capture covers (see [`calibrated_feeder_window`]);
+    /// `None` when the feeder is not in the calibrated camera's view.
+    pub fn feeder_rays(&self) -> Option<&CentreRays> {
+        self.feeder_rays
+            .get_or_init(|| {
+                calibrated_feeder_window(&self.spec)
+                    .map(|w| CentreRays::new(&self.spec.camera.intrinsics, w))
+            })
+            .as_ref()
     }
 
     /// The shapes of a part.

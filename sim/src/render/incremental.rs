@@ -2,13 +2,14 @@
 //! capture after capture, with one part picked out of it. Only the pixels an added, removed or
 //! moved part can affect are rendered again (its image, the shadows it casts, their edges); every
 //! other pixel is the previous render's. The result is exactly what a full render gives, because
-//! every pixel depends only on its own rays and its neighbours' centre rays (see [`render`]).
+//! every pixel depends only on its own rays and its neighbours' centre rays (see
+//! [`render`](super::render)).
 
 use nalgebra::{Isometry3, Point3};
 use perception::camera::Camera;
 
 use super::renderer::full_masks;
-use super::{RenderOutput, RenderScene, RenderSettings, Window, render};
+use super::{CentreRays, RenderOutput, RenderScene, RenderSettings, Window, render_with_rays};
 
 /// Pixels added around an affected region's projected bounds: the neighbours whose centre rays
 /// decide a pixel's edge supersampling (1), the samples' half-pixel reach, and the curvature of
@@ -43,8 +44,8 @@ impl IncrementalRenderer {
         Self::default()
     }
 
-    /// Renders `window` of `scene` as [`render`] does, reusing the previous render's pixels that
-    /// no changed part can affect.
+    /// Renders `window` of `scene` as [`render_with_rays`](super::render_with_rays) does, reusing
+    /// the previous render's pixels that no changed part can affect.
     #[allow(non_snake_case)]
     pub fn render(
         &mut self,
@@ -53,18 +54,19 @@ impl IncrementalRenderer {
         table_T_camera: &Isometry3<f64>,
         window: Window,
         settings: &RenderSettings,
+        rays: Option<&CentreRays>,
     ) -> &RenderOutput {
         let reused = self.last.take().and_then(|last| {
             let same_view = last.camera == *camera
                 && last.table_T_camera == *table_T_camera
                 && last.window == window
                 && last.settings == *settings;
-            (same_view && same_setting(&last.scene, scene)).then(|| update(last, scene))?
+            (same_view && same_setting(&last.scene, scene)).then(|| update(last, scene, rays))?
         });
         let (output, rendered) = match reused {
             Some(done) => done,
             None => (
-                render(scene, camera, table_T_camera, window, settings),
+                render_with_rays(scene, camera, table_T_camera, window, settings, rays),
                 window.len(),
             ),
         };
@@ -93,7 +95,11 @@ fn same_setting(a: &RenderScene, b: &RenderScene) -> bool {
 
 /// The last render brought up to `scene`, and how many pixels that rendered; `None` when too much
 /// changed (or the change cannot be bounded) for reuse to pay.
-fn update(last: Last, scene: &RenderScene) -> Option<(RenderOutput, usize)> {
+fn update(
+    last: Last,
+    scene: &RenderScene,
+    rays: Option<&CentreRays>,
+) -> Option<(RenderOutput, usize)> {
     let old = &last.scene;
     let (new_of_old, added) = match_instances(old, scene)?;
     let floor = lowest_surface(old).min(lowest_surface(scene));
@@ -130,7 +136,7 @@ fn update(last: Last, scene: &RenderScene) -> Option<(RenderOutput, usize)> {
         ..settings
     };
     for sub in &dirty {
-        let fresh = render(scene, &camera, &table_T_camera, *sub, &pixels_only);
+        let fresh = render_with_rays(scene, &camera, &table_T_camera, *sub, &pixels_only, rays);
         let w = sub.width as usize;
         for r in 0..sub.height as usize {
             let start = output

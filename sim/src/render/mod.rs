@@ -21,6 +21,6 @@ pub use capture::{Capture, capture, window_covering};
 pub use geometry::{Hit, Instance, PointLight, RenderMesh, RenderScene, SurfaceKind, Table};
 pub use incremental::IncrementalRenderer;
 pub use output::{InstanceMask, RenderOutput, Window};
-pub use renderer::{RenderSettings, instance_mask, render};
+pub use renderer::{CentreRays, RenderSettings, instance_mask, render, render_with_rays};
 pub use sensor::{SensorError, SensorModel};
 pub use tag_board::{BoardMark, TagBoard};

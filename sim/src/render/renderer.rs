@@ -3,6 +3,8 @@
 //! depth step) get n × n stratified colour samples. Rows are rendered in bands in parallel; full
 //! masks per instance reuse the visible ids and cast only where another surface is in front.
 
+use std::sync::Arc;
+
 use nalgebra::{Isometry3, Point2, Point3, Vector3};
 use perception::camera::Camera;
 use rayon::prelude::*;
@@ -109,6 +111,64 @@ pub fn render(
     window: Window,
     settings: &RenderSettings,
 ) -> RenderOutput {
+    render_with_rays(scene, camera, table_T_camera, window, settings, None)
+}
+
+/// The camera-frame centre rays of a window's pixels and of the one-pixel border that edge
+/// detection reads. They depend on the lens alone, so every render of one camera's window, in
+/// any pose, can share them instead of inverting the distortion for each pixel again.
+#[derive(Debug, Clone)]
+pub struct CentreRays {
+    camera: Camera,
+    /// The window grown by one pixel on every side.
+    x0: i64,
+    y0: i64,
+    width: usize,
+    height: usize,
+    rays: Arc<Vec<Option<Vector3<f64>>>>,
+}
+
+impl CentreRays {
+    /// The centre rays of `window` of `camera` (and its one-pixel border).
+    pub fn new(camera: &Camera, window: Window) -> Self {
+        let (x0, y0) = (window.x0 as i64 - 1, window.y0 as i64 - 1);
+        let (width, height) = (window.width as usize + 2, window.height as usize + 2);
+        let rays = (0..width * height)
+            .into_par_iter()
+            .map(|k| {
+                let (x, y) = (x0 + (k % width) as i64, y0 + (k / width) as i64);
+                ray(camera, x as f64, y as f64)
+            })
+            .collect();
+        Self {
+            camera: *camera,
+            x0,
+            y0,
+            width,
+            height,
+            rays: Arc::new(rays),
+        }
+    }
+
+    /// The ray at pixel (x, y), if the table covers it.
+    fn get(&self, x: i64, y: i64) -> Option<Option<Vector3<f64>>> {
+        let (cx, cy) = (x - self.x0, y - self.y0);
+        (cx >= 0 && cy >= 0 && (cx as usize) < self.width && (cy as usize) < self.height)
+            .then(|| self.rays[cy as usize * self.width + cx as usize])
+    }
+}
+
+/// [`render`] reading centre rays from `rays` where it covers the pixels (rays of another camera
+/// are not used).
+#[allow(non_snake_case)]
+pub fn render_with_rays(
+    scene: &RenderScene,
+    camera: &Camera,
+    table_T_camera: &Isometry3<f64>,
+    window: Window,
+    settings: &RenderSettings,
+    rays: Option<&CentreRays>,
+) -> RenderOutput {
     let n = window.len();
     let mut radiance = vec![[0f32; 3]; n];
     let mut depth = vec![0f64; n];
@@ -120,6 +180,7 @@ pub fn render(
         table_T_camera,
         origin: Point3::from(table_T_camera.translation.vector),
         shadows: settings.shadows,
+        rays: rays.filter(|r| r.camera == *camera),
     };
     let ss = settings.supersampling.max(1);
     // Edge detection needs the neighbours' centre samples; without supersampling none is needed.
@@ -139,7 +200,7 @@ pub fn render(
                 let mut grid = Vec::with_capacity(gw * (rows + 2 * border));
                 for gy in 0..(rows + 2 * border) as i64 {
                     for gx in 0..gw as i64 {
-                        grid.push(tracer.centre((gx0 + gx) as f64, (gy0 + gy) as f64));
+                        grid.push(tracer.centre(gx0 + gx, gy0 + gy));
                     }
                 }
                 for r in 0..rows {
@@ -200,12 +261,17 @@ struct Tracer<'a> {
     table_T_camera: &'a Isometry3<f64>,
     origin: Point3<f64>,
     shadows: bool,
+    rays: Option<&'a CentreRays>,
 }
 
 impl Tracer<'_> {
     /// The centre ray of pixel (x, y): colour, depth, visible instance and edge signature.
-    fn centre(&self, x: f64, y: f64) -> CentreSample {
-        let Some(dc) = ray(self.camera, x, y) else {
+    fn centre(&self, x: i64, y: i64) -> CentreSample {
+        let dc = match self.rays.and_then(|r| r.get(x, y)) {
+            Some(dc) => dc,
+            None => ray(self.camera, x as f64, y as f64),
+        };
+        let Some(dc) = dc else {
             return CentreSample::MISS;
         };
         let d = self.table_T_camera.rotation * dc;
