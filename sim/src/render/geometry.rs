@@ -10,6 +10,7 @@ use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
 use super::instance_grid::{InstanceGrid, slab_range};
+use super::shadow_grid::ShadowGrid;
 use super::{Appearance, TagBoard};
 
 /// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
@@ -353,7 +354,33 @@ impl RenderScene {
 
     /// Whether anything blocks the unit ray from `o` along `d` before `max_t` (shadow rays).
     pub fn occluded(&self, o: &Point3<f64>, d: &Vector3<f64>, max_t: f64) -> bool {
-        for i in self.candidates(o, d, max_t) {
+        self.occluded_among(self.candidates(o, d, max_t), o, d, max_t)
+    }
+
+    /// [`Self::occluded`] for a shadow ray towards the light whose [`ShadowGrid`] is `grid`: from
+    /// the board's top it tests only the instances the grid holds for its cell.
+    pub(crate) fn occluded_towards(
+        &self,
+        grid: Option<&ShadowGrid>,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> bool {
+        match grid.and_then(|g| g.candidates(o)) {
+            Some(mask) => self.occluded_among(Bits(mask), o, d, max_t),
+            None => self.occluded(o, d, max_t),
+        }
+    }
+
+    /// Whether one of the `candidates` (instances a ray may meet) or the board blocks the ray.
+    fn occluded_among(
+        &self,
+        candidates: impl Iterator<Item = usize>,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        max_t: f64,
+    ) -> bool {
+        for i in candidates {
             let inst = &self.instances[i];
             let (lo, hi) = self.bounds[i];
             if slab(&lo, &hi, o, d).is_some_and(|e| e < max_t) {
@@ -369,6 +396,14 @@ impl RenderScene {
             return true;
         }
         false
+    }
+
+    /// The shadow grid of each light (`None` where none applies), for one render.
+    pub(crate) fn shadow_grids(&self) -> Vec<Option<ShadowGrid>> {
+        self.lights
+            .iter()
+            .map(|l| ShadowGrid::new(&l.position, l.radius, &self.bounds))
+            .collect()
     }
 }
 

@@ -14,6 +14,7 @@ mod output;
 mod renderer;
 mod sensor;
 mod shading;
+mod shadow_grid;
 mod tag_board;
 
 pub use appearance::Appearance;

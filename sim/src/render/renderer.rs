@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use super::geometry::SurfaceKind;
 use super::shading::{ambient, brdf_cos};
+use super::shadow_grid::ShadowGrid;
 use super::{Appearance, BoardMark, Hit, InstanceMask, RenderOutput, RenderScene, Window};
 
 /// How to render.
@@ -179,7 +180,7 @@ pub fn render_with_rays(
         camera,
         table_T_camera,
         origin: Point3::from(table_T_camera.translation.vector),
-        shadows: settings.shadows,
+        shadow_grids: settings.shadows.then(|| scene.shadow_grids()),
         rays: rays.filter(|r| r.camera == *camera),
     };
     let ss = settings.supersampling.max(1);
@@ -260,7 +261,8 @@ struct Tracer<'a> {
     camera: &'a Camera,
     table_T_camera: &'a Isometry3<f64>,
     origin: Point3<f64>,
-    shadows: bool,
+    /// Each light's shadow grid, when lights cast shadows.
+    shadow_grids: Option<Vec<Option<ShadowGrid>>>,
     rays: Option<&'a CentreRays>,
 }
 
@@ -278,7 +280,7 @@ impl Tracer<'_> {
         let Some(hit) = self.scene.intersect(&self.origin, &d, f64::INFINITY) else {
             return CentreSample::MISS;
         };
-        let (rgb, lit, surface) = shade(self.scene, &self.origin, &d, &hit, self.shadows);
+        let (rgb, lit, surface) = self.shade(&d, &hit);
         let visible = match hit.kind {
             SurfaceKind::Part(i) => (i + 1) as u16,
             SurfaceKind::Table | SurfaceKind::Board => 0,
@@ -310,7 +312,7 @@ impl Tracer<'_> {
                 };
                 let d = self.table_T_camera.rotation * ds;
                 if let Some(h) = self.scene.intersect(&self.origin, &d, f64::INFINITY) {
-                    let (s, _, _) = shade(self.scene, &self.origin, &d, &h, self.shadows);
+                    let (s, _, _) = self.shade(&d, &h);
                     for k in 0..3 {
                         acc[k] += s[k];
                     }
@@ -379,58 +381,55 @@ fn surface_at(scene: &RenderScene, hit: &Hit, p: &Point3<f64>) -> Surface {
     }
 }
 
-/// Radiance leaving the hit surface towards the camera, the lights that reach it (bit k for
-/// light k) and the surface.
-///
-/// A light with a radius is sampled at one point of its sphere per shading point, chosen by a
-/// hash of the point's coordinates: penumbrae come out as deterministic noise that the edge
-/// supersampling averages.
-fn shade(
-    scene: &RenderScene,
-    o: &Point3<f64>,
-    d: &Vector3<f64>,
-    hit: &Hit,
-    shadows: bool,
-) -> ([f64; 3], u32, Surface) {
-    let p = o + hit.t * d;
-    let surface = surface_at(scene, hit, &p);
-    let a = surface.appearance;
-    let mut lit = 0u32;
-    let n = hit.normal;
-    let v = -d;
-    let mut c = ambient(&a, &n, &v, &scene.ambient);
-    let start = p + n * SHADOW_BIAS;
-    for (k, light) in scene.lights.iter().enumerate() {
-        let to = light.position - start;
-        let dist = to.norm();
-        if dist <= 0.0 {
-            continue;
-        }
-        let l = to / dist;
-        if n.dot(&l) <= 0.0 {
-            continue;
-        }
-        if shadows {
-            let target = if light.radius > 0.0 {
-                light.position + sphere_point(&p, k) * light.radius
-            } else {
-                light.position
-            };
-            let ts = target - start;
-            let ds = ts.norm();
-            if ds > 0.0 && scene.occluded(&start, &(ts / ds), ds) {
+impl Tracer<'_> {
+    /// Radiance leaving the hit surface towards the camera, the lights that reach it (bit k for
+    /// light k) and the surface.
+    ///
+    /// A light with a radius is sampled at one point of its sphere per shading point, chosen by a
+    /// hash of the point's coordinates: penumbrae come out as deterministic noise that the edge
+    /// supersampling averages.
+    fn shade(&self, d: &Vector3<f64>, hit: &Hit) -> ([f64; 3], u32, Surface) {
+        let scene = self.scene;
+        let p = self.origin + hit.t * d;
+        let surface = surface_at(scene, hit, &p);
+        let a = surface.appearance;
+        let mut lit = 0u32;
+        let n = hit.normal;
+        let v = -d;
+        let mut c = ambient(&a, &n, &v, &scene.ambient);
+        let start = p + n * SHADOW_BIAS;
+        for (k, light) in scene.lights.iter().enumerate() {
+            let to = light.position - start;
+            let dist = to.norm();
+            if dist <= 0.0 {
                 continue;
             }
+            let l = to / dist;
+            if n.dot(&l) <= 0.0 {
+                continue;
+            }
+            if let Some(grids) = &self.shadow_grids {
+                let target = if light.radius > 0.0 {
+                    light.position + sphere_point(&p, k) * light.radius
+                } else {
+                    light.position
+                };
+                let ts = target - start;
+                let ds = ts.norm();
+                if ds > 0.0 && scene.occluded_towards(grids[k].as_ref(), &start, &(ts / ds), ds) {
+                    continue;
+                }
+            }
+            let spread = light.radius / dist;
+            let f = brdf_cos(&a, &n, &v, &l, surface.tangent.as_ref(), spread);
+            let inv2 = 1.0 / (dist * dist);
+            for ch in 0..3 {
+                c[ch] += f[ch] * light.intensity[ch] * inv2;
+            }
+            lit |= 1 << (k % 32);
         }
-        let spread = light.radius / dist;
-        let f = brdf_cos(&a, &n, &v, &l, surface.tangent.as_ref(), spread);
-        let inv2 = 1.0 / (dist * dist);
-        for ch in 0..3 {
-            c[ch] += f[ch] * light.intensity[ch] * inv2;
-        }
-        lit |= 1 << (k % 32);
+        (c, lit, surface)
     }
-    (c, lit, surface)
 }
 
 /// A point in the unit ball chosen by a hash of a shading point and a light number.
