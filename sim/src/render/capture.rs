@@ -6,6 +6,7 @@ use nalgebra::{Isometry3, Point3};
 use perception::camera::Camera;
 use rand::Rng;
 
+use super::geometry::box_corners;
 use super::{RenderOutput, RenderScene, RenderSettings, SensorError, SensorModel, Window, render};
 
 /// Pixels added around the projected corners of a region: its edges bow slightly between the
@@ -29,12 +30,7 @@ pub fn window_covering(
         f64::NEG_INFINITY,
         f64::NEG_INFINITY,
     );
-    for k in 0..8 {
-        let c = Point3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
+    for c in box_corners(lo, hi) {
         let p = camera.project(&(camera_T_table * c)).ok()?;
         if !(p.x.is_finite() && p.y.is_finite()) {
             return None;

@@ -423,17 +423,23 @@ impl Iterator for Bits {
     }
 }
 
+/// The eight corners of the box from `lo` to `hi`.
+pub(crate) fn box_corners(lo: &Point3<f64>, hi: &Point3<f64>) -> [Point3<f64>; 8] {
+    std::array::from_fn(|k| {
+        Point3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        )
+    })
+}
+
 /// Table-frame bounding box of an instance (the part box's corners, transformed).
 fn world_aabb(inst: &Instance) -> (Point3<f64>, Point3<f64>) {
     let (lo, hi) = inst.mesh.aabb();
     let mut wlo = Point3::from(Vector3::repeat(f64::INFINITY));
     let mut whi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
-    for k in 0..8 {
-        let c = Point3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
+    for c in box_corners(&lo, &hi) {
         let w = inst.table_T_part * c;
         wlo = wlo.inf(&w);
         whi = whi.sup(&w);

@@ -5,9 +5,10 @@
 //! every pixel depends only on its own rays and its neighbours' centre rays (see
 //! [`render`](super::render)).
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::Isometry3;
 use perception::camera::Camera;
 
+use super::geometry::box_corners;
 use super::renderer::full_masks;
 use super::{CentreRays, RenderOutput, RenderScene, RenderSettings, Window, render_with_rays};
 
@@ -213,16 +214,8 @@ fn lowest_surface(scene: &RenderScene) -> f64 {
 #[allow(non_snake_case)]
 fn affected_pixels(scene: &RenderScene, i: usize, last: &Last, floor: f64) -> Option<Window> {
     let (lo, hi) = scene.instance_bounds(i);
-    let corners: Vec<Point3<f64>> = (0..8)
-        .map(|k| {
-            Point3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            )
-        })
-        .collect();
-    let mut points = corners.clone();
+    let corners = box_corners(&lo, &hi);
+    let mut points = corners.to_vec();
     for light in &scene.lights {
         // A sphere light lies inside the cube around it; its shadow inside the cube corners'.
         for k in 0..8 {

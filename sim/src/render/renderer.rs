@@ -10,6 +10,7 @@ use perception::camera::Camera;
 use rayon::prelude::*;
 
 use super::geometry::SurfaceKind;
+use super::geometry::box_corners;
 use super::shading::{ambient, brdf_cos};
 use super::shadow_grid::ShadowGrid;
 use super::{Appearance, BoardMark, Hit, InstanceMask, RenderOutput, RenderScene, Window};
@@ -474,12 +475,7 @@ pub fn instance_mask(
         f64::NEG_INFINITY,
     );
     let mut whole = false;
-    for k in 0..8 {
-        let c = Point3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
+    for c in box_corners(&lo, &hi) {
         match camera.project(&(camera_T_table * c)) {
             Ok(px) if px.x.is_finite() && px.y.is_finite() => {
                 u0 = u0.min(px.x);

@@ -5,6 +5,8 @@
 
 use nalgebra::{Point3, Vector3};
 
+use super::geometry::box_corners;
+
 /// Shadow-ray origins within this height of the board's top (z = 0) may use the grid, metres
 /// (shadow rays start a fraction of a micrometre above the surface they shade).
 const BAND: f64 = 1e-6;
@@ -56,15 +58,10 @@ impl ShadowGrid {
             let mut add = |x: f64, y: f64| {
                 f = [f[0].min(x), f[1].min(y), f[2].max(x), f[3].max(y)];
             };
-            for k in 0..8 {
-                let c = Point3::new(
-                    if k & 1 == 0 { lo.x } else { hi.x },
-                    if k & 2 == 0 { lo.y } else { hi.y },
-                    if k & 4 == 0 { lo.z } else { hi.z },
-                );
+            for c in box_corners(lo, hi) {
                 add(c.x, c.y);
                 for l in &sources {
-                    if !(l.z > hi.z + BAND) {
+                    if l.z.is_nan() || l.z <= hi.z + BAND {
                         return None;
                     }
                     // The corner's shadow on the lowest and highest receiving planes (it moves
@@ -134,7 +131,7 @@ impl ShadowGrid {
     /// The instances (bit i for instance i) whose boxes a segment from `o` to the light can meet;
     /// `None` when `o` is not on the board's top, where the grid says nothing.
     pub(crate) fn candidates(&self, o: &Point3<f64>) -> Option<u64> {
-        if !(o.z.abs() <= BAND) {
+        if o.z.is_nan() || o.z.abs() > BAND {
             return None;
         }
         let (fx, fy) = ((o.x - self.x0) / self.cell, (o.y - self.y0) / self.cell);
