@@ -402,7 +402,7 @@ impl RenderScene {
     pub(crate) fn shadow_grids(&self) -> Vec<Option<ShadowGrid>> {
         self.lights
             .iter()
-            .map(|l| ShadowGrid::new(&l.position, l.radius, &self.bounds))
+            .map(|l| ShadowGrid::new(l, &self.bounds))
             .collect()
     }
 }
@@ -432,6 +432,12 @@ pub(crate) fn box_corners(lo: &Point3<f64>, hi: &Point3<f64>) -> [Point3<f64>; 8
             if k & 4 == 0 { lo.z } else { hi.z },
         )
     })
+}
+
+/// The corners of the cube around a light's sphere (its centre, eight times, for a point light).
+pub(crate) fn light_cube(light: &PointLight) -> [Point3<f64>; 8] {
+    let r = Vector3::repeat(light.radius);
+    box_corners(&(light.position - r), &(light.position + r))
 }
 
 /// Table-frame bounding box of an instance (the part box's corners, transformed).

@@ -8,7 +8,7 @@
 use nalgebra::Isometry3;
 use perception::camera::Camera;
 
-use super::geometry::box_corners;
+use super::geometry::{box_corners, light_cube};
 use super::renderer::full_masks;
 use super::{CentreRays, RenderOutput, RenderScene, RenderSettings, Window, render_with_rays};
 
@@ -218,14 +218,7 @@ fn affected_pixels(scene: &RenderScene, i: usize, last: &Last, floor: f64) -> Op
     let mut points = corners.to_vec();
     for light in &scene.lights {
         // A sphere light lies inside the cube around it; its shadow inside the cube corners'.
-        for k in 0..8 {
-            let r = light.radius;
-            let l = light.position
-                + nalgebra::Vector3::new(
-                    if k & 1 == 0 { -r } else { r },
-                    if k & 2 == 0 { -r } else { r },
-                    if k & 4 == 0 { -r } else { r },
-                );
+        for l in light_cube(light) {
             if l.z <= hi.z {
                 return None;
             }

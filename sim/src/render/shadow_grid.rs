@@ -3,9 +3,10 @@
 //! board then tests only the instances binned in its cell, instead of clipping itself against the
 //! scene's grid; most of a feeder image is board, and each of its points casts a ray per light.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 
-use super::geometry::box_corners;
+use super::PointLight;
+use super::geometry::{box_corners, light_cube};
 
 /// Shadow-ray origins within this height of the board's top (z = 0) may use the grid, metres
 /// (shadow rays start a fraction of a micrometre above the surface they shade).
@@ -30,23 +31,14 @@ pub(crate) struct ShadowGrid {
 }
 
 impl ShadowGrid {
-    /// The grid for a light at `position` with `radius` over these table-frame boxes; `None` when
+    /// The grid for `light` over these table-frame boxes; `None` when
     /// none applies (no boxes, more than 64, or the light not above every box).
-    pub(crate) fn new(
-        position: &Point3<f64>,
-        radius: f64,
-        bounds: &[(Point3<f64>, Point3<f64>)],
-    ) -> Option<Self> {
-        if bounds.is_empty() || bounds.len() > 64 || !(radius.is_finite() && radius >= 0.0) {
+    pub(crate) fn new(light: &PointLight, bounds: &[(Point3<f64>, Point3<f64>)]) -> Option<Self> {
+        if bounds.is_empty() || bounds.len() > 64 {
             return None;
         }
         // A sphere light lies inside the cube around it; its shadows inside the cube corners'.
-        let sources: Vec<Point3<f64>> = (0..8)
-            .map(|k| {
-                let s = |bit: usize| if k & bit == 0 { -radius } else { radius };
-                position + Vector3::new(s(1), s(2), s(4))
-            })
-            .collect();
+        let sources = light_cube(light);
         let mut footprints = Vec::with_capacity(bounds.len());
         for (lo, hi) in bounds {
             let mut f = [
@@ -146,7 +138,7 @@ impl ShadowGrid {
 mod tests {
     use std::sync::Arc;
 
-    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
     use perception::part::{Material, TriMesh};
 
     use super::*;
