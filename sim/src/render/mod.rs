@@ -1,6 +1,8 @@
 //! The simulated camera: a ray tracer over the scene's triangle meshes (parry BVHs), rendering RGB
 //! with physically based shading and shadows, depth, and per-instance masks through perception's
 //! camera model, for a full frame, a downscaled overview or a crop window.
+//! [`IncrementalRenderer`] renders a scene again only where its parts changed, and [`CentreRays`]
+//! lets the renders of one camera window share its lens inversion.
 
 #![allow(non_snake_case)]
 
