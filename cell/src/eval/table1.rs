@@ -335,6 +335,7 @@ fn part_summary(
     let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
     let (mut not_resting, mut not_resting_posed) = (0, 0);
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
+    let pick_at = pick_confidence();
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
     for f in frames {
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
@@ -378,7 +379,7 @@ fn part_summary(
                     }
                     let good = refined.x_mm.hypot(refined.y_mm) <= ASSEMBLY_GRADE_MM
                         && d.refined_flip_deg.unwrap_or(refined.angle_deg) <= ASSEMBLY_GRADE_DEG;
-                    let picked = d.confidence.is_some_and(|c| c >= pick_confidence());
+                    let picked = d.confidence.is_some_and(|c| c >= pick_at);
                     assembly_grade += usize::from(good);
                     pickable += usize::from(picked);
                     pickable_assembly_grade += usize::from(good && picked);

@@ -223,6 +223,10 @@ impl CellKnowledge {
         near: &Joints,
     ) -> Result<Vec<Joints>, robots::kinematics::IkError> {
         let k = &self.kinematics;
+        if !near.iter().all(|v| v.is_finite()) {
+            // No current joints to be near: the kinematics say why.
+            return k.inverse_nearest(base_T_tcp, near).map(|s| vec![s.joints]);
+        }
         let reject_singular = k.singularity_policy == SingularityPolicy::Reject;
         let branch = |q: &Joints| (q[2].sin() >= 0.0, q[4].sin() >= 0.0);
         let mut all: Vec<Joints> = k
@@ -231,9 +235,8 @@ impl CellKnowledge {
             .filter(|s| !reject_singular || s.singularities.is_empty())
             .filter_map(|s| k.joint_limits.wrap_nearest_all(&s.joints, near))
             .collect();
-        if all.is_empty() || !near.iter().all(|v| v.is_finite()) {
-            // The kinematics say why: nothing within the limits and the singularity policy, or
-            // no current joints to be near.
+        if all.is_empty() {
+            // The kinematics say why: nothing within the limits and the singularity policy.
             return k.inverse_nearest(base_T_tcp, near).map(|s| vec![s.joints]);
         }
         all.sort_by(|a, b| {

@@ -246,17 +246,5 @@ fn affected_pixels(scene: &RenderScene, i: usize, last: &Last, floor: f64) -> Op
         u1 = u1.max(px.x);
         v1 = v1.max(px.y);
     }
-    let w = last.window;
-    let (wx0, wy0) = (w.x0 as f64, w.y0 as f64);
-    let (wx1, wy1) = (wx0 + w.width as f64, wy0 + w.height as f64);
-    let x0 = (u0 - MARGIN_PX).floor().clamp(wx0, wx1);
-    let y0 = (v0 - MARGIN_PX).floor().clamp(wy0, wy1);
-    let x1 = (u1 + MARGIN_PX).ceil().clamp(wx0, wx1);
-    let y1 = (v1 + MARGIN_PX).ceil().clamp(wy0, wy1);
-    Some(Window {
-        x0: x0 as u32,
-        y0: y0 as u32,
-        width: (x1 - x0) as u32,
-        height: (y1 - y0) as u32,
-    })
+    Some(last.window.around([u0, v0, u1, v1], MARGIN_PX))
 }

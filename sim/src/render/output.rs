@@ -40,6 +40,23 @@ impl Window {
         }
     }
 
+    /// The pixels of `self` within `margin` pixels of the image-plane box from (u0, v0) to
+    /// (u1, v1), whole pixels, clamped to `self`.
+    pub(crate) fn around(&self, [u0, v0, u1, v1]: [f64; 4], margin: f64) -> Window {
+        let (wx0, wy0) = (self.x0 as f64, self.y0 as f64);
+        let (wx1, wy1) = (wx0 + self.width as f64, wy0 + self.height as f64);
+        let x0 = (u0 - margin).floor().clamp(wx0, wx1);
+        let y0 = (v0 - margin).floor().clamp(wy0, wy1);
+        let x1 = (u1 + margin).ceil().clamp(wx0, wx1);
+        let y1 = (v1 + margin).ceil().clamp(wy0, wy1);
+        Window {
+            x0: x0 as u32,
+            y0: y0 as u32,
+            width: (x1 - x0) as u32,
+            height: (y1 - y0) as u32,
+        }
+    }
+
     /// Number of pixels.
     pub fn len(&self) -> usize {
         self.width as usize * self.height as usize

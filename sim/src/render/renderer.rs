@@ -486,22 +486,10 @@ pub fn instance_mask(
             _ => whole = true,
         }
     }
-    let margin = 3.0;
-    let (wx0, wy0) = (window.x0 as f64, window.y0 as f64);
-    let (wx1, wy1) = (wx0 + window.width as f64, wy0 + window.height as f64);
     let sub = if whole {
         window
     } else {
-        let x0 = (u0 - margin).floor().clamp(wx0, wx1);
-        let y0 = (v0 - margin).floor().clamp(wy0, wy1);
-        let x1 = (u1 + margin).ceil().clamp(wx0, wx1);
-        let y1 = (v1 + margin).ceil().clamp(wy0, wy1);
-        Window {
-            x0: x0 as u32,
-            y0: y0 as u32,
-            width: (x1 - x0) as u32,
-            height: (y1 - y0) as u32,
-        }
+        window.around([u0, v0, u1, v1], 3.0)
     };
     let origin = Point3::from(table_T_camera.translation.vector);
     let mut bits = vec![false; sub.len()];
