@@ -69,9 +69,11 @@ impl BatchSession {
             .map_err(model_error)?
             .with_intra_threads(intra_threads.max(1))
             .map_err(|e| model_error(e.into()))?
-            // Idle workers sleep instead of spinning: voting and pose fitting run on the same
-            // cores right after each inference.
-            .with_intra_op_spinning(false)
+            // Workers spin between operators while a run lasts, and stop the moment it
+            // returns: voting and pose fitting run on the same cores right after each inference.
+            .with_intra_op_spinning(true)
+            .map_err(|e| model_error(e.into()))?
+            .with_config_entry("session.force_spinning_stop", "1")
             .map_err(|e| model_error(e.into()))?
             .commit_from_memory(&bytes)
             .map_err(model_error)?;
