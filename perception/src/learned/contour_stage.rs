@@ -117,6 +117,14 @@ impl ContourStage {
         // Every hypothesis gets the coarse round; only the best is finished. The keypoint pose
         // (the first) is replaced only by a hypothesis that beats it by the margin.
         for (k, (class, start)) in starts.into_iter().enumerate() {
+            // A support is at most 1: once the best one is within the margin of it, no other
+            // hypothesis can replace it, so the rest need not be screened.
+            if best
+                .as_ref()
+                .is_some_and(|(_, b)| b.support + self.config.switch_margin >= 1.0)
+            {
+                break;
+            }
             let Some(fit) = aligner.screen(view(class), start) else {
                 continue;
             };
