@@ -63,17 +63,18 @@ pub fn sample_planar(
         stride: w,
     };
     // Divided (not multiplied by the reciprocal) so values equal the training's `value / 255`.
-    const S8: f32 = 255.0;
-    const S16: f32 = 65535.0;
+    let levels = eight_bit_levels();
+    let v8 = |v: u8| levels[usize::from(v)];
+    let v16 = |v: u16| f32::from(v) / 65535.0;
     match image {
-        DynamicImage::ImageLuma8(i) => fill(i.as_raw(), 1, S8, &window, dst),
-        DynamicImage::ImageLumaA8(i) => fill(i.as_raw(), 2, S8, &window, dst),
-        DynamicImage::ImageRgb8(i) => fill(i.as_raw(), 3, S8, &window, dst),
-        DynamicImage::ImageRgba8(i) => fill(i.as_raw(), 4, S8, &window, dst),
-        DynamicImage::ImageLuma16(i) => fill(i.as_raw(), 1, S16, &window, dst),
-        DynamicImage::ImageLumaA16(i) => fill(i.as_raw(), 2, S16, &window, dst),
-        DynamicImage::ImageRgb16(i) => fill(i.as_raw(), 3, S16, &window, dst),
-        DynamicImage::ImageRgba16(i) => fill(i.as_raw(), 4, S16, &window, dst),
+        DynamicImage::ImageLuma8(i) => fill(i.as_raw(), 1, v8, &window, dst),
+        DynamicImage::ImageLumaA8(i) => fill(i.as_raw(), 2, v8, &window, dst),
+        DynamicImage::ImageRgb8(i) => fill(i.as_raw(), 3, v8, &window, dst),
+        DynamicImage::ImageRgba8(i) => fill(i.as_raw(), 4, v8, &window, dst),
+        DynamicImage::ImageLuma16(i) => fill(i.as_raw(), 1, v16, &window, dst),
+        DynamicImage::ImageLumaA16(i) => fill(i.as_raw(), 2, v16, &window, dst),
+        DynamicImage::ImageRgb16(i) => fill(i.as_raw(), 3, v16, &window, dst),
+        DynamicImage::ImageRgba16(i) => fill(i.as_raw(), 4, v16, &window, dst),
         _ => return check_format(image),
     }
     Ok(())
@@ -88,35 +89,55 @@ struct Window {
     stride: usize,
 }
 
-fn fill<T: Copy + Into<f32>>(raw: &[T], channels: usize, full: f32, w: &Window, dst: &mut [f32]) {
+/// Fills the planes through `value` (a pixel's channel → [0, 1]), column by column from a table
+/// of clamped source columns, so the inner loop has no clamping.
+fn fill<T: Copy>(
+    raw: &[T],
+    channels: usize,
+    value: impl Fn(T) -> f32,
+    w: &Window,
+    dst: &mut [f32],
+) {
     let plane = w.width * w.height;
     let (cx0, cy0) = (i64::from(w.clamp[0]), i64::from(w.clamp[1]));
     let (cx1, cy1) = (
         cx0 + i64::from(w.clamp[2]) - 1,
         cy0 + i64::from(w.clamp[3]) - 1,
     );
+    let columns: Vec<usize> = (0..w.width)
+        .map(|col| (w.x0 + col as i64).clamp(cx0, cx1) as usize * channels)
+        .collect();
     let (r, rest) = dst.split_at_mut(plane);
     let (g, b) = rest.split_at_mut(plane);
-    for row in 0..w.height {
+    let rows = r
+        .chunks_exact_mut(w.width)
+        .zip(g.chunks_exact_mut(w.width))
+        .zip(b.chunks_exact_mut(w.width));
+    for (row, ((r, g), b)) in rows.enumerate() {
         let sy = (w.y0 + row as i64).clamp(cy0, cy1) as usize;
         let line = &raw[sy * w.stride * channels..(sy + 1) * w.stride * channels];
-        let out = row * w.width;
-        for col in 0..w.width {
-            let sx = (w.x0 + col as i64).clamp(cx0, cx1) as usize;
-            let px = &line[sx * channels..];
-            let i = out + col;
-            if channels >= 3 {
-                r[i] = px[0].into() / full;
-                g[i] = px[1].into() / full;
-                b[i] = px[2].into() / full;
-            } else {
-                let v = px[0].into() / full;
-                r[i] = v;
-                g[i] = v;
-                b[i] = v;
+        let out = columns.iter().zip(r).zip(g).zip(b);
+        if channels >= 3 {
+            for (((&c, r), g), b) in out {
+                *r = value(line[c]);
+                *g = value(line[c + 1]);
+                *b = value(line[c + 2]);
+            }
+        } else {
+            for (((&c, r), g), b) in out {
+                let v = value(line[c]);
+                *r = v;
+                *g = v;
+                *b = v;
             }
         }
     }
+}
+
+/// `value / 255` for every 8-bit value, so an 8-bit pixel costs a lookup, not a division.
+fn eight_bit_levels() -> &'static [f32; 256] {
+    static LEVELS: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    LEVELS.get_or_init(|| std::array::from_fn(|v| f32::from(v as u8) / 255.0))
 }
 
 /// The segmenter's input for a region of interest: planar RGB of the region padded (edge
