@@ -513,3 +513,46 @@ pub fn keypoint_vector_labels(
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The dispatched count (8 lanes where the CPU has AVX2) equals a count taken one pixel at a
+    /// time, for every remainder of the lane width and for hypotheses on the pixel grid as well
+    /// as off it.
+    #[test]
+    fn vote_counts_equal_a_one_pixel_at_a_time_count() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let t2 = 0.99f32 * 0.99;
+        for n in [0, 1, 7, 8, 9, 15, 16, 17, 31, 517] {
+            let xs: Vec<f32> = (0..n).map(|_| rng.random_range(0..64) as f32).collect();
+            let ys: Vec<f32> = (0..n).map(|_| rng.random_range(0..64) as f32).collect();
+            let (ux, uy): (Vec<f32>, Vec<f32>) = (0..n)
+                .map(|_| {
+                    let a = rng.random_range(0.0..std::f32::consts::TAU);
+                    (a.cos(), a.sin())
+                })
+                .unzip();
+            for h in 0..64 {
+                let (hx, hy) = if h % 2 == 0 {
+                    (rng.random_range(0..64) as f32, rng.random_range(0..64) as f32)
+                } else {
+                    (rng.random_range(-8.0..72.0), rng.random_range(-8.0..72.0))
+                };
+                let one_at_a_time = (0..n)
+                    .filter(|&i| {
+                        let (dx, dy) = (hx - xs[i], hy - ys[i]);
+                        let dot = dx * ux[i] + dy * uy[i];
+                        dot > 0.0 && dot * dot > t2 * (dx * dx + dy * dy)
+                    })
+                    .count();
+                assert_eq!(
+                    count_votes([&xs, &ys, &ux, &uy], hx, hy, t2),
+                    one_at_a_time,
+                    "{n} pixels, hypothesis ({hx}, {hy})"
+                );
+            }
+        }
+    }
+}
