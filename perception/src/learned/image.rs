@@ -99,6 +99,9 @@ fn fill<T: Copy>(
     dst: &mut [f32],
 ) {
     let plane = w.width * w.height;
+    if plane == 0 {
+        return;
+    }
     let (cx0, cy0) = (i64::from(w.clamp[0]), i64::from(w.clamp[1]));
     let (cx1, cy1) = (
         cx0 + i64::from(w.clamp[2]) - 1,
@@ -228,6 +231,15 @@ mod tests {
             dst,
             [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.2, 0.2, 0.2, 0.2]
         );
+    }
+
+    #[test]
+    fn an_empty_window_fills_nothing() {
+        let img = DynamicImage::ImageLuma8(GrayImage::new(4, 4));
+        let mut dst = Vec::new();
+        sample_planar(&img, 0, 0, 0, 3, [0, 0, 4, 4], &mut dst).unwrap();
+        sample_planar(&img, 0, 0, 3, 0, [0, 0, 4, 4], &mut dst).unwrap();
+        assert!(dst.is_empty());
     }
 
     #[test]
