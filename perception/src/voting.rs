@@ -536,7 +536,10 @@ mod tests {
                 .unzip();
             for h in 0..64 {
                 let (hx, hy) = if h % 2 == 0 {
-                    (rng.random_range(0..64) as f32, rng.random_range(0..64) as f32)
+                    (
+                        rng.random_range(0..64) as f32,
+                        rng.random_range(0..64) as f32,
+                    )
                 } else {
                     (rng.random_range(-8.0..72.0), rng.random_range(-8.0..72.0))
                 };
