@@ -355,17 +355,22 @@ impl Voter {
         count_votes([&self.xs, &self.ys, &self.ux, &self.uy], hx, hy, t2)
     }
 
+    /// The pixels whose vector points at `(hx, hy)`, in order (the test of [`count_votes`]; every
+    /// index is written and the count advances only for inliers, so the loop has no branch).
     fn collect_inliers(&mut self, hx: f32, hy: f32) {
         let t2 = self.config.inlier_cosine * self.config.inlier_cosine;
-        self.inliers.clear();
-        for j in 0..self.xs.len() {
-            let dx = hx - self.xs[j];
-            let dy = hy - self.ys[j];
-            let dot = dx * self.ux[j] + dy * self.uy[j];
-            if dot > 0.0 && dot * dot > t2 * (dx * dx + dy * dy) {
-                self.inliers.push(j as u32);
-            }
+        let n = self.xs.len();
+        self.inliers.resize(n, 0);
+        let mut count = 0;
+        let pixels = self.xs.iter().zip(&self.ys).zip(&self.ux).zip(&self.uy);
+        for (j, (((&x, &y), &ux), &uy)) in pixels.enumerate() {
+            let dx = hx - x;
+            let dy = hy - y;
+            let dot = dx * ux + dy * uy;
+            self.inliers[count] = j as u32;
+            count += usize::from((dot > 0.0) & (dot * dot > t2 * (dx * dx + dy * dy)));
         }
+        self.inliers.truncate(count);
     }
 
     /// The point closest (in squared perpendicular distance) to every inlier line.
