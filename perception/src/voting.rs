@@ -355,7 +355,7 @@ impl Voter {
         count_votes([&self.xs, &self.ys, &self.ux, &self.uy], hx, hy, t2)
     }
 
-    /// The pixels whose vector points at `(hx, hy)`, in order (the test of [`count_votes`]; every
+    /// The pixels whose vector points at `(hx, hy)`, in order ([`votes_for`]; every
     /// index is written and the count advances only for inliers, so the loop has no branch).
     fn collect_inliers(&mut self, hx: f32, hy: f32) {
         let t2 = self.config.inlier_cosine * self.config.inlier_cosine;
@@ -364,11 +364,8 @@ impl Voter {
         let mut count = 0;
         let pixels = self.xs.iter().zip(&self.ys).zip(&self.ux).zip(&self.uy);
         for (j, (((&x, &y), &ux), &uy)) in pixels.enumerate() {
-            let dx = hx - x;
-            let dy = hy - y;
-            let dot = dx * ux + dy * uy;
             self.inliers[count] = j as u32;
-            count += usize::from((dot > 0.0) & (dot * dot > t2 * (dx * dx + dy * dy)));
+            count += usize::from(votes_for([x, y, ux, uy], hx, hy, t2));
         }
         self.inliers.truncate(count);
     }
@@ -462,12 +459,19 @@ fn count_votes(pixels: [&[f32]; 4], hx: f32, hy: f32, t2: f32) -> usize {
     let [xs, ys, uxs, uys] = pixels;
     let mut count = 0u32;
     for (((&x, &y), &ux), &uy) in xs.iter().zip(ys).zip(uxs).zip(uys) {
-        let dx = hx - x;
-        let dy = hy - y;
-        let dot = dx * ux + dy * uy;
-        count += u32::from((dot > 0.0) & (dot * dot > t2 * (dx * dx + dy * dy)));
+        count += u32::from(votes_for([x, y, ux, uy], hx, hy, t2));
     }
     count as usize
+}
+
+/// Whether the pixel at (x, y) with unit vector (ux, uy) points at `(hx, hy)` within cosine
+/// √`t2` (no branch, so the loops that use it vectorise).
+#[inline(always)]
+fn votes_for([x, y, ux, uy]: [f32; 4], hx: f32, hy: f32, t2: f32) -> bool {
+    let dx = hx - x;
+    let dy = hy - y;
+    let dot = dx * ux + dy * uy;
+    (dot > 0.0) & (dot * dot > t2 * (dx * dx + dy * dy))
 }
 
 /// Hypotheses needed to draw one all-inlier pair with probability `confidence` at inlier ratio `w`.

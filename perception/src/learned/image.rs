@@ -63,8 +63,7 @@ pub fn sample_planar(
         stride: w,
     };
     // Divided (not multiplied by the reciprocal) so values equal the training's `value / 255`.
-    let levels = eight_bit_levels();
-    let v8 = |v: u8| levels[usize::from(v)];
+    let v8 = |v: u8| EIGHT_BIT_LEVELS[usize::from(v)];
     let v16 = |v: u16| f32::from(v) / 65535.0;
     match image {
         DynamicImage::ImageLuma8(i) => fill(i.as_raw(), 1, v8, &window, dst),
@@ -137,11 +136,17 @@ fn fill<T: Copy>(
     }
 }
 
-/// `value / 255` for every 8-bit value, so an 8-bit pixel costs a lookup, not a division.
-fn eight_bit_levels() -> &'static [f32; 256] {
-    static LEVELS: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
-    LEVELS.get_or_init(|| std::array::from_fn(|v| f32::from(v as u8) / 255.0))
-}
+/// `value / 255` for every 8-bit value (divided at compile time, rounded as at run time), so an
+/// 8-bit pixel costs a lookup, not a division.
+const EIGHT_BIT_LEVELS: [f32; 256] = {
+    let mut levels = [0.0; 256];
+    let mut v = 0;
+    while v < 256 {
+        levels[v] = v as f32 / 255.0;
+        v += 1;
+    }
+    levels
+};
 
 /// The segmenter's input for a region of interest: planar RGB of the region padded (edge
 /// replication) to multiples of `multiple`; the buffer is reused between frames.

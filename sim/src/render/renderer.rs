@@ -9,8 +9,7 @@ use nalgebra::{Isometry3, Point2, Point3, Vector3};
 use perception::camera::Camera;
 use rayon::prelude::*;
 
-use super::geometry::SurfaceKind;
-use super::geometry::box_corners;
+use super::geometry::{SurfaceKind, box_corners};
 use super::shading::{ambient, brdf_cos};
 use super::shadow_grid::ShadowGrid;
 use super::{Appearance, BoardMark, Hit, InstanceMask, RenderOutput, RenderScene, Window};

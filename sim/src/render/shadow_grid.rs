@@ -41,6 +41,9 @@ impl ShadowGrid {
         let sources = light_cube(light);
         let mut footprints = Vec::with_capacity(bounds.len());
         for (lo, hi) in bounds {
+            if sources.iter().any(|l| l.z.is_nan() || l.z <= hi.z + BAND) {
+                return None;
+            }
             let mut f = [
                 f64::INFINITY,
                 f64::INFINITY,
@@ -53,9 +56,6 @@ impl ShadowGrid {
             for c in box_corners(lo, hi) {
                 add(c.x, c.y);
                 for l in &sources {
-                    if l.z.is_nan() || l.z <= hi.z + BAND {
-                        return None;
-                    }
                     // The corner's shadow on the lowest and highest receiving planes (it moves
                     // linearly between them); corners below a plane shade nothing on it.
                     for z in [-BAND, BAND] {
@@ -71,16 +71,22 @@ impl ShadowGrid {
             }
             footprints.push([f[0] - SLACK, f[1] - SLACK, f[2] + SLACK, f[3] + SLACK]);
         }
-        let (x0, y0) = footprints
-            .iter()
-            .fold((f64::INFINITY, f64::INFINITY), |(x, y), f| {
-                (x.min(f[0]), y.min(f[1]))
-            });
-        let (x1, y1) = footprints
-            .iter()
-            .fold((f64::NEG_INFINITY, f64::NEG_INFINITY), |(x, y), f| {
-                (x.max(f[2]), y.max(f[3]))
-            });
+        let [x0, y0, x1, y1] = footprints.iter().fold(
+            [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ],
+            |b, f| {
+                [
+                    b[0].min(f[0]),
+                    b[1].min(f[1]),
+                    b[2].max(f[2]),
+                    b[3].max(f[3]),
+                ]
+            },
+        );
         let extent = (x1 - x0).max(y1 - y0);
         if !(extent.is_finite() && extent > 0.0) {
             return None;
