@@ -44,6 +44,22 @@ def load_start(model, args, device):
         model.load_state_dict(torch.load(start, map_location=device))
 
 
+def recorded_train_minutes(out, name, model):
+    """The training time in `out/name.toml` when `out/name.pt` holds exactly `model`'s weights, so
+    that an `--eval-only` re-export of the same weights keeps their training record; else None."""
+    import tomllib
+
+    weights, manifest = os.path.join(out, f"{name}.pt"), os.path.join(out, f"{name}.toml")
+    if not (os.path.exists(weights) and os.path.exists(manifest)):
+        return None
+    saved = torch.load(weights, map_location="cpu")["state_dict"]
+    current = model.state_dict()
+    if saved.keys() != current.keys() or not all(torch.equal(saved[k], current[k].cpu()) for k in saved):
+        return None
+    with open(manifest, "rb") as f:
+        return tomllib.load(f).get("training", {}).get("test_metrics", {}).get("train_minutes")
+
+
 def setup(seed, threads=2):
     """Seeds torch and NumPy, limits CPU threads; returns the device (CUDA when present)."""
     torch.manual_seed(seed)

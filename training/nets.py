@@ -45,7 +45,11 @@ class Normalise(nn.Module):
 
 
 class Up(nn.Module):
-    """x2 bilinear upsampling of the coarse map, 1x1 projection, sum with the skip, 3x3 block."""
+    """x2 bilinear upsampling of the coarse map, 1x1 projection, sum with the skip, 3x3 block.
+
+    The factor is a constant 2, not the skip's size: inputs are multiples of the coarsest stride,
+    so the two agree, and a constant lets ONNX Runtime keep the upsampling in its blocked (NCHWc)
+    layout instead of reordering around a generic Resize (about 2 ms per 12-crop batch)."""
 
     def __init__(self, c_coarse, c_skip, cout):
         super().__init__()
@@ -54,7 +58,7 @@ class Up(nn.Module):
         self.fuse = block(cout, cout)
 
     def forward(self, coarse, skip):
-        up = F.interpolate(self.proj(coarse), size=skip.shape[-2:], mode="bilinear", align_corners=False)
+        up = F.interpolate(self.proj(coarse), scale_factor=2.0, mode="bilinear", align_corners=False)
         return self.fuse(up + self.skip(skip))
 
 
@@ -90,7 +94,7 @@ class KeypointNet(nn.Module):
         y = self.u16(f32, f16)
         y = self.u8(y, f8)
         y = self.u4(y, f4)
-        y = F.interpolate(y, size=f2.shape[-2:], mode="bilinear", align_corners=False)
+        y = F.interpolate(y, scale_factor=2.0, mode="bilinear", align_corners=False)
         out = self.head(F.relu(y + self.skip2(f2)))
         mask = out[:, :1]
         v = out[:, 1:]

@@ -13,7 +13,18 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, check_export, code_commit, export_onnx, load_start, progress_lr, setup, training_args, write_manifest
+from common import (
+    Curve,
+    check_export,
+    code_commit,
+    export_onnx,
+    load_start,
+    progress_lr,
+    recorded_train_minutes,
+    setup,
+    training_args,
+    write_manifest,
+)
 from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
@@ -220,6 +231,7 @@ def main(argv=None):
     curve_name = "keypoints_curve.csv"
     load_start(model, args, device)
     if args.eval_only:
+        train_minutes = recorded_train_minutes(args.out, "keypoints", model)
         args.epochs = 0
     curve = None if args.eval_only else Curve(
         os.path.join(args.out, curve_name),
@@ -275,7 +287,8 @@ def main(argv=None):
             break
     if curve is not None:
         curve.close()
-    train_minutes = (time.time() - t_train) / 60
+    if not args.eval_only:
+        train_minutes = (time.time() - t_train) / 60
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
     # The torch weights travel with the ONNX file: scripts/seed_compare runs them in eager mode.
@@ -283,7 +296,7 @@ def main(argv=None):
     model.to(device)
 
     met = evaluate(model, test, device, voting=True)
-    if not args.eval_only:
+    if train_minutes is not None:
         met["train_minutes"] = train_minutes
     met["mmac_per_crop"] = macs / 1e6
     for k_, v_ in met.items():

@@ -14,7 +14,18 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, check_export, code_commit, export_onnx, load_start, progress_lr, setup, training_args, write_manifest
+from common import (
+    Curve,
+    check_export,
+    code_commit,
+    export_onnx,
+    load_start,
+    progress_lr,
+    recorded_train_minutes,
+    setup,
+    training_args,
+    write_manifest,
+)
 from data import load_feeder, obj_ids
 from nets import PARTS, Segmenter, count_macs
 
@@ -201,6 +212,7 @@ def main(argv=None):
     curve_name = "segmenter_curve.csv"
     load_start(model, args, device)
     if args.eval_only:
+        train_minutes = recorded_train_minutes(args.out, "segmenter", model)
         args.steps = 0
     curve = None if args.eval_only else Curve(
         os.path.join(args.out, curve_name),
@@ -249,7 +261,8 @@ def main(argv=None):
             break
     if curve is not None:
         curve.close()
-    train_minutes = (time.time() - t_train) / 60
+    if not args.eval_only:
+        train_minutes = (time.time() - t_train) / 60
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
     # The torch weights travel with the ONNX file: scripts/seed_compare runs them in eager mode.
@@ -257,7 +270,7 @@ def main(argv=None):
     model.to(device)
 
     met = evaluate(model, test, device)
-    if not args.eval_only:
+    if train_minutes is not None:
         met["train_minutes"] = train_minutes
     met["mmac_576x448"] = macs / 1e6
     for k_, v_ in met.items():
