@@ -38,10 +38,13 @@ class Normalise(nn.Module):
         self.register_buffer("std", torch.tensor(RGB_STD).view(1, 3, 1, 1))
 
     def forward(self, x):
-        rgb = (x[:, :3] - self.mean) / self.std
-        if self.extra == 0:
-            return rgb
-        return torch.cat([rgb, x[:, 3:]], dim=1)
+        # The extra channels get mean 0 and std 1, which leaves them exactly as they are: one
+        # pass over the whole input instead of slicing the RGB channels out and back in.
+        mean, std = self.mean, self.std
+        if self.extra:
+            zeros = mean.new_zeros(1, self.extra, 1, 1)
+            mean, std = torch.cat([mean, zeros], dim=1), torch.cat([std, zeros + 1], dim=1)
+        return (x - mean) / std
 
 
 class Up(nn.Module):
