@@ -38,10 +38,12 @@ def training_args(doc, data, model, limit_what):
 
 
 def load_start(model, args, device):
-    """Loads `--eval-only` or `--init` weights into `model`, if either is given."""
+    """Loads `--eval-only` or `--init` weights into `model`, if either is given: a checkpoint
+    (`--checkpoint`) or the `.pt` committed beside a model (its state dict under "state_dict")."""
     start = args.eval_only or args.init
     if start:
-        model.load_state_dict(torch.load(start, map_location=device))
+        state = torch.load(start, map_location=device)
+        model.load_state_dict(state["state_dict"] if "state_dict" in state else state)
 
 
 def recorded_train_minutes(out, name, model):
