@@ -38,12 +38,18 @@ def training_args(doc, data, model, limit_what):
 
 
 def load_start(model, args, device):
-    """Loads `--eval-only` or `--init` weights into `model`, if either is given: a checkpoint
-    (`--checkpoint`) or the `.pt` committed beside a model (its state dict under "state_dict")."""
+    """Loads `--eval-only` or `--init` weights (either form `state_dict_in` reads) into `model`,
+    if either is given."""
     start = args.eval_only or args.init
     if start:
-        state = torch.load(start, map_location=device)
-        model.load_state_dict(state["state_dict"] if "state_dict" in state else state)
+        model.load_state_dict(state_dict_in(start, device))
+
+
+def state_dict_in(path, device="cpu"):
+    """The weights in `path`: a checkpoint (a bare state dict) or the `.pt` the trainers commit
+    beside a model (the state dict under "state_dict", with the net's widths)."""
+    state = torch.load(path, map_location=device)
+    return state["state_dict"] if "state_dict" in state else state
 
 
 def recorded_train_minutes(out, name, model):
@@ -54,7 +60,7 @@ def recorded_train_minutes(out, name, model):
     weights, manifest = os.path.join(out, f"{name}.pt"), os.path.join(out, f"{name}.toml")
     if not (os.path.exists(weights) and os.path.exists(manifest)):
         return None
-    saved = torch.load(weights, map_location="cpu")["state_dict"]
+    saved = state_dict_in(weights)
     current = model.state_dict()
     if saved.keys() != current.keys() or not all(torch.equal(saved[k], current[k].cpu()) for k in saved):
         return None

@@ -13,8 +13,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import Curve, check_export, code_commit, export_onnx, load_start, progress_lr, setup, training_args, write_manifest
-from common import recorded_train_minutes
+from common import (Curve, check_export, code_commit, export_onnx, load_start, progress_lr, recorded_train_minutes,
+                    setup, training_args, write_manifest)
 from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
