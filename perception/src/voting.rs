@@ -231,8 +231,8 @@ impl Voter {
         }
     }
 
-    /// Loads keypoint k's unit vectors for the foreground pixels; zero vectors stay zero (they
-    /// never vote and never make hypotheses).
+    /// Loads keypoint k's vectors for the foreground pixels, normalised (the network's need not
+    /// be); zero vectors stay zero (they never vote and never make hypotheses).
     fn load_vectors(&mut self, field: &VectorField<'_>, k: usize) -> Result<(), VoteError> {
         let plane = field.width * field.height;
         let (cx, cy) = (
