@@ -128,6 +128,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         p.touching,
         p.false_positives
     );
+    let m = &p.misses;
+    println!(
+        "missed {}: {} found as the wrong part, {} with a split or merged mask (IoU < {}), {} \
+         under another part's instance, {} with no detection at all",
+        p.truths - p.true_positives,
+        m.wrong_part,
+        m.partial,
+        options.min_iou,
+        m.covered,
+        m.nothing
+    );
     println!(
         "poses: {} matched with a pose (parts resting on the table), {} without; stable pose \
          right {:.1} %; AR_MSSD {:.1} % (PnP {:.1} %), AR_MSPD {:.1} % (PnP {:.1} %)",

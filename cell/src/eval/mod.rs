@@ -403,6 +403,19 @@ pub struct TruthRecord {
     pub resting: bool,
     /// Index of the detection matched to it.
     pub detection: Option<usize>,
+    /// The detection of any part whose mask overlaps it most, and that IoU: why a miss was
+    /// missed (merged with a neighbour, split, the wrong part, or nothing there).
+    #[serde(default)]
+    pub closest: Option<Overlap>,
+}
+
+/// A detection and its mask IoU with a ground-truth instance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Overlap {
+    /// Index of the detection.
+    pub detection: usize,
+    /// Mask IoU.
+    pub iou: f64,
 }
 
 /// Records written before `resting` existed did not tell: every part counted as resting.
@@ -625,6 +638,7 @@ fn evaluate_image(
                 ignored: info.visib_fract < options.min_visib_fract || truth_masks[k].area() == 0,
                 resting: rests(k),
                 detection: None,
+                closest: None,
             }
         })
         .collect();
@@ -662,6 +676,17 @@ fn evaluate_image(
         })
         .collect();
     let matches = greedy_match(&candidates, &truth_refs, options.min_iou);
+    for (truth, mask) in truths.iter_mut().zip(&truth_masks) {
+        truth.closest = candidates
+            .iter()
+            .enumerate()
+            .map(|(d, c)| Overlap {
+                detection: d,
+                iou: matching::iou(c.mask, mask),
+            })
+            .filter(|o| o.iou > 0.0)
+            .max_by(|a, b| a.iou.total_cmp(&b.iou));
+    }
 
     let mut detections = Vec::with_capacity(found.detections.len());
     for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {

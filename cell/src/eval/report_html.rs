@@ -409,7 +409,9 @@ fn render(
         "<h2>Detection</h2><p>Touching: the visible mask comes within {} px of another \
          instance's.</p><table><tr><th class=l>part</th><th>instances</th><th>ignored</th>\
          <th>touching</th><th>detections</th><th>true pos.</th><th>false pos.</th>\
-         <th>precision</th><th>recall</th><th>recall touching</th><th>recall isolated</th></tr>",
+         <th>precision</th><th>recall</th><th>recall touching</th><th>recall isolated</th>\
+         <th>missed: wrong part</th><th>split or merged</th><th>under another</th>\
+         <th>nothing</th></tr>",
         meta.options.touch_gap_px
     );
     let all: Vec<&PartSummary> = s.parts.iter().chain(std::iter::once(&s.pooled)).collect();
@@ -417,7 +419,8 @@ fn render(
         let _ = write!(
             h,
             "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td>{}</td></tr>",
             escape(&p.part),
             p.truths,
             p.ignored,
@@ -428,7 +431,11 @@ fn render(
             pct(p.precision),
             pct(p.recall),
             pct(p.recall_touching),
-            pct(p.recall_isolated)
+            pct(p.recall_isolated),
+            p.misses.wrong_part,
+            p.misses.partial,
+            p.misses.covered,
+            p.misses.nothing
         );
     }
     h.push_str("</table>");

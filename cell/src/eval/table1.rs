@@ -149,6 +149,9 @@ pub struct PartSummary {
     pub recall_touching: f64,
     /// Recall over the instances that touch nothing.
     pub recall_isolated: f64,
+    /// Why the counted instances that were missed were missed.
+    #[serde(default)]
+    pub misses: MissCauses,
     /// Matched detections without a pose (PnP, refinement or the reprojection gate failed).
     pub pose_failures: usize,
     /// The pose failures by kind (the reason with its numbers replaced by `#`), most first.
@@ -179,6 +182,21 @@ pub struct PartSummary {
     pub stable_pose_right: usize,
     /// `stable_pose_right / poses`.
     pub stable_pose_rate: f64,
+}
+
+/// Missed instances by the detection that overlaps each one most
+/// ([`super::TruthRecord::closest`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MissCauses {
+    /// Another part's detection covers it at the IoU threshold or above: found, wrong part.
+    pub wrong_part: usize,
+    /// A detection of its own part covers it, below the threshold: a split or merged mask.
+    pub partial: usize,
+    /// Only another part's detection touches it, below the threshold: swallowed by a
+    /// neighbour's instance or hidden under it.
+    pub covered: usize,
+    /// No detection overlaps it.
+    pub nothing: usize,
 }
 
 /// Lateral error (camera x, y) of a pose that the cell's insertions take with margin, mm: the
@@ -334,6 +352,7 @@ fn part_summary(
     let (mut detections, mut tp, mut fp, mut pose_failures, mut stable_right) = (0, 0, 0, 0, 0);
     let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
     let (mut not_resting, mut not_resting_posed) = (0, 0);
+    let mut misses = MissCauses::default();
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
     let pick_at = pick_confidence();
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
@@ -349,6 +368,16 @@ fn part_summary(
             if t.detection.is_some() {
                 recalled += 1;
                 recalled_touching += usize::from(t.touching);
+                continue;
+            }
+            let closest = t
+                .closest
+                .and_then(|c| f.detections.get(c.detection).map(|d| (&d.part, c.iou)));
+            match closest {
+                None => misses.nothing += 1,
+                Some((p, _)) if *p == t.part => misses.partial += 1,
+                Some((_, iou)) if iou >= options.min_iou => misses.wrong_part += 1,
+                Some(_) => misses.covered += 1,
             }
         }
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
@@ -411,6 +440,7 @@ fn part_summary(
         recall: ratio(recalled, truths),
         recall_touching: ratio(recalled_touching, touching),
         recall_isolated: ratio(recalled - recalled_touching, truths - touching),
+        misses,
         pose_failures,
         pose_failure_kinds: {
             let mut v: Vec<(String, usize)> = kinds.into_iter().collect();
@@ -584,7 +614,7 @@ pub fn text_table(summary: &EvalSummary) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::{DetectionRecord, FrameRecord, TruthRecord};
+    use crate::eval::{DetectionRecord, FrameRecord, Overlap, TruthRecord};
 
     fn errors(x: f64, angle: f64) -> PoseErrors {
         PoseErrors {
@@ -609,6 +639,7 @@ mod tests {
             ignored,
             resting: true,
             detection,
+            closest: None,
         }
     }
 
@@ -681,6 +712,45 @@ mod tests {
                 detections: vec![],
             },
         ]
+    }
+
+    #[test]
+    fn misses_are_told_apart_by_the_detection_that_overlaps_them_most() {
+        let missed = |closest: Option<(usize, f64)>| TruthRecord {
+            closest: closest.map(|(detection, iou)| Overlap { detection, iou }),
+            ..truth("a", None, true, false)
+        };
+        let frame = FrameRecord {
+            scene: 0,
+            image: 0,
+            failure: None,
+            times: None,
+            truths: vec![
+                truth("a", Some(0), true, false),
+                missed(Some((1, 0.7))),
+                missed(Some((1, 0.2))),
+                missed(Some((0, 0.3))),
+                missed(Some((2, 0.3))),
+                missed(None),
+            ],
+            detections: vec![
+                det("a", Some(0), None),
+                det("b", None, None),
+                det("a", None, None),
+            ],
+        };
+        let s = summarise(
+            &[frame],
+            &[("a".into(), 10.0), ("b".into(), 10.0)],
+            &EvalOptions::default(),
+        );
+        let m = s.parts[0].misses;
+        assert_eq!(
+            (m.wrong_part, m.partial, m.covered, m.nothing),
+            (1, 2, 1, 1),
+            "{m:?}"
+        );
+        assert_eq!(s.parts[1].misses, MissCauses::default());
     }
 
     #[test]
