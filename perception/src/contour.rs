@@ -706,6 +706,15 @@ mod tests {
         assert!(q.windows(2).all(|w| w[0] < w[1]), "rises with the support");
     }
 
+    /// How far `fit` is from the true (x, y, yaw) of a scene seen from 1.5 m: pixels, degrees.
+    fn fit_error(fit: &ContourFit, truth: (f64, f64, f64), camera: &Camera) -> (f64, f64) {
+        let px_per_m = camera.fx / 1.5;
+        (
+            (fit.x - truth.0).hypot(fit.y - truth.1) * px_per_m,
+            (fit.yaw - truth.2).to_degrees().abs(),
+        )
+    }
+
     #[test]
     #[allow(non_snake_case)]
     fn a_box_is_aligned_to_a_hundredth_of_a_pixel_from_two_pixels_and_five_degrees_off() {
@@ -720,9 +729,7 @@ mod tests {
             patch: &patch,
         };
         let fit = aligner.align(view, start).expect("the box is found");
-        let px_per_m = camera.fx / 1.5;
-        let err_px = (fit.x - x).hypot(fit.y - y) * px_per_m;
-        let err_deg = (fit.yaw - yaw).to_degrees().abs();
+        let (err_px, err_deg) = fit_error(&fit, (x, y, yaw), &camera);
         assert!(err_px < 0.01, "position off by {err_px:.4} px");
         assert!(err_deg < 0.01, "yaw off by {err_deg:.4}°");
         assert!(fit.support > 0.95, "support {}", fit.support);
@@ -791,8 +798,7 @@ mod tests {
                 patch: &patch,
             };
             let fit = aligner.align(view, start).expect("the shell is found");
-            let err_px = (fit.x - x).hypot(fit.y - y) * px_per_m;
-            let err_deg = (fit.yaw - yaw).to_degrees().abs();
+            let (err_px, err_deg) = fit_error(&fit, (x, y, yaw), &camera);
             assert!(err_px < 0.01, "{rule:?}: off by {err_px:.4} px");
             assert!(err_deg < 0.01, "{rule:?}: yaw off by {err_deg:.4}°");
         }
