@@ -112,7 +112,7 @@ impl PartOutline {
         let mut edges: Vec<_> = by_edge.into_iter().collect();
         edges.sort_unstable();
         Self {
-            final_edge: FinalEdge::Nearest,
+            final_edge: FinalEdge::default(),
             vertices: mesh.vertices.clone(),
             triangles: mesh.triangles.clone(),
             normals,
@@ -463,31 +463,29 @@ impl ContourAligner {
     /// Fits x, y and yaw of the part in `view` so its outline meets the frame's edges,
     /// starting from `(x, y, yaw)`. `None` when too few samples find edges.
     pub fn align(&self, view: ContourView<'_>, start: (f64, f64, f64)) -> Option<ContourFit> {
-        self.rounds(view, start, &self.config.search_px, true)
+        self.rounds(view, start, 0..self.config.search_px.len())
     }
 
     /// The first, coarsest round of [`Self::align`] only: a cheap fit whose support ranks
     /// competing hypotheses before the best one is finished with [`Self::finish`].
     pub fn screen(&self, view: ContourView<'_>, start: (f64, f64, f64)) -> Option<ContourFit> {
-        self.rounds(view, start, &self.config.search_px[..1], false)
+        self.rounds(view, start, 0..1)
     }
 
     /// The remaining rounds of [`Self::align`] from a [`Self::screen`]ed fit.
     pub fn finish(&self, view: ContourView<'_>, screened: &ContourFit) -> Option<ContourFit> {
         let start = (screened.x, screened.y, screened.yaw);
-        self.rounds(view, start, &self.config.search_px[1..], true)
+        self.rounds(view, start, 1..self.config.search_px.len())
     }
 
-    /// Gauss–Newton rounds at the given search reaches (pixels), then the fit's support. The
-    /// last reach is the finest round when `ends_finest`: there the outline's [`FinalEdge`]
-    /// rule picks the steps.
+    /// Gauss–Newton rounds `which` of the configured search reaches, then the fit's support. In
+    /// the finest (last configured) round the outline's [`FinalEdge`] rule picks the steps.
     #[allow(non_snake_case)]
     fn rounds(
         &self,
         view: ContourView<'_>,
         start: (f64, f64, f64),
-        reaches: &[f64],
-        ends_finest: bool,
+        which: std::ops::Range<usize>,
     ) -> Option<ContourFit> {
         let ContourView {
             outline,
@@ -498,9 +496,11 @@ impl ContourAligner {
         let mut q = Vector3::new(start.0, start.1, start.2);
         let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
         let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
-        for (round, &reach) in reaches.iter().enumerate() {
+        let finest = self.config.search_px.len() - 1;
+        for round in which {
+            let reach = self.config.search_px[round];
             let (share, rule) = match outline.final_edge {
-                FinalEdge::Outermost if ends_finest && round + 1 == reaches.len() => {
+                FinalEdge::Outermost if round == finest => {
                     (self.config.outermost_share, FinalEdge::Outermost)
                 }
                 _ => (self.config.edge_share, FinalEdge::Nearest),

@@ -403,8 +403,8 @@ pub struct TruthRecord {
     pub resting: bool,
     /// Index of the detection matched to it.
     pub detection: Option<usize>,
-    /// The detection of any part whose mask overlaps it most, and that IoU: why a miss was
-    /// missed (merged with a neighbour, split, the wrong part, or nothing there).
+    /// For a missed instance, the detection of any part whose mask overlaps it most, and that
+    /// IoU: why it was missed (merged with a neighbour, split, the wrong part, or nothing there).
     #[serde(default)]
     pub closest: Option<Overlap>,
 }
@@ -676,7 +676,17 @@ fn evaluate_image(
         })
         .collect();
     let matches = greedy_match(&candidates, &truth_refs, options.min_iou);
-    for (truth, mask) in truths.iter_mut().zip(&truth_masks) {
+    // Why each miss was missed: the detection overlapping it most, of any part.
+    let mut matched = vec![false; truths.len()];
+    for m in matches.iter().flatten() {
+        matched[m.truth] = true;
+    }
+    for ((truth, mask), _) in truths
+        .iter_mut()
+        .zip(&truth_masks)
+        .zip(&matched)
+        .filter(|(_, m)| !**m)
+    {
         truth.closest = candidates
             .iter()
             .enumerate()
