@@ -7,6 +7,7 @@
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
+use cell::eval::gallery::GalleryItem;
 use cell::eval::matching::mask_from_raster;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::summarise;
@@ -297,6 +298,16 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
     assert_eq!((run.gallery[0].image, run.gallery[0].detection), (1, 0));
     let keys: Vec<f64> = run.gallery.iter().map(|g| g.refined.mssd_mm).collect();
     assert!(keys.windows(2).all(|w| w[0] >= w[1]), "{keys:?}");
+    // The flip's picture shows the true outline (green) and the estimate's (magenta) apart.
+    let has = |item: &GalleryItem, colour: [u8; 3]| item.crop.pixels().any(|p| p.0 == colour);
+    assert!(has(&run.gallery[0], [0, 230, 70]) && has(&run.gallery[0], [255, 0, 255]));
+    // The worst placed are parts in the right stable pose, not the flip.
+    assert_eq!(run.misplaced.len(), 1, "capacity: a third of the gallery");
+    for item in &run.misplaced {
+        assert_eq!(Some(&item.stable_pose), item.true_stable_pose.as_ref());
+        assert!(item.refined.angle_deg <= 10.0, "{:?}", item.refined);
+        assert!(page.contains(&item.file_name()));
+    }
 }
 
 #[test]

@@ -126,6 +126,21 @@ impl PartOutline {
         self
     }
 
+    /// The projected outline of the part at `camera_T_part`, as pixels every `spacing` pixels
+    /// along it: what the fit pulls onto the image's edges, for drawing it over the frame.
+    #[allow(non_snake_case)]
+    pub fn pixels(
+        &self,
+        camera: &Camera,
+        camera_T_part: &Isometry3<f64>,
+        spacing: f64,
+    ) -> Vec<Point2<f64>> {
+        self.outline(camera, camera_T_part, spacing)
+            .into_iter()
+            .map(|p| p.pixel)
+            .collect()
+    }
+
     /// The outline of the part at `camera_T_part`: points on the mesh whose projections lie on
     /// the boundary of the part's silhouette, every `spacing` pixels, with the outward normal.
     #[allow(non_snake_case)]
@@ -668,6 +683,8 @@ mod tests {
         let (outline, stable, camera, camera_T_table, _) = scene(0.002, -0.001, 0.3);
         let camera_T_part = camera_T_table * stable.table_T_part(0.002, -0.001, 0.3);
         let points = outline.outline(&camera, &camera_T_part, 2.0);
+        let pixels: Vec<_> = points.iter().map(|p| p.pixel).collect();
+        assert_eq!(outline.pixels(&camera, &camera_T_part, 2.0), pixels);
         let centre = camera.project(&(camera_T_part * Point3::origin())).unwrap();
         // 2 × (9 + 5) mm of perimeter at ≈ 7.1 px/mm, one sample per 2 px.
         assert!(

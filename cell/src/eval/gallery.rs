@@ -1,12 +1,15 @@
 //! The gallery of the worst estimates: each detection's 128 × 128 keypoint crop, upscaled × 2,
-//! with the predicted mask outline (yellow), the true keypoints (projected ground-truth pose,
-//! green circles) and the voted keypoints (red crosses).
+//! with the predicted mask outline (yellow), the part's true outline and keypoints (projected
+//! ground-truth pose: green line, green circles), the estimated pose's outline (magenta line)
+//! and the voted keypoints (red crosses).
 
 use image::{DynamicImage, GenericImageView, Rgb, RgbImage};
-use nalgebra::{Isometry3, Point2, Point3};
+use nalgebra::{Isometry3, Point2};
 use perception::Camera;
 use perception::learned::LearnedDetection;
 use perception::metrics::PoseErrors;
+
+use super::PartData;
 
 /// Side of the keypoint crop, pixels.
 pub const CROP: u32 = 128;
@@ -16,6 +19,7 @@ pub const ZOOM: u32 = 2;
 const YELLOW: Rgb<u8> = Rgb([255, 220, 0]);
 const GREEN: Rgb<u8> = Rgb([0, 230, 70]);
 const RED: Rgb<u8> = Rgb([255, 40, 40]);
+const MAGENTA: Rgb<u8> = Rgb([255, 0, 255]);
 const OUTSIDE: Rgb<u8> = Rgb([96, 96, 96]);
 
 /// One picture of the gallery and what its caption says.
@@ -120,14 +124,16 @@ impl<T> GalleryKeeper<T> {
     }
 }
 
-/// The detection's crop of `image`, upscaled, with its mask outline, the true keypoints
-/// (`keypoints` under `truth`, projected by `camera`) and the voted keypoints drawn.
+/// The detection's crop of `image`, upscaled, with its mask outline, the part's true outline
+/// and keypoints (`part` at `truth`, projected by `camera`), the outline at `estimate` (the
+/// camera-frame pose, if there is one) and the voted keypoints drawn.
 pub fn draw_crop(
     image: &DynamicImage,
     camera: &Camera,
     detection: &LearnedDetection,
-    keypoints: &[Point3<f64>],
+    part: &PartData,
     truth: &Isometry3<f64>,
+    estimate: Option<&Isometry3<f64>>,
 ) -> RgbImage {
     let [ox, oy] = detection.crop_origin;
     let side = CROP * ZOOM;
@@ -170,7 +176,18 @@ pub fn draw_crop(
             (p.y - oy as f64) * z + (z - 1.0) / 2.0,
         )
     };
-    for k in keypoints {
+    // Outline samples half a picture pixel apart draw a line.
+    let mut outline = |pose: &Isometry3<f64>, colour| {
+        for p in part.outline.pixels(camera, pose, 0.5 / z) {
+            let (x, y) = to_pic(p);
+            put(&mut out, x, y, colour);
+        }
+    };
+    outline(truth, GREEN);
+    if let Some(estimate) = estimate {
+        outline(estimate, MAGENTA);
+    }
+    for k in &part.keypoints {
         if let Ok(p) = camera.project(&(truth * k)) {
             circle(&mut out, to_pic(p), 5.0, GREEN);
         }

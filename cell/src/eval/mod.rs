@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion};
+use perception::contour::PartOutline;
 use perception::learned::{InstanceMask, LearnedDetections, StageTimes};
 use perception::metrics::{PoseErrors, pose_errors};
 use perception::part::{Catalog, PartRole, StablePose};
@@ -175,6 +176,8 @@ pub struct PartData {
     pub stable_poses: Vec<StablePose>,
     /// Diameter from models_info.json, mm.
     pub diameter_mm: f64,
+    /// Outline model of its mesh, to draw the true and estimated outlines in the gallery.
+    pub outline: PartOutline,
 }
 
 /// A BOP split opened for evaluation against a catalog.
@@ -279,6 +282,7 @@ impl EvalDataset {
                     near_group: ambiguity_group(&spec.symmetries),
                     stable_poses: spec.stable_poses.clone(),
                     diameter_mm: info.diameter,
+                    outline: PartOutline::new(&mesh),
                 },
             );
         }
@@ -488,6 +492,9 @@ pub struct EvalRun {
     pub frames: Vec<FrameRecord>,
     /// The worst crops, worst first.
     pub gallery: Vec<GalleryItem>,
+    /// The worst placed of the parts resting in the right stable pose (largest in-plane
+    /// error first): where contour alignment missed the outline.
+    pub misplaced: Vec<GalleryItem>,
     /// Matched detections without a pose, highest score first.
     pub failures: Vec<FailedCrop>,
 }
@@ -506,8 +513,11 @@ pub fn evaluate(
         .count()
         .min(options.limit.unwrap_or(usize::MAX));
     let mut frames = Vec::with_capacity(total);
-    let mut keeper = GalleryKeeper::new(options.gallery);
-    let mut failed = GalleryKeeper::new(options.gallery.div_ceil(3));
+    let mut galleries = Galleries {
+        worst: GalleryKeeper::new(options.gallery),
+        misplaced: GalleryKeeper::new(options.gallery.div_ceil(3)),
+        failed: GalleryKeeper::new(options.gallery.div_ceil(3)),
+    };
     for (i, (scene, image)) in dataset.images().take(total).enumerate() {
         frames.push(evaluate_image(
             dataset,
@@ -515,16 +525,23 @@ pub fn evaluate(
             image,
             detector,
             options,
-            &mut keeper,
-            &mut failed,
+            &mut galleries,
         )?);
         progress(i + 1, total);
     }
     Ok(EvalRun {
         frames,
-        gallery: keeper.into_items(),
-        failures: failed.into_items(),
+        gallery: galleries.worst.into_items(),
+        misplaced: galleries.misplaced.into_items(),
+        failures: galleries.failed.into_items(),
     })
+}
+
+/// The galleries one evaluation fills (see [`EvalRun`]).
+struct Galleries {
+    worst: GalleryKeeper,
+    misplaced: GalleryKeeper,
+    failed: GalleryKeeper<FailedCrop>,
 }
 
 /// Evaluates one image.
@@ -535,8 +552,7 @@ fn evaluate_image(
     image: &BopImage,
     detector: &mut dyn FrameDetector,
     options: &EvalOptions,
-    keeper: &mut GalleryKeeper,
-    failed: &mut GalleryKeeper<FailedCrop>,
+    galleries: &mut Galleries,
 ) -> Result<FrameRecord, EvalError> {
     let scene_camera = scene.dir.join("scene_camera.json");
     let at = |message: String| EvalError::Mismatch {
@@ -731,7 +747,7 @@ fn evaluate_image(
                 .as_ref()
                 .map(|p| part.stable_poses[p.class].name.clone());
             if let (Err(reason), false) = (&det.pose, truths[m.truth].ignored) {
-                failed.offer(det.score, || FailedCrop {
+                galleries.failed.offer(det.score, || FailedCrop {
                     scene: scene.id,
                     image: image.id,
                     detection: d,
@@ -739,13 +755,7 @@ fn evaluate_image(
                     score: det.score,
                     iou: m.iou,
                     reason: reason.clone(),
-                    crop: gallery::draw_crop(
-                        &frame_image.pixels,
-                        &camera,
-                        det,
-                        &part.keypoints,
-                        truth,
-                    ),
+                    crop: gallery::draw_crop(&frame_image.pixels, &camera, det, part, truth, None),
                 });
             }
             let flip = |est: &Isometry3<f64>| {
@@ -774,25 +784,36 @@ fn evaluate_image(
                         &c.keypoint_planar.camera_T_part,
                     ));
                 }
-                if !truths[m.truth].ignored {
-                    keeper.offer(refined_e.mssd_mm, || GalleryItem {
-                        scene: scene.id,
-                        image: image.id,
-                        detection: d,
-                        part: part.name.clone(),
-                        iou: m.iou,
-                        raw: raw_e,
-                        refined: refined_e,
-                        stable_pose: pose.stable_pose.clone(),
-                        true_stable_pose: rec.true_stable_pose.clone(),
-                        crop: gallery::draw_crop(
-                            &frame_image.pixels,
-                            &camera,
-                            det,
-                            &part.keypoints,
-                            truth,
-                        ),
-                    });
+                let item = || GalleryItem {
+                    scene: scene.id,
+                    image: image.id,
+                    detection: d,
+                    part: part.name.clone(),
+                    iou: m.iou,
+                    raw: raw_e,
+                    refined: refined_e,
+                    stable_pose: pose.stable_pose.clone(),
+                    true_stable_pose: rec.true_stable_pose.clone(),
+                    crop: gallery::draw_crop(
+                        &frame_image.pixels,
+                        &camera,
+                        det,
+                        part,
+                        truth,
+                        Some(refined),
+                    ),
+                };
+                let counted = &truths[m.truth];
+                if !counted.ignored {
+                    galleries.worst.offer(refined_e.mssd_mm, item);
+                    if counted.resting
+                        && rec.true_stable_pose.as_ref() == Some(&pose.stable_pose)
+                        && refined_e.angle_deg <= options.outlier_deg
+                    {
+                        galleries
+                            .misplaced
+                            .offer(refined_e.x_mm.hypot(refined_e.y_mm), item);
+                    }
                 }
             }
         }

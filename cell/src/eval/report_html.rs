@@ -125,19 +125,24 @@ pub fn write_eval_report(
         write(&rel, &png)?;
         plots.push((rel, title));
     }
-    let mut pictures = Vec::new();
-    for item in &run.gallery {
-        let rel = format!("{GALLERY_DIR}/{}", item.file_name());
-        write(&rel, &encode_png(&rel, &item.crop)?)?;
-        pictures.push((rel, item));
+    // The worst estimates, then the worst placed in the right stable pose (a crop in both is
+    // the same picture).
+    let mut galleries = [(&run.gallery, Vec::new()), (&run.misplaced, Vec::new())];
+    for (items, pictures) in &mut galleries {
+        for item in items.iter() {
+            let rel = format!("{GALLERY_DIR}/{}", item.file_name());
+            write(&rel, &encode_png(&rel, &item.crop)?)?;
+            pictures.push((rel, item));
+        }
     }
+    let [(_, worst), (_, misplaced)] = galleries;
     let mut failed = Vec::new();
     for item in &run.failures {
         let rel = format!("{GALLERY_DIR}/{}", item.file_name());
         write(&rel, &encode_png(&rel, &item.crop)?)?;
         failed.push((rel, item));
     }
-    let html = render(meta, summary, &plots, &pictures, &failed);
+    let html = render(meta, summary, &plots, [&worst, &misplaced], &failed);
     write(HTML_FILE, html.as_bytes())?;
     Ok(out.join(HTML_FILE))
 }
@@ -319,7 +324,7 @@ fn render(
     meta: &EvalMeta,
     s: &EvalSummary,
     plots: &[(String, &str)],
-    pictures: &[(String, &GalleryItem)],
+    [worst, misplaced]: [&[(String, &GalleryItem)]; 2],
     failed: &[(String, &FailedCrop)],
 ) -> String {
     let mut h = String::new();
@@ -524,36 +529,22 @@ fn render(
     let _ = write!(
         h,
         "<h2>The {} worst estimates (by refined MSSD)</h2><p>The keypoint crop × 2: predicted mask \
-         outline yellow, true keypoints (ground-truth pose projected) green circles, voted \
-         keypoints red crosses.</p>",
-        pictures.len()
+         outline yellow, the part's true outline and keypoints (ground-truth pose projected) \
+         green line and circles, the refined pose's outline magenta, voted keypoints red \
+         crosses.</p>",
+        worst.len()
     );
-    for (rel, item) in pictures {
+    gallery_figures(&mut h, worst);
+    if !misplaced.is_empty() {
         let _ = write!(
             h,
-            "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{} — scene {} image {} det {}; IoU \
-             {:.2}<br>refined: MSSD {:.2} mm, θ {:.1}°, x/y/z {:.2}/{:.2}/{:.1} mm<br>PnP: θ \
-             {:.1}°, x/y/z {:.2}/{:.2}/{:.1} mm<br>stable pose {} (true {})</figcaption></figure>",
-            escape(rel),
-            escape(&item.part),
-            escape(&item.part),
-            item.scene,
-            item.image,
-            item.detection,
-            item.iou,
-            item.refined.mssd_mm,
-            item.refined.angle_deg,
-            item.refined.x_mm,
-            item.refined.y_mm,
-            item.refined.z_mm,
-            item.raw.angle_deg,
-            item.raw.x_mm,
-            item.raw.y_mm,
-            item.raw.z_mm,
-            escape(&item.stable_pose),
-            escape(item.true_stable_pose.as_deref().unwrap_or("?"))
+            "<h2>The {} worst placed in the right stable pose (by in-plane error)</h2><p>Parts \
+             resting on the table whose stable pose was found and whose angle error is within \
+             the outlier angle: where contour alignment took the wrong edges.</p>",
+            misplaced.len()
         );
     }
+    gallery_figures(&mut h, misplaced);
     if !failed.is_empty() {
         let _ = write!(
             h,
@@ -580,4 +571,34 @@ fn render(
     }
     h.push_str("</html>\n");
     h
+}
+
+/// One figure per gallery item: the picture and its errors.
+fn gallery_figures(h: &mut String, items: &[(String, &GalleryItem)]) {
+    for (rel, item) in items {
+        let _ = write!(
+            h,
+            "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{} — scene {} image {} det {}; IoU \
+             {:.2}<br>refined: MSSD {:.2} mm, θ {:.1}°, x/y/z {:.2}/{:.2}/{:.1} mm<br>PnP: θ \
+             {:.1}°, x/y/z {:.2}/{:.2}/{:.1} mm<br>stable pose {} (true {})</figcaption></figure>",
+            escape(rel),
+            escape(&item.part),
+            escape(&item.part),
+            item.scene,
+            item.image,
+            item.detection,
+            item.iou,
+            item.refined.mssd_mm,
+            item.refined.angle_deg,
+            item.refined.x_mm,
+            item.refined.y_mm,
+            item.refined.z_mm,
+            item.raw.angle_deg,
+            item.raw.x_mm,
+            item.raw.y_mm,
+            item.raw.z_mm,
+            escape(&item.stable_pose),
+            escape(item.true_stable_pose.as_deref().unwrap_or("?"))
+        );
+    }
 }
