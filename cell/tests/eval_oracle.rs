@@ -298,6 +298,38 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
     assert_eq!((run.gallery[0].image, run.gallery[0].detection), (1, 0));
     let keys: Vec<f64> = run.gallery.iter().map(|g| g.refined.mssd_mm).collect();
     assert!(keys.windows(2).all(|w| w[0] >= w[1]), "{keys:?}");
+    // The BOP results file: one row per pose, each (but the flip's) on its ground truth.
+    let csv = std::fs::read_to_string(out.join("cell-learned_ds-test.csv")).unwrap();
+    let mut rows = csv.lines();
+    assert_eq!(rows.next(), Some("scene_id,im_id,obj_id,score,R,t,time"));
+    let rows: Vec<&str> = rows.collect();
+    assert_eq!(rows.len(), p.poses, "the false detections have no pose");
+    let bop = BopDataset::load(&root, &split).unwrap();
+    let mut on_truth = 0;
+    for row in &rows {
+        let cols: Vec<&str> = row.split(',').collect();
+        assert_eq!(cols.len(), 7, "{row}");
+        let numbers = |c: &str| -> Vec<f64> { c.split(' ').map(|x| x.parse().unwrap()).collect() };
+        let (r, t) = (numbers(cols[4]), numbers(cols[5]));
+        let pose = pose_from_bop(&r.try_into().unwrap(), &t.try_into().unwrap()).unwrap();
+        assert!(
+            (cols[6].parse::<f64>().unwrap() - 0.02).abs() < 1e-9,
+            "20 ms a frame"
+        );
+        let image = bop.scenes[cols[0].parse::<usize>().unwrap()]
+            .images
+            .iter()
+            .find(|i| i.id == cols[1].parse::<usize>().unwrap())
+            .unwrap();
+        let obj_id: u32 = cols[2].parse().unwrap();
+        on_truth += usize::from((0..image.gt.len()).any(|k| {
+            let truth = image.camera_T_part(k).unwrap();
+            image.gt[k].obj_id == obj_id
+                && (pose.translation.vector - truth.translation.vector).norm() < 1e-4
+                && pose.rotation.angle_to(&truth.rotation) < 0.5f64.to_radians()
+        }));
+    }
+    assert_eq!(on_truth, p.poses - 1, "all but the flip");
     // The flip's picture shows the true outline (green) and the estimate's (magenta) apart.
     let has = |item: &GalleryItem, colour: [u8; 3]| item.crop.pixels().any(|p| p.0 == colour);
     assert!(has(&run.gallery[0], [0, 230, 70]) && has(&run.gallery[0], [255, 0, 255]));

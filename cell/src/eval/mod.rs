@@ -8,6 +8,7 @@
 //! detection precision / recall, stable-pose rate, BOP MSSD / MSPD recall and stage times;
 //! [`report_html`] writes eval.json, eval.html, plots and the [`gallery`] of the worst crops.
 
+pub mod bop_results;
 pub mod gallery;
 pub mod matching;
 pub mod report_html;
@@ -26,7 +27,9 @@ use perception::planar::{PlanarConfig, PlanarPose, PlanarRefiner};
 use perception::symmetry::{ambiguity_group, symmetric_angle, symmetry_group};
 use perception::{Camera, Distortion, FrameImage};
 use serde::{Deserialize, Serialize};
-use sim::dataset::{BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop};
+use sim::dataset::{
+    BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop, pose_to_bop,
+};
 
 use gallery::{FailedCrop, GalleryItem, GalleryKeeper};
 use matching::{Candidate, Truth, greedy_match, mask_from_raster, touching_flags};
@@ -466,6 +469,32 @@ pub struct DetectionRecord {
     /// The pose's confidence, what the cell ranks and gates its picks by (with a pose).
     #[serde(default)]
     pub confidence: Option<f64>,
+    /// The refined pose, as BOP writes poses (with a pose, matched or not).
+    #[serde(default)]
+    pub pose: Option<BopPose>,
+    /// The part's BOP object id in the dataset (none if the dataset has no model of it).
+    #[serde(default)]
+    pub obj_id: Option<u32>,
+}
+
+/// A pose as BOP's ground truth and results write it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BopPose {
+    /// Model-to-camera rotation, row-major.
+    #[serde(rename = "cam_R_m2c")]
+    pub r: [f64; 9],
+    /// Model-to-camera translation, mm.
+    #[serde(rename = "cam_t_m2c")]
+    pub t_mm: [f64; 3],
+}
+
+impl BopPose {
+    /// The BOP form of `camera_T_part` (metres).
+    #[allow(non_snake_case)]
+    pub fn of(camera_T_part: &Isometry3<f64>) -> Self {
+        let (r, t_mm) = pose_to_bop(camera_T_part);
+        Self { r, t_mm }
+    }
 }
 
 /// One evaluated image.
@@ -717,6 +746,11 @@ fn evaluate_image(
     let mut detections = Vec::with_capacity(found.detections.len());
     for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {
         let mut rec = DetectionRecord {
+            obj_id: dataset
+                .parts
+                .values()
+                .find(|p| p.name == det.part)
+                .map(|p| p.obj_id),
             part: det.part.clone(),
             score: det.score,
             crop_origin: det.crop_origin,
@@ -735,8 +769,13 @@ fn evaluate_image(
             raw_flip_deg: None,
             refined_flip_deg: None,
             contour_support: None,
-            confidence: None,
+            confidence: det.confidence(),
             keypoint_refined: None,
+            pose: det
+                .pose
+                .as_ref()
+                .ok()
+                .map(|p| BopPose::of(&p.planar.camera_T_part)),
         };
         if let Some(m) = m {
             truths[m.truth].detection = Some(d);
@@ -773,7 +812,6 @@ fn evaluate_image(
                 let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
                 rec.refined_flip_deg = Some(flip(refined));
                 rec.refined = Some(refined_e);
-                rec.confidence = det.confidence();
                 if let Some(c) = &pose.contour {
                     rec.contour_support = Some(c.fit.support);
                     rec.keypoint_refined = Some(pose_errors(

@@ -1,6 +1,6 @@
-//! The evaluation's files: `eval.json` (settings, summary, every frame's records), `eval.html`
-//! (one page, inline CSS, nothing fetched), PNG plots in `plots/` and the gallery in `gallery/`,
-//! each written atomically.
+//! The evaluation's files: `eval.json` (settings, summary, every frame's records), the estimates
+//! as a BOP results file ([`bop_results`]), `eval.html` (one page, inline CSS, nothing fetched),
+//! PNG plots in `plots/` and the galleries in `gallery/`, each written atomically.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -10,6 +10,7 @@ use image::codecs::png::PngEncoder;
 use plotters::prelude::*;
 use serde::Serialize;
 
+use super::bop_results;
 use super::gallery::{FailedCrop, GalleryItem};
 use super::table1::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, Table1Row, seed_row};
 use super::{EvalOptions, EvalRun, FrameRecord};
@@ -67,8 +68,8 @@ struct JsonOut<'a> {
     frames: &'a [FrameRecord],
 }
 
-/// Writes eval.json, eval.html, the plots and the gallery into `out` (created); returns the
-/// HTML path.
+/// Writes eval.json, the BOP results, eval.html, the plots and the galleries into `out`
+/// (created); returns the HTML path.
 pub fn write_eval_report(
     out: &Path,
     meta: &EvalMeta,
@@ -101,6 +102,15 @@ pub fn write_eval_report(
     })?;
     json.push('\n');
     write(JSON_FILE, json.as_bytes())?;
+    let dataset_name = meta
+        .dataset
+        .file_name()
+        .unwrap_or_default()
+        .to_string_lossy();
+    write(
+        &bop_results::file_name(&dataset_name, &meta.split),
+        bop_results::results_csv(&run.frames).as_bytes(),
+    )?;
 
     let mut plots = Vec::new();
     for (name, title, x_label, x_max, get) in [

@@ -665,6 +665,8 @@ mod tests {
             contour_support: None,
             confidence: None,
             keypoint_refined: None,
+            pose: None,
+            obj_id: None,
         }
     }
 

@@ -136,7 +136,7 @@ pub(crate) fn row_major(r: &Matrix3<f64>) -> [f64; 9] {
 }
 
 /// (R row-major, t in mm) of a pose.
-pub(crate) fn pose_to_bop(pose: &Isometry3<f64>) -> ([f64; 9], [f64; 3]) {
+pub fn pose_to_bop(pose: &Isometry3<f64>) -> ([f64; 9], [f64; 3]) {
     let r = pose.rotation.to_rotation_matrix();
     let t = pose.translation.vector * 1000.0;
     (row_major(r.matrix()), [t.x, t.y, t.z])

@@ -15,7 +15,9 @@ mod overview;
 mod preview;
 mod reader;
 
-pub use bop::{BopCamera, GtInfo, GtPose, ModelInfo, SceneCamera, pose_from_bop, write_models};
+pub use bop::{
+    BopCamera, GtInfo, GtPose, ModelInfo, SceneCamera, pose_from_bop, pose_to_bop, write_models,
+};
 pub use config::{DatasetConfig, Split};
 pub use crops::CropLabel;
 pub use error::DatasetError;
