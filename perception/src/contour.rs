@@ -310,12 +310,15 @@ fn cross(a: Vector2<f64>, b: Vector2<f64>) -> f64 {
 /// Longest search along a normal, pixels.
 const MAX_REACH: usize = 16;
 
-/// A grey-level window of the frame (0–1), sampled bilinearly in sensor pixels.
+/// A grey-level window of the frame (0–1), sampled bilinearly in sensor pixels, and where in it
+/// the part is hidden by others.
 pub struct GreyPatch {
     origin: [f64; 2],
     width: usize,
     height: usize,
     values: Vec<f32>,
+    /// Per pixel, whether another part covers it (empty: nothing hidden).
+    hidden: Vec<bool>,
 }
 
 impl GreyPatch {
@@ -337,7 +340,35 @@ impl GreyPatch {
             width: w as usize,
             height: h as usize,
             values: grey.into_raw(),
+            hidden: Vec::new(),
         }
+    }
+
+    /// The same patch with the pixels where `hidden` (of a sensor pixel) holds marked as covered
+    /// by another part: outline samples there are neither fitted nor counted in the support.
+    pub fn with_hidden(mut self, hidden: impl Fn(Point2<f64>) -> bool) -> Self {
+        let [x0, y0] = self.origin;
+        self.hidden = (0..self.height)
+            .flat_map(|i| (0..self.width).map(move |j| (i, j)))
+            .map(|(i, j)| hidden(Point2::new(x0 + j as f64, y0 + i as f64)))
+            .collect();
+        self
+    }
+
+    /// Whether the pixel nearest sensor point `p` is covered by another part.
+    fn is_hidden(&self, p: Point2<f64>) -> bool {
+        if self.hidden.is_empty() {
+            return false;
+        }
+        let (u, v) = (
+            (p.x - self.origin[0]).round(),
+            (p.y - self.origin[1]).round(),
+        );
+        if !(u >= 0.0 && v >= 0.0) {
+            return false;
+        }
+        let (j, i) = (u as usize, v as usize);
+        j < self.width && i < self.height && self.hidden[i * self.width + j]
     }
 
     /// Bilinear grey level at a sensor pixel, or `None` outside the patch.
@@ -425,7 +456,8 @@ pub struct ContourFit {
     pub y: f64,
     /// Yaw about the table normal, radians.
     pub yaw: f64,
-    /// Share of outline samples that found an edge within one pixel at the end.
+    /// Share of the outline samples in sight (not hidden by other parts) that found an edge
+    /// within one pixel at the end.
     pub support: f64,
 }
 
@@ -481,8 +513,9 @@ impl ContourAligner {
         self.rounds(view, start, 0..self.config.search_px.len())
     }
 
-    /// The first, coarsest round of [`Self::align`] only: a cheap fit whose support ranks
-    /// competing hypotheses before the best one is finished with [`Self::finish`].
+    /// The first, coarsest round of [`Self::align`] only, on the outline samples in sight: a
+    /// cheap fit whose support ranks competing hypotheses before the best one is finished with
+    /// [`Self::finish`].
     pub fn screen(&self, view: ContourView<'_>, start: (f64, f64, f64)) -> Option<ContourFit> {
         self.rounds(view, start, 0..1)
     }
@@ -512,6 +545,11 @@ impl ContourAligner {
         let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
         let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
         let finest = self.config.search_px.len() - 1;
+        // Screening starts from keypoint poses pixels off, where the edges of the parts covering
+        // this one would rank its hypotheses, so it fits only the samples in sight. The later
+        // rounds start within a pixel or two, where a touching neighbour's edge is mostly this
+        // part's own too, and fit every sample (skipping them there lost accuracy).
+        let screening = which == (0..1);
         for round in which {
             let reach = self.config.search_px[round];
             let (share, rule) = match outline.final_edge {
@@ -536,6 +574,9 @@ impl ContourAligner {
                     else {
                         continue;
                     };
+                    if screening && patch.is_hidden(pixel) {
+                        continue;
+                    }
                     let Some((offset, contrast)) =
                         patch.edge_along(pixel, p.normal, reach, share, rule)
                     else {
@@ -562,11 +603,12 @@ impl ContourAligner {
                 }
             }
         }
-        let points = outline.outline(camera, &pose(&q), self.config.spacing_px);
+        let mut points = outline.outline(camera, &pose(&q), self.config.spacing_px);
+        points.retain(|p| !patch.is_hidden(p.pixel));
         if points.is_empty() {
             return None;
         }
-        // Support: the strongest step within a pixel of each sample is an edge.
+        // Support: the strongest step within a pixel of each sample in sight is an edge.
         let hits = points
             .iter()
             .filter_map(|p| patch.edge_along(p.pixel, p.normal, 1.0, 1.0, FinalEdge::Nearest))
@@ -753,6 +795,49 @@ mod tests {
         // A half-turn of a box is the same box; a quarter turn is not.
         let turned = aligner.align(view, (x, y, yaw + 1.4));
         assert!(turned.is_none_or(|f| f.support < 0.6), "{turned:?}");
+    }
+
+    #[test]
+    fn samples_hidden_by_another_part_are_not_screened_or_counted() {
+        // The lower third of the frame around the box is covered by another part (a flat grey),
+        // which hides the box's lower side and the lower ends of its short sides.
+        let (x, y, yaw) = (0.0, 0.0, 0.0);
+        let (outline, stable, camera, camera_T_table, mut patch) = scene(x, y, yaw);
+        let centre = camera
+            .project(&(camera_T_table * stable.table_T_part(x, y, yaw) * Point3::origin()))
+            .unwrap();
+        let cut = centre.y + 10.0;
+        for i in 0..patch.height {
+            if patch.origin[1] + i as f64 > cut {
+                patch.values[i * patch.width..(i + 1) * patch.width].fill(0.5);
+            }
+        }
+        let aligner = ContourAligner::new(camera_T_table, ContourConfig::default());
+        let start = (x + 1e-4, y, yaw + 2f64.to_radians());
+        let screened = |patch: &GreyPatch| {
+            let view = ContourView {
+                outline: &outline,
+                stable: &stable,
+                camera: &camera,
+                patch,
+            };
+            aligner.screen(view, start).expect("the box is found")
+        };
+        let seen_all = screened(&patch);
+        let patch = patch.with_hidden(|p| p.y > cut);
+        let seen_visible = screened(&patch);
+        // Counted over all samples, the hidden ones miss; over those in sight, nearly all hit.
+        assert!(seen_all.support < 0.8, "support {}", seen_all.support);
+        assert!(
+            seen_visible.support > 0.95,
+            "support {}",
+            seen_visible.support
+        );
+        let (err_px, err_deg) = fit_error(&seen_visible, (x, y, yaw), &camera);
+        assert!(
+            err_px < 0.05 && err_deg < 0.05,
+            "{err_px:.3} px, {err_deg:.3}°"
+        );
     }
 
     #[test]

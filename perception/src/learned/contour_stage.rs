@@ -4,7 +4,7 @@
 
 use std::f64::consts::PI;
 
-use nalgebra::{Isometry3, UnitQuaternion};
+use nalgebra::{Isometry3, Point2, UnitQuaternion};
 
 use super::models::CROP_SIZE;
 use crate::Camera;
@@ -63,9 +63,9 @@ impl ContourStage {
     }
 
     /// Aligns `estimate` of part `class` (whose keypoint crop starts at sensor pixel
-    /// `crop_origin`) on the edges of `image` and weighs its confidence by the fit's quality;
-    /// keeps the keypoint pose, with no confidence, when no hypothesis finds enough of its
-    /// outline.
+    /// `crop_origin`) on the edges of `image`, except where `hidden` (of a sensor pixel) says
+    /// another part covers it, and weighs its confidence by the fit's quality; keeps the
+    /// keypoint pose, with no confidence, when no hypothesis finds enough of its outline.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
         &self,
@@ -76,6 +76,7 @@ impl ContourStage {
         image: &FrameImage,
         camera: &Camera,
         crop_origin: [i64; 2],
+        hidden: impl Fn(Point2<f64>) -> bool,
     ) {
         let (Some(outlined), Some(refiner)) = (self.parts.get(class), estimator.refiner(part))
         else {
@@ -86,7 +87,8 @@ impl ContourStage {
             &image.pixels,
             image.origin,
             [crop_origin[0] - MARGIN, crop_origin[1] - MARGIN, side, side],
-        );
+        )
+        .with_hidden(hidden);
         let aligner = ContourAligner::new(*refiner.camera_T_table(), self.config);
         let planar = &estimate.planar;
         // The keypoint pose and its half-turn, its near-symmetric twins snapped onto their own

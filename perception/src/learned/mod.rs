@@ -13,6 +13,7 @@ pub mod image;
 pub mod instances;
 pub mod keypoint_net;
 pub mod models;
+mod occlusion;
 mod perception;
 mod pipeline;
 pub mod segmenter;

@@ -15,6 +15,7 @@ use super::image::Preprocessor;
 use super::instances::{Instance, InstanceConfig, InstanceGrouper};
 use super::keypoint_net::KeypointNet;
 use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
+use super::occlusion::CellOwners;
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
 use crate::contour::ContourConfig;
@@ -248,19 +249,22 @@ impl LearnedPipeline {
         )?;
         let contour = self.contour.as_ref();
         let parts = &self.parts;
+        let owners = CellOwners::new(&instances, self.map.width, self.map.height, sensor);
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
-        let pose_of = |((inst, origin), votes): &((&Instance, &[i64; 2]), _)| {
+        let pose_of = |k: usize| {
+            let ((inst, origin), votes) = &jobs[k];
             let ctx = PoseContext {
                 estimator,
                 contour,
                 image,
                 camera,
+                hidden: &|p| owners.other_than(k, p),
             };
             ctx.pose(inst.part, &parts[inst.part], votes, **origin)
         };
         let threads = self.config.threads.min(jobs.len()).max(1);
         let mut poses: Vec<PoseOutcome> = if threads <= 1 {
-            jobs.iter().map(pose_of).collect()
+            (0..jobs.len()).map(pose_of).collect()
         } else {
             // Workers take the next detection as they free up: poses differ widely in cost
             // (a refused estimate is not aligned).
@@ -272,8 +276,10 @@ impl LearnedPipeline {
                             let mut mine = Vec::new();
                             loop {
                                 let i = next.fetch_add(1, Ordering::Relaxed);
-                                let Some(job) = jobs.get(i) else { break mine };
-                                mine.push((i, pose_of(job)));
+                                if i >= jobs.len() {
+                                    break mine;
+                                }
+                                mine.push((i, pose_of(i)));
                             }
                         })
                     })
@@ -320,12 +326,14 @@ type PoseOutcome = (
     Option<PoseEstimate>,
 );
 
-/// What the pose stage of one frame shares between its workers.
+/// What the pose stage of one frame shares between its workers, and where other parts hide
+/// the detection at hand.
 struct PoseContext<'a> {
     estimator: &'a PoseEstimator,
     contour: Option<&'a ContourStage>,
     image: &'a FrameImage,
     camera: &'a Camera,
+    hidden: &'a (dyn Fn(Point2<f64>) -> bool + Sync),
 }
 
 impl PoseContext<'_> {
@@ -353,6 +361,7 @@ impl PoseContext<'_> {
                         self.image,
                         self.camera,
                         origin,
+                        self.hidden,
                     );
                 }
                 (keypoints, Ok(pose), None)
