@@ -798,6 +798,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(non_snake_case)]
     fn samples_hidden_by_another_part_are_not_screened_or_counted() {
         // The lower third of the frame around the box is covered by another part (a flat grey),
         // which hides the box's lower side and the lower ends of its short sides.
