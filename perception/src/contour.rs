@@ -344,14 +344,17 @@ impl GreyPatch {
         }
     }
 
-    /// The same patch with the pixels where `hidden` (of a sensor pixel) holds marked as covered
-    /// by another part: outline samples there are neither fitted nor counted in the support.
-    pub fn with_hidden(mut self, hidden: impl Fn(Point2<f64>) -> bool) -> Self {
-        let [x0, y0] = self.origin;
-        self.hidden = (0..self.height)
-            .flat_map(|i| (0..self.width).map(move |j| (i, j)))
-            .map(|(i, j)| hidden(Point2::new(x0 + j as f64, y0 + i as f64)))
-            .collect();
+    /// The same patch with the pixels that another part covers marked: `covered(y, x, row)`
+    /// marks in `row` those of sensor row `y` from column `x` on. Screening fits no outline
+    /// sample there and no support counts one.
+    pub fn with_hidden(mut self, covered: impl Fn(i64, i64, &mut [bool])) -> Self {
+        let (x0, y0) = (self.origin[0] as i64, self.origin[1] as i64);
+        self.hidden = vec![false; self.width * self.height];
+        if self.width > 0 {
+            for (i, row) in self.hidden.chunks_exact_mut(self.width).enumerate() {
+                covered(y0 + i as i64, x0, row);
+            }
+        }
         self
     }
 
@@ -825,7 +828,7 @@ mod tests {
             aligner.screen(view, start).expect("the box is found")
         };
         let seen_all = screened(&patch);
-        let patch = patch.with_hidden(|p| p.y > cut);
+        let patch = patch.with_hidden(|y, _, row| row.fill(y as f64 > cut));
         let seen_visible = screened(&patch);
         // Counted over all samples, the hidden ones miss; over those in sight, nearly all hit.
         assert!(seen_all.support < 0.8, "support {}", seen_all.support);

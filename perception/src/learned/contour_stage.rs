@@ -4,7 +4,7 @@
 
 use std::f64::consts::PI;
 
-use nalgebra::{Isometry3, Point2, UnitQuaternion};
+use nalgebra::{Isometry3, UnitQuaternion};
 
 use super::models::CROP_SIZE;
 use crate::Camera;
@@ -63,8 +63,8 @@ impl ContourStage {
     }
 
     /// Aligns `estimate` of part `class` (whose keypoint crop starts at sensor pixel
-    /// `crop_origin`) on the edges of `image`, except where `hidden` (of a sensor pixel) says
-    /// another part covers it, and weighs its confidence by the fit's quality; keeps the
+    /// `crop_origin`) on the edges of `image`, except where `covered` marks another part over
+    /// it (see [`GreyPatch::with_hidden`]), and weighs its confidence by the fit's quality; keeps the
     /// keypoint pose, with no confidence, when no hypothesis finds enough of its outline.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
@@ -76,7 +76,7 @@ impl ContourStage {
         image: &FrameImage,
         camera: &Camera,
         crop_origin: [i64; 2],
-        hidden: impl Fn(Point2<f64>) -> bool,
+        covered: impl Fn(i64, i64, &mut [bool]),
     ) {
         let (Some(outlined), Some(refiner)) = (self.parts.get(class), estimator.refiner(part))
         else {
@@ -88,7 +88,7 @@ impl ContourStage {
             image.origin,
             [crop_origin[0] - MARGIN, crop_origin[1] - MARGIN, side, side],
         )
-        .with_hidden(hidden);
+        .with_hidden(covered);
         let aligner = ContourAligner::new(*refiner.camera_T_table(), self.config);
         let planar = &estimate.planar;
         // The keypoint pose and its half-turn, its near-symmetric twins snapped onto their own

@@ -1,8 +1,6 @@
 //! Where the other detected parts lie in a frame: contour alignment neither fits nor counts an
 //! outline sample there, because the edge it would find belongs to the part on top (or beside).
 
-use nalgebra::Point2;
-
 use super::instances::Instance;
 use super::models::SEGMENTER_STRIDE;
 
@@ -12,7 +10,7 @@ pub struct CellOwners {
     width: usize,
     height: usize,
     /// Sensor pixel of cell (0, 0)'s first pixel.
-    origin: [f64; 2],
+    origin: [i64; 2],
     /// Instance index + 1 per cell, row-major (0: no instance).
     owner: Vec<u32>,
 }
@@ -32,28 +30,27 @@ impl CellOwners {
         Self {
             width,
             height,
-            origin: origin.map(f64::from),
+            origin: origin.map(i64::from),
             owner,
         }
     }
 
-    /// Whether sensor pixel `p` (pixel centres at integers) lies in a cell of an instance other
-    /// than instance `me`.
-    pub fn other_than(&self, me: usize, p: Point2<f64>) -> bool {
-        let s = SEGMENTER_STRIDE as f64;
-        let (u, v) = (
-            (p.x - self.origin[0] + 0.5) / s,
-            (p.y - self.origin[1] + 0.5) / s,
-        );
-        if !(u >= 0.0 && v >= 0.0) {
-            return false;
+    /// Marks in `row` the pixels of sensor row `y` from column `x` on that lie in a cell of an
+    /// instance other than instance `me` (and clears the others).
+    pub fn cover_row(&self, me: usize, y: i64, x: i64, row: &mut [bool]) {
+        row.fill(false);
+        let s = SEGMENTER_STRIDE as i64;
+        let i = (y - self.origin[1]).div_euclid(s);
+        if !(0..self.height as i64).contains(&i) {
+            return;
         }
-        let (j, i) = (u as usize, v as usize);
-        if j >= self.width || i >= self.height {
-            return false;
+        let owners = &self.owner[i as usize * self.width..][..self.width];
+        for (k, covered) in row.iter_mut().enumerate() {
+            let j = (x + k as i64 - self.origin[0]).div_euclid(s);
+            if let Some(&o) = usize::try_from(j).ok().and_then(|j| owners.get(j)) {
+                *covered = o != 0 && o as usize != me + 1;
+            }
         }
-        let o = self.owner[i * self.width + j];
-        o != 0 && o as usize != me + 1
     }
 }
 
@@ -62,7 +59,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_pixel_is_hidden_by_the_other_instances_cells_only() {
+    fn a_row_is_covered_by_the_other_instances_cells_only() {
         // A 4 × 2 cell map at sensor pixel (100, 50): instance 0 owns cells (0, 0) and (0, 1),
         // instance 1 owns cell (1, 3).
         let inst = |cells: Vec<u32>| Instance {
@@ -72,25 +69,27 @@ mod tests {
             cells,
         };
         let owners = CellOwners::new(&[inst(vec![0, 1]), inst(vec![7])], 4, 2, [100, 50]);
-        let p = |x: f64, y: f64| Point2::new(x, y);
-        // Cell (1, 3) covers sensor pixels 112..=115 × 54..=57 (centres), edges at ±0.5.
-        assert!(owners.other_than(0, p(112.0, 54.0)));
-        assert!(owners.other_than(0, p(115.4, 57.4)));
-        assert!(
-            !owners.other_than(0, p(111.4, 54.0)),
-            "cell (1, 2) has no owner"
+        let row = |me: usize, y: i64, x: i64, n: usize| {
+            let mut out = vec![true; n];
+            owners.cover_row(me, y, x, &mut out);
+            out
+        };
+        // Cell (1, 3) covers sensor pixels 112..=115 × 54..=57; row 54 from column 110 on.
+        let covered_by_1 = [false, false, true, true, true, true, false, false];
+        assert_eq!(
+            row(0, 54, 110, 8),
+            covered_by_1,
+            "past the map's right side: uncovered"
         );
-        assert!(!owners.other_than(1, p(113.0, 55.0)), "its own cell");
-        assert!(owners.other_than(1, p(100.0, 50.0)) && owners.other_than(1, p(107.0, 53.0)));
-        assert!(!owners.other_than(0, p(100.0, 50.0)));
-        // Outside the map nothing is hidden.
-        for q in [
-            p(99.0, 50.0),
-            p(100.0, 49.0),
-            p(116.0, 57.0),
-            p(115.0, 58.0),
-        ] {
-            assert!(!owners.other_than(0, q) && !owners.other_than(1, q), "{q}");
-        }
+        assert_eq!(row(0, 57, 110, 8), covered_by_1);
+        assert_eq!(row(1, 54, 110, 8), [false; 8], "its own cell");
+        // Row 50 from column 98: instance 0's cells are 100..=107.
+        let covered_by_0: Vec<bool> = (98..110).map(|x| (100..108).contains(&x)).collect();
+        assert_eq!(row(1, 50, 98, 12), covered_by_0);
+        assert_eq!(row(1, 53, 98, 12), covered_by_0);
+        assert_eq!(row(0, 50, 98, 12), [false; 12]);
+        // Rows above and below the map are uncovered.
+        assert_eq!(row(0, 49, 110, 8), [false; 8]);
+        assert_eq!(row(0, 58, 110, 8), [false; 8]);
     }
 }

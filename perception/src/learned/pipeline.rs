@@ -258,7 +258,7 @@ impl LearnedPipeline {
                 contour,
                 image,
                 camera,
-                hidden: &|p| owners.other_than(k, p),
+                covered: &|y, x, row: &mut [bool]| owners.cover_row(k, y, x, row),
             };
             ctx.pose(inst.part, &parts[inst.part], votes, **origin)
         };
@@ -333,7 +333,7 @@ struct PoseContext<'a> {
     contour: Option<&'a ContourStage>,
     image: &'a FrameImage,
     camera: &'a Camera,
-    hidden: &'a (dyn Fn(Point2<f64>) -> bool + Sync),
+    covered: &'a (dyn Fn(i64, i64, &mut [bool]) + Sync),
 }
 
 impl PoseContext<'_> {
@@ -361,7 +361,7 @@ impl PoseContext<'_> {
                         self.image,
                         self.camera,
                         origin,
-                        self.hidden,
+                        self.covered,
                     );
                 }
                 (keypoints, Ok(pose), None)
