@@ -277,11 +277,11 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
         models: PathBuf::from("none (ground truth)"),
         options,
     };
-    let html = write_eval_report(&out, &meta, &s, &run).unwrap();
-    let page = std::fs::read_to_string(&html).unwrap();
+    let files = write_eval_report(&out, &meta, &s, &run).unwrap();
+    let page = std::fs::read_to_string(&files.html).unwrap();
     assert!(page.contains("Table 1") && page.contains("seed paper"));
     let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("eval.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(&files.json).unwrap()).unwrap();
     assert_eq!(json["frames"].as_array().unwrap().len(), 2);
     assert_eq!(json["summary"]["pooled"]["false_positives"], 2);
     assert_eq!(run.gallery.len(), 3.min(p.poses));
@@ -299,7 +299,8 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
     let keys: Vec<f64> = run.gallery.iter().map(|g| g.refined.mssd_mm).collect();
     assert!(keys.windows(2).all(|w| w[0] >= w[1]), "{keys:?}");
     // The BOP results file: one row per pose, each (but the flip's) on its ground truth.
-    let csv = std::fs::read_to_string(out.join("cell-learned_ds-test.csv")).unwrap();
+    assert_eq!(files.bop_results, out.join("cell-learned_ds-test.csv"));
+    let csv = std::fs::read_to_string(&files.bop_results).unwrap();
     let mut rows = csv.lines();
     assert_eq!(rows.next(), Some("scene_id,im_id,obj_id,score,R,t,time"));
     let rows: Vec<&str> = rows.collect();

@@ -33,7 +33,7 @@ pub struct Args {
     /// Part catalog the dataset was made from (object id = catalog index + 1).
     #[arg(long, default_value = "scenarios/parts/usbc.toml")]
     pub catalog: PathBuf,
-    /// Output folder for eval.json, eval.html, plots/ and gallery/.
+    /// Output folder for eval.json, the BOP results file, eval.html, plots/ and gallery/.
     #[arg(long, default_value = "target/eval")]
     pub out: PathBuf,
     /// Evaluate at most this many images.
@@ -113,7 +113,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         models: args.models.clone(),
         options,
     };
-    let html = write_eval_report(&args.out, &meta, &summary, &run)?;
+    let files = write_eval_report(&args.out, &meta, &summary, &run)?;
     print!("{}", text_table(&summary));
     let p = &summary.pooled;
     println!(
@@ -196,13 +196,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         );
     }
     println!(
-        "{} images of {}/{} in {:.1} s; wrote {} and {}",
+        "{} images of {}/{} in {:.1} s; wrote {}, {} and {}",
         summary.frames,
         args.dataset.display(),
         split,
         elapsed,
-        args.out.join(cell::eval::report_html::JSON_FILE).display(),
-        html.display()
+        files.json.display(),
+        files.bop_results.display(),
+        files.html.display()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -68,14 +68,25 @@ struct JsonOut<'a> {
     frames: &'a [FrameRecord],
 }
 
+/// The main files a report wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EvalFiles {
+    /// eval.json.
+    pub json: PathBuf,
+    /// The BOP Challenge results file.
+    pub bop_results: PathBuf,
+    /// eval.html.
+    pub html: PathBuf,
+}
+
 /// Writes eval.json, the BOP results, eval.html, the plots and the galleries into `out`
-/// (created); returns the HTML path.
+/// (created).
 pub fn write_eval_report(
     out: &Path,
     meta: &EvalMeta,
     summary: &EvalSummary,
     run: &EvalRun,
-) -> Result<PathBuf, EvalReportError> {
+) -> Result<EvalFiles, EvalReportError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |source| EvalReportError::Io { path, source }
@@ -107,10 +118,8 @@ pub fn write_eval_report(
         .file_name()
         .unwrap_or_default()
         .to_string_lossy();
-    write(
-        &bop_results::file_name(&dataset_name, &meta.split),
-        bop_results::results_csv(&run.frames).as_bytes(),
-    )?;
+    let bop_file = bop_results::file_name(&dataset_name, &meta.split);
+    write(&bop_file, bop_results::results_csv(&run.frames).as_bytes())?;
 
     let mut plots = Vec::new();
     for (name, title, x_label, x_max, get) in [
@@ -154,7 +163,11 @@ pub fn write_eval_report(
     }
     let html = render(meta, summary, &plots, [&worst, &misplaced], &failed);
     write(HTML_FILE, html.as_bytes())?;
-    Ok(out.join(HTML_FILE))
+    Ok(EvalFiles {
+        json: out.join(JSON_FILE),
+        bop_results: out.join(bop_file),
+        html: out.join(HTML_FILE),
+    })
 }
 
 type Series = (String, RGBColor, bool, Vec<f64>);
