@@ -144,23 +144,16 @@ pub fn write_eval_report(
         write(&rel, &png)?;
         plots.push((rel, title));
     }
-    // The worst estimates, then the worst placed in the right stable pose (a crop in both is
-    // the same picture).
-    let mut galleries = [(&run.gallery, Vec::new()), (&run.misplaced, Vec::new())];
-    for (items, pictures) in &mut galleries {
-        for item in items.iter() {
-            let rel = format!("{GALLERY_DIR}/{}", item.file_name());
-            write(&rel, &encode_png(&rel, &item.crop)?)?;
-            pictures.push((rel, item));
-        }
-    }
-    let [(_, worst), (_, misplaced)] = galleries;
-    let mut failed = Vec::new();
-    for item in &run.failures {
-        let rel = format!("{GALLERY_DIR}/{}", item.file_name());
-        write(&rel, &encode_png(&rel, &item.crop)?)?;
-        failed.push((rel, item));
-    }
+    // Each gallery picture as gallery/NAME, and its path for the page (a crop in two galleries
+    // is the same picture).
+    let save = |name: String, crop: &image::RgbImage| {
+        let rel = format!("{GALLERY_DIR}/{name}");
+        write(&rel, &encode_png(&rel, crop)?)?;
+        Ok::<_, EvalReportError>(rel)
+    };
+    let worst = saved(&run.gallery, |i| save(i.file_name(), &i.crop))?;
+    let misplaced = saved(&run.misplaced, |i| save(i.file_name(), &i.crop))?;
+    let failed = saved(&run.failures, |i| save(i.file_name(), &i.crop))?;
     let html = render(meta, summary, &plots, [&worst, &misplaced], &failed);
     write(HTML_FILE, html.as_bytes())?;
     Ok(EvalFiles {
@@ -168,6 +161,14 @@ pub fn write_eval_report(
         bop_results: out.join(bop_file),
         html: out.join(HTML_FILE),
     })
+}
+
+/// Each of `items` with the path `save` wrote its picture to.
+fn saved<T>(
+    items: &[T],
+    save: impl Fn(&T) -> Result<String, EvalReportError>,
+) -> Result<Vec<(String, &T)>, EvalReportError> {
+    items.iter().map(|i| Ok((save(i)?, i))).collect()
 }
 
 type Series = (String, RGBColor, bool, Vec<f64>);
