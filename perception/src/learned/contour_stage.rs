@@ -64,8 +64,9 @@ impl ContourStage {
 
     /// Aligns `estimate` of part `class` (whose keypoint crop starts at sensor pixel
     /// `crop_origin`) on the edges of `image`, except where `covered` marks another part over
-    /// it (see [`GreyPatch::with_hidden`]), and weighs its confidence by the fit's quality; keeps the
-    /// keypoint pose, with no confidence, when no hypothesis finds enough of its outline.
+    /// it (see [`GreyPatch::with_hidden`]), and weighs its confidence by the fit's quality;
+    /// keeps the keypoint pose, with no confidence, when no hypothesis finds enough of its
+    /// outline.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
         &self,

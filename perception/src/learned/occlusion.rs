@@ -4,7 +4,8 @@
 use super::instances::Instance;
 use super::models::SEGMENTER_STRIDE;
 
-/// The instance that owns each segmenter cell of a frame.
+/// The instance that owns each segmenter cell of a frame (its buffer reused from frame to
+/// frame).
 #[derive(Debug, Clone, Default)]
 pub struct CellOwners {
     width: usize,
@@ -16,23 +17,20 @@ pub struct CellOwners {
 }
 
 impl CellOwners {
-    /// The owners of the `width` × `height` cells of a segment map whose first pixel is sensor
-    /// pixel `origin`, from the frame's `instances`.
-    pub fn new(instances: &[Instance], width: usize, height: usize, origin: [u32; 2]) -> Self {
-        let mut owner = vec![0; width * height];
+    /// Sets the owners of the `width` × `height` cells of a segment map whose first pixel is
+    /// sensor pixel `origin` from the frame's `instances`.
+    pub fn set(&mut self, instances: &[Instance], width: usize, height: usize, origin: [u32; 2]) {
+        self.owner.clear();
+        self.owner.resize(width * height, 0);
         for (k, inst) in instances.iter().enumerate() {
             for &c in &inst.cells {
-                if let Some(o) = owner.get_mut(c as usize) {
+                if let Some(o) = self.owner.get_mut(c as usize) {
                     *o = k as u32 + 1;
                 }
             }
         }
-        Self {
-            width,
-            height,
-            origin: origin.map(i64::from),
-            owner,
-        }
+        (self.width, self.height) = (width, height);
+        self.origin = origin.map(i64::from);
     }
 
     /// Marks in `row` the pixels of sensor row `y` from column `x` on that lie in a cell of an
@@ -68,7 +66,10 @@ mod tests {
             centre: [0.0; 2],
             cells,
         };
-        let owners = CellOwners::new(&[inst(vec![0, 1]), inst(vec![7])], 4, 2, [100, 50]);
+        let mut owners = CellOwners::default();
+        // A frame before, of another size and owners, leaves nothing behind.
+        owners.set(&[inst((0..12).collect())], 6, 2, [0, 0]);
+        owners.set(&[inst(vec![0, 1]), inst(vec![7])], 4, 2, [100, 50]);
         let row = |me: usize, y: i64, x: i64, n: usize| {
             let mut out = vec![true; n];
             owners.cover_row(me, y, x, &mut out);

@@ -75,6 +75,7 @@ pub struct LearnedPipeline {
     preprocessor: Preprocessor,
     map: SegmentMap,
     grouper: InstanceGrouper,
+    owners: CellOwners,
     batch: CropBatch,
     estimator: Option<(Isometry3<f64>, PoseEstimator)>,
     contour: Option<ContourStage>,
@@ -160,6 +161,7 @@ impl LearnedPipeline {
             preprocessor: Preprocessor::default(),
             map: SegmentMap::default(),
             grouper: InstanceGrouper::new(config.instances),
+            owners: CellOwners::default(),
             batch: CropBatch::default(),
             estimator: None,
             contour,
@@ -248,8 +250,12 @@ impl LearnedPipeline {
             camera_T_table,
         )?;
         let contour = self.contour.as_ref();
+        if contour.is_some() {
+            let (w, h) = (self.map.width, self.map.height);
+            self.owners.set(&instances, w, h, sensor);
+        }
+        let owners = &self.owners;
         let parts = &self.parts;
-        let owners = CellOwners::new(&instances, self.map.width, self.map.height, sensor);
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
         let pose_of = |k: usize| {
             let ((inst, origin), votes) = &jobs[k];
