@@ -10,6 +10,8 @@ import json
 import os
 import sys
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from PIL import Image
 
@@ -21,12 +23,41 @@ def _png(path):
         return np.asarray(im)
 
 
+def _crop(d, name, stem):
+    """One crop of part `name` in folder `d`: (rgb, mask, keypoints, pose)."""
+    path = os.path.join(d, stem + ".json")
+    with open(path) as f:
+        label = json.load(f)
+    if label["part"] != name:
+        raise ValueError(f"{path}: part {label['part']!r} in the folder of {name!r}")
+    rgb = _png(os.path.join(d, label["rgb"]))
+    mask = _png(os.path.join(d, label["mask"])) > 127
+    if rgb.shape != (128, 128, 3) or mask.shape != (128, 128):
+        raise ValueError(f"{path}: crop is {rgb.shape}, mask {mask.shape}; want 128x128")
+    kp = np.asarray(label["keypoints"], dtype=np.float32)
+    if kp.shape != (9, 2):
+        raise ValueError(f"{path}: {kp.shape[0]} keypoints, want 9")
+    pose = (
+        np.asarray(label["cam_R_m2c"], dtype=np.float64).reshape(3, 3),
+        np.asarray(label["cam_t_m2c"], dtype=np.float64),
+        np.asarray(label["cam_K"], dtype=np.float64),
+        np.asarray(label["dist_coeffs"], dtype=np.float64),
+    )
+    return rgb, mask, kp, pose
+
+
+def _parallel(fn, items):
+    """`fn` over `items` in order, on a thread pool (PNG decoding releases the GIL)."""
+    with ThreadPoolExecutor(max_workers=min(16, os.cpu_count() or 1)) as pool:
+        return list(pool.map(lambda a: fn(*a), items))
+
+
 def load_crops(root, split, limit=None):
     """All crops of `split` ("train"/"test") under `root`/crops, in PARTS order.
 
     Returns dict: rgb uint8 [N,128,128,3], mask bool [N,128,128], keypoints float32 [N,9,2]
     (crop px), part int64 [N]."""
-    rgbs, masks, kps, parts, poses = [], [], [], [], []
+    items, parts = [], []
     for p, name in enumerate(PARTS):
         d = os.path.join(root, "crops", name, split)
         if not os.path.isdir(d):
@@ -34,33 +65,11 @@ def load_crops(root, split, limit=None):
         stems = sorted(f[:-5] for f in os.listdir(d) if f.endswith(".json"))
         if limit is not None:
             stems = stems[:limit]
-        for stem in stems:
-            path = os.path.join(d, stem + ".json")
-            with open(path) as f:
-                label = json.load(f)
-            if label["part"] != name:
-                raise ValueError(f"{path}: part {label['part']!r} in the folder of {name!r}")
-            rgb = _png(os.path.join(d, label["rgb"]))
-            mask = _png(os.path.join(d, label["mask"])) > 127
-            if rgb.shape != (128, 128, 3) or mask.shape != (128, 128):
-                raise ValueError(f"{path}: crop is {rgb.shape}, mask {mask.shape}; want 128x128")
-            kp = np.asarray(label["keypoints"], dtype=np.float32)
-            if kp.shape != (9, 2):
-                raise ValueError(f"{path}: {kp.shape[0]} keypoints, want 9")
-            rgbs.append(rgb)
-            masks.append(mask)
-            kps.append(kp)
-            parts.append(p)
-            poses.append(
-                (
-                    np.asarray(label["cam_R_m2c"], dtype=np.float64).reshape(3, 3),
-                    np.asarray(label["cam_t_m2c"], dtype=np.float64),
-                    np.asarray(label["cam_K"], dtype=np.float64),
-                    np.asarray(label["dist_coeffs"], dtype=np.float64),
-                )
-            )
+        items += [(d, name, stem) for stem in stems]
+        parts += [p] * len(stems)
+    rgbs, masks, kps, poses = zip(*_parallel(_crop, items))
     return {
-        "poses": poses,
+        "poses": list(poses),
         "rgb": np.stack(rgbs),
         "mask": np.stack(masks),
         "keypoints": np.stack(kps),
@@ -99,7 +108,7 @@ def load_feeder(root, folder, obj_to_part, limit=None):
     base = os.path.join(root, folder)
     if not os.path.isdir(base):
         raise FileNotFoundError(f"{base}: no feeder frames (cell dataset --train-feeder/--test-feeder)")
-    frames = []
+    items = []
     for scene in sorted(os.listdir(base)):
         sdir = os.path.join(base, scene)
         if not scene.isdigit() or not os.path.isdir(sdir):
@@ -108,50 +117,43 @@ def load_feeder(root, folder, obj_to_part, limit=None):
             cams = json.load(f)
         with open(os.path.join(sdir, "scene_gt.json")) as f:
             gts = json.load(f)
-        for key in sorted(cams, key=int):
-            if limit is not None and len(frames) >= limit:
-                return frames
-            cam = cams[key]
-            im = int(key)
-            rgb = _png(os.path.join(sdir, "rgb", f"{im:06d}.png"))
-            H, W = rgb.shape[0] // 4 * 4, rgb.shape[1] // 4 * 4
-            rgb = rgb[:H, :W]
-            gt = gts[key]
-            t = np.asarray([g["cam_t_m2c"] for g in gt], dtype=np.float64)
-            centres = project(cam["cam_K"], cam["dist_coeffs"], t).astype(np.float32)
-            inst_part = np.asarray([obj_to_part[g["obj_id"]] for g in gt], dtype=np.int64)
-            masks = np.stack(
-                [
-                    _png(os.path.join(sdir, "mask_visib", f"{im:06d}_{k:06d}.png"))[:H, :W] > 127
-                    for k in range(len(gt))
-                ]
-            )
-            # Share of each 4x4 cell per instance; background is what is left.
-            share = masks.reshape(len(gt), H // 4, 4, W // 4, 4).mean(axis=(2, 4))
-            bg = 1.0 - share.sum(axis=0)
-            best = share.argmax(axis=0)
-            fg = share.max(axis=0) > bg
-            inst = np.where(fg, best, -1)
-            cls = np.where(fg, inst_part[best] + 1, 0)
-            jj, ii = np.meshgrid(np.arange(W // 4), np.arange(H // 4))
-            cx = 4 * jj + 1.5
-            cy = 4 * ii + 1.5
-            offset = np.zeros((2, H // 4, W // 4), dtype=np.float32)
-            offset[0] = np.where(fg, centres[best, 0] - cx, 0)
-            offset[1] = np.where(fg, centres[best, 1] - cy, 0)
-            frames.append(
-                {
-                    "rgb": rgb,
-                    "cls": cls.astype(np.int64),
-                    "inst": inst.astype(np.int64),
-                    "offset": offset,
-                    "centres": centres,
-                    "inst_part": inst_part,
-                    "name": f"{folder}/{scene}/{im:06d}",
-                }
-            )
-    return frames
+        items += [(sdir, f"{folder}/{scene}", int(k), cams[k], gts[k], obj_to_part) for k in sorted(cams, key=int)]
+    return _parallel(_feeder_frame, items[:limit])
 
+
+def _feeder_frame(sdir, name, im, cam, gt, obj_to_part):
+    """Frame `im` of scene folder `sdir` with its stride-4 targets (see `load_feeder`)."""
+    rgb = _png(os.path.join(sdir, "rgb", f"{im:06d}.png"))
+    H, W = rgb.shape[0] // 4 * 4, rgb.shape[1] // 4 * 4
+    rgb = rgb[:H, :W]
+    t = np.asarray([g["cam_t_m2c"] for g in gt], dtype=np.float64)
+    centres = project(cam["cam_K"], cam["dist_coeffs"], t).astype(np.float32)
+    inst_part = np.asarray([obj_to_part[g["obj_id"]] for g in gt], dtype=np.int64)
+    masks = np.stack(
+        [_png(os.path.join(sdir, "mask_visib", f"{im:06d}_{k:06d}.png"))[:H, :W] > 127 for k in range(len(gt))]
+    )
+    # Share of each 4x4 cell per instance; background is what is left.
+    share = masks.reshape(len(gt), H // 4, 4, W // 4, 4).mean(axis=(2, 4))
+    bg = 1.0 - share.sum(axis=0)
+    best = share.argmax(axis=0)
+    fg = share.max(axis=0) > bg
+    inst = np.where(fg, best, -1)
+    cls = np.where(fg, inst_part[best] + 1, 0)
+    jj, ii = np.meshgrid(np.arange(W // 4), np.arange(H // 4))
+    cx = 4 * jj + 1.5
+    cy = 4 * ii + 1.5
+    offset = np.zeros((2, H // 4, W // 4), dtype=np.float32)
+    offset[0] = np.where(fg, centres[best, 0] - cx, 0)
+    offset[1] = np.where(fg, centres[best, 1] - cy, 0)
+    return {
+        "rgb": rgb,
+        "cls": cls.astype(np.int64),
+        "inst": inst.astype(np.int64),
+        "offset": offset,
+        "centres": centres,
+        "inst_part": inst_part,
+        "name": f"{name}/{im:06d}",
+    }
 
 def obj_ids(root):
     """obj_id -> index in PARTS, from any crop label or the models' order under `root`."""

@@ -13,8 +13,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import (Curve, check_export, code_commit, export_onnx, load_start, progress_lr, recorded_train_minutes,
-                    setup, training_args, write_manifest)
+from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
+                    recorded_train_minutes, setup, training_args, write_manifest)
 from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
 
@@ -38,14 +38,12 @@ def vector_targets(kp, cx, cy):
 
 
 def make_input(rgb_u8, part, device, augment=False, gen=None):
-    """[B, 6, 128, 128] float: RGB / 255 (optionally with gain and noise jitter) + one-hot planes."""
+    """[B, 6, 128, 128] float: RGB / 255 (optionally jittered by `jitter` with `gen`, a generator
+    on `device`) + one-hot planes."""
     x = rgb_u8.to(device).float() / 255.0
-    b = x.shape[0]
     if augment:
-        gain = 1 + 0.15 * (2 * torch.rand(b, 1, 1, 1, generator=gen) - 1)
-        tint = 1 + 0.05 * (2 * torch.rand(b, 3, 1, 1, generator=gen) - 1)
-        noise = 0.01 * torch.randn(x.shape, generator=gen)
-        x = (x * (gain * tint).to(device) + noise.to(device)).clamp(0, 1)
+        x = jitter(x, gen)
+    b = x.shape[0]
     onehot = F.one_hot(part.to(device), len(PARTS)).float()[:, :, None, None].expand(b, len(PARTS), 128, 128)
     return torch.cat([x, onehot], dim=1)
 
@@ -195,6 +193,7 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop about its centre (augmentation)")
     ap.add_argument("--widths", default="16,24,48,64,96", help="channels at strides 2, 4, 8, 16, 32")
+    ap.add_argument("--eval-every", type=int, default=1, help="epochs between test evaluations")
     ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
     args = ap.parse_args(argv)
 
@@ -217,6 +216,10 @@ def main(argv=None):
     total = steps_per_epoch * args.epochs
     cx, cy = cell_centres(device)
     gen = torch.Generator().manual_seed(args.seed)
+    gen_dev = torch.Generator(device=device).manual_seed(args.seed)
+    # On a GPU the training set lives there: batches are gathered without host copies.
+    for key in ("rgb_t", "part_t", "mask_t", "kp_t"):
+        train[key] = train[key].to(device)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "keypoints_curve.csv"
     load_start(model, args, device)
@@ -230,15 +233,16 @@ def main(argv=None):
     t_train = time.time()
     step = 0
     stopped = False
+    # Losses summed on the device since the last curve row (no host sync per step).
+    acc, k = torch.zeros(3, device=device), 0
     for epoch in range(args.epochs):
         model.train()
         perm = torch.randperm(n, generator=gen)
-        acc = np.zeros(3)
         for s in range(steps_per_epoch):
             lr, progress = progress_lr(opt, args.lr, step, total, time.time() - t_train, 60 * args.max_minutes)
-            idx = perm[s * args.batch : (s + 1) * args.batch]
-            x = make_input(train["rgb_t"][idx], train["part_t"][idx], device, augment=True, gen=gen)
-            mask, kp = train["mask_t"][idx].to(device), train["kp_t"][idx].to(device)
+            idx = perm[s * args.batch : (s + 1) * args.batch].to(device)
+            x = make_input(train["rgb_t"][idx], train["part_t"][idx], device, augment=True, gen=gen_dev)
+            mask, kp = train["mask_t"][idx], train["kp_t"][idx]
             if args.rotate:
                 x, mask, kp = rotate(x, mask, kp, gen)
             mask_t = F.avg_pool2d(mask[:, None].float(), 2).ge(0.5).float()
@@ -250,12 +254,15 @@ def main(argv=None):
             loss.backward()
             opt.step()
             step += 1
-            acc += [loss.item(), l_mask.item(), l_vec.item()]
+            k += 1
+            acc += torch.stack([loss, l_mask, l_vec]).detach()
             if (time.time() - t_train) / 60 >= args.max_minutes:
                 stopped = True
                 break
-        k = s + 1
+        if (epoch + 1) % args.eval_every and not stopped and epoch + 1 < args.epochs:
+            continue
         met = evaluate(model, test, device)
+        acc = acc.cpu().numpy()
         curve.row(
             epoch=epoch + 1,
             step=step,
@@ -272,6 +279,7 @@ def main(argv=None):
             f"(mask {acc[1] / k:.4f} vec {acc[2] / k:.4f}) test IoU {met['mask_iou']:.3f} angle {met['vector_angle_mean_deg']:.2f} deg",
             flush=True,
         )
+        acc, k = torch.zeros(3, device=device), 0
         if stopped:
             print(f"stopped at the {args.max_minutes} min budget", flush=True)
             break

@@ -14,8 +14,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from common import (Curve, check_export, code_commit, export_onnx, load_start, progress_lr, recorded_train_minutes,
-                    setup, training_args, write_manifest)
+from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
+                    recorded_train_minutes, setup, training_args, write_manifest)
 from data import load_feeder, obj_ids
 from nets import PARTS, Segmenter, count_macs
 
@@ -35,10 +35,11 @@ def quarter_turn(rgb, lab, off, k):
     return rgb, lab, o
 
 
-def batch_of(frames, idx, size, rng, augment, turn=False):
+def batch_of(frames, idx, size, rng, turn=False):
     """Random `size` x `size` crops (origins on the 4-px grid) of the frames `idx`, each turned
     by a random number of quarter turns when `turn`; frames smaller than `size` are padded by
-    edge replication with ignored labels."""
+    edge replication with ignored labels. Returns uint8 images [B, 3, size, size], classes and
+    offsets at stride 4."""
     xs, cls, off = [], [], []
     c = size // 4
     for i in idx:
@@ -65,13 +66,22 @@ def batch_of(frames, idx, size, rng, augment, turn=False):
         xs.append(np.ascontiguousarray(crop[0]))
         cls.append(np.ascontiguousarray(crop[1]))
         off.append(np.ascontiguousarray(crop[2]))
-    x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2).float() / 255.0
-    if augment:
-        b = x.shape[0]
-        gain = 1 + 0.15 * (2 * torch.from_numpy(rng.random((b, 1, 1, 1))).float() - 1)
-        tint = 1 + 0.05 * (2 * torch.from_numpy(rng.random((b, 3, 1, 1))).float() - 1)
-        x = (x * gain * tint + 0.01 * torch.from_numpy(rng.standard_normal(x.shape)).float()).clamp(0, 1)
+    x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2)
     return x, torch.from_numpy(np.stack(cls)), torch.from_numpy(np.stack(off))
+
+
+class Batches(torch.utils.data.IterableDataset):
+    """Endless training batches of `batch_of`, drawn by each loader worker from its own seed."""
+
+    def __init__(self, frames, batch, size, turn, seed):
+        self.frames, self.batch, self.size, self.turn, self.seed = frames, batch, size, turn, seed
+
+    def __iter__(self):
+        worker = torch.utils.data.get_worker_info()
+        rng = np.random.default_rng([self.seed, worker.id if worker else 0])
+        while True:
+            idx = rng.integers(0, len(self.frames), self.batch)
+            yield batch_of(self.frames, idx, self.size, rng, self.turn)
 
 
 def losses(logits, offsets, cls, off):
@@ -181,13 +191,13 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
     ap.add_argument("--eval-every", type=int, default=250)
+    ap.add_argument("--workers", type=int, default=0, help="processes preparing batches (0: the training process)")
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop by random quarter turns (augmentation)")
     args = ap.parse_args(argv)
     if args.size % 16:
         sys.exit(f"--size {args.size} must be a multiple of 16")
 
     device = setup(args.seed, args.threads)
-    rng = np.random.default_rng(args.seed)
     t0 = time.time()
     mapping = obj_ids(args.train)
     train = load_feeder(args.train, "train_feeder", mapping, args.limit)
@@ -208,25 +218,36 @@ def main(argv=None):
         os.path.join(args.out, curve_name),
         ["step", "elapsed_s", "lr", "train_loss", "train_cls_loss", "train_offset_loss", "test_cell_accuracy", "test_instance_precision", "test_instance_recall"],
     )
+    batches = iter(
+        torch.utils.data.DataLoader(
+            Batches(train, args.batch, args.size, bool(args.rotate), args.seed),
+            batch_size=None,
+            num_workers=args.workers,
+            pin_memory=device.type == "cuda",
+            prefetch_factor=4 if args.workers else None,
+        )
+    )
+    gen = torch.Generator(device=device).manual_seed(args.seed)
     t_train = time.time()
-    acc = np.zeros(3)
-    k = 0
+    # Losses summed on the device since the last curve row (no host sync per step).
+    acc, k = torch.zeros(3, device=device), 0
     for step in range(1, args.steps + 1):
         model.train()
         lr, progress = progress_lr(opt, args.lr, step - 1, args.steps, time.time() - t_train, 60 * args.max_minutes)
-        idx = rng.integers(0, len(train), args.batch)
-        x, cls, off = batch_of(train, idx, args.size, rng, augment=True, turn=bool(args.rotate))
-        logits, offsets = model(x.to(device))
-        l_cls, l_off = losses(logits, offsets, cls.to(device), off.to(device))
+        x, cls, off = next(batches)
+        x = jitter(x.to(device, non_blocking=True).float() / 255.0, gen)
+        logits, offsets = model(x)
+        l_cls, l_off = losses(logits, offsets, cls.to(device, non_blocking=True), off.to(device, non_blocking=True))
         loss = l_cls + l_off
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        acc += [loss.item(), l_cls.item(), l_off.item()]
+        acc += torch.stack([loss, l_cls, l_off]).detach()
         k += 1
         out_of_time = (time.time() - t_train) / 60 >= args.max_minutes
         if step % args.eval_every == 0 or step == args.steps or out_of_time:
             met = evaluate(model, test, device, max_frames=20)
+            acc = acc.cpu().numpy()
             curve.row(
                 step=step,
                 elapsed_s=time.time() - t_train,
@@ -244,8 +265,7 @@ def main(argv=None):
                 f"R {met['instance_recall']:.3f}",
                 flush=True,
             )
-            acc[:] = 0
-            k = 0
+            acc, k = torch.zeros(3, device=device), 0
         if out_of_time:
             print(f"stopped at the {args.max_minutes} min budget", flush=True)
             break
