@@ -73,10 +73,7 @@ def setup(seed, threads=2):
     torch.manual_seed(seed)
     np.random.seed(seed)
     torch.set_num_threads(threads)
-    if torch.cuda.is_available():
-        torch.backends.cudnn.benchmark = True
-        return torch.device("cuda")
-    return torch.device("cpu")
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
 
 
 def jitter(x, gen):
