@@ -103,6 +103,31 @@ fn yes() -> bool {
     true
 }
 
+/// A [`PartSpec::hole_weight`]: a finite number, at least 1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(transparent)]
+pub struct HoleWeight(f64);
+
+impl HoleWeight {
+    /// The weight.
+    pub fn get(self) -> f64 {
+        self.0
+    }
+}
+
+impl<'de> Deserialize<'de> for HoleWeight {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let w = f64::deserialize(d)?;
+        if w.is_finite() && w >= 1.0 {
+            Ok(Self(w))
+        } else {
+            Err(serde::de::Error::custom(format!(
+                "hole_weight must be a finite number of at least 1, got {w}"
+            )))
+        }
+    }
+}
+
 /// A top-down grasp of a part resting in one stable pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -135,6 +160,12 @@ pub struct PartSpec {
     /// Declared rotational symmetries (exact and near).
     #[serde(default)]
     pub symmetries: Vec<Symmetry>,
+    /// How many times the other outline samples the edges of holes through the part (cut-outs
+    /// in a flat face) weigh in the contour fit's last round: a cut-out's edge is one clean step
+    /// at the face, where a thin-walled shell's outer outline is a wall whose rim, outer face and
+    /// shadow blur it by a pixel or two. Absent: 1, like any other sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hole_weight: Option<HoleWeight>,
     /// Top-down grasps, each for one stable pose; poses without one are not pickable.
     #[serde(default, rename = "grasp")]
     pub grasps: Vec<Grasp>,
@@ -294,6 +325,24 @@ mod tests {
             }) => {
                 assert_eq!((line, column), (8, 1), "{message}");
                 assert!(message.contains("colour"), "{message}");
+            }
+            other => panic!("expected a located error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_hole_weight_below_one_is_located() {
+        let text = "name = \"x\"\n[[part]]\nname = \"a\"\nrole = \"main\"\nmesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\nhole_weight = 0.5\n";
+        match Catalog::parse(text, Path::new("c.toml")) {
+            Err(PartError::Catalog {
+                line,
+                column,
+                message,
+                ..
+            }) => {
+                assert_eq!((line, column), (8, 15), "{message}");
+                assert!(message.contains("hole_weight must be"), "{message}");
+                assert!(message.contains("0.5"), "{message}");
             }
             other => panic!("expected a located error, got {other:?}"),
         }

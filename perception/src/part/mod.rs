@@ -10,7 +10,9 @@ mod mesh_repair;
 mod pieces;
 mod stable_pose;
 
-pub use catalog::{Catalog, Grasp, Material, PartRole, PartSpec, Symmetry, line_column};
+pub use catalog::{
+    Catalog, Grasp, HoleWeight, Material, PartRole, PartSpec, Symmetry, line_column,
+};
 pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
 pub use mesh::{MeshDefect, OpenRegion, TriMesh};
