@@ -144,6 +144,10 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     );
     assert!(found >= MIN_FOUND, "{found} of {parts} parts found");
     assert!(
+        accepted >= MIN_ACCEPTED,
+        "{accepted} poses under the reprojection gate"
+    );
+    assert!(
         median <= CENTRE_MEDIAN_PX,
         "centre keypoint median {median:.2} px"
     );
@@ -153,18 +157,16 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
     );
 }
 
-// Bounds measured with the committed models (2026-11-25) on 12 frames: 133 of 144 parts found
-// (the misses: parts mostly under others), centre keypoint median 3.23 px, all nine keypoints
-// median 13.9 px (the keypoint net's own test crops: 5.9 px), 11 poses under the pipeline's
-// default 4 px reprojection gate (the learned scenario runs at 12 px: e2e_learned). Re-measured
-// a session later (the frames are rendered at test time, and the renderer and the graphs' export
-// changed in between; the keypoint graph without normalisation gives the same figures as the one
-// with it): 131 found, 3.10 px, 12.5 px, 9 poses. Two frames
-// were too few for a median of per-part medians: on frames 11–12 alone the new net measured
-// 16.1 px against the previous one's 13.2, on all 12 frames 13.9 against 13.5.
-const MIN_FOUND: usize = 130;
-const CENTRE_MEDIAN_PX: f64 = 3.6;
-const KEYPOINTS_MEDIAN_PX: f64 = 15.0;
+// Bounds measured with the committed models on 12 frames. The CPU-trained pair (2026-11-25):
+// 131 of 144 parts found (the misses: parts mostly under others), centre keypoint median
+// 3.10 px, all nine keypoints median 12.5 px (the keypoint net's own test crops: 5.9 px), 9 poses
+// under the pipeline's default 4 px reprojection gate (the learned scenario runs at 12 px:
+// e2e_learned). The GPU-trained pair (2026-11-26: the segmenter from scratch, the keypoint net a
+// fourth cycle; test crops 4.8 px): 136 found, 2.74 px, 11.5 px, 25 poses under the gate.
+const MIN_FOUND: usize = 134;
+const CENTRE_MEDIAN_PX: f64 = 3.1;
+const KEYPOINTS_MEDIAN_PX: f64 = 13.0;
+const MIN_ACCEPTED: usize = 20;
 
 #[test]
 #[ignore = "rewrites the benchmark frame in perception/tests/data/learned"]
