@@ -313,39 +313,36 @@ pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
 mod tests {
     use super::*;
 
-    #[test]
-    fn unknown_key_is_located() {
-        let text = "name = \"x\"\n[[part]]\nname = \"a\"\nrole = \"main\"\nmesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\ncolour = 3\n";
-        match Catalog::parse(text, Path::new("c.toml")) {
+    /// The line, column and message of the error that a one-part catalog, whose last line is
+    /// `last`, is refused with.
+    fn refusal_of_part_line(last: &str) -> (usize, usize, String) {
+        let text = format!(
+            "name = \"x\"\n[[part]]\nname = \"a\"\nrole = \"main\"\nmesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\n{last}\n"
+        );
+        match Catalog::parse(&text, Path::new("c.toml")) {
             Err(PartError::Catalog {
                 line,
                 column,
                 message,
                 ..
-            }) => {
-                assert_eq!((line, column), (8, 1), "{message}");
-                assert!(message.contains("colour"), "{message}");
-            }
+            }) => (line, column, message),
             other => panic!("expected a located error, got {other:?}"),
         }
     }
 
     #[test]
+    fn unknown_key_is_located() {
+        let (line, column, message) = refusal_of_part_line("colour = 3");
+        assert_eq!((line, column), (8, 1), "{message}");
+        assert!(message.contains("colour"), "{message}");
+    }
+
+    #[test]
     fn a_hole_weight_below_one_is_located() {
-        let text = "name = \"x\"\n[[part]]\nname = \"a\"\nrole = \"main\"\nmesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\nhole_weight = 0.5\n";
-        match Catalog::parse(text, Path::new("c.toml")) {
-            Err(PartError::Catalog {
-                line,
-                column,
-                message,
-                ..
-            }) => {
-                assert_eq!((line, column), (8, 15), "{message}");
-                assert!(message.contains("hole_weight must be"), "{message}");
-                assert!(message.contains("0.5"), "{message}");
-            }
-            other => panic!("expected a located error, got {other:?}"),
-        }
+        let (line, column, message) = refusal_of_part_line("hole_weight = 0.5");
+        assert_eq!((line, column), (8, 15), "{message}");
+        assert!(message.contains("hole_weight must be"), "{message}");
+        assert!(message.contains("0.5"), "{message}");
     }
 
     #[test]
