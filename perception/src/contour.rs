@@ -179,12 +179,10 @@ impl PartOutline {
                 (camera_T_part.rotation * n).dot(&p.coords) < 0.0
             })
             .collect();
-        let Some(mut mask) = Silhouette::rasterise(&pixels, &self.triangles, &front) else {
+        let Some(mask) = Silhouette::rasterise(&pixels, &self.triangles, &front) else {
             return Vec::new();
         };
-        if holes {
-            mask.find_holes();
-        }
+        let hole_map = if holes { mask.holes() } else { Vec::new() };
         let mut out = Vec::new();
         for ([a, b], [ta, tb]) in &self.edges {
             let fa = front[*ta as usize];
@@ -221,7 +219,9 @@ impl PartOutline {
                     part: va + (vb - va) * t,
                     pixel,
                     normal: outward,
-                    hole: holes && mask.in_hole(pixel + outward * 1.5),
+                    hole: mask
+                        .cell(pixel + outward * 1.5)
+                        .is_some_and(|k| hole_map.get(k) == Some(&true)),
                 });
             }
         }
@@ -246,9 +246,6 @@ struct Silhouette {
     width: usize,
     height: usize,
     cells: Vec<bool>,
-    /// Outside cells connected to the border (empty until [`Silhouette::find_holes`]): the
-    /// other outside cells are holes.
-    exterior: Vec<bool>,
 }
 
 impl Silhouette {
@@ -312,17 +309,16 @@ impl Silhouette {
             width,
             height,
             cells,
-            exterior: Vec::new(),
         })
     }
 
-    /// Marks the outside cells reached from the border (the margin ring around the mask
-    /// connects them all); the outside cells left unmarked are holes.
-    fn find_holes(&mut self) {
+    /// The holes through the mask, cell by cell: the outside cells that the border's flood fill
+    /// does not reach (the margin ring around the mask connects all the others).
+    fn holes(&self) -> Vec<bool> {
         let (width, height) = (self.width, self.height);
-        let mut exterior = vec![false; width * height];
+        let mut hole: Vec<bool> = self.cells.iter().map(|c| !c).collect();
         let mut stack = vec![0usize];
-        exterior[0] = true;
+        hole[0] = false;
         while let Some(k) = stack.pop() {
             let (i, j) = (k / width, k % width);
             let neighbours = [
@@ -332,31 +328,24 @@ impl Silhouette {
                 (j + 1 < width).then(|| k + 1),
             ];
             for n in neighbours.into_iter().flatten() {
-                if !self.cells[n] && !exterior[n] {
-                    exterior[n] = true;
+                if hole[n] {
+                    hole[n] = false;
                     stack.push(n);
                 }
             }
         }
-        self.exterior = exterior;
+        hole
     }
 
-    /// Whether `p` lies in a hole through the mask (after [`Silhouette::find_holes`]).
-    fn in_hole(&self, p: Point2<f64>) -> bool {
+    /// The cell under pixel `p`, if the mask's grid covers it.
+    fn cell(&self, p: Point2<f64>) -> Option<usize> {
         let (j, i) = (p.x.round() as i64 - self.x0, p.y.round() as i64 - self.y0);
-        if i < 0 || j < 0 || i as usize >= self.height || j as usize >= self.width {
-            return false;
-        }
-        let k = i as usize * self.width + j as usize;
-        !self.cells[k] && self.exterior.get(k) == Some(&false)
+        (i >= 0 && j >= 0 && (i as usize) < self.height && (j as usize) < self.width)
+            .then(|| i as usize * self.width + j as usize)
     }
 
     fn inside(&self, p: Point2<f64>) -> bool {
-        let (j, i) = (p.x.round() as i64 - self.x0, p.y.round() as i64 - self.y0);
-        if i < 0 || j < 0 || i as usize >= self.height || j as usize >= self.width {
-            return false;
-        }
-        self.cells[i as usize * self.width + j as usize]
+        self.cell(p).is_some_and(|k| self.cells[k])
     }
 }
 
@@ -639,19 +628,19 @@ impl ContourAligner {
                     if screening && patch.is_hidden(pixel) {
                         continue;
                     }
-                    // A hole's edge is a single clean step: the nearest one.
-                    let found = if p.hole {
-                        patch.edge_along(
-                            pixel,
-                            p.normal,
-                            reach,
+                    // A hole's edge is a single clean step: the nearest one, weighed more.
+                    let (share, rule, weight) = if p.hole {
+                        (
                             self.config.edge_share,
                             FinalEdge::Nearest,
+                            outline.hole_weight,
                         )
                     } else {
-                        patch.edge_along(pixel, p.normal, reach, share, rule)
+                        (share, rule, 1.0)
                     };
-                    let Some((offset, contrast)) = found else {
+                    let Some((offset, contrast)) =
+                        patch.edge_along(pixel, p.normal, reach, share, rule)
+                    else {
                         continue;
                     };
                     if contrast < self.config.min_contrast {
@@ -660,8 +649,7 @@ impl ContourAligner {
                     let j = (p.normal.transpose() * d_pixel * camera_r_table * d_table).transpose();
                     // Residual: signed distance from the predicted outline to the edge.
                     let r = -offset;
-                    let w = huber_weight(r, self.config.huber_px)
-                        * if p.hole { outline.hole_weight } else { 1.0 };
+                    let w = huber_weight(r, self.config.huber_px) * weight;
                     h += j * j.transpose() * w;
                     g += j * (r * w);
                     used += 1;

@@ -13,7 +13,7 @@ use crate::contour::{
 };
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
-use crate::part::{HoleWeight, Material, PartSpec, TriMesh};
+use crate::part::{Material, PartSpec, TriMesh};
 use crate::planar::best_yaw;
 use crate::symmetry::ambiguity_group;
 
@@ -54,7 +54,7 @@ impl ContourStage {
             .map(|(spec, mesh)| OutlinedPart {
                 outline: PartOutline::new(mesh)
                     .with_final_edge(final_edge(spec.material))
-                    .with_hole_weight(spec.hole_weight.map_or(1.0, HoleWeight::get)),
+                    .with_hole_weight(spec.hole_weight.get()),
                 near: ambiguity_group(&spec.symmetries)
                     .into_iter()
                     .skip(1)

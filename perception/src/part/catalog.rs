@@ -103,7 +103,8 @@ fn yes() -> bool {
     true
 }
 
-/// A [`PartSpec::hole_weight`]: a finite number, at least 1.
+/// A [`PartSpec::hole_weight`]: a finite number, at least 1 (1, the default, weighs holes'
+/// edges like any other sample).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 #[serde(transparent)]
 pub struct HoleWeight(f64);
@@ -112,6 +113,16 @@ impl HoleWeight {
     /// The weight.
     pub fn get(self) -> f64 {
         self.0
+    }
+
+    fn is_one(&self) -> bool {
+        self.0 == 1.0
+    }
+}
+
+impl Default for HoleWeight {
+    fn default() -> Self {
+        Self(1.0)
     }
 }
 
@@ -164,8 +175,8 @@ pub struct PartSpec {
     /// in a flat face) weigh in the contour fit's last round: a cut-out's edge is one clean step
     /// at the face, where a thin-walled shell's outer outline is a wall whose rim, outer face and
     /// shadow blur it by a pixel or two. Absent: 1, like any other sample.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hole_weight: Option<HoleWeight>,
+    #[serde(default, skip_serializing_if = "HoleWeight::is_one")]
+    pub hole_weight: HoleWeight,
     /// Top-down grasps, each for one stable pose; poses without one are not pickable.
     #[serde(default, rename = "grasp")]
     pub grasps: Vec<Grasp>,
