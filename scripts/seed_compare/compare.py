@@ -114,13 +114,13 @@ def load_net(models, name):
         x[:, 3:] = torch.nn.functional.one_hot(torch.arange(3) % len(PARTS), len(PARTS)).float()[:, :, None, None]
     # The keypoint graph is exported without normalising its vectors (training/README.md):
     # compare the raw ones, then let the eager net give unit vectors as the seed's voting expects.
-    raw = getattr(net, "unit_vectors", None)
-    if raw is not None:
+    keypoints = name == "keypoints"
+    if keypoints:
         net.unit_vectors = False
     with torch.inference_mode():
         ref = net(x)
-    if raw is not None:
-        net.unit_vectors = raw
+    if keypoints:
+        net.unit_vectors = True
     outs = sess.run(None, {sess.get_inputs()[0].name: x.numpy()})
     diff = max(float(np.abs(o - r.numpy()).max()) for o, r in zip(outs, ref))
     if not diff < AGREE:
