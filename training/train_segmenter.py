@@ -99,47 +99,51 @@ def pad16(rgb):
     return np.pad(rgb, ((0, (-H) % 16), (0, (-W) % 16), (0, 0)), mode="edge")
 
 
-def group(cls_pred, offsets, radius=20.0, min_votes=30):
-    """Instances from a class map [h, w] and offsets [2, h, w] (NumPy): every part cell votes
-    for its centre (cell centre + offset); peaks of the vote histogram (4-px bins, 3x3 sum, at
-    least `min_votes`) are the centres; each cell joins the nearest centre within `radius` px.
-    Returns (instance map [h, w] with -1 for none, class of each instance)."""
+def group(cls_pred, offsets, radius=20.0, cross_radius=10.0, min_votes=30):
+    """Instances from a class map [h, w] and offsets [2, h, w] (NumPy), as the Rust grouper
+    (perception::learned::instances) forms them: every part cell votes for its centre (cell
+    centre + offset) on its class's histogram (4-px bins, 3x3 sum, at least `min_votes`); peaks
+    at least `radius` px from a stronger peak of the same class and `cross_radius` px from one
+    of another class are the centres; each cell joins the nearest centre of its class within
+    `radius`, else the nearest of any class. Returns (instance map [h, w] with -1 for none,
+    class of each instance)."""
     h, w = cls_pred.shape
     fg = cls_pred > 0
     ii, jj = np.nonzero(fg)
     inst = np.full((h, w), -1, dtype=np.int64)
     if len(ii) == 0:
         return inst, []
+    cc = cls_pred[ii, jj]
     vx = 4 * jj + 1.5 + offsets[0, ii, jj]
     vy = 4 * ii + 1.5 + offsets[1, ii, jj]
     bx = np.clip(np.floor(vx / 4).astype(int), 0, w - 1)
     by = np.clip(np.floor(vy / 4).astype(int), 0, h - 1)
-    hist = np.zeros((h + 2, w + 2))
-    np.add.at(hist, (by + 1, bx + 1), 1)
-    acc = sum(hist[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
-    pad = np.pad(acc, 1, constant_values=-1)
-    neigh = np.stack([pad[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
-    # Local maxima; plateaus give several, merged below (centres closer than `radius`).
-    is_peak = (acc >= min_votes) & (acc >= neigh.max(0))
-    py, px = np.nonzero(is_peak)
-    if len(py) == 0:
+    peaks = []  # (votes, class, centre)
+    for c in range(1, len(PARTS) + 1):
+        sel = cc == c
+        hist = np.zeros((h + 2, w + 2))
+        np.add.at(hist, (by[sel] + 1, bx[sel] + 1), 1)
+        acc = sum(hist[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        pad = np.pad(acc, 1, constant_values=-1)
+        neigh = np.stack([pad[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
+        # Local maxima; plateaus give several, merged below (centres closer than `radius`).
+        py, px = np.nonzero((acc >= min_votes) & (acc >= neigh.max(0)))
+        peaks += [(acc[y, x], c, np.array([4 * x + 2.0, 4 * y + 2.0])) for y, x in zip(py, px)]
+    centres, classes = [], []
+    for _, c, p in sorted(peaks, key=lambda t: -t[0]):
+        if all(np.linalg.norm(p - q) > (radius if k == c else cross_radius) for q, k in zip(centres, classes)):
+            centres.append(p)
+            classes.append(c)
+    if not centres:
         return inst, []
-    order = np.argsort(-acc[py, px])
-    centres = []
-    for k in order:
-        c = np.array([4 * px[k] + 2.0, 4 * py[k] + 2.0])
-        if all(np.linalg.norm(c - q) > radius for q in centres):
-            centres.append(c)
-    centres = np.array(centres)
+    centres, classes = np.array(centres), np.array(classes)
     d = np.hypot(vx[:, None] - centres[None, :, 0], vy[:, None] - centres[None, :, 1])
-    near = d.argmin(1)
-    ok = d[np.arange(len(near)), near] <= radius
+    d[d > radius] = np.inf
+    own = np.where(classes[None, :] == cc[:, None], d, np.inf)
+    near = np.where(np.isfinite(own.min(1)), own.argmin(1), d.argmin(1))
+    ok = np.isfinite(d[np.arange(len(near)), near])
     inst[ii[ok], jj[ok]] = near[ok]
-    classes = []
-    for k in range(len(centres)):
-        sel = inst == k
-        classes.append(int(np.bincount(cls_pred[sel], minlength=len(PARTS) + 1)[1:].argmax() + 1) if sel.any() else 0)
-    return inst, classes
+    return inst, [int(c) for c in classes]
 
 
 @torch.no_grad()
@@ -192,6 +196,7 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
     ap.add_argument("--eval-every", type=int, default=250)
     ap.add_argument("--workers", type=int, default=0, help="processes preparing batches (0: the training process)")
+    ap.add_argument("--widths", default="12,16,32,64", help="channels at strides 2, 4, 8, 16")
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop by random quarter turns (augmentation)")
     args = ap.parse_args(argv)
     if args.size % 16:
@@ -204,7 +209,7 @@ def main(argv=None):
     test = load_feeder(args.test, "test_feeder", mapping, args.limit)
     print(f"loaded {len(train)} train / {len(test)} test feeder frames in {time.time() - t0:.0f} s", flush=True)
 
-    model = Segmenter().to(device)
+    model = Segmenter(tuple(int(w) for w in args.widths.split(","))).to(device)
     macs = count_macs(model, torch.zeros(1, 3, 448, 576, device=device))
     print(f"segmenter: {macs / 1e6:.0f} MMAC per 576x448 window, {sum(p.numel() for p in model.parameters())} parameters")
     opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)

@@ -1,8 +1,11 @@
 //! From the segmenter's cells to part instances: every foreground cell votes for its instance
-//! centre (cell centre + predicted offset); peaks of the vote map at least `min_separation_px`
-//! apart are the instances (so touching parts with distinct centres separate); each foreground
-//! cell joins the nearest peak within `assign_radius_px`; an instance's class is the majority of
-//! its cells' classes and its score their mean probability of that class.
+//! centre (cell centre + predicted offset) on its class's vote map; peaks at least
+//! `min_separation_px` from a stronger peak of the same class, and `cross_separation_px` from one
+//! of another class, are the instances (so touching parts with distinct centres separate, and a
+//! part half hidden under another part keeps its own instance when its visible cells carry its
+//! class); each foreground cell joins the nearest peak of its class within `assign_radius_px`,
+//! or else the nearest peak of any class (a stray mislabelled cell joins the part it lies on);
+//! an instance's class is its peak's and its score the mean probability of that class.
 
 use super::detection::InstanceMask;
 use super::models::SEGMENTER_STRIDE;
@@ -11,9 +14,12 @@ use super::segmenter::SegmentMap;
 /// Grouping settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InstanceConfig {
-    /// Two instance centres are at least this far apart, pixels (parts are 60–80 px across;
-    /// overlapping parts' centres come ~30 px close in feeder frames).
+    /// Two instance centres of one class are at least this far apart, pixels (parts are
+    /// 60–80 px across; overlapping parts' centres come ~30 px close in feeder frames).
     pub min_separation_px: f64,
+    /// Two instance centres of different classes are at least this far apart, pixels: closer,
+    /// the weaker peak is the stronger one's part with some cells mislabelled.
+    pub cross_separation_px: f64,
     /// A cell joins a centre when its vote lands within this distance, pixels.
     pub assign_radius_px: f64,
     /// Radius of the mean shift that refines a peak to the mean of the votes near it, pixels.
@@ -28,6 +34,7 @@ impl Default for InstanceConfig {
     fn default() -> Self {
         Self {
             min_separation_px: 24.0,
+            cross_separation_px: 10.0,
             assign_radius_px: 24.0,
             refine_radius_px: 8.0,
             min_peak_votes: 8.0,
@@ -117,14 +124,16 @@ impl InstanceGrouper {
     pub fn group(&mut self, map: &SegmentMap) -> Vec<Instance> {
         let (w, h) = (map.width, map.height);
         let plane = w * h;
+        let parts = map.classes.saturating_sub(1);
         let s = SEGMENTER_STRIDE as f32;
-        // 1. Votes of the foreground cells, splatted bilinearly onto the cell grid.
+        // 1. Votes of the foreground cells, splatted bilinearly onto their class's cell grid.
         self.votes.clear();
         self.voters.clear();
         self.accumulator.clear();
-        self.accumulator.resize(plane, 0.0);
+        self.accumulator.resize(parts * plane, 0.0);
         for c in 0..plane {
-            if map.class[c] == 0 {
+            let class = usize::from(map.class[c]);
+            if class == 0 || class > parts {
                 continue;
             }
             let (i, j) = (c / w, c % w);
@@ -135,6 +144,7 @@ impl InstanceGrouper {
             }
             self.votes.push([vx, vy]);
             self.voters.push(c as u32);
+            let acc = &mut self.accumulator[(class - 1) * plane..class * plane];
             let (gx, gy) = ((vx - 1.5) / s, (vy - 1.5) / s);
             let (fx, fy) = (gx.floor(), gy.floor());
             let (ax, ay) = (gx - fx, gy - fy);
@@ -142,13 +152,13 @@ impl InstanceGrouper {
                 for (dx, wx) in [(0, 1.0 - ax), (1, ax)] {
                     let (x, y) = (fx as i64 + dx, fy as i64 + dy);
                     if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
-                        self.accumulator[y as usize * w + x as usize] += wx * wy;
+                        acc[y as usize * w + x as usize] += wx * wy;
                     }
                 }
             }
         }
-        // 2. Peaks: local maxima of the 3 × 3 vote sums, strongest first, kept when far enough
-        //    from every stronger peak.
+        // 2. Peaks: local maxima of each class's 3 × 3 vote sums, strongest first, kept when far
+        //    enough from every stronger peak.
         let sum3 = |acc: &[f32], i: usize, j: usize| {
             let mut t = 0.0;
             for y in i.saturating_sub(1)..(i + 2).min(h) {
@@ -159,58 +169,69 @@ impl InstanceGrouper {
             t
         };
         let mut candidates = Vec::new();
-        for i in 0..h {
-            for j in 0..w {
-                if self.accumulator[i * w + j] <= 0.0 {
-                    continue;
-                }
-                let v = sum3(&self.accumulator, i, j);
-                if f64::from(v) < self.config.min_peak_votes {
-                    continue;
-                }
-                let mut is_max = true;
-                'n: for y in i.saturating_sub(1)..(i + 2).min(h) {
-                    for x in j.saturating_sub(1)..(j + 2).min(w) {
-                        let u = sum3(&self.accumulator, y, x);
-                        if u > v || (u == v && (y * w + x) < (i * w + j)) {
-                            is_max = false;
-                            break 'n;
+        for k in 0..parts {
+            let acc = &self.accumulator[k * plane..(k + 1) * plane];
+            for i in 0..h {
+                for j in 0..w {
+                    if acc[i * w + j] <= 0.0 {
+                        continue;
+                    }
+                    let v = sum3(acc, i, j);
+                    if f64::from(v) < self.config.min_peak_votes {
+                        continue;
+                    }
+                    let mut is_max = true;
+                    'n: for y in i.saturating_sub(1)..(i + 2).min(h) {
+                        for x in j.saturating_sub(1)..(j + 2).min(w) {
+                            let u = sum3(acc, y, x);
+                            if u > v || (u == v && (y * w + x) < (i * w + j)) {
+                                is_max = false;
+                                break 'n;
+                            }
                         }
                     }
-                }
-                if is_max {
-                    candidates.push((v, [s * j as f32 + 1.5, s * i as f32 + 1.5]));
+                    if is_max {
+                        candidates.push((v, k + 1, [s * j as f32 + 1.5, s * i as f32 + 1.5]));
+                    }
                 }
             }
         }
         candidates.sort_by(|a, b| b.0.total_cmp(&a.0));
         let sep2 = (self.config.min_separation_px * self.config.min_separation_px) as f32;
-        let mut peaks: Vec<[f32; 2]> = Vec::new();
-        for (_, p) in candidates {
-            let p = self.mean_shift(p);
-            if peaks.iter().all(|q| dist2(*q, p) >= sep2) {
-                peaks.push(p);
+        let cross2 = (self.config.cross_separation_px * self.config.cross_separation_px) as f32;
+        let mut peaks: Vec<(usize, [f32; 2])> = Vec::new();
+        for (_, class, p) in candidates {
+            let p = self.mean_shift(map, class, p);
+            let apart = |(k, q): &(usize, [f32; 2])| {
+                dist2(*q, p) >= if *k == class { sep2 } else { cross2 }
+            };
+            if peaks.iter().all(apart) {
+                peaks.push((class, p));
             }
         }
-        // 3. Each voting cell joins the nearest peak within the radius.
+        // 3. Each voting cell joins the nearest peak of its class within the radius, or else the
+        //    nearest of any class.
         let r2 = (self.config.assign_radius_px * self.config.assign_radius_px) as f32;
         self.owner.clear();
         self.owner.resize(self.votes.len(), u32::MAX);
-        for (k, v) in self.votes.iter().enumerate() {
-            let best = peaks
-                .iter()
-                .enumerate()
-                .map(|(n, p)| (n, dist2(*p, *v)))
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((n, d)) = best
-                && d <= r2
-            {
+        for (k, (v, &c)) in self.votes.iter().zip(&self.voters).enumerate() {
+            let class = usize::from(map.class[c as usize]);
+            let nearest = |same: bool| {
+                peaks
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, (pc, _))| !same || *pc == class)
+                    .map(|(n, (_, p))| (n, dist2(*p, *v)))
+                    .filter(|(_, d)| *d <= r2)
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+            };
+            if let Some((n, _)) = nearest(true).or_else(|| nearest(false)) {
                 self.owner[k] = n as u32;
             }
         }
-        // 4. Class by majority, score by mean probability, centre by the refined peak.
+        // 4. Class by the peak, score by mean probability, centre by the refined peak.
         let mut out = Vec::with_capacity(peaks.len());
-        for (n, peak) in peaks.iter().enumerate() {
+        for (n, (class, peak)) in peaks.iter().enumerate() {
             let cells: Vec<u32> = self
                 .owner
                 .iter()
@@ -221,13 +242,6 @@ impl InstanceGrouper {
             if cells.len() < self.config.min_cells.max(1) {
                 continue;
             }
-            let mut counts = vec![0usize; map.classes];
-            for &c in &cells {
-                counts[map.class[c as usize] as usize] += 1;
-            }
-            let class = (1..map.classes)
-                .max_by_key(|&k| (counts[k], std::cmp::Reverse(k)))
-                .unwrap_or(1);
             let score = cells
                 .iter()
                 .map(|&c| f64::from(map.probs[class * plane + c as usize]))
@@ -243,13 +257,13 @@ impl InstanceGrouper {
         out
     }
 
-    /// Moves `p` to the mean of the votes within the refine radius, a few times.
-    fn mean_shift(&self, mut p: [f32; 2]) -> [f32; 2] {
+    /// Moves `p` to the mean of the votes of `class` within the refine radius, a few times.
+    fn mean_shift(&self, map: &SegmentMap, class: usize, mut p: [f32; 2]) -> [f32; 2] {
         let r2 = (self.config.refine_radius_px * self.config.refine_radius_px) as f32;
         for _ in 0..3 {
             let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0usize);
-            for v in &self.votes {
-                if dist2(*v, p) <= r2 {
+            for (v, &c) in self.votes.iter().zip(&self.voters) {
+                if usize::from(map.class[c as usize]) == class && dist2(*v, p) <= r2 {
                     sx += f64::from(v[0]);
                     sy += f64::from(v[1]);
                     n += 1;
@@ -353,6 +367,49 @@ mod tests {
         let assigned: usize = instances.iter().map(|i| i.cells.len()).sum();
         let fg = map.class.iter().filter(|&&c| c != 0).count();
         assert_eq!(assigned, fg - 3);
+    }
+
+    #[test]
+    fn a_part_half_under_another_part_keeps_its_instance() {
+        // 16 px apart, closer than one class's separation: a top shell lying over a main shell.
+        separate([[50.3, 61.7], [66.1, 59.2]]);
+    }
+
+    #[test]
+    fn a_part_with_a_mislabelled_patch_stays_one_instance() {
+        // Disc 1 (class 3) relabels the cells right of x = 102 (over a third) as class 2: their
+        // votes peak on the disc's own centre, too close to the stronger peak to be a part.
+        let (mut map, centres) = two_touching_discs([[30.3, 61.7], [100.1, 58.2]]);
+        let (w, plane) = (map.width, map.width * map.height);
+        let mut relabelled = 0;
+        for c in 0..plane {
+            if map.class[c] == 3 && 4.0 * (c % w) as f64 + 1.5 > 102.0 {
+                map.class[c] = 2;
+                relabelled += 1;
+            }
+        }
+        assert!(
+            relabelled > 40,
+            "{relabelled} cells: enough for an instance of their own"
+        );
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
+        assert_eq!(instances.len(), 2, "{instances:?}");
+        let right = instances
+            .iter()
+            .max_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
+        let right = right.expect("two instances");
+        assert_eq!(right.part, 2, "the disc keeps its class");
+        let err = (right.centre[0] - centres[1][0]).hypot(right.centre[1] - centres[1][1]);
+        assert!(err < 1.0, "centre {:?} vs {:?}", right.centre, centres[1]);
+        let disc = map.class.iter().enumerate().filter(|(c, k)| {
+            let (x, y) = (4.0 * (c % w) as f64 + 1.5, 4.0 * (c / w) as f64 + 1.5);
+            **k != 0 && (x - centres[1][0]).hypot(y - centres[1][1]) <= 24.0
+        });
+        assert_eq!(
+            right.cells.len(),
+            disc.count(),
+            "every cell of the disc, relabelled ones too"
+        );
     }
 
     #[test]
