@@ -99,14 +99,16 @@ def pad16(rgb):
     return np.pad(rgb, ((0, (-H) % 16), (0, (-W) % 16), (0, 0)), mode="edge")
 
 
-def group(cls_pred, offsets, radius=20.0, cross_radius=10.0, min_votes=30):
+def group(cls_pred, offsets, probs, radius=20.0, cross_radius=10.0, contested_min_score=0.75, min_votes=30):
     """Instances from a class map [h, w] and offsets [2, h, w] (NumPy), as the Rust grouper
     (perception::learned::instances) forms them: every part cell votes for its centre (cell
     centre + offset) on its class's histogram (4-px bins, 3x3 sum, at least `min_votes`); peaks
     at least `radius` px from a stronger peak of the same class and `cross_radius` px from one
     of another class are the centres; each cell joins the nearest centre of its class within
-    `radius`, else the nearest of any class. Returns (instance map [h, w] with -1 for none,
-    class of each instance)."""
+    `radius`, else the nearest of any class; a centre within `radius` of a stronger one of
+    another class whose cells' mean probability `probs` [classes, h, w] of its class is below
+    `contested_min_score` is dropped and its cells join again. Returns (instance map [h, w]
+    with -1 for none, class of each instance)."""
     h, w = cls_pred.shape
     fg = cls_pred > 0
     ii, jj = np.nonzero(fg)
@@ -137,12 +139,26 @@ def group(cls_pred, offsets, radius=20.0, cross_radius=10.0, min_votes=30):
     if not centres:
         return inst, []
     centres, classes = np.array(centres), np.array(classes)
-    d = np.hypot(vx[:, None] - centres[None, :, 0], vy[:, None] - centres[None, :, 1])
-    d[d > radius] = np.inf
-    own = np.where(classes[None, :] == cc[:, None], d, np.inf)
-    near = np.where(np.isfinite(own.min(1)), own.argmin(1), d.argmin(1))
-    ok = np.isfinite(d[np.arange(len(near)), near])
-    inst[ii[ok], jj[ok]] = near[ok]
+
+    def assign(centres, classes):
+        d = np.hypot(vx[:, None] - centres[None, :, 0], vy[:, None] - centres[None, :, 1])
+        d[d > radius] = np.inf
+        own = np.where(classes[None, :] == cc[:, None], d, np.inf)
+        near = np.where(np.isfinite(own.min(1)), own.argmin(1), d.argmin(1))
+        return np.where(np.isfinite(d[np.arange(len(near)), near]), near, -1)
+
+    owner = assign(centres, classes)
+    keep = []
+    for n, (p, c) in enumerate(zip(centres, classes)):
+        contested = any(k != c and np.linalg.norm(p - q) < radius for q, k in zip(centres[:n], classes[:n]))
+        mine = owner == n
+        score = probs[c, ii[mine], jj[mine]].mean() if mine.any() else 0.0
+        keep.append(not contested or score >= contested_min_score)
+    if not all(keep):
+        centres, classes = centres[keep], classes[keep]
+        owner = assign(centres, classes)
+    ok = owner >= 0
+    inst[ii[ok], jj[ok]] = owner[ok]
     return inst, [int(c) for c in classes]
 
 
@@ -162,7 +178,7 @@ def evaluate(model, frames, device, max_frames=None):
         pred = logits[0].argmax(0).cpu().numpy()[:h, :w]
         off = offsets[0].cpu().numpy()[:, :h, :w]
         conf += np.bincount(f["cls"].ravel() * n_cls + pred.ravel(), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
-        inst, classes = group(pred, off)
+        inst, classes = group(pred, off, logits[0].softmax(0).cpu().numpy()[:, :h, :w])
         gt_ids = [k for k in range(len(f["inst_part"])) if (f["inst"] == k).sum() >= MIN_GT_CELLS]
         n_gt += len(gt_ids)
         n_pred += len(classes)
@@ -196,7 +212,7 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
     ap.add_argument("--eval-every", type=int, default=250)
     ap.add_argument("--workers", type=int, default=0, help="processes preparing batches (0: the training process)")
-    ap.add_argument("--widths", default="12,16,32,64", help="channels at strides 2, 4, 8, 16")
+    ap.add_argument("--widths", default="12,16,48,96", help="channels at strides 2, 4, 8, 16")
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop by random quarter turns (augmentation)")
     args = ap.parse_args(argv)
     if args.size % 16:

@@ -20,6 +20,9 @@ pub struct InstanceConfig {
     /// Two instance centres of different classes are at least this far apart, pixels: closer,
     /// the weaker peak is the stronger one's part with some cells mislabelled.
     pub cross_separation_px: f64,
+    /// The smallest score of an instance whose peak lies closer than `min_separation_px` to a
+    /// stronger peak of another class.
+    pub contested_min_score: f64,
     /// A cell joins a centre when its vote lands within this distance, pixels.
     pub assign_radius_px: f64,
     /// Radius of the mean shift that refines a peak to the mean of the votes near it, pixels.
@@ -35,6 +38,7 @@ impl Default for InstanceConfig {
         Self {
             min_separation_px: 24.0,
             cross_separation_px: 10.0,
+            contested_min_score: 0.75,
             assign_radius_px: 24.0,
             refine_radius_px: 8.0,
             min_peak_votes: 8.0,
@@ -211,6 +215,55 @@ impl InstanceGrouper {
         }
         // 3. Each voting cell joins the nearest peak of its class within the radius, or else the
         //    nearest of any class.
+        self.assign(map, &peaks);
+        // 4. A peak closer than one class's separation to a stronger peak of another class stays
+        //    only when its cells are confident of its class: otherwise it is a mislabelled patch
+        //    of the stronger peak's part, whose cells then join it.
+        let mut scores = self.scores(map, &peaks);
+        let keep: Vec<bool> = (0..peaks.len())
+            .map(|n| {
+                let (class, p) = peaks[n];
+                let contested = peaks[..n]
+                    .iter()
+                    .any(|(k, q)| *k != class && dist2(*q, p) < sep2);
+                !contested || scores[n].1 >= self.config.contested_min_score
+            })
+            .collect();
+        if keep.contains(&false) {
+            let mut n = 0;
+            peaks.retain(|_| {
+                n += 1;
+                keep[n - 1]
+            });
+            self.assign(map, &peaks);
+            scores = self.scores(map, &peaks);
+        }
+        // 5. Class by the peak, score by mean probability, centre by the refined peak.
+        let mut out = Vec::with_capacity(peaks.len());
+        for (n, (class, peak)) in peaks.iter().enumerate() {
+            if scores[n].0 < self.config.min_cells.max(1) {
+                continue;
+            }
+            let cells: Vec<u32> = self
+                .owner
+                .iter()
+                .zip(&self.voters)
+                .filter(|(o, _)| **o == n as u32)
+                .map(|(_, c)| *c)
+                .collect();
+            out.push(Instance {
+                part: class - 1,
+                score: scores[n].1,
+                centre: [f64::from(peak[0]), f64::from(peak[1])],
+                cells,
+            });
+        }
+        out
+    }
+
+    /// Sets each vote's owner: the nearest peak of its cell's class within the assignment
+    /// radius, or else the nearest peak of any class within it.
+    fn assign(&mut self, map: &SegmentMap, peaks: &[(usize, [f32; 2])]) {
         let r2 = (self.config.assign_radius_px * self.config.assign_radius_px) as f32;
         self.owner.clear();
         self.owner.resize(self.votes.len(), u32::MAX);
@@ -229,32 +282,22 @@ impl InstanceGrouper {
                 self.owner[k] = n as u32;
             }
         }
-        // 4. Class by the peak, score by mean probability, centre by the refined peak.
-        let mut out = Vec::with_capacity(peaks.len());
-        for (n, (class, peak)) in peaks.iter().enumerate() {
-            let cells: Vec<u32> = self
-                .owner
-                .iter()
-                .zip(&self.voters)
-                .filter(|(o, _)| **o == n as u32)
-                .map(|(_, c)| *c)
-                .collect();
-            if cells.len() < self.config.min_cells.max(1) {
-                continue;
+    }
+
+    /// Per peak, its cells and their mean probability of its class.
+    fn scores(&self, map: &SegmentMap, peaks: &[(usize, [f32; 2])]) -> Vec<(usize, f64)> {
+        let plane = map.width * map.height;
+        let mut sums = vec![(0usize, 0.0f64); peaks.len()];
+        for (&o, &c) in self.owner.iter().zip(&self.voters) {
+            if let Some((class, _)) = peaks.get(o as usize) {
+                let s = &mut sums[o as usize];
+                s.0 += 1;
+                s.1 += f64::from(map.probs[class * plane + c as usize]);
             }
-            let score = cells
-                .iter()
-                .map(|&c| f64::from(map.probs[class * plane + c as usize]))
-                .sum::<f64>()
-                / cells.len() as f64;
-            out.push(Instance {
-                part: class - 1,
-                score,
-                centre: [f64::from(peak[0]), f64::from(peak[1])],
-                cells,
-            });
         }
-        out
+        sums.into_iter()
+            .map(|(n, sum)| (n, if n == 0 { 0.0 } else { sum / n as f64 }))
+            .collect()
     }
 
     /// Moves `p` to the mean of the votes of `class` within the refine radius, a few times.
@@ -410,6 +453,50 @@ mod tests {
             disc.count(),
             "every cell of the disc, relabelled ones too"
         );
+    }
+
+    #[test]
+    fn an_unsure_patch_voting_beside_its_part_joins_it() {
+        // Disc 1 (class 3) relabels the cells right of x = 102 as class 2 with probability 0.55,
+        // and their votes land 15 px right of the disc's centre: a peak of its own, contested by
+        // the disc's and not sure of its class, so its cells join the disc.
+        let (mut map, centres) = two_touching_discs([[30.3, 61.7], [100.1, 58.2]]);
+        let (w, plane) = (map.width, map.width * map.height);
+        for c in 0..plane {
+            if map.class[c] == 3 && 4.0 * (c % w) as f64 + 1.5 > 102.0 {
+                map.class[c] = 2;
+                map.probs[2 * plane + c] = 0.55;
+                map.probs[3 * plane + c] = 0.35;
+                map.offsets[c] += 15.0;
+            }
+        }
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
+        assert_eq!(instances.len(), 2, "{instances:?}");
+        let right = instances
+            .iter()
+            .max_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
+        let right = right.expect("two instances");
+        assert_eq!(right.part, 2, "the disc keeps its class");
+        assert!(
+            (right.centre[0] - centres[1][0]).abs() < 1.0,
+            "{:?}",
+            right.centre
+        );
+        let disc_cells = (0..plane)
+            .filter(|&c| {
+                let (x, y) = (4.0 * (c % w) as f64 + 1.5, 4.0 * (c / w) as f64 + 1.5);
+                map.class[c] != 0 && (x - centres[1][0]).hypot(y - centres[1][1]) <= 24.0
+            })
+            .count();
+        assert_eq!(right.cells.len(), disc_cells);
+        // Sure of its class, the same patch is a part of its own (one under the disc).
+        for c in 0..plane {
+            if map.class[c] == 2 && map.probs[2 * plane + c] == 0.55 {
+                map.probs[2 * plane + c] = 0.85;
+            }
+        }
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
+        assert_eq!(instances.len(), 3, "{instances:?}");
     }
 
     #[test]
