@@ -91,6 +91,18 @@ fn cell_eval_on_a_rendered_feeder_split() {
     // gate refused (at the default 4 px gate most are, with their reason).
     let tp = p["true_positives"].as_u64().unwrap();
     assert_eq!(p["raw"]["all"]["samples"].as_u64(), Some(tp), "{p}");
+    // Every miss and every false positive has exactly one cause.
+    let causes = |v: &serde_json::Value| -> u64 {
+        let counts = v.as_object().unwrap_or_else(|| panic!("{v}"));
+        counts.values().map(|n| n.as_u64().unwrap()).sum()
+    };
+    assert_eq!(
+        causes(&p["misses"]),
+        p["truths"].as_u64().unwrap() - tp,
+        "{p}"
+    );
+    let fp = p["false_positives"].as_u64().unwrap();
+    assert_eq!(causes(&p["false_positive_causes"]), fp, "{p}");
     // Each match either has a pose (of a resting part, or of one leaning on another, counted
     // apart) or a failure.
     assert_eq!(

@@ -191,6 +191,7 @@ def table1(errs):
             "n": int(len(sub)),
             "mean": [float(v) for v in sub.mean(axis=0)] if len(sub) else [float("nan")] * 4,
             "std": [float(v) for v in sub.std(axis=0)] if len(sub) else [float("nan")] * 4,
+            "median": [float(v) for v in np.median(sub, axis=0)] if len(sub) else [float("nan")] * 4,
         }
     return row
 
@@ -250,7 +251,7 @@ def run_seed(frames_json, dataset, split, seg, kpn, kp3d, rng):
         pred = logits[0].argmax(0).numpy()[:h, :w]
         off = offsets[0].numpy()[:, :h, :w]
         t2 = time.perf_counter()
-        _, classes = group(pred, off)
+        _, classes = group(pred, off, logits[0].softmax(0).numpy()[:, :h, :w])
         t3 = time.perf_counter()
         # The crops our pipeline cut, with its parts.
         n = len(dets)

@@ -139,6 +139,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         m.covered,
         m.nothing
     );
+    let f = &p.false_positive_causes;
+    println!(
+        "false positives {}: {} on another part's instance, {} a second instance of a found \
+         part, {} a poor mask of a missed one, {} over other parts below IoU {}, {} on the empty \
+         table",
+        p.false_positives,
+        f.wrong_part,
+        f.duplicate,
+        f.partial,
+        f.straddling,
+        options.min_iou,
+        f.nothing
+    );
     println!(
         "poses: {} matched with a pose (parts resting on the table), {} without; stable pose \
          right {:.1} %; AR_MSSD {:.1} % (PnP {:.1} %), AR_MSPD {:.1} % (PnP {:.1} %)",

@@ -475,6 +475,20 @@ pub struct DetectionRecord {
     /// The part's BOP object id in the dataset (none if the dataset has no model of it).
     #[serde(default)]
     pub obj_id: Option<u32>,
+    /// For an unmatched detection, the ground-truth instance of any part whose mask overlaps
+    /// it most, and that IoU: why it is a false positive (the wrong part, a second instance of
+    /// a found part, a poor mask, a mask over several parts, or nothing there).
+    #[serde(default)]
+    pub closest_truth: Option<TruthOverlap>,
+}
+
+/// A ground-truth instance and its mask IoU with a detection.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TruthOverlap {
+    /// Index of the ground-truth instance.
+    pub truth: usize,
+    /// Mask IoU.
+    pub iou: f64,
 }
 
 /// A pose as BOP's ground truth and results write it.
@@ -743,9 +757,22 @@ fn evaluate_image(
             .max_by(|a, b| a.iou.total_cmp(&b.iou));
     }
 
+    // Why each false positive is one: the truth its mask overlaps most, of any part.
+    let closest_truth = |c: &Candidate<'_>| {
+        truth_masks
+            .iter()
+            .enumerate()
+            .map(|(truth, mask)| TruthOverlap {
+                truth,
+                iou: matching::iou(c.mask, mask),
+            })
+            .filter(|o| o.iou > 0.0)
+            .max_by(|a, b| a.iou.total_cmp(&b.iou))
+    };
     let mut detections = Vec::with_capacity(found.detections.len());
     for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {
         let mut rec = DetectionRecord {
+            closest_truth: m.is_none().then(|| closest_truth(&candidates[d])).flatten(),
             obj_id: dataset
                 .parts
                 .values()

@@ -440,7 +440,8 @@ fn render(
          <th>touching</th><th>detections</th><th>true pos.</th><th>false pos.</th>\
          <th>precision</th><th>recall</th><th>recall touching</th><th>recall isolated</th>\
          <th>missed: wrong part</th><th>split or merged</th><th>under another</th>\
-         <th>nothing</th></tr>",
+         <th>nothing</th><th>false pos.: wrong part</th><th>second instance</th>\
+         <th>poor mask</th><th>over others</th><th>on the table</th></tr>",
         meta.options.touch_gap_px
     );
     let all: Vec<&PartSummary> = s.parts.iter().chain(std::iter::once(&s.pooled)).collect();
@@ -449,7 +450,7 @@ fn render(
             h,
             "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
              <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td></tr>",
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&p.part),
             p.truths,
             p.ignored,
@@ -464,7 +465,12 @@ fn render(
             p.misses.wrong_part,
             p.misses.partial,
             p.misses.covered,
-            p.misses.nothing
+            p.misses.nothing,
+            p.false_positive_causes.wrong_part,
+            p.false_positive_causes.duplicate,
+            p.false_positive_causes.partial,
+            p.false_positive_causes.straddling,
+            p.false_positive_causes.nothing
         );
     }
     h.push_str("</table>");

@@ -152,6 +152,9 @@ pub struct PartSummary {
     /// Why the counted instances that were missed were missed.
     #[serde(default)]
     pub misses: MissCauses,
+    /// Why the detections matched to nothing are false positives.
+    #[serde(default)]
+    pub false_positive_causes: FalsePositiveCauses,
     /// Matched detections without a pose (PnP, refinement or the reprojection gate failed).
     pub pose_failures: usize,
     /// The pose failures by kind (the reason with its numbers replaced by `#`), most first.
@@ -196,6 +199,24 @@ pub struct MissCauses {
     /// neighbour's instance or hidden under it.
     pub covered: usize,
     /// No detection overlaps it.
+    pub nothing: usize,
+}
+
+/// False positives by the ground-truth instance that overlaps each one most
+/// ([`super::DetectionRecord::closest_truth`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FalsePositiveCauses {
+    /// It covers another part's instance at the IoU threshold or above: found, wrong part.
+    pub wrong_part: usize,
+    /// It overlaps an instance of its own part that another detection matched: a split or a
+    /// doubled instance.
+    pub duplicate: usize,
+    /// It overlaps an unmatched instance of its own part, below the threshold: a poor mask.
+    pub partial: usize,
+    /// It overlaps other parts' instances only, below the threshold: a mask over several
+    /// parts, or a part seen where a neighbour lies.
+    pub straddling: usize,
+    /// It overlaps no instance: a part seen on the empty table.
     pub nothing: usize,
 }
 
@@ -353,6 +374,7 @@ fn part_summary(
     let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
     let (mut not_resting, mut not_resting_posed) = (0, 0);
     let mut misses = MissCauses::default();
+    let mut fp_causes = FalsePositiveCauses::default();
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
     let pick_at = pick_confidence();
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
@@ -384,6 +406,18 @@ fn part_summary(
             detections += 1;
             let Some(t) = d.truth else {
                 fp += 1;
+                match d
+                    .closest_truth
+                    .and_then(|c| Some((f.truths.get(c.truth)?, c.iou)))
+                {
+                    None => fp_causes.nothing += 1,
+                    Some((t, _)) if t.part == d.part && t.detection.is_some() => {
+                        fp_causes.duplicate += 1
+                    }
+                    Some((t, _)) if t.part == d.part => fp_causes.partial += 1,
+                    Some((_, iou)) if iou >= options.min_iou => fp_causes.wrong_part += 1,
+                    Some(_) => fp_causes.straddling += 1,
+                }
                 continue;
             };
             if f.truths[t].ignored {
@@ -441,6 +475,7 @@ fn part_summary(
         recall_touching: ratio(recalled_touching, touching),
         recall_isolated: ratio(recalled - recalled_touching, truths - touching),
         misses,
+        false_positive_causes: fp_causes,
         pose_failures,
         pose_failure_kinds: {
             let mut v: Vec<(String, usize)> = kinds.into_iter().collect();
@@ -614,7 +649,7 @@ pub fn text_table(summary: &EvalSummary) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::{DetectionRecord, FrameRecord, Overlap, TruthRecord};
+    use crate::eval::{DetectionRecord, FrameRecord, Overlap, TruthOverlap, TruthRecord};
 
     fn errors(x: f64, angle: f64) -> PoseErrors {
         PoseErrors {
@@ -667,6 +702,7 @@ mod tests {
             keypoint_refined: None,
             pose: None,
             obj_id: None,
+            closest_truth: None,
         }
     }
 
@@ -753,6 +789,55 @@ mod tests {
             "{m:?}"
         );
         assert_eq!(s.parts[1].misses, MissCauses::default());
+    }
+
+    #[test]
+    fn false_positives_are_told_apart_by_the_truth_that_overlaps_them_most() {
+        let unmatched = |part: &str, closest: Option<(usize, f64)>| DetectionRecord {
+            closest_truth: closest.map(|(truth, iou)| TruthOverlap { truth, iou }),
+            ..det(part, None, None)
+        };
+        let frame = FrameRecord {
+            scene: 0,
+            image: 0,
+            failure: None,
+            times: None,
+            truths: vec![
+                truth("a", Some(0), true, false),
+                truth("a", None, true, false),
+                truth("b", None, true, false),
+            ],
+            detections: vec![
+                det("a", Some(0), None),
+                unmatched("a", Some((0, 0.3))),
+                unmatched("a", Some((1, 0.4))),
+                unmatched("a", Some((2, 0.6))),
+                unmatched("a", Some((2, 0.2))),
+                unmatched("a", None),
+                unmatched("b", Some((0, 0.2))),
+            ],
+        };
+        let s = summarise(
+            &[frame],
+            &[("a".into(), 10.0), ("b".into(), 10.0)],
+            &EvalOptions::default(),
+        );
+        let f = s.parts[0].false_positive_causes;
+        assert_eq!(s.parts[0].false_positives, 5);
+        assert_eq!(
+            (
+                f.wrong_part,
+                f.duplicate,
+                f.partial,
+                f.straddling,
+                f.nothing
+            ),
+            (1, 1, 1, 1, 1),
+            "{f:?}"
+        );
+        let b = s.parts[1].false_positive_causes;
+        assert_eq!((b.straddling, s.parts[1].false_positives), (1, 1));
+        assert_eq!(s.pooled.false_positive_causes.straddling, 2);
     }
 
     #[test]
