@@ -752,18 +752,28 @@ mod tests {
         ]
     }
 
+    /// The summary of one frame with these truths and detections, parts "a" and "b".
+    fn one_frame(truths: Vec<TruthRecord>, detections: Vec<DetectionRecord>) -> EvalSummary {
+        let frame = FrameRecord {
+            scene: 0,
+            image: 0,
+            failure: None,
+            times: None,
+            truths,
+            detections,
+        };
+        let parts = [("a".into(), 10.0), ("b".into(), 10.0)];
+        summarise(&[frame], &parts, &EvalOptions::default())
+    }
+
     #[test]
     fn misses_are_told_apart_by_the_detection_that_overlaps_them_most() {
         let missed = |closest: Option<(usize, f64)>| TruthRecord {
             closest: closest.map(|(detection, iou)| Overlap { detection, iou }),
             ..truth("a", None, true, false)
         };
-        let frame = FrameRecord {
-            scene: 0,
-            image: 0,
-            failure: None,
-            times: None,
-            truths: vec![
+        let s = one_frame(
+            vec![
                 truth("a", Some(0), true, false),
                 missed(Some((1, 0.7))),
                 missed(Some((1, 0.2))),
@@ -771,16 +781,11 @@ mod tests {
                 missed(Some((2, 0.3))),
                 missed(None),
             ],
-            detections: vec![
+            vec![
                 det("a", Some(0), None),
                 det("b", None, None),
                 det("a", None, None),
             ],
-        };
-        let s = summarise(
-            &[frame],
-            &[("a".into(), 10.0), ("b".into(), 10.0)],
-            &EvalOptions::default(),
         );
         let m = s.parts[0].misses;
         assert_eq!(
@@ -797,17 +802,13 @@ mod tests {
             closest_truth: closest.map(|(truth, iou)| TruthOverlap { truth, iou }),
             ..det(part, None, None)
         };
-        let frame = FrameRecord {
-            scene: 0,
-            image: 0,
-            failure: None,
-            times: None,
-            truths: vec![
+        let s = one_frame(
+            vec![
                 truth("a", Some(0), true, false),
                 truth("a", None, true, false),
                 truth("b", None, true, false),
             ],
-            detections: vec![
+            vec![
                 det("a", Some(0), None),
                 unmatched("a", Some((0, 0.3))),
                 unmatched("a", Some((1, 0.4))),
@@ -816,11 +817,6 @@ mod tests {
                 unmatched("a", None),
                 unmatched("b", Some((0, 0.2))),
             ],
-        };
-        let s = summarise(
-            &[frame],
-            &[("a".into(), 10.0), ("b".into(), 10.0)],
-            &EvalOptions::default(),
         );
         let f = s.parts[0].false_positive_causes;
         assert_eq!(s.parts[0].false_positives, 5);

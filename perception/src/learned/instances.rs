@@ -435,24 +435,7 @@ mod tests {
             relabelled > 40,
             "{relabelled} cells: enough for an instance of their own"
         );
-        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
-        assert_eq!(instances.len(), 2, "{instances:?}");
-        let right = instances
-            .iter()
-            .max_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
-        let right = right.expect("two instances");
-        assert_eq!(right.part, 2, "the disc keeps its class");
-        let err = (right.centre[0] - centres[1][0]).hypot(right.centre[1] - centres[1][1]);
-        assert!(err < 1.0, "centre {:?} vs {:?}", right.centre, centres[1]);
-        let disc = map.class.iter().enumerate().filter(|(c, k)| {
-            let (x, y) = (4.0 * (c % w) as f64 + 1.5, 4.0 * (c / w) as f64 + 1.5);
-            **k != 0 && (x - centres[1][0]).hypot(y - centres[1][1]) <= 24.0
-        });
-        assert_eq!(
-            right.cells.len(),
-            disc.count(),
-            "every cell of the disc, relabelled ones too"
-        );
+        the_right_disc_is_one_instance(&map, centres[1]);
     }
 
     #[test]
@@ -470,25 +453,7 @@ mod tests {
                 map.offsets[c] += 15.0;
             }
         }
-        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
-        assert_eq!(instances.len(), 2, "{instances:?}");
-        let right = instances
-            .iter()
-            .max_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
-        let right = right.expect("two instances");
-        assert_eq!(right.part, 2, "the disc keeps its class");
-        assert!(
-            (right.centre[0] - centres[1][0]).abs() < 1.0,
-            "{:?}",
-            right.centre
-        );
-        let disc_cells = (0..plane)
-            .filter(|&c| {
-                let (x, y) = (4.0 * (c % w) as f64 + 1.5, 4.0 * (c / w) as f64 + 1.5);
-                map.class[c] != 0 && (x - centres[1][0]).hypot(y - centres[1][1]) <= 24.0
-            })
-            .count();
-        assert_eq!(right.cells.len(), disc_cells);
+        the_right_disc_is_one_instance(&map, centres[1]);
         // Sure of its class, the same patch is a part of its own (one under the disc).
         for c in 0..plane {
             if map.class[c] == 2 && map.probs[2 * plane + c] == 0.55 {
@@ -497,6 +462,30 @@ mod tests {
         }
         let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
         assert_eq!(instances.len(), 3, "{instances:?}");
+    }
+
+    /// Groups `map` (two discs, the right one centred at `centre`) and checks that the right
+    /// disc is one instance of its class (2), centred on it, with every cell of the disc.
+    fn the_right_disc_is_one_instance(map: &SegmentMap, centre: [f64; 2]) {
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(map);
+        assert_eq!(instances.len(), 2, "{instances:?}");
+        let right = instances
+            .iter()
+            .max_by(|a, b| a.centre[0].total_cmp(&b.centre[0]))
+            .expect("two instances");
+        assert_eq!(right.part, 2, "the disc keeps its class");
+        let err = (right.centre[0] - centre[0]).hypot(right.centre[1] - centre[1]);
+        assert!(err < 1.0, "centre {:?} vs {centre:?}", right.centre);
+        let w = map.width;
+        let disc = (0..w * map.height).filter(|&c| {
+            let (x, y) = (4.0 * (c % w) as f64 + 1.5, 4.0 * (c / w) as f64 + 1.5);
+            map.class[c] != 0 && (x - centre[0]).hypot(y - centre[1]) <= 24.0
+        });
+        assert_eq!(
+            right.cells.len(),
+            disc.count(),
+            "every cell of the disc, relabelled ones too"
+        );
     }
 
     #[test]
