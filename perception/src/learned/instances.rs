@@ -5,17 +5,22 @@
 //! part half hidden under another part keeps its own instance when its visible cells carry its
 //! class); each foreground cell joins the nearest peak of its class within `assign_radius_px`,
 //! or else the nearest peak of any class (a stray mislabelled cell joins the part it lies on);
-//! an instance's class is its peak's and its score the mean probability of that class.
+//! an instance's class is its peak's and its score the mean probability of that class. The
+//! settings are in pixels at a reference image scale; each frame scales them by its own (a part
+//! seen from 1.4 m is 1.3 times as large as from 1.8 m).
 
 use super::detection::InstanceMask;
 use super::models::SEGMENTER_STRIDE;
 use super::segmenter::SegmentMap;
 
-/// Grouping settings.
+/// Grouping settings, in pixels at the image scale `reference_px_per_mm`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InstanceConfig {
+    /// The image scale the pixel settings are for: pixels per mm on the table.
+    pub reference_px_per_mm: f64,
     /// Two instance centres of one class are at least this far apart, pixels (parts are
-    /// 60–80 px across; overlapping parts' centres come ~30 px close in feeder frames).
+    /// 60–80 px across; a large part's far cells, whose offsets fall short, can vote for a
+    /// second centre more than 24 px from the first).
     pub min_separation_px: f64,
     /// Two instance centres of different classes are at least this far apart, pixels: closer,
     /// the weaker peak is the stronger one's part with some cells mislabelled.
@@ -36,13 +41,33 @@ pub struct InstanceConfig {
 impl Default for InstanceConfig {
     fn default() -> Self {
         Self {
-            min_separation_px: 24.0,
+            // The seed's camera (fx 10 704 px) 1.5 m above the table.
+            reference_px_per_mm: 7.14,
+            min_separation_px: 30.0,
             cross_separation_px: 10.0,
             contested_min_score: 0.75,
             assign_radius_px: 24.0,
             refine_radius_px: 8.0,
             min_peak_votes: 8.0,
             min_cells: 40,
+        }
+    }
+}
+
+impl InstanceConfig {
+    /// The same settings for an image of `px_per_mm` on the table: distances scaled by the
+    /// ratio to the reference, cell counts by its square.
+    pub fn at_scale(&self, px_per_mm: f64) -> Self {
+        let k = px_per_mm / self.reference_px_per_mm;
+        Self {
+            reference_px_per_mm: px_per_mm,
+            min_separation_px: self.min_separation_px * k,
+            cross_separation_px: self.cross_separation_px * k,
+            assign_radius_px: self.assign_radius_px * k,
+            refine_radius_px: self.refine_radius_px * k,
+            min_peak_votes: self.min_peak_votes * k * k,
+            min_cells: (self.min_cells as f64 * k * k).round() as usize,
+            ..*self
         }
     }
 }
@@ -124,8 +149,9 @@ impl InstanceGrouper {
         &self.config
     }
 
-    /// The instances of `map`, strongest peak first.
-    pub fn group(&mut self, map: &SegmentMap) -> Vec<Instance> {
+    /// The instances of `map`, an image of `px_per_mm` on the table, strongest peak first.
+    pub fn group(&mut self, map: &SegmentMap, px_per_mm: f64) -> Vec<Instance> {
+        let config = self.config.at_scale(px_per_mm);
         let (w, h) = (map.width, map.height);
         let plane = w * h;
         let parts = map.classes.saturating_sub(1);
@@ -181,7 +207,7 @@ impl InstanceGrouper {
                         continue;
                     }
                     let v = sum3(acc, i, j);
-                    if f64::from(v) < self.config.min_peak_votes {
+                    if f64::from(v) < config.min_peak_votes {
                         continue;
                     }
                     let mut is_max = true;
@@ -201,11 +227,11 @@ impl InstanceGrouper {
             }
         }
         candidates.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let sep2 = (self.config.min_separation_px * self.config.min_separation_px) as f32;
-        let cross2 = (self.config.cross_separation_px * self.config.cross_separation_px) as f32;
+        let sep2 = (config.min_separation_px * config.min_separation_px) as f32;
+        let cross2 = (config.cross_separation_px * config.cross_separation_px) as f32;
         let mut peaks: Vec<(usize, [f32; 2])> = Vec::new();
         for (_, class, p) in candidates {
-            let p = self.mean_shift(map, class, p);
+            let p = self.mean_shift(map, class, p, config.refine_radius_px);
             let apart = |(k, q): &(usize, [f32; 2])| {
                 dist2(*q, p) >= if *k == class { sep2 } else { cross2 }
             };
@@ -215,7 +241,7 @@ impl InstanceGrouper {
         }
         // 3. Each voting cell joins the nearest peak of its class within the radius, or else the
         //    nearest of any class.
-        self.assign(map, &peaks);
+        self.assign(map, &peaks, config.assign_radius_px);
         // 4. A peak closer than one class's separation to a stronger peak of another class stays
         //    only when its cells are confident of its class: otherwise it is a mislabelled patch
         //    of the stronger peak's part, whose cells then join it.
@@ -226,7 +252,7 @@ impl InstanceGrouper {
                 let contested = peaks[..n]
                     .iter()
                     .any(|(k, q)| *k != class && dist2(*q, p) < sep2);
-                !contested || scores[n].1 >= self.config.contested_min_score
+                !contested || scores[n].1 >= config.contested_min_score
             })
             .collect();
         if keep.contains(&false) {
@@ -235,13 +261,13 @@ impl InstanceGrouper {
                 n += 1;
                 keep[n - 1]
             });
-            self.assign(map, &peaks);
+            self.assign(map, &peaks, config.assign_radius_px);
             scores = self.scores(map, &peaks);
         }
         // 5. Class by the peak, score by mean probability, centre by the refined peak.
         let mut out = Vec::with_capacity(peaks.len());
         for (n, (class, peak)) in peaks.iter().enumerate() {
-            if scores[n].0 < self.config.min_cells.max(1) {
+            if scores[n].0 < config.min_cells.max(1) {
                 continue;
             }
             let cells: Vec<u32> = self
@@ -261,10 +287,10 @@ impl InstanceGrouper {
         out
     }
 
-    /// Sets each vote's owner: the nearest peak of its cell's class within the assignment
-    /// radius, or else the nearest peak of any class within it.
-    fn assign(&mut self, map: &SegmentMap, peaks: &[(usize, [f32; 2])]) {
-        let r2 = (self.config.assign_radius_px * self.config.assign_radius_px) as f32;
+    /// Sets each vote's owner: the nearest peak of its cell's class within `radius` pixels, or
+    /// else the nearest peak of any class within it.
+    fn assign(&mut self, map: &SegmentMap, peaks: &[(usize, [f32; 2])], radius: f64) {
+        let r2 = (radius * radius) as f32;
         self.owner.clear();
         self.owner.resize(self.votes.len(), u32::MAX);
         for (k, (v, &c)) in self.votes.iter().zip(&self.voters).enumerate() {
@@ -300,9 +326,9 @@ impl InstanceGrouper {
             .collect()
     }
 
-    /// Moves `p` to the mean of the votes of `class` within the refine radius, a few times.
-    fn mean_shift(&self, map: &SegmentMap, class: usize, mut p: [f32; 2]) -> [f32; 2] {
-        let r2 = (self.config.refine_radius_px * self.config.refine_radius_px) as f32;
+    /// Moves `p` to the mean of the votes of `class` within `radius` pixels, a few times.
+    fn mean_shift(&self, map: &SegmentMap, class: usize, mut p: [f32; 2], radius: f64) -> [f32; 2] {
+        let r2 = (radius * radius) as f32;
         for _ in 0..3 {
             let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0usize);
             for (v, &c) in self.votes.iter().zip(&self.voters) {
@@ -328,6 +354,9 @@ fn dist2(a: [f32; 2], b: [f32; 2]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The default settings' own image scale.
+    const REFERENCE: f64 = 7.14;
 
     /// A map of two touching discs (classes 1 and 3) whose cells point at their centres with
     /// small deterministic offset noise, plus a 3-cell speck of class 2 far away.
@@ -389,7 +418,7 @@ mod tests {
 
     fn separate(centres: [[f64; 2]; 2]) {
         let (map, centres) = two_touching_discs(centres);
-        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map, REFERENCE);
         assert_eq!(instances.len(), 2, "{instances:?}");
         let mut found: Vec<&Instance> = instances.iter().collect();
         found.sort_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
@@ -460,14 +489,14 @@ mod tests {
                 map.probs[2 * plane + c] = 0.85;
             }
         }
-        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map);
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(&map, REFERENCE);
         assert_eq!(instances.len(), 3, "{instances:?}");
     }
 
     /// Groups `map` (two discs, the right one centred at `centre`) and checks that the right
     /// disc is one instance of its class (2), centred on it, with every cell of the disc.
     fn the_right_disc_is_one_instance(map: &SegmentMap, centre: [f64; 2]) {
-        let instances = InstanceGrouper::new(InstanceConfig::default()).group(map);
+        let instances = InstanceGrouper::new(InstanceConfig::default()).group(map, REFERENCE);
         assert_eq!(instances.len(), 2, "{instances:?}");
         let right = instances
             .iter()
@@ -486,6 +515,29 @@ mod tests {
             disc.count(),
             "every cell of the disc, relabelled ones too"
         );
+    }
+
+    #[test]
+    fn the_settings_scale_with_the_image() {
+        let twice = InstanceConfig::default().at_scale(2.0 * REFERENCE);
+        assert_eq!(
+            (twice.min_separation_px, twice.assign_radius_px),
+            (60.0, 48.0)
+        );
+        assert_eq!((twice.min_peak_votes, twice.min_cells), (32.0, 160));
+        // Two discs of one class 36 px apart are two parts at the reference scale; at 1.5
+        // times it, one part's separation is 45 px, so they are one.
+        let (mut map, _) = two_touching_discs([[50.3, 61.7], [86.3, 59.2]]);
+        let plane = map.width * map.height;
+        for c in 0..plane {
+            if map.class[c] == 3 {
+                map.class[c] = 1;
+                (map.probs[plane + c], map.probs[3 * plane + c]) = (0.8, 0.1);
+            }
+        }
+        let mut grouper = InstanceGrouper::new(InstanceConfig::default());
+        assert_eq!(grouper.group(&map, REFERENCE).len(), 2);
+        assert_eq!(grouper.group(&map, 1.5 * REFERENCE).len(), 1);
     }
 
     #[test]

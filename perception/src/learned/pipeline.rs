@@ -210,7 +210,9 @@ impl LearnedPipeline {
             .run(self.preprocessor.tensor(), [hp, wp], valid, &mut self.map)?;
         times.segment = lap(&mut t);
 
-        let mut instances = self.grouper.group(&self.map);
+        let mut instances = self
+            .grouper
+            .group(&self.map, table_px_per_mm(camera, camera_T_table));
         instances.retain(|i| i.score >= self.config.min_score);
         times.instances = lap(&mut t);
 
@@ -445,6 +447,15 @@ pub fn sensor_observations(
         })
         .collect();
     (keypoints, observations)
+}
+
+/// The image scale on the table, pixels per mm: the focal length over the table plane's
+/// distance from the camera.
+#[allow(non_snake_case)]
+fn table_px_per_mm(camera: &Camera, camera_T_table: &Isometry3<f64>) -> f64 {
+    let normal = camera_T_table.rotation * nalgebra::Vector3::z();
+    let distance_mm = 1000.0 * normal.dot(&camera_T_table.translation.vector).abs();
+    camera.fx / distance_mm.max(1.0)
 }
 
 /// The pose estimator for the table at `camera_T_table`, rebuilt only when it moves.
