@@ -56,6 +56,19 @@ pub fn intersection(a: &InstanceMask, b: &InstanceMask) -> usize {
     n
 }
 
+/// The mask among `masks` that overlaps `mask` most, by index, with that IoU (none without
+/// any overlap): what a miss or a false positive is told apart by.
+pub fn most_overlapping<'a>(
+    masks: impl Iterator<Item = &'a InstanceMask>,
+    mask: &InstanceMask,
+) -> Option<(usize, f64)> {
+    masks
+        .map(|m| iou(m, mask))
+        .enumerate()
+        .filter(|(_, iou)| *iou > 0.0)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+}
+
 /// Intersection over union of two masks (0 when both are empty).
 pub fn iou(a: &InstanceMask, b: &InstanceMask) -> f64 {
     let i = intersection(a, b);

@@ -746,28 +746,14 @@ fn evaluate_image(
         .zip(&matched)
         .filter(|(_, m)| !**m)
     {
-        truth.closest = candidates
-            .iter()
-            .enumerate()
-            .map(|(d, c)| Overlap {
-                detection: d,
-                iou: matching::iou(c.mask, mask),
-            })
-            .filter(|o| o.iou > 0.0)
-            .max_by(|a, b| a.iou.total_cmp(&b.iou));
+        truth.closest = matching::most_overlapping(candidates.iter().map(|c| c.mask), mask)
+            .map(|(detection, iou)| Overlap { detection, iou });
     }
 
     // Why each false positive is one: the truth its mask overlaps most, of any part.
     let closest_truth = |c: &Candidate<'_>| {
-        truth_masks
-            .iter()
-            .enumerate()
-            .map(|(truth, mask)| TruthOverlap {
-                truth,
-                iou: matching::iou(c.mask, mask),
-            })
-            .filter(|o| o.iou > 0.0)
-            .max_by(|a, b| a.iou.total_cmp(&b.iou))
+        matching::most_overlapping(truth_masks.iter(), c.mask)
+            .map(|(truth, iou)| TruthOverlap { truth, iou })
     };
     let mut detections = Vec::with_capacity(found.detections.len());
     for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {
