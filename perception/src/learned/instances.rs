@@ -245,46 +245,40 @@ impl InstanceGrouper {
         // 4. A peak closer than one class's separation to a stronger peak of another class stays
         //    only when its cells are confident of its class: otherwise it is a mislabelled patch
         //    of the stronger peak's part, whose cells then join it.
-        let mut scores = self.scores(map, &peaks);
-        let keep: Vec<bool> = (0..peaks.len())
-            .map(|n| {
-                let (class, p) = peaks[n];
+        let mut members = self.members(peaks.len());
+        let keep: Vec<bool> = peaks
+            .iter()
+            .enumerate()
+            .map(|(n, &(class, p))| {
                 let contested = peaks[..n]
                     .iter()
                     .any(|(k, q)| *k != class && dist2(*q, p) < sep2);
-                !contested || scores[n].1 >= config.contested_min_score
+                !contested
+                    || mean_probability(map, class, &members[n]) >= config.contested_min_score
             })
             .collect();
         if keep.contains(&false) {
-            let mut n = 0;
-            peaks.retain(|_| {
-                n += 1;
-                keep[n - 1]
-            });
+            peaks = peaks
+                .into_iter()
+                .zip(keep)
+                .filter(|(_, k)| *k)
+                .map(|(p, _)| p)
+                .collect();
             self.assign(map, &peaks, config.assign_radius_px);
-            scores = self.scores(map, &peaks);
+            members = self.members(peaks.len());
         }
         // 5. Class by the peak, score by mean probability, centre by the refined peak.
-        let mut out = Vec::with_capacity(peaks.len());
-        for (n, (class, peak)) in peaks.iter().enumerate() {
-            if scores[n].0 < config.min_cells.max(1) {
-                continue;
-            }
-            let cells: Vec<u32> = self
-                .owner
-                .iter()
-                .zip(&self.voters)
-                .filter(|(o, _)| **o == n as u32)
-                .map(|(_, c)| *c)
-                .collect();
-            out.push(Instance {
+        peaks
+            .iter()
+            .zip(members)
+            .filter(|(_, cells)| cells.len() >= config.min_cells.max(1))
+            .map(|(&(class, peak), cells)| Instance {
                 part: class - 1,
-                score: scores[n].1,
+                score: mean_probability(map, class, &cells),
                 centre: [f64::from(peak[0]), f64::from(peak[1])],
                 cells,
-            });
-        }
-        out
+            })
+            .collect()
     }
 
     /// Sets each vote's owner: the nearest peak of its cell's class within `radius` pixels, or
@@ -310,20 +304,15 @@ impl InstanceGrouper {
         }
     }
 
-    /// Per peak, its cells and their mean probability of its class.
-    fn scores(&self, map: &SegmentMap, peaks: &[(usize, [f32; 2])]) -> Vec<(usize, f64)> {
-        let plane = map.width * map.height;
-        let mut sums = vec![(0usize, 0.0f64); peaks.len()];
+    /// The cells each of `peaks` peaks owns, in one pass over the votes.
+    fn members(&self, peaks: usize) -> Vec<Vec<u32>> {
+        let mut members = vec![Vec::new(); peaks];
         for (&o, &c) in self.owner.iter().zip(&self.voters) {
-            if let Some((class, _)) = peaks.get(o as usize) {
-                let s = &mut sums[o as usize];
-                s.0 += 1;
-                s.1 += f64::from(map.probs[class * plane + c as usize]);
+            if let Some(cells) = members.get_mut(o as usize) {
+                cells.push(c);
             }
         }
-        sums.into_iter()
-            .map(|(n, sum)| (n, if n == 0 { 0.0 } else { sum / n as f64 }))
-            .collect()
+        members
     }
 
     /// Moves `p` to the mean of the votes of `class` within `radius` pixels, a few times.
@@ -344,6 +333,20 @@ impl InstanceGrouper {
             p = [(sx / n as f64) as f32, (sy / n as f64) as f32];
         }
         p
+    }
+}
+
+/// The mean probability of `class` over `cells` (0 for none).
+fn mean_probability(map: &SegmentMap, class: usize, cells: &[u32]) -> f64 {
+    let plane = map.width * map.height;
+    let sum: f64 = cells
+        .iter()
+        .map(|&c| f64::from(map.probs[class * plane + c as usize]))
+        .sum();
+    if cells.is_empty() {
+        0.0
+    } else {
+        sum / cells.len() as f64
     }
 }
 
