@@ -77,7 +77,10 @@ class KeypointNet(nn.Module):
     The decoder runs to stride 4; the last step upsamples it to stride 2 and adds a 1x1
     projection of the stride-2 features (edges), so almost no work is done at 64x64."""
 
-    def __init__(self, w=(8, 16, 32, 48, 64)):
+    WIDTHS = (16, 24, 48, 64, 96)
+    """Channels at strides 2, 4, 8, 16, 32 of the committed net (the trainer's default)."""
+
+    def __init__(self, w=WIDTHS):
         super().__init__()
         self.norm = Normalise(len(PARTS))
         self.s2 = block(6, w[0], 2)  # 64x64
@@ -124,7 +127,10 @@ class Segmenter(nn.Module):
     OFFSET_SCALE = 32.0
     """Offsets are predicted in units of this many pixels (keeps the regression well scaled)."""
 
-    def __init__(self, w=(12, 16, 32, 64)):
+    WIDTHS = (12, 16, 48, 96)
+    """Channels at strides 2, 4, 8, 16 of the committed net (the trainer's default)."""
+
+    def __init__(self, w=WIDTHS):
         super().__init__()
         self.widths = tuple(w)
         self.norm = Normalise()

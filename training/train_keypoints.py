@@ -192,7 +192,7 @@ def main(argv=None):
     ap.add_argument("--epochs", type=int, default=20)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop about its centre (augmentation)")
-    ap.add_argument("--widths", default="16,24,48,64,96", help="channels at strides 2, 4, 8, 16, 32")
+    ap.add_argument("--widths", default=",".join(map(str, KeypointNet.WIDTHS)), help="channels at strides 2, 4, 8, 16, 32")
     ap.add_argument("--eval-every", type=int, default=1, help="epochs between test evaluations")
     ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
     args = ap.parse_args(argv)

@@ -212,7 +212,7 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=256, help="training crop side, px (multiple of 16)")
     ap.add_argument("--eval-every", type=int, default=250)
     ap.add_argument("--workers", type=int, default=0, help="processes preparing batches (0: the training process)")
-    ap.add_argument("--widths", default="12,16,48,96", help="channels at strides 2, 4, 8, 16")
+    ap.add_argument("--widths", default=",".join(map(str, Segmenter.WIDTHS)), help="channels at strides 2, 4, 8, 16")
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop by random quarter turns (augmentation)")
     args = ap.parse_args(argv)
     if args.size % 16:
