@@ -413,12 +413,12 @@ pub struct TruthRecord {
     /// For a missed instance, the detection of any part whose mask overlaps it most, and that
     /// IoU: why it was missed (merged with a neighbour, split, the wrong part, or nothing there).
     #[serde(default)]
-    pub closest: Option<Overlap>,
+    pub closest: Option<DetectionOverlap>,
 }
 
 /// A detection and its mask IoU with a ground-truth instance.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Overlap {
+pub struct DetectionOverlap {
     /// Index of the detection.
     pub detection: usize,
     /// Mask IoU.
@@ -747,7 +747,7 @@ fn evaluate_image(
         .filter(|(_, m)| !**m)
     {
         truth.closest = matching::most_overlapping(candidates.iter().map(|c| c.mask), mask)
-            .map(|(detection, iou)| Overlap { detection, iou });
+            .map(|(detection, iou)| DetectionOverlap { detection, iou });
     }
 
     // Why each false positive is one: the truth its mask overlaps most, of any part.

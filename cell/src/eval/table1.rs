@@ -649,7 +649,7 @@ pub fn text_table(summary: &EvalSummary) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::{DetectionRecord, FrameRecord, Overlap, TruthOverlap, TruthRecord};
+    use crate::eval::{DetectionOverlap, DetectionRecord, FrameRecord, TruthOverlap, TruthRecord};
 
     fn errors(x: f64, angle: f64) -> PoseErrors {
         PoseErrors {
@@ -769,7 +769,7 @@ mod tests {
     #[test]
     fn misses_are_told_apart_by_the_detection_that_overlaps_them_most() {
         let missed = |closest: Option<(usize, f64)>| TruthRecord {
-            closest: closest.map(|(detection, iou)| Overlap { detection, iou }),
+            closest: closest.map(|(detection, iou)| DetectionOverlap { detection, iou }),
             ..truth("a", None, true, false)
         };
         let s = one_frame(
