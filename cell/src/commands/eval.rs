@@ -12,7 +12,7 @@ use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{
     ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, pick_confidence, summarise, text_table,
 };
-use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split};
+use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split, stable_poses};
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
@@ -182,6 +182,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
          {} of {}; {} of them matched with a pose, left out of the refined rows",
         p.not_resting, p.truths, p.not_resting_posed
     );
+    print!("{}", stable_poses::text(&summary.stable_poses));
     if !p.pose_failure_kinds.is_empty() {
         let kinds: Vec<String> = p
             .pose_failure_kinds

@@ -12,6 +12,7 @@ pub mod bop_results;
 pub mod gallery;
 pub mod matching;
 pub mod report_html;
+pub mod stable_poses;
 pub mod table1;
 
 use std::collections::BTreeMap;
@@ -408,6 +409,9 @@ pub struct TruthRecord {
     /// counted apart.
     #[serde(default = "resting_by_default")]
     pub resting: bool,
+    /// The stable pose it rests in (the planar refiner's class of its true pose), when resting.
+    #[serde(default)]
+    pub stable_pose: Option<String>,
     /// Index of the detection matched to it.
     pub detection: Option<usize>,
     /// For a missed instance, the detection of any part whose mask overlaps it most, and that
@@ -696,6 +700,10 @@ fn evaluate_image(
                 touching: touching[k],
                 ignored: info.visib_fract < options.min_visib_fract || truth_masks[k].area() == 0,
                 resting: rests(k),
+                stable_pose: rests(k)
+                    .then(|| snapped[k].as_ref())
+                    .flatten()
+                    .map(|p| truth_parts[k].stable_poses[p.class].name.clone()),
                 detection: None,
                 closest: None,
             }

@@ -12,6 +12,7 @@ use serde::Serialize;
 
 use super::bop_results;
 use super::gallery::{FailedCrop, GalleryItem};
+use super::stable_poses::StablePoseRow;
 use super::table1::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, Table1Row, seed_row};
 use super::{EvalOptions, EvalRun, FrameRecord};
 use crate::report::html::escape;
@@ -308,6 +309,40 @@ figure{display:inline-block;margin:4px;width:256px;vertical-align:top;font-size:
 figure img{width:256px;height:256px;image-rendering:pixelated;border:1px solid #ccc}\
 .scroll{overflow-x:auto}code{background:#f3f3f3;padding:1px 4px}";
 
+/// Detection and posing by the stable pose the parts truly rest in.
+fn stable_pose_table(h: &mut String, rows: &[StablePoseRow]) {
+    if rows.is_empty() {
+        return;
+    }
+    h.push_str(
+        "<h2>By stable pose</h2><p>Counted instances resting on the table, by the stable pose \
+         they truly rest in: how many were found, posed (a detection with a pose), and posed in \
+         that stable pose, and what the others were taken for.</p><table><tr><th class=l>part</th>\
+         <th class=l>stable pose</th><th>resting</th><th>found</th><th>posed</th>\
+         <th>posed in it</th><th class=l>taken for</th></tr>",
+    );
+    for r in rows {
+        let wrong: Vec<String> = r
+            .taken_for
+            .iter()
+            .map(|(p, n)| format!("{n} × {}", escape(p)))
+            .collect();
+        let _ = write!(
+            h,
+            "<tr><td class=l>{}</td><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td class=l>{}</td></tr>",
+            escape(&r.part),
+            escape(&r.stable_pose),
+            r.resting,
+            r.found,
+            r.posed,
+            r.right,
+            wrong.join(", ")
+        );
+    }
+    h.push_str("</table>");
+}
+
 fn num(x: f64, d: usize) -> String {
     if x.is_finite() {
         format!("{x:.d$}")
@@ -528,6 +563,7 @@ fn render(
             );
         }
     }
+    stable_pose_table(&mut h, &s.stable_poses);
 
     // Timing.
     h.push_str(

@@ -259,6 +259,9 @@ pub struct EvalSummary {
     pub pooled: PartSummary,
     /// Table 1 rows per part: raw seed-style, raw all, refined seed-style, refined all.
     pub table1: Vec<Table1Entry>,
+    /// Detection and posing by the stable pose the parts rest in.
+    #[serde(default)]
+    pub stable_poses: Vec<super::stable_poses::StablePoseRow>,
     /// Time per stage.
     pub stages: Vec<StageSummary>,
     /// Frames per second of the pipeline (1 / mean total time).
@@ -571,6 +574,7 @@ pub fn summarise(
         parts: per_part,
         pooled,
         table1,
+        stable_poses: super::stable_poses::stable_pose_rows(frames),
         stages,
         frames_per_s: 1e3 / mean_total,
     }
@@ -673,6 +677,7 @@ mod tests {
             touching,
             ignored,
             resting: true,
+            stable_pose: Some("+z".into()),
             detection,
             closest: None,
         }
