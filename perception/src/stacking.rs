@@ -4,15 +4,17 @@
 //! Planar refinement puts every part flat on the table in one of its stable poses. When two such
 //! estimates overlap by more than estimation error explains, one part lies on the other (leaning
 //! on it, or stacked): a pose that no stable pose describes, so neither estimate is fit for a
-//! grasp. The test runs parry's contact query on the parts' convex pieces (their hulls would
-//! overlap where one part's tab reaches over another's low wall); a pair's depth is the smallest
-//! translation that separates its deepest-overlapping pieces. The query works in millimetres:
-//! parry's penetration solver has absolute tolerances that misjudge overlaps of millimetre parts
-//! in metres.
+//! grasp. The test runs on the parts' convex pieces (their hulls would overlap where one part's
+//! tab reaches over another's low wall): parry's GJK says whether two pieces intersect, and the
+//! separating-axis theorem how deep (parry's EPA misjudged deep overlaps of pieces with parallel
+//! faces); a pair's depth is the smallest translation that separates its deepest-overlapping
+//! pieces. The queries work in millimetres: parry's solvers have absolute tolerances that
+//! misjudge millimetre parts in metres.
 
 use nalgebra::{Isometry3, Point3};
 use parry3d_f64::math::{Pose, Rotation, Vector};
-use parry3d_f64::query::contact;
+use parry3d_f64::query::intersection_test;
+use parry3d_f64::query::sat::support_map_support_map_compute_separation;
 use parry3d_f64::shape::ConvexPolyhedron;
 
 use crate::part::{TriMesh, convex_pieces};
@@ -142,9 +144,44 @@ fn deepest(
             if (ca - cb).norm() > p.radius + q.radius {
                 continue;
             }
-            if let Ok(Some(c)) = contact(&pose_a, &p.shape, &pose_b, &q.shape, 0.0) {
-                depth = depth.max(-c.dist);
-            }
+            depth = depth.max(penetration(&pose_a, &p.shape, &pose_b, &q.shape));
+        }
+    }
+    depth
+}
+
+/// Penetration depth of two convex pieces at their poses, mm (−∞ when apart): GJK tells whether
+/// they intersect, and the separating-axis depth how deep. (parry's EPA, behind its `contact`,
+/// reported two insert molds 2 mm apart at the same yaw as touching, and as apart when it gave up.)
+fn penetration(pose_a: &Pose, a: &ConvexPolyhedron, pose_b: &Pose, b: &ConvexPolyhedron) -> f64 {
+    if intersection_test(pose_a, a, pose_b, b).is_ok_and(|i| i.intersecting) {
+        separating_axis_depth(&pose_a.inv_mul(pose_b), a, b)
+    } else {
+        f64::NEG_INFINITY
+    }
+}
+
+/// The least overlap of two convex polyhedra (`b` at `pos_ab` in `a`'s frame) over the axes that
+/// can separate them, both faces' normals and the cross products of their edges: their
+/// penetration depth, exact for convex polyhedra (negative when some axis separates them).
+fn separating_axis_depth(pos_ab: &Pose, a: &ConvexPolyhedron, b: &ConvexPolyhedron) -> f64 {
+    let edges_b: Vec<Vector> = b.edges().iter().map(|e| pos_ab.rotation * e.dir).collect();
+    let axes = a
+        .faces()
+        .iter()
+        .map(|f| f.normal)
+        .chain(b.faces().iter().map(|f| pos_ab.rotation * f.normal))
+        .chain(a.edges().iter().flat_map(|ea| {
+            edges_b
+                .iter()
+                .filter_map(move |eb| ea.dir.cross(*eb).try_normalize())
+        }));
+    let mut depth = f64::INFINITY;
+    for axis in axes {
+        for dir in [axis, -axis] {
+            depth = depth.min(-support_map_support_map_compute_separation(
+                a, b, pos_ab, dir,
+            ));
         }
     }
     depth
@@ -220,6 +257,34 @@ mod tests {
         ]);
         let o = found[0].expect("overlap");
         assert!((o.depth - 0.001).abs() < 1e-6, "depth {}", o.depth);
+    }
+
+    #[test]
+    fn insert_molds_overlapping_at_any_yaw_are_flagged() {
+        // parry's contact query (EPA) reported these as touching or apart: two insert molds 2 mm
+        // apart, at one yaw or nearly.
+        let root =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = crate::part::Catalog::load(&root).unwrap();
+        let mold = catalog.part("insert_mold").unwrap();
+        let check = StackingCheck::new(&[catalog.load_mesh(mold).unwrap()], 0.0005);
+        for (yaw, turn) in [
+            (0.0, 0.0),
+            (0.0, 1e-6),
+            (0.3, 1e-9),
+            (0.3, 0.01),
+            (1.0, 0.0),
+        ] {
+            let resting = |x: f64, yaw: f64| {
+                Isometry3::from_parts(
+                    Translation3::new(x, 0.0, 0.002075),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+                )
+            };
+            let found = check.overlaps(&[(0, resting(0.0, yaw)), (0, resting(0.002, yaw + turn))]);
+            let o = found[0].unwrap_or_else(|| panic!("yaw {yaw} + {turn}: apart"));
+            assert!(o.depth > 0.002, "yaw {yaw} + {turn}: {} mm", 1e3 * o.depth);
+        }
     }
 
     #[test]
