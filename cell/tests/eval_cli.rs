@@ -118,7 +118,11 @@ fn cell_eval_on_a_rendered_feeder_split() {
     let resting = p["truths"].as_u64().unwrap() - p["not_resting"].as_u64().unwrap();
     assert_eq!(sum("resting"), resting, "{rows:?}");
     assert_eq!(sum("posed"), p["poses"].as_u64().unwrap(), "{rows:?}");
-    assert_eq!(sum("right"), p["stable_pose_right"].as_u64().unwrap(), "{rows:?}");
+    assert_eq!(
+        sum("right"),
+        p["stable_pose_right"].as_u64().unwrap(),
+        "{rows:?}"
+    );
     let html = std::fs::read_to_string(out.join("eval.html")).unwrap();
     assert!(html.contains("Table 1") && html.contains("By stable pose"));
     // The gallery holds the 4 worst posed crops (resting or not) and the ⌈4 / 3⌉ = 2 worst

@@ -73,6 +73,10 @@ pub struct ContourRefinement {
     pub fit: ContourFit,
     /// The planar pose from the keypoints alone, before the alignment.
     pub keypoint_planar: PlanarPose,
+    /// The keypoints failed the reprojection gate and the outline alone placed the part, in a
+    /// stable pose whose view repeats on a turn (a featureless face up): its yaw is known only
+    /// up to that turn.
+    pub outline_only: bool,
 }
 
 impl PoseEstimate {
@@ -109,6 +113,7 @@ impl PoseEstimate {
         self.contour = Some(ContourRefinement {
             fit,
             keypoint_planar,
+            outline_only: false,
         });
     }
 }

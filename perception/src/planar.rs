@@ -247,6 +247,17 @@ impl PlanarRefiner {
         })
     }
 
+    /// Table-frame (x, y) of the point at `height` above the table that `camera` sees at
+    /// `pixel` (distorted, as observed).
+    pub fn table_point(
+        &self,
+        camera: &Camera,
+        pixel: Point2<f64>,
+        height: f64,
+    ) -> Result<(f64, f64), PlanarError> {
+        self.intersect_ray(&camera.pixel_ray(pixel)?.into_inner(), height)
+    }
+
     /// Table-frame (x, y) where the camera-frame ray direction `ray` meets the plane at `height`.
     fn intersect_ray(&self, ray: &Vector3<f64>, height: f64) -> Result<(f64, f64), PlanarError> {
         let table_t_camera = self.camera_T_table.inverse();

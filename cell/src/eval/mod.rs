@@ -25,7 +25,7 @@ use perception::learned::{InstanceMask, LearnedDetections, StageTimes};
 use perception::metrics::{PoseErrors, pose_errors};
 use perception::part::{Catalog, PartRole, StablePose};
 use perception::planar::{PlanarConfig, PlanarPose, PlanarRefiner};
-use perception::symmetry::{ambiguity_group, symmetric_angle, symmetry_group};
+use perception::symmetry::{ambiguity_group, symmetric_angle, symmetry_group, view_turns};
 use perception::{Camera, Distortion, FrameImage};
 use serde::{Deserialize, Serialize};
 use sim::dataset::{
@@ -178,6 +178,9 @@ pub struct PartData {
     pub near_group: Vec<UnitQuaternion<f64>>,
     /// Stable poses, in the order classes refer to.
     pub stable_poses: Vec<StablePose>,
+    /// Per stable pose, the turns under which the part looks the same from above
+    /// ([`perception::part::ViewSymmetry`]; the identity alone for most).
+    pub view_turns: Vec<Vec<UnitQuaternion<f64>>>,
     /// Diameter from models_info.json, mm.
     pub diameter_mm: f64,
     /// Outline model of its mesh, to draw the true and estimated outlines in the gallery.
@@ -285,6 +288,11 @@ impl EvalDataset {
                     group: symmetry_group(&spec.symmetries),
                     near_group: ambiguity_group(&spec.symmetries),
                     stable_poses: spec.stable_poses.clone(),
+                    view_turns: spec
+                        .stable_poses
+                        .iter()
+                        .map(|s| view_turns(s, spec.view_order(&s.name)))
+                        .collect(),
                     diameter_mm: info.diameter,
                     outline: PartOutline::new(&mesh),
                 },
@@ -388,6 +396,22 @@ impl From<&StageTimes> for StageMs {
             total: ms(t.total),
         }
     }
+}
+
+/// `truth`, or the turn of it (`turns`, part frame) nearest `estimate` in rotation.
+fn seen_truth(
+    truth: &Isometry3<f64>,
+    turns: &[UnitQuaternion<f64>],
+    estimate: &Isometry3<f64>,
+) -> Isometry3<f64> {
+    turns
+        .iter()
+        .map(|g| truth * Isometry3::from_parts(Default::default(), *g))
+        .min_by(|a, b| {
+            let d = |t: &Isometry3<f64>| t.rotation.angle_to(&estimate.rotation);
+            d(a).total_cmp(&d(b))
+        })
+        .unwrap_or(*truth)
 }
 
 /// One ground-truth instance of a frame.
@@ -818,18 +842,32 @@ fn evaluate_image(
                     crop: gallery::draw_crop(&frame_image.pixels, &camera, det, part, truth, None),
                 });
             }
+            // A part resting in a stable pose whose view repeats on a turn is scored against the
+            // turn of its true pose nearest each estimate: vision cannot tell those apart.
+            let turns: &[UnitQuaternion<f64>] = match (&snapped[m.truth], truths[m.truth].resting) {
+                (Some(p), true) => &part.view_turns[p.class],
+                _ => &[],
+            };
+            let seen = |est: &Isometry3<f64>| seen_truth(truth, turns, est);
             let flip = |est: &Isometry3<f64>| {
-                symmetric_angle(&est.rotation, &truth.rotation, &part.near_group).to_degrees()
+                symmetric_angle(&est.rotation, &seen(est).rotation, &part.near_group).to_degrees()
             };
             // Raw PnP is reported for every estimate, also one the reprojection gate refused
             // (the paper's Table 1 is ungated PnP); refined figures only for accepted poses.
             if let Some(estimate) = det.pose.as_ref().ok().or(det.refused.as_ref()) {
                 let raw = &estimate.pnp.camera_T_part;
-                rec.raw = Some(pose_errors(&camera, &part.points, &part.group, truth, raw));
+                rec.raw = Some(pose_errors(
+                    &camera,
+                    &part.points,
+                    &part.group,
+                    &seen(raw),
+                    raw,
+                ));
                 rec.raw_flip_deg = Some(flip(raw));
             }
             if let (Ok(pose), Some(raw_e)) = (&det.pose, rec.raw) {
                 let refined = &pose.planar.camera_T_part;
+                let truth = &seen(refined);
                 let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
                 rec.refined_flip_deg = Some(flip(refined));
                 rec.refined = Some(refined_e);
@@ -839,7 +877,7 @@ fn evaluate_image(
                         &camera,
                         &part.points,
                         &part.group,
-                        truth,
+                        &seen(&c.keypoint_planar.camera_T_part),
                         &c.keypoint_planar.camera_T_part,
                     ));
                 }
@@ -886,4 +924,32 @@ fn evaluate_image(
         truths,
         detections,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, Vector3};
+
+    #[test]
+    fn a_truth_is_seen_as_its_turn_nearest_the_estimate() {
+        let truth = Isometry3::from_parts(
+            Translation3::new(0.01, 0.02, 1.5),
+            UnitQuaternion::from_euler_angles(3.0, 0.1, 0.2),
+        );
+        let quarter = |k: f64| {
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), k * std::f64::consts::FRAC_PI_2)
+        };
+        let turns: Vec<_> = (0..4).map(|k| quarter(k as f64)).collect();
+        // An estimate 3 quarter turns and 0.01 rad off the truth is 0.01 rad off its third turn.
+        let estimate = truth * Isometry3::from_parts(Default::default(), quarter(3.01));
+        let seen = seen_truth(&truth, &turns, &estimate);
+        assert!(
+            (seen.rotation.angle_to(&estimate.rotation) - 0.005 * std::f64::consts::PI).abs()
+                < 1e-9
+        );
+        assert_eq!(seen.translation, truth.translation);
+        // Without turns the truth stands.
+        assert_eq!(seen_truth(&truth, &[], &estimate), truth);
+    }
 }

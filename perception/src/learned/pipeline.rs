@@ -65,6 +65,16 @@ impl Default for PipelineConfig {
 /// the contour-aligned lateral error (≈ 0.05 mm median, 0.2 mm at the 90th percentile).
 pub const STACKING_TOLERANCE: f64 = 0.0005;
 
+/// Keypoints whose RMS on the table exceeds this, mm, place nothing: only then does a part
+/// that may rest in a featureless stable pose get posed by its outline. Upside-down insert molds'
+/// keypoints miss by 1.9 mm and more (13.3 px at 7.1 px/mm; median 23.5 px); face-up ones that
+/// miss a tight gate (4 px) by 0.6–1.5 mm, and the outline alone cannot tell the two faces apart.
+const RESCUE_MIN_RMS_MM: f64 = 1.6;
+
+/// Least edge support of an outline-only pose of a part in a featureless stable pose (0.85 posed
+/// one more upside-down insert mold of 97 on the test set, and two more parts leaning on others).
+const RESCUE_SUPPORT: f64 = 0.9;
+
 /// The learned perception pipeline: both networks' sessions and every buffer, reused per frame.
 pub struct LearnedPipeline {
     parts: Vec<String>,
@@ -258,6 +268,7 @@ impl LearnedPipeline {
         }
         let owners = &self.owners;
         let parts = &self.parts;
+        let meaningless_rms_px = RESCUE_MIN_RMS_MM * table_px_per_mm(camera, camera_T_table);
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
         let pose_of = |k: usize| {
             let ((inst, origin), votes) = &jobs[k];
@@ -267,6 +278,7 @@ impl LearnedPipeline {
                 image,
                 camera,
                 covered: &|y, x, row: &mut [bool]| owners.cover_row(k, y, x, row),
+                meaningless_rms_px,
             };
             ctx.pose(inst.part, &parts[inst.part], votes, **origin)
         };
@@ -342,6 +354,9 @@ struct PoseContext<'a> {
     image: &'a FrameImage,
     camera: &'a Camera,
     covered: &'a (dyn Fn(i64, i64, &mut [bool]) + Sync),
+    /// Keypoint RMS above which the keypoints say nothing about the part, pixels
+    /// ([`RESCUE_MIN_RMS_MM`] on the table).
+    meaningless_rms_px: f64,
 }
 
 impl PoseContext<'_> {
@@ -380,6 +395,27 @@ impl PoseContext<'_> {
                     EstimateError::Rms { estimate, .. } => Some(*estimate),
                     _ => None,
                 };
+                // Keypoints that miss the gate but still fit a pose are the part's (a face-up
+                // insert mold with its pins in view); only meaningless ones leave it to the
+                // outline.
+                if let (Some(stage), Some(mut estimate)) = (self.contour, refused.clone())
+                    && estimate.rms_px > self.meaningless_rms_px
+                    && let Some(centre) = keypoints.last()
+                    && stage.rescue(
+                        &mut estimate,
+                        class,
+                        part,
+                        self.estimator,
+                        self.image,
+                        self.camera,
+                        origin,
+                        centre.position,
+                        RESCUE_SUPPORT,
+                        self.covered,
+                    )
+                {
+                    return (keypoints, Ok(estimate), None);
+                }
                 (keypoints, Err(reason), refused)
             }
         }
@@ -389,6 +425,9 @@ impl PoseContext<'_> {
 /// Withdraws the poses of parts that lie on or under another detected part (their estimates on
 /// the table overlap): each becomes a refused estimate with the reason, which names the other
 /// part and its centre in sensor pixels (`sensor`: the sensor pixel of the instances' origin).
+/// An outline-only pose ([`crate::estimate::ContourRefinement::outline_only`]) is the weaker
+/// witness: it is withdrawn for any overlap, but withdraws no keypoint pose (a part leaning on
+/// others can show an outline that fits a featureless pose on the table).
 #[allow(non_snake_case)]
 fn withdraw_stacked(
     check: &StackingCheck,
@@ -397,23 +436,38 @@ fn withdraw_stacked(
     parts: &[String],
     poses: &mut [PoseOutcome],
 ) {
-    let (posed, estimates): (Vec<usize>, Vec<_>) = poses
-        .iter()
-        .enumerate()
-        .filter_map(|(i, (_, pose, _))| {
-            let table_T_part = pose.as_ref().ok()?.planar.table_T_part;
-            Some((i, (instances[i].part, table_T_part)))
-        })
-        .unzip();
-    for (k, overlap) in check.overlaps(&estimates).into_iter().enumerate() {
-        let Some(o) = overlap else { continue };
-        let (i, other) = (posed[k], &instances[posed[o.other]]);
+    let outline_only = |pose: &PoseEstimate| pose.contour.as_ref().is_some_and(|c| c.outline_only);
+    let mut withdrawn = Vec::new();
+    for keypoint_poses_only in [false, true] {
+        let (posed, estimates): (Vec<usize>, Vec<_>) = poses
+            .iter()
+            .enumerate()
+            .filter_map(|(i, (_, pose, _))| {
+                let pose = pose.as_ref().ok()?;
+                if keypoint_poses_only && outline_only(pose) {
+                    return None;
+                }
+                Some((i, (instances[i].part, pose.planar.table_T_part)))
+            })
+            .unzip();
+        for (k, overlap) in check.overlaps(&estimates).into_iter().enumerate() {
+            let Some(o) = overlap else { continue };
+            let i = posed[k];
+            let first_pass_keeps = poses[i].1.as_ref().is_ok_and(|p| !outline_only(p));
+            if !keypoint_poses_only && first_pass_keeps {
+                continue;
+            }
+            withdrawn.push((i, posed[o.other], o.depth));
+        }
+    }
+    for (i, other, depth) in withdrawn {
+        let other = &instances[other];
         let reason = format!(
             "lies on or under the {} at ({:.0}, {:.0}) px: on the table their poses overlap by {:.2} mm",
             parts[other.part],
             other.centre[0] + f64::from(sensor[0]),
             other.centre[1] + f64::from(sensor[1]),
-            1e3 * o.depth
+            1e3 * depth
         );
         if let Ok(pose) = std::mem::replace(&mut poses[i].1, Err(reason)) {
             poses[i].2 = Some(pose);
@@ -513,6 +567,87 @@ mod tests {
             }
         }
         (mask, vectors)
+    }
+
+    /// An outline-only pose that overlaps a keypoint pose is withdrawn alone; two keypoint
+    /// poses that overlap are both withdrawn.
+    #[test]
+    #[allow(non_snake_case)]
+    fn an_outline_only_pose_withdraws_no_keypoint_pose() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = Catalog::load(&root).unwrap();
+        let camera = Camera::basler_seed();
+        let camera_T_table = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let estimator =
+            PoseEstimator::new(&catalog, camera_T_table, EstimatorConfig::with_gate(1.0)).unwrap();
+        let part = catalog.part("insert_mold").unwrap();
+        let mesh = catalog.load_mesh(part).unwrap();
+        let check = StackingCheck::new(&[mesh], STACKING_TOLERANCE);
+        // Insert molds face up at these table points: the first two 2 mm apart (overlapping),
+        // the last two as well, the middle pair 20 mm apart.
+        let at = [0.0, 0.002, 0.022, 0.024];
+        let pose_at = |x: f64, outline_only: bool| {
+            let table_T_part = part.stable_poses[0].table_T_part(x, 0.0, 0.3);
+            let observations: Vec<Observation> = part
+                .keypoint_points()
+                .iter()
+                .enumerate()
+                .map(|(keypoint, k)| Observation {
+                    keypoint,
+                    pixel: camera
+                        .project(&(camera_T_table * table_T_part * k))
+                        .unwrap(),
+                    covariance: None,
+                })
+                .collect();
+            let mut pose = estimator
+                .estimate("insert_mold", &camera, &observations)
+                .unwrap();
+            if outline_only {
+                let fit = crate::contour::ContourFit {
+                    x,
+                    y: 0.0,
+                    yaw: 0.3,
+                    support: 1.0,
+                };
+                let refiner = estimator.refiner("insert_mold").unwrap();
+                pose.adopt_contour(fit, 0, refiner, 1.0);
+                pose.contour.as_mut().unwrap().outline_only = true;
+            }
+            pose
+        };
+        let mut poses: Vec<PoseOutcome> = at
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| (Vec::new(), Ok(pose_at(x, i == 1)), None))
+            .collect();
+        let instances: Vec<Instance> = at
+            .iter()
+            .map(|_| Instance {
+                part: 0,
+                score: 1.0,
+                centre: [0.0, 0.0],
+                cells: Vec::new(),
+            })
+            .collect();
+        withdraw_stacked(
+            &check,
+            &instances,
+            [0, 0],
+            &["insert_mold".into()],
+            &mut poses,
+        );
+        let kept: Vec<bool> = poses.iter().map(|(_, p, _)| p.is_ok()).collect();
+        assert_eq!(kept, [true, false, false, false]);
+        assert!(
+            poses
+                .iter()
+                .skip(1)
+                .all(|(_, _, refused)| refused.is_some())
+        );
     }
 
     /// The glue between the nets and PnP: crop origin, field → crop pixels, crop → sensor pixels,

@@ -41,6 +41,7 @@ struct MeshSpans {
 #[derive(Deserialize)]
 struct MeshSpan {
     mesh: Option<toml::Spanned<toml::Value>>,
+    view_symmetries: Option<toml::Spanned<toml::Value>>,
 }
 
 /// The role a part plays in the assembly.
@@ -101,6 +102,18 @@ pub struct Symmetry {
 
 fn yes() -> bool {
     true
+}
+
+/// A stable pose whose view from above repeats on a turn about the vertical (a featureless face
+/// up, a square outline): vision finds the part's place and its yaw only up to that turn.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewSymmetry {
+    /// Name of the stable pose (e.g. "-z").
+    pub stable_pose: String,
+    /// Order n ≥ 2: the view repeats after a turn of 360°/n about the vertical through the part
+    /// origin.
+    pub order: u32,
 }
 
 /// A [`PartSpec::hole_weight`]: a finite number, at least 1 (1, the default, weighs holes'
@@ -177,6 +190,11 @@ pub struct PartSpec {
     /// shadow blur it by a pixel or two. Absent: 1, like any other sample.
     #[serde(default, skip_serializing_if = "HoleWeight::is_one")]
     pub hole_weight: HoleWeight,
+    /// Stable poses whose view from above repeats on a turn: the learned pipeline poses a part
+    /// resting in one by its outline when its keypoints fail, and evaluation scores its yaw up to
+    /// the turn.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub view_symmetries: Vec<ViewSymmetry>,
     /// Top-down grasps, each for one stable pose; poses without one are not pickable.
     #[serde(default, rename = "grasp")]
     pub grasps: Vec<Grasp>,
@@ -210,9 +228,39 @@ impl PartSpec {
         self.stable_poses.iter().find(|s| s.name == name)
     }
 
+    /// The order of the view symmetry of a stable pose (1 when its view does not repeat).
+    pub fn view_order(&self, stable_pose: &str) -> u32 {
+        self.view_symmetries
+            .iter()
+            .find(|v| v.stable_pose == stable_pose)
+            .map_or(1, |v| v.order)
+    }
+
     /// The grasp for a stable pose, if the part is pickable in it.
     pub fn grasp_for(&self, stable_pose: &str) -> Option<&Grasp> {
         self.grasps.iter().find(|g| g.stable_pose == stable_pose)
+    }
+
+    /// What is wrong with the view symmetries, if anything: an order below 2, or (once prepared)
+    /// a stable pose the part does not have.
+    fn view_symmetry_problem(&self) -> Option<String> {
+        for v in &self.view_symmetries {
+            if v.order < 2 {
+                return Some(format!(
+                    "view symmetry of \"{}\" has order {}; it must be at least 2",
+                    v.stable_pose, v.order
+                ));
+            }
+            if !self.stable_poses.is_empty() && self.stable_pose(&v.stable_pose).is_none() {
+                let names: Vec<&str> = self.stable_poses.iter().map(|s| s.name.as_str()).collect();
+                return Some(format!(
+                    "view symmetry names stable pose \"{}\", which the part does not have (it has {})",
+                    v.stable_pose,
+                    names.join(", ")
+                ));
+            }
+        }
+        None
     }
 
     /// Whether `prepare` has filled in keypoints, mass and stable poses.
@@ -267,18 +315,27 @@ impl Catalog {
         })?;
         catalog.dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         catalog.file = path.into();
-        catalog.mesh_locations = toml::from_str::<MeshSpans>(text)
-            .map(|m| {
-                m.part
-                    .iter()
-                    .map(|p| {
-                        p.mesh
-                            .as_ref()
-                            .map_or((1, 1), |s| line_column(text, s.span().start))
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let spans = toml::from_str::<MeshSpans>(text).ok();
+        let at = |part: usize, key: fn(&MeshSpan) -> Option<&toml::Spanned<toml::Value>>| {
+            spans
+                .as_ref()
+                .and_then(|m| key(m.part.get(part)?))
+                .map_or((1, 1), |s| line_column(text, s.span().start))
+        };
+        catalog.mesh_locations = (0..catalog.parts.len())
+            .map(|i| at(i, |p| p.mesh.as_ref()))
+            .collect();
+        for (i, part) in catalog.parts.iter().enumerate() {
+            if let Some(message) = part.view_symmetry_problem() {
+                let (line, column) = at(i, |p| p.view_symmetries.as_ref());
+                return Err(PartError::Catalog {
+                    path: path.into(),
+                    line,
+                    column,
+                    message: format!("part \"{}\": {message}", part.name),
+                });
+            }
+        }
         Ok(catalog)
     }
 
@@ -354,6 +411,41 @@ mod tests {
         assert_eq!((line, column), (8, 15), "{message}");
         assert!(message.contains("hole_weight must be"), "{message}");
         assert!(message.contains("0.5"), "{message}");
+    }
+
+    #[test]
+    fn a_view_symmetry_of_order_one_is_located() {
+        let (line, column, message) =
+            refusal_of_part_line("view_symmetries = [{ stable_pose = \"-z\", order = 1 }]");
+        assert_eq!((line, column), (8, 19), "{message}");
+        assert!(
+            message.contains("order 1") && message.contains("\"a\""),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn the_upside_down_insert_mold_repeats_every_quarter_turn_and_a_misnamed_pose_is_refused() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let catalog = Catalog::parse(&text, &path).unwrap();
+        let mold = catalog.part("insert_mold").unwrap();
+        assert_eq!((mold.view_order("-z"), mold.view_order("+z")), (4, 1));
+        let key = "view_symmetries = [{ stable_pose = \"-z\"";
+        let line = text[..text.find(key).unwrap()].matches('\n').count() + 1;
+        let bad = text.replacen(key, "view_symmetries = [{ stable_pose = \"-q\"", 1);
+        match Catalog::parse(&bad, &path) {
+            Err(PartError::Catalog {
+                line: l, message, ..
+            }) => {
+                assert_eq!(l, line, "{message}");
+                assert!(
+                    message.contains("\"-q\"") && message.contains("+z, -z"),
+                    "{message}"
+                );
+            }
+            other => panic!("expected a located error, got {other:?}"),
+        }
     }
 
     #[test]

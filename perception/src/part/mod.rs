@@ -11,7 +11,7 @@ mod pieces;
 mod stable_pose;
 
 pub use catalog::{
-    Catalog, Grasp, HoleWeight, Material, PartRole, PartSpec, Symmetry, line_column,
+    Catalog, Grasp, HoleWeight, Material, PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
 };
 pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
