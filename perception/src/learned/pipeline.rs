@@ -14,7 +14,7 @@ use super::detection::{LearnedDetection, LearnedDetections, StageTimes};
 use super::image::Preprocessor;
 use super::instances::{Instance, InstanceConfig, InstanceGrouper};
 use super::keypoint_net::KeypointNet;
-use super::models::{LearnedModels, SEGMENTER_MULTIPLE};
+use super::models::{LearnedModels, SEGMENTER_MULTIPLE, SEGMENTER_STRIDE};
 use super::occlusion::CellOwners;
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
@@ -268,7 +268,7 @@ impl LearnedPipeline {
         }
         let owners = &self.owners;
         let parts = &self.parts;
-        let meaningless_rms_px = RESCUE_MIN_RMS_MM * table_px_per_mm(camera, camera_T_table);
+        let px_per_mm = table_px_per_mm(camera, camera_T_table);
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
         let pose_of = |k: usize| {
             let ((inst, origin), votes) = &jobs[k];
@@ -278,9 +278,11 @@ impl LearnedPipeline {
                 image,
                 camera,
                 covered: &|y, x, row: &mut [bool]| owners.cover_row(k, y, x, row),
-                meaningless_rms_px,
+                px_per_mm,
             };
-            ctx.pose(inst.part, &parts[inst.part], votes, **origin)
+            let visible_mm2 =
+                (inst.cells.len() * SEGMENTER_STRIDE.pow(2)) as f64 / px_per_mm.powi(2);
+            ctx.pose(inst.part, &parts[inst.part], votes, **origin, visible_mm2)
         };
         let threads = self.config.threads.min(jobs.len()).max(1);
         let mut poses: Vec<PoseOutcome> = if threads <= 1 {
@@ -354,19 +356,20 @@ struct PoseContext<'a> {
     image: &'a FrameImage,
     camera: &'a Camera,
     covered: &'a (dyn Fn(i64, i64, &mut [bool]) + Sync),
-    /// Keypoint RMS above which the keypoints say nothing about the part, pixels
-    /// ([`RESCUE_MIN_RMS_MM`] on the table).
-    meaningless_rms_px: f64,
+    /// The image scale on the table, pixels per mm.
+    px_per_mm: f64,
 }
 
 impl PoseContext<'_> {
-    /// Keypoints → pose estimate → contour alignment for one detection of part `class`.
+    /// Keypoints → pose estimate → contour alignment for one detection of part `class` whose mask
+    /// covers `visible_mm2` of the table (or, when the keypoints place nothing, its outline alone).
     fn pose(
         &self,
         class: usize,
         part: &str,
         votes: &Result<Vec<KeypointVote>, VoteError>,
         origin: [i64; 2],
+        visible_mm2: f64,
     ) -> PoseOutcome {
         let v = match votes {
             Ok(v) => v,
@@ -399,7 +402,7 @@ impl PoseContext<'_> {
                 // insert mold with its pins in view); only meaningless ones leave it to the
                 // outline.
                 if let (Some(stage), Some(mut estimate)) = (self.contour, refused.clone())
-                    && estimate.rms_px > self.meaningless_rms_px
+                    && estimate.rms_px > RESCUE_MIN_RMS_MM * self.px_per_mm
                     && let Some(centre) = keypoints.last()
                     && stage.rescue(
                         &mut estimate,
@@ -410,6 +413,7 @@ impl PoseContext<'_> {
                         self.camera,
                         origin,
                         centre.position,
+                        visible_mm2,
                         RESCUE_SUPPORT,
                         self.covered,
                     )
@@ -438,6 +442,8 @@ fn withdraw_stacked(
 ) {
     let outline_only = |pose: &PoseEstimate| pose.contour.as_ref().is_some_and(|c| c.outline_only);
     let mut withdrawn = Vec::new();
+    // First every pose is checked and the outline-only ones that overlap anything go; then the
+    // keypoint poses are checked among themselves.
     for keypoint_poses_only in [false, true] {
         let (posed, estimates): (Vec<usize>, Vec<_>) = poses
             .iter()
@@ -453,11 +459,9 @@ fn withdraw_stacked(
         for (k, overlap) in check.overlaps(&estimates).into_iter().enumerate() {
             let Some(o) = overlap else { continue };
             let i = posed[k];
-            let first_pass_keeps = poses[i].1.as_ref().is_ok_and(|p| !outline_only(p));
-            if !keypoint_poses_only && first_pass_keeps {
-                continue;
+            if keypoint_poses_only || poses[i].1.as_ref().is_ok_and(outline_only) {
+                withdrawn.push((i, posed[o.other], o.depth));
             }
-            withdrawn.push((i, posed[o.other], o.depth));
         }
     }
     for (i, other, depth) in withdrawn {
