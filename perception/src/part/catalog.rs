@@ -31,15 +31,15 @@ pub struct Catalog {
     pub mesh_locations: Vec<(usize, usize)>,
 }
 
-/// Where each `[[part]]`'s `mesh` value is written, read with spans.
+/// Where each `[[part]]`'s located keys (`mesh`, `view_symmetries`) are written, read with spans.
 #[derive(Deserialize)]
-struct MeshSpans {
+struct PartKeySpans {
     #[serde(default)]
-    part: Vec<MeshSpan>,
+    part: Vec<PartKeys>,
 }
 
 #[derive(Deserialize)]
-struct MeshSpan {
+struct PartKeys {
     mesh: Option<toml::Spanned<toml::Value>>,
     view_symmetries: Option<toml::Spanned<toml::Value>>,
 }
@@ -315,8 +315,8 @@ impl Catalog {
         })?;
         catalog.dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         catalog.file = path.into();
-        let spans = toml::from_str::<MeshSpans>(text).ok();
-        let at = |part: usize, key: fn(&MeshSpan) -> Option<&toml::Spanned<toml::Value>>| {
+        let spans = toml::from_str::<PartKeySpans>(text).ok();
+        let at = |part: usize, key: fn(&PartKeys) -> Option<&toml::Spanned<toml::Value>>| {
             spans
                 .as_ref()
                 .and_then(|m| key(m.part.get(part)?))
