@@ -80,6 +80,11 @@ pub struct ContourRefinement {
 }
 
 impl PoseEstimate {
+    /// Whether the outline alone placed the part ([`ContourRefinement::outline_only`]).
+    pub fn is_outline_only(&self) -> bool {
+        self.contour.as_ref().is_some_and(|c| c.outline_only)
+    }
+
     /// Replaces the planar pose by a contour fit on stable pose `class` of `refiner` (the
     /// keypoint pose is kept in `contour`). The class posterior is the keypoints' when the class
     /// stays, and the fit's edge support when contour alignment chose another one; tilt, margin

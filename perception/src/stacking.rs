@@ -74,8 +74,19 @@ impl StackingCheck {
 
     /// For each estimate `(class, table_T_part)`, its deepest overlap beyond the tolerance with
     /// another estimate, if it has one.
-    #[allow(non_snake_case)]
     pub fn overlaps(&self, estimates: &[(usize, Isometry3<f64>)]) -> Vec<Option<Overlap>> {
+        self.overlaps_where(estimates, |_, _| true)
+    }
+
+    /// [`Self::overlaps`], counting an overlap of estimate `k` with estimate `other` against `k`
+    /// only where `counts(k, other)`: a weak estimate may fall to any overlap and yet bring down
+    /// no strong one.
+    #[allow(non_snake_case)]
+    pub fn overlaps_where(
+        &self,
+        estimates: &[(usize, Isometry3<f64>)],
+        counts: impl Fn(usize, usize) -> bool,
+    ) -> Vec<Option<Overlap>> {
         let mut found: Vec<Option<Overlap>> = vec![None; estimates.len()];
         for (i, (ci, table_T_i)) in estimates.iter().enumerate() {
             let Some(pi) = self.parts.get(*ci) else {
@@ -95,7 +106,7 @@ impl StackingCheck {
                     continue;
                 }
                 for (k, other) in [(i, j), (j, i)] {
-                    if found[k].is_none_or(|o| o.depth < depth) {
+                    if counts(k, other) && found[k].is_none_or(|o| o.depth < depth) {
                         found[k] = Some(Overlap { other, depth });
                     }
                 }

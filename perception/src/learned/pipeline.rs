@@ -65,16 +65,6 @@ impl Default for PipelineConfig {
 /// the contour-aligned lateral error (≈ 0.05 mm median, 0.2 mm at the 90th percentile).
 pub const STACKING_TOLERANCE: f64 = 0.0005;
 
-/// Keypoints whose RMS on the table exceeds this, mm, place nothing: only then does a part
-/// that may rest in a featureless stable pose get posed by its outline. Upside-down insert molds'
-/// keypoints miss by 1.9 mm and more (13.3 px at 7.1 px/mm; median 23.5 px); face-up ones that
-/// miss a tight gate (4 px) by 0.6–1.5 mm, and the outline alone cannot tell the two faces apart.
-const RESCUE_MIN_RMS_MM: f64 = 1.6;
-
-/// Least edge support of an outline-only pose of a part in a featureless stable pose (0.85 posed
-/// one more upside-down insert mold of 97 on the test set, and two more parts leaning on others).
-const RESCUE_SUPPORT: f64 = 0.9;
-
 /// The learned perception pipeline: both networks' sessions and every buffer, reused per frame.
 pub struct LearnedPipeline {
     parts: Vec<String>,
@@ -220,9 +210,8 @@ impl LearnedPipeline {
             .run(self.preprocessor.tensor(), [hp, wp], valid, &mut self.map)?;
         times.segment = lap(&mut t);
 
-        let mut instances = self
-            .grouper
-            .group(&self.map, table_px_per_mm(camera, camera_T_table));
+        let px_per_mm = table_px_per_mm(camera, camera_T_table);
+        let mut instances = self.grouper.group(&self.map, px_per_mm);
         instances.retain(|i| i.score >= self.config.min_score);
         times.instances = lap(&mut t);
 
@@ -268,7 +257,6 @@ impl LearnedPipeline {
         }
         let owners = &self.owners;
         let parts = &self.parts;
-        let px_per_mm = table_px_per_mm(camera, camera_T_table);
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
         let pose_of = |k: usize| {
             let ((inst, origin), votes) = &jobs[k];
@@ -398,14 +386,10 @@ impl PoseContext<'_> {
                     EstimateError::Rms { estimate, .. } => Some(*estimate),
                     _ => None,
                 };
-                // Keypoints that miss the gate but still fit a pose are the part's (a face-up
-                // insert mold with its pins in view); only meaningless ones leave it to the
-                // outline.
-                if let (Some(stage), Some(mut estimate)) = (self.contour, refused.clone())
-                    && estimate.rms_px > RESCUE_MIN_RMS_MM * self.px_per_mm
-                    && let Some(centre) = keypoints.last()
-                    && stage.rescue(
-                        &mut estimate,
+                if let (Some(stage), Some(estimate), Some(centre)) =
+                    (self.contour, &refused, keypoints.last())
+                    && let Some(rescued) = stage.rescue(
+                        estimate,
                         class,
                         part,
                         self.estimator,
@@ -413,12 +397,12 @@ impl PoseContext<'_> {
                         self.camera,
                         origin,
                         centre.position,
+                        self.px_per_mm,
                         visible_mm2,
-                        RESCUE_SUPPORT,
                         self.covered,
                     )
                 {
-                    return (keypoints, Ok(estimate), None);
+                    return (keypoints, Ok(rescued), None);
                 }
                 (keypoints, Err(reason), refused)
             }
@@ -440,38 +424,30 @@ fn withdraw_stacked(
     parts: &[String],
     poses: &mut [PoseOutcome],
 ) {
-    let outline_only = |pose: &PoseEstimate| pose.contour.as_ref().is_some_and(|c| c.outline_only);
-    let mut withdrawn = Vec::new();
-    // First every pose is checked and the outline-only ones that overlap anything go; then the
-    // keypoint poses are checked among themselves.
-    for keypoint_poses_only in [false, true] {
-        let (posed, estimates): (Vec<usize>, Vec<_>) = poses
-            .iter()
-            .enumerate()
-            .filter_map(|(i, (_, pose, _))| {
-                let pose = pose.as_ref().ok()?;
-                if keypoint_poses_only && outline_only(pose) {
-                    return None;
-                }
-                Some((i, (instances[i].part, pose.planar.table_T_part)))
-            })
-            .unzip();
-        for (k, overlap) in check.overlaps(&estimates).into_iter().enumerate() {
-            let Some(o) = overlap else { continue };
-            let i = posed[k];
-            if keypoint_poses_only || poses[i].1.as_ref().is_ok_and(outline_only) {
-                withdrawn.push((i, posed[o.other], o.depth));
-            }
-        }
-    }
-    for (i, other, depth) in withdrawn {
-        let other = &instances[other];
+    let (posed, estimates): (Vec<usize>, Vec<_>) = poses
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, pose, _))| {
+            let table_T_part = pose.as_ref().ok()?.planar.table_T_part;
+            Some((i, (instances[i].part, table_T_part)))
+        })
+        .unzip();
+    let outline_only: Vec<bool> = posed
+        .iter()
+        .map(|&i| poses[i].1.as_ref().is_ok_and(PoseEstimate::is_outline_only))
+        .collect();
+    let overlaps = check.overlaps_where(&estimates, |k, other| {
+        outline_only[k] || !outline_only[other]
+    });
+    for (k, overlap) in overlaps.into_iter().enumerate() {
+        let Some(o) = overlap else { continue };
+        let (i, other) = (posed[k], &instances[posed[o.other]]);
         let reason = format!(
             "lies on or under the {} at ({:.0}, {:.0}) px: on the table their poses overlap by {:.2} mm",
             parts[other.part],
             other.centre[0] + f64::from(sensor[0]),
             other.centre[1] + f64::from(sensor[1]),
-            1e3 * depth
+            1e3 * o.depth
         );
         if let Ok(pose) = std::mem::replace(&mut poses[i].1, Err(reason)) {
             poses[i].2 = Some(pose);
