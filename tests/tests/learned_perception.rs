@@ -17,11 +17,13 @@ use feeder_support::{catalog, render_feeder, snapped};
 use nalgebra::{Isometry3, Point3};
 use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline};
 use perception::onnx::Runtime;
+use perception::part::Catalog;
 use perception::symmetry::view_turns;
 use perception::{Frame, FrameContent, PartPerception};
 
-/// The committed models, or `None` (with a note) when they are not in the tree yet.
-fn committed_models() -> Option<LearnedModels> {
+/// The pipeline with the committed models, or `None` (with a note) when they are not in the tree
+/// yet.
+fn committed_pipeline(catalog: &Catalog) -> Option<LearnedPipeline> {
     let dir = LearnedModels::dir_from_env();
     if !dir.join("segmenter.toml").exists() {
         eprintln!(
@@ -30,19 +32,18 @@ fn committed_models() -> Option<LearnedModels> {
         );
         return None;
     }
-    Some(LearnedModels::in_dir(&dir).unwrap_or_else(|e| panic!("{e}")))
+    let models = LearnedModels::in_dir(&dir).unwrap_or_else(|e| panic!("{e}"));
+    let runtime = Runtime::get().unwrap_or_else(|e| panic!("{e}"));
+    Some(LearnedPipeline::load(&models, catalog, &runtime).unwrap_or_else(|e| panic!("{e}")))
 }
 
 #[test]
 #[allow(non_snake_case)]
 fn learned_perception_finds_every_feeder_part_from_pixels() {
-    let Some(models) = committed_models() else {
+    let catalog = catalog();
+    let Some(pipeline) = committed_pipeline(&catalog) else {
         return;
     };
-    let catalog = catalog();
-    let runtime = Runtime::get().unwrap_or_else(|e| panic!("{e}"));
-    let pipeline =
-        LearnedPipeline::load(&models, &catalog, &runtime).unwrap_or_else(|e| panic!("{e}"));
     // The table is the base frame here: base_T_camera = table_T_camera.
     let mut perception = LearnedPerception::new(pipeline, Isometry3::identity());
     let (mut found, mut parts, mut accepted) = (0, 0, 0);
@@ -178,13 +179,10 @@ const MIN_ACCEPTED: usize = 20;
 #[test]
 #[allow(non_snake_case)]
 fn upside_down_insert_molds_are_posed_by_their_outline() {
-    let Some(models) = committed_models() else {
+    let catalog = catalog();
+    let Some(mut pipeline) = committed_pipeline(&catalog) else {
         return;
     };
-    let catalog = catalog();
-    let runtime = Runtime::get().unwrap_or_else(|e| panic!("{e}"));
-    let mut pipeline =
-        LearnedPipeline::load(&models, &catalog, &runtime).unwrap_or_else(|e| panic!("{e}"));
     let spec = catalog.part("insert_mold").expect("a catalog part");
     let turns = view_turns(spec.stable_pose("-z").expect("an upside-down pose"), 4);
     let (mut upside_down, mut right, mut other) = (0, 0, 0);
