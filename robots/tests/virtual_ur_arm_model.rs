@@ -169,6 +169,7 @@ async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time(
 
     // The default configuration waits its 0.25 s.
     drop(robot);
+    inputs_released(&vur).await;
     let config = robot_config(&vur);
     assert_eq!(config.gripper_actuation_s, 0.25);
     let mut robot = UrRobot::connect(config).await.unwrap();
@@ -181,6 +182,7 @@ async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time(
 
     // No wait: done at once, well before the device's stroke (the program cannot know it).
     drop(robot);
+    inputs_released(&vur).await;
     let mut robot = UrRobot::connect(UrRobotConfig {
         gripper_actuation_s: 0.0,
         ..robot_config(&vur)
@@ -195,6 +197,7 @@ async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time(
     let mut config = robot_config(&vur);
     config.gripper = robots::ur_robot::GripperOutput::Standard(5);
     drop(robot);
+    inputs_released(&vur).await;
     let mut robot = UrRobot::connect(config).await.unwrap();
     let took = timed_gripper(&vur, &mut robot, true).await;
     assert!(took >= 0.25 - 1e-9, "done after {took} s");
@@ -453,4 +456,13 @@ async fn a_collision_reported_by_the_arm_model_is_a_protective_stop() {
     // Motion stays blocked until the stop is unlocked (after the controller's delay).
     let again = robot.move_j(q1, motion).await.unwrap_err();
     assert!(matches!(again, RobotError::ProtectiveStop), "{again:?}");
+}
+
+/// Waits until the controller has noticed that the dropped client is gone and freed its input
+/// registers, as a reconnecting client must (else its recipe is refused with IN_USE).
+async fn inputs_released(vur: &VirtualUr) {
+    wait_for("the dropped client's inputs to be freed", || {
+        vur.controller.claimed_inputs() == 0
+    })
+    .await;
 }

@@ -531,6 +531,12 @@ impl VirtualController {
         }
     }
 
+    /// How many RTDE input variables clients hold (their recipes claim them; a client's are
+    /// freed once the controller notices it has gone).
+    pub fn claimed_inputs(&self) -> usize {
+        self.lock().owners.len()
+    }
+
     /// Messages the controller logged for clients (runtime errors, refused programs), oldest
     /// first; the newest [`MAX_TEXT_LOG`] are kept.
     pub fn messages(&self) -> Vec<String> {
