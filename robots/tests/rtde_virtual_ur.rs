@@ -140,8 +140,13 @@ async fn unknown_variables_and_taken_inputs_are_refused_with_typed_errors() {
         other => panic!("expected IN_USE, got {other:?}"),
     }
     drop(owner);
-    tokio::time::sleep(Duration::from_millis(100)).await;
-    // Released when its owner disconnects.
+    // Released when the controller sees its owner's socket close, which it notices
+    // asynchronously (a fixed sleep raced it on a loaded host).
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while vur.controller.claimed_inputs() > 0 {
+        assert!(Instant::now() < deadline, "inputs still claimed after 2 s");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
     RtdeClient::connect(client_config(&vur).with_input_recipe(&["input_int_register_30"]))
         .await
         .unwrap();
