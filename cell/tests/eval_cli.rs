@@ -123,8 +123,17 @@ fn cell_eval_on_a_rendered_feeder_split() {
         p["stable_pose_right"].as_u64().unwrap(),
         "{rows:?}"
     );
+    // Every pick is one of its kinds, and the assembly-grade ones are among the pickable
+    // assembly-grade poses.
+    let picks = &p["picks"];
+    let n = picks["picks"].as_u64().unwrap();
+    assert_eq!(causes(picks) - n, n, "{picks}");
+    assert!(
+        picks["assembly_grade"].as_u64().unwrap() <= p["pickable_assembly_grade"].as_u64().unwrap(),
+        "{p}"
+    );
     let html = std::fs::read_to_string(out.join("eval.html")).unwrap();
-    assert!(html.contains("Table 1") && html.contains("By stable pose"));
+    assert!(html.contains("Table 1") && html.contains("By stable pose") && html.contains("Picks"));
     // The gallery holds the 4 worst posed crops (resting or not) and the ⌈4 / 3⌉ = 2 worst
     // detections without a pose, as far as there are such (no instance of these frames is
     // ignored).

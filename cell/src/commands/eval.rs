@@ -177,6 +177,20 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         p.pickable_assembly_grade,
         percent(p.pickable_assembly_grade, p.pickable)
     );
+    let k = &p.picks;
+    println!(
+        "picks the cell would make (confidence ≥ {}, a stable pose it has a grasp for): {}; \
+         assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
+         another part {}, on no part {}",
+        pick_confidence(),
+        k.picks,
+        k.assembly_grade,
+        percent(k.assembly_grade, k.picks),
+        k.off,
+        k.wrong_stable_pose,
+        k.not_resting,
+        k.unmatched
+    );
     println!(
         "parts not resting on the table (leaning on or lying on another part, in no stable pose): \
          {} of {}; {} of them matched with a pose, left out of the refined rows",

@@ -181,6 +181,8 @@ pub struct PartData {
     /// Per stable pose, the turns under which the part looks the same from above
     /// ([`perception::part::ViewSymmetry`]; the identity alone for most).
     pub view_turns: Vec<Vec<UnitQuaternion<f64>>>,
+    /// The stable poses the cell has a grasp for (the catalog's `grasp`s): the ways up it picks.
+    pub graspable: Vec<String>,
     /// Diameter from models_info.json, mm.
     pub diameter_mm: f64,
     /// Outline model of its mesh, to draw the true and estimated outlines in the gallery.
@@ -292,6 +294,12 @@ impl EvalDataset {
                         .stable_poses
                         .iter()
                         .map(|s| view_turns(s, spec.view_order(&s.name)))
+                        .collect(),
+                    graspable: spec
+                        .stable_poses
+                        .iter()
+                        .filter(|s| spec.grasp_for(&s.name).is_some())
+                        .map(|s| s.name.clone())
                         .collect(),
                     diameter_mm: info.diameter,
                     outline: PartOutline::new(&mesh),
@@ -508,6 +516,9 @@ pub struct DetectionRecord {
     /// a found part, a poor mask, a mask over several parts, or nothing there).
     #[serde(default)]
     pub closest_truth: Option<TruthOverlap>,
+    /// Whether its pose is in a stable pose the cell has a grasp for (so it may be picked).
+    #[serde(default)]
+    pub graspable: bool,
 }
 
 /// A ground-truth instance and its mask IoU with a detection.
@@ -789,13 +800,14 @@ fn evaluate_image(
     };
     let mut detections = Vec::with_capacity(found.detections.len());
     for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {
+        let own_part = dataset.parts.values().find(|p| p.name == det.part);
         let mut rec = DetectionRecord {
             closest_truth: m.is_none().then(|| closest_truth(&candidates[d])).flatten(),
-            obj_id: dataset
-                .parts
-                .values()
-                .find(|p| p.name == det.part)
-                .map(|p| p.obj_id),
+            obj_id: own_part.map(|p| p.obj_id),
+            graspable: det
+                .pose
+                .as_ref()
+                .is_ok_and(|p| own_part.is_some_and(|own| own.graspable.contains(&p.stable_pose))),
             part: det.part.clone(),
             score: det.score,
             crop_origin: det.crop_origin,

@@ -553,6 +553,31 @@ fn render(
         );
     }
     h.push_str("</table>");
+    let _ = write!(
+        h,
+        "<h2>Picks</h2><p>The poses the cell would pick (confidence ≥ {}, in a stable pose it \
+         has a grasp for), by what the picked part turned out to be.</p><table><tr>\
+         <th class=l>part</th><th>picks</th><th>assembly-grade</th><th>further off</th>\
+         <th>other stable pose</th><th>on or under another part</th><th>on no part</th></tr>",
+        super::table1::pick_confidence()
+    );
+    for p in &all {
+        let k = &p.picks;
+        let _ = write!(
+            h,
+            "<tr><td class=l>{}</td><td>{}</td><td>{} ({})</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td></tr>",
+            escape(&p.part),
+            k.picks,
+            k.assembly_grade,
+            pct(k.assembly_grade as f64 / k.picks.max(1) as f64),
+            k.off,
+            k.wrong_stable_pose,
+            k.not_resting,
+            k.unmatched
+        );
+    }
+    h.push_str("</table>");
     for p in &s.parts {
         for (kind, n) in &p.pose_failure_kinds {
             let _ = write!(

@@ -165,6 +165,7 @@ mod tests {
             pose: None,
             obj_id: None,
             closest_truth: None,
+            graspable: false,
         }
     }
 

@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use perception::metrics::{ErrorSummary, PoseErrors, Summary, SummaryOptions};
 use serde::{Deserialize, Serialize};
 
-use super::{DetectionRecord, EvalOptions, FrameRecord, StageMs};
+use super::{DetectionRecord, EvalOptions, FrameRecord, StageMs, TruthRecord};
 
 /// The seed's Table 1 (raw PnP, θ > 10° dropped): part, then (mean, σ) of x, y, z (mm), θ (deg).
 pub const SEED_TABLE1: [(&str, [(f64, f64); 4]); 3] = [
@@ -176,6 +176,9 @@ pub struct PartSummary {
     /// The pickable poses that are assembly-grade.
     #[serde(default)]
     pub pickable_assembly_grade: usize,
+    /// The poses the cell would pick, by what they turned out to be.
+    #[serde(default)]
+    pub picks: Picks,
     /// Raw PnP errors.
     pub raw: PoseStats,
     /// Errors after planar refinement, over the resting instances.
@@ -185,6 +188,26 @@ pub struct PartSummary {
     pub stable_pose_right: usize,
     /// `stable_pose_right / poses`.
     pub stable_pose_rate: f64,
+}
+
+/// The poses the cell would pick (confidence at least [`pick_confidence`], in a stable pose it
+/// has a grasp for), over every detection and not only the resting parts', by what each was.
+/// A pick that is not assembly-grade costs the cell a failed insertion or a wasted grasp.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Picks {
+    /// All of them.
+    pub picks: usize,
+    /// A resting part in that stable pose, within [`ASSEMBLY_GRADE_MM`] and
+    /// [`ASSEMBLY_GRADE_DEG`].
+    pub assembly_grade: usize,
+    /// A resting part in that stable pose, further off.
+    pub off: usize,
+    /// A resting part in another stable pose.
+    pub wrong_stable_pose: usize,
+    /// A part leaning on or lying on another part.
+    pub not_resting: usize,
+    /// A detection matched to no part.
+    pub unmatched: usize,
 }
 
 /// Missed instances by the detection that overlaps each one most
@@ -225,6 +248,38 @@ pub struct FalsePositiveCauses {
 pub const ASSEMBLY_GRADE_MM: f64 = 0.1;
 /// Angle error of an assembly-grade pose, degrees.
 pub const ASSEMBLY_GRADE_DEG: f64 = 1.0;
+
+impl Picks {
+    /// Counts detection `d` (against its frame's `truths`) when the cell would pick it at
+    /// confidence `pick_at`; picks of ignored (barely visible) instances are not counted.
+    fn count(&mut self, d: &DetectionRecord, truths: &[TruthRecord], pick_at: f64) {
+        if !(d.graspable && d.stable_pose.is_some() && d.confidence.is_some_and(|c| c >= pick_at)) {
+            return;
+        }
+        let truth = d.truth.and_then(|t| truths.get(t));
+        if truth.is_some_and(|t| t.ignored) {
+            return;
+        }
+        self.picks += 1;
+        let slot = match (truth, d.refined) {
+            (None, _) => &mut self.unmatched,
+            (Some(t), _) if !t.resting => &mut self.not_resting,
+            (Some(_), _) if d.stable_pose != d.true_stable_pose => &mut self.wrong_stable_pose,
+            (Some(_), Some(e)) if is_assembly_grade(&e, d.refined_flip_deg) => {
+                &mut self.assembly_grade
+            }
+            (Some(_), _) => &mut self.off,
+        };
+        *slot += 1;
+    }
+}
+
+/// Whether refined errors `e` (with the angle to the nearest symmetric twin, `flip_deg`) are
+/// within [`ASSEMBLY_GRADE_MM`] and [`ASSEMBLY_GRADE_DEG`].
+fn is_assembly_grade(e: &PoseErrors, flip_deg: Option<f64>) -> bool {
+    e.x_mm.hypot(e.y_mm) <= ASSEMBLY_GRADE_MM
+        && flip_deg.unwrap_or(e.angle_deg) <= ASSEMBLY_GRADE_DEG
+}
 
 /// The smallest confidence of a detection the cell picks (its default selection settings).
 pub fn pick_confidence() -> f64 {
@@ -381,6 +436,7 @@ fn part_summary(
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
     let pick_at = pick_confidence();
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
+    let mut picks = Picks::default();
     for f in frames {
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
             if t.ignored {
@@ -407,6 +463,7 @@ fn part_summary(
         }
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
             detections += 1;
+            picks.count(d, &f.truths, pick_at);
             let Some(t) = d.truth else {
                 fp += 1;
                 match d
@@ -443,8 +500,7 @@ fn part_summary(
                     if d.stable_pose.is_some() && d.stable_pose == d.true_stable_pose {
                         stable_right += 1;
                     }
-                    let good = refined.x_mm.hypot(refined.y_mm) <= ASSEMBLY_GRADE_MM
-                        && d.refined_flip_deg.unwrap_or(refined.angle_deg) <= ASSEMBLY_GRADE_DEG;
+                    let good = is_assembly_grade(&refined, d.refined_flip_deg);
                     let picked = d.confidence.is_some_and(|c| c >= pick_at);
                     assembly_grade += usize::from(good);
                     pickable += usize::from(picked);
@@ -491,6 +547,7 @@ fn part_summary(
         assembly_grade,
         pickable,
         pickable_assembly_grade,
+        picks,
         raw,
         refined,
         stable_pose_right: stable_right,
@@ -708,6 +765,7 @@ mod tests {
             pose: None,
             obj_id: None,
             closest_truth: None,
+            graspable: false,
         }
     }
 
@@ -953,6 +1011,43 @@ mod tests {
         assert_eq!(a.poses, 3);
         assert_eq!(a.assembly_grade, 2, "the 0.14 mm pose is not");
         assert_eq!((a.pickable, a.pickable_assembly_grade), (2, 1));
+    }
+
+    #[test]
+    fn picks_are_told_apart_by_what_the_picked_part_turned_out_to_be() {
+        let mut frame = frames().swap_remove(0);
+        frame.truths = (0..5).map(|k| truth("a", Some(k), false, k == 4)).collect();
+        frame.truths[3].resting = false;
+        frame.detections = vec![
+            // 0.085 mm laterally at 0.4°: assembly-grade.
+            det("a", Some(0), Some((0.12, 0.8))),
+            // 0.28 mm laterally: further off.
+            det("a", Some(1), Some((0.4, 0.8))),
+            // Taken for +z, truly −z.
+            det("a", Some(2), Some((0.12, 20.0))),
+            det("a", Some(3), Some((0.12, 0.8))),
+            det("a", None, Some((0.12, 0.8))),
+            // Not counted: an ignored instance, too unsure to pick, no grasp for its pose.
+            det("a", Some(4), Some((0.12, 0.8))),
+            det("a", Some(0), Some((0.12, 0.8))),
+            det("a", Some(0), Some((0.12, 0.8))),
+        ];
+        for (k, d) in frame.detections.iter_mut().enumerate() {
+            d.confidence = Some(if k == 6 { 0.1 } else { 0.9 });
+            d.graspable = k != 7;
+        }
+        let s = summarise(&[frame], &[("a".into(), 10.0)], &EvalOptions::default());
+        assert_eq!(
+            s.parts[0].picks,
+            Picks {
+                picks: 5,
+                assembly_grade: 1,
+                off: 1,
+                wrong_stable_pose: 1,
+                not_resting: 1,
+                unmatched: 1,
+            }
+        );
     }
 
     #[test]
