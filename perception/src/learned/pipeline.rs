@@ -69,7 +69,7 @@ impl Default for PipelineConfig {
 /// Default lean of a pickable keypoint pose from its stable pose, radians: 30°, five times the
 /// planar refiner's tilt deviation. On the four eval sets and seed 3, it kept 7 parts lying on
 /// another part and 1 in another stable pose from being picked, at the cost of 2 assembly-grade
-/// picks (25° cost 4 for 9, 20° cost 8 for 19).
+/// picks; 25° and 20° also took 4 and 9 assembly-grade picks away (docs/perception.md).
 pub const MAX_LEAN: f64 = std::f64::consts::PI / 6.0;
 
 /// Default deepest overlap of two estimates put down to estimation error, metres: several times
