@@ -548,6 +548,38 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
     use std::path::Path;
 
+    /// The committed catalog, the seed's camera 1.5 m straight above the table, the camera's
+    /// pose on the table and an estimator with a reprojection gate of `gate_px`.
+    #[allow(non_snake_case)]
+    fn overhead(gate_px: f64) -> (Catalog, Camera, Isometry3<f64>, PoseEstimator) {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = Catalog::load(&root).unwrap();
+        let camera_T_table = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let estimator = PoseEstimator::new(
+            &catalog,
+            camera_T_table,
+            EstimatorConfig::with_gate(gate_px),
+        )
+        .unwrap();
+        (catalog, Camera::basler_seed(), camera_T_table, estimator)
+    }
+
+    /// Where `camera` sees the keypoints of `part` at `camera_T_part`, sensor pixels.
+    #[allow(non_snake_case)]
+    fn keypoint_pixels(
+        camera: &Camera,
+        camera_T_part: &Isometry3<f64>,
+        part: &crate::part::PartSpec,
+    ) -> Vec<Point2<f64>> {
+        part.keypoint_points()
+            .iter()
+            .map(|k| camera.project(&(camera_T_part * k)).unwrap())
+            .collect()
+    }
+
     /// A perfect keypoint-net output (contract layout: cell (i, j) centre at crop pixel
     /// (2j + 0.5, 2i + 0.5)) for keypoints at crop pixels `kps`, foreground within 28 px of `c`.
     fn perfect_field(kps: &[Point2<f64>], c: Point2<f64>) -> (Vec<u8>, Vec<f32>) {
@@ -576,15 +608,7 @@ mod tests {
     #[test]
     #[allow(non_snake_case)]
     fn an_outline_only_pose_withdraws_no_keypoint_pose() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
-        let catalog = Catalog::load(&root).unwrap();
-        let camera = Camera::basler_seed();
-        let camera_T_table = Isometry3::from_parts(
-            Translation3::new(0.0, 0.0, 1.5),
-            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-        );
-        let estimator =
-            PoseEstimator::new(&catalog, camera_T_table, EstimatorConfig::with_gate(1.0)).unwrap();
+        let (catalog, camera, camera_T_table, estimator) = overhead(1.0);
         let part = catalog.part("insert_mold").unwrap();
         let mesh = catalog.load_mesh(part).unwrap();
         let check = StackingCheck::new(&[mesh], STACKING_TOLERANCE);
@@ -593,18 +617,16 @@ mod tests {
         let at = [0.0, 0.002, 0.022, 0.024];
         let pose_at = |x: f64, outline_only: bool| {
             let table_T_part = part.stable_poses[0].table_T_part(x, 0.0, 0.3);
-            let observations: Vec<Observation> = part
-                .keypoint_points()
-                .iter()
-                .enumerate()
-                .map(|(keypoint, k)| Observation {
-                    keypoint,
-                    pixel: camera
-                        .project(&(camera_T_table * table_T_part * k))
-                        .unwrap(),
-                    covariance: None,
-                })
-                .collect();
+            let observations: Vec<Observation> =
+                keypoint_pixels(&camera, &(camera_T_table * table_T_part), part)
+                    .into_iter()
+                    .enumerate()
+                    .map(|(keypoint, pixel)| Observation {
+                        keypoint,
+                        pixel,
+                        covariance: None,
+                    })
+                    .collect();
             let mut pose = estimator
                 .estimate("insert_mold", &camera, &observations)
                 .unwrap();
@@ -676,11 +698,7 @@ mod tests {
             let part = catalog.part(name).unwrap();
             let table_T_part = part.stable_poses[0].table_T_part(x, y, yaw);
             let camera_T_part = camera_T_table * table_T_part;
-            let sensor: Vec<Point2<f64>> = part
-                .keypoint_points()
-                .iter()
-                .map(|k| camera.project(&(camera_T_part * k)).unwrap())
-                .collect();
+            let sensor = keypoint_pixels(&camera, &camera_T_part, part);
             let centre = sensor[8];
             let origin = crop_origin([centre.x, centre.y]);
             let shift = Vector3::new(origin[0] as f64, origin[1] as f64, 0.0).xy();
@@ -728,16 +746,7 @@ mod tests {
     #[test]
     #[allow(non_snake_case)]
     fn a_keypoint_pose_leaning_past_the_limit_gets_no_confidence() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
-        let catalog = Catalog::load(&root).unwrap();
-        let camera = Camera::basler_seed();
-        let camera_T_table = Isometry3::from_parts(
-            Translation3::new(0.0, 0.0, 1.5),
-            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-        )
-        .inverse();
-        let estimator =
-            PoseEstimator::new(&catalog, camera_T_table, EstimatorConfig::with_gate(1e4)).unwrap();
+        let (catalog, camera, camera_T_table, estimator) = overhead(1e4);
         let ctx = PoseContext {
             estimator: &estimator,
             contour: None,
@@ -756,15 +765,7 @@ mod tests {
                 UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 40f64.to_radians()),
             );
         let confidence = |table_T_part: &Isometry3<f64>| {
-            let sensor: Vec<Point2<f64>> = part
-                .keypoint_points()
-                .iter()
-                .map(|k| {
-                    camera
-                        .project(&(camera_T_table * table_T_part * k))
-                        .unwrap()
-                })
-                .collect();
+            let sensor = keypoint_pixels(&camera, &(camera_T_table * table_T_part), part);
             let origin = crop_origin([sensor[8].x, sensor[8].y]);
             let votes: Vec<KeypointVote> = sensor
                 .iter()
