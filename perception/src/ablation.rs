@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::keypoint_noise::KeypointNoiseModel;
 use crate::metrics::{ErrorSummary, PoseErrors, SummaryOptions, pose_errors};
 use crate::part::{PartSpec, StablePose};
-use crate::planar::{PlanarConfig, PlanarError, PlanarRefiner};
+use crate::planar::{ClassSet, PlanarConfig, PlanarError, PlanarRefiner};
 use crate::pnp::solve_pnp;
 use crate::symmetry::symmetry_group;
 use crate::{Camera, CameraError};
@@ -373,7 +373,14 @@ fn run_trial(
         .and_then(|s| refiner.refine(&s.camera_T_part).ok());
     let fit = pnp.as_ref().and_then(|s| {
         refiner
-            .refine_with_keypoints(&s.camera_T_part, cam, &part.keypoints, &pixels, None)
+            .refine_with_keypoints(
+                &s.camera_T_part,
+                cam,
+                &part.keypoints,
+                &pixels,
+                None,
+                ClassSet::ALL,
+            )
             .ok()
     });
     let estimates = [

@@ -11,7 +11,7 @@ use crate::Camera;
 use crate::contour::ContourFit;
 use crate::part::{Catalog, PartRole};
 use crate::perceive::PerceptionError;
-use crate::planar::{PlanarConfig, PlanarError, PlanarPose, PlanarRefiner};
+use crate::planar::{ClassSet, PlanarConfig, PlanarError, PlanarPose, PlanarRefiner};
 use crate::pnp::{PnpError, PnpSolution, solve_pnp};
 use crate::symmetry::symmetry_group;
 
@@ -239,6 +239,18 @@ impl PoseEstimator {
         camera: &Camera,
         observations: &[Observation],
     ) -> Result<PoseEstimate, EstimateError> {
+        self.estimate_in(part, camera, observations, ClassSet::ALL)
+    }
+
+    /// [`PoseEstimator::estimate`] with the stable pose one of `classes` (indices into the
+    /// part's stable poses).
+    pub fn estimate_in(
+        &self,
+        part: &str,
+        camera: &Camera,
+        observations: &[Observation],
+        classes: ClassSet,
+    ) -> Result<PoseEstimate, EstimateError> {
         let m = self
             .models
             .get(part)
@@ -270,6 +282,7 @@ impl PoseEstimator {
             &model,
             &pixels,
             weights,
+            classes,
         )?;
         let rms_px = pixel_rms(camera, &planar.camera_T_part, &model, &pixels);
         let gate_px = self.config.max_rms_px;

@@ -40,6 +40,40 @@ pub enum PlanarError {
     /// A pixel could not be turned into a ray.
     #[error(transparent)]
     Camera(#[from] CameraError),
+    /// Every stable pose was ruled out before the keypoints were weighed.
+    #[error("no stable pose is admitted")]
+    NoAdmittedClass,
+}
+
+/// The stable-pose classes an estimate may be snapped onto: evidence other than the keypoints
+/// (a mask larger than a class's footprint) can rule classes out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClassSet(u64);
+
+impl ClassSet {
+    /// Every class.
+    pub const ALL: Self = Self(u64::MAX);
+
+    /// The classes among `0..n` for which `admit` holds (classes from 64 on are always kept).
+    pub fn filter(n: usize, mut admit: impl FnMut(usize) -> bool) -> Self {
+        let mut bits = u64::MAX;
+        for class in 0..n.min(64) {
+            if !admit(class) {
+                bits &= !(1 << class);
+            }
+        }
+        Self(bits)
+    }
+
+    /// Whether it holds `class`.
+    pub fn contains(self, class: usize) -> bool {
+        class >= 64 || self.0 & (1 << class) != 0
+    }
+
+    /// Whether it holds none of the classes `0..n`.
+    pub fn is_empty_below(self, n: usize) -> bool {
+        !(0..n).any(|c| self.contains(c))
+    }
 }
 
 /// Tuning of the class decision.
@@ -78,9 +112,9 @@ pub struct PlanarPose {
     pub tilt: f64,
     /// Posterior probability of the chosen class among all classes (softmax of the scores).
     pub confidence: f64,
-    /// Score margin (log-likelihood units) to the second-best class; infinite with one class.
+    /// Score margin (log-likelihood units) to the runner-up; infinite without one.
     pub margin: f64,
-    /// The second-best class, if any.
+    /// The class ranked next below the chosen one, if any and if not ruled out.
     pub runner_up: Option<usize>,
     /// The part symmetry `g` chosen for the canonical representative: the reported pose is the
     /// estimate's `table_T_part · g` (identity when the part has no exact symmetry).
@@ -200,8 +234,22 @@ impl PlanarRefiner {
     /// Snaps a camera-frame pose estimate (from PnP) onto the table.
     #[allow(non_snake_case)]
     pub fn refine(&self, camera_T_part: &Isometry3<f64>) -> Result<PlanarPose, PlanarError> {
+        self.refine_in(camera_T_part, ClassSet::ALL)
+    }
+
+    /// [`PlanarRefiner::refine`] onto the best of `classes` only; the confidence is the
+    /// posterior among them.
+    #[allow(non_snake_case)]
+    pub fn refine_in(
+        &self,
+        camera_T_part: &Isometry3<f64>,
+        classes: ClassSet,
+    ) -> Result<PlanarPose, PlanarError> {
         if !isometry_finite(camera_T_part) {
             return Err(PlanarError::NonFinite("camera_T_part"));
+        }
+        if classes.is_empty_below(self.stable_poses.len()) {
+            return Err(PlanarError::NoAdmittedClass);
         }
         let table_T_est = self.camera_T_table.inverse() * camera_T_part;
         // Class and symmetry representative: best score, then the smallest |yaw|.
@@ -213,6 +261,7 @@ impl PlanarRefiner {
             let (class, &(score, tilt)) = scores
                 .iter()
                 .enumerate()
+                .filter(|(c, _)| classes.contains(*c))
                 .max_by(|a, b| a.1.0.total_cmp(&b.1.0))
                 .expect("at least one class");
             let yaw = best_yaw(&r, &self.stable_poses[class].rest_rotation());
@@ -228,7 +277,8 @@ impl PlanarRefiner {
             }
         }
         let (best_score, yaw, class, tilt, symmetry) = best.expect("the group has the identity");
-        let (confidence, margin, runner_up) = class_confidence(&scores_of_best, class, best_score);
+        let (confidence, margin, runner_up) =
+            class_confidence(&scores_of_best, class, best_score, classes);
         let pose = &self.stable_poses[class];
         // The origin's viewing ray meets the plane z = rest_height (table frame).
         let ray = camera_T_part.translation.vector;
@@ -274,8 +324,9 @@ impl PlanarRefiner {
         Ok((p.x, p.y))
     }
 
-    /// [`PlanarRefiner::refine`], then x, y and yaw fitted to the keypoints by Gauss–Newton on
-    /// the (covariance-weighted) reprojection error with the class and height held fixed.
+    /// [`PlanarRefiner::refine_in`] `classes`, then x, y and yaw fitted to the keypoints by
+    /// Gauss–Newton on the (covariance-weighted) reprojection error with the class and height
+    /// held fixed.
     ///
     /// `pixels` are observed (distorted) pixels of `model` keypoints in `camera`.
     #[allow(non_snake_case)]
@@ -286,8 +337,9 @@ impl PlanarRefiner {
         model: &[Point3<f64>],
         pixels: &[Point2<f64>],
         covariances: Option<&[Matrix2<f64>]>,
+        classes: ClassSet,
     ) -> Result<PlanarPose, PlanarError> {
-        let mut planar = self.refine(camera_T_part)?;
+        let mut planar = self.refine_in(camera_T_part, classes)?;
         if model.len() != pixels.len() {
             return Err(PnpError::LengthMismatch {
                 what: "image points",
@@ -476,16 +528,27 @@ fn normal_equations(
     (jtj, jtr)
 }
 
-/// Softmax posterior of the chosen class, the margin to the runner-up, and the runner-up.
-fn class_confidence(scores: &[(f64, f64)], class: usize, best: f64) -> (f64, f64, Option<usize>) {
-    let total: f64 = scores.iter().map(|(s, _)| (s - best).exp()).sum();
+/// Softmax posterior of the chosen class among the admitted `classes`, the margin to the
+/// runner-up, and the runner-up: the class ranked next below the chosen one, unless it is ruled
+/// out (then there is none: the keypoints' next choice is no alternative).
+fn class_confidence(
+    scores: &[(f64, f64)],
+    class: usize,
+    best: f64,
+    classes: ClassSet,
+) -> (f64, f64, Option<usize>) {
+    let total: f64 = (scores.iter().enumerate())
+        .filter(|(c, _)| classes.contains(*c))
+        .map(|(_, (s, _))| (s - best).exp())
+        .sum();
     let runner_up = scores
         .iter()
         .enumerate()
-        .filter(|(i, _)| *i != class)
+        .filter(|(c, (s, _))| *c != class && *s <= best)
         .max_by(|a, b| a.1.0.total_cmp(&b.1.0))
-        .map(|(i, _)| i);
-    let margin = runner_up.map_or(f64::INFINITY, |i| best - scores[i].0);
+        .map(|(c, _)| c)
+        .filter(|c| classes.contains(*c));
+    let margin = runner_up.map_or(f64::INFINITY, |c| best - scores[c].0);
     (1.0 / total, margin, runner_up)
 }
 

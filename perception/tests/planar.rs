@@ -3,7 +3,7 @@
 use nalgebra::{Isometry3, Point2, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use perception::Camera;
 use perception::part::{StablePose, Symmetry};
-use perception::planar::{PlanarConfig, PlanarError, PlanarRefiner};
+use perception::planar::{ClassSet, PlanarConfig, PlanarError, PlanarRefiner};
 use perception::symmetry::symmetry_group;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -122,7 +122,7 @@ fn keypoint_fit_beats_the_estimate_on_noisy_pixels() {
         let pnp = perception::pnp::solve_pnp(&cam, &model, &px, None).unwrap();
         let a = refiner.refine(&pnp.camera_T_part).unwrap();
         let b = refiner
-            .refine_with_keypoints(&pnp.camera_T_part, &cam, &model, &px, None)
+            .refine_with_keypoints(&pnp.camera_T_part, &cam, &model, &px, None, ClassSet::ALL)
             .unwrap();
         assert_eq!(b.table_T_part.translation.z, poses[0].rest_height);
         yaw_ray += a.table_T_part.rotation.angle_to(&truth.rotation);
@@ -153,6 +153,41 @@ fn symmetric_part_is_reported_in_a_canonical_representative() {
         let d = (p.yaw - yaw).rem_euclid(std::f64::consts::PI);
         assert!(d < 1e-9 || (std::f64::consts::PI - d) < 1e-9);
     }
+}
+
+#[test]
+fn ruled_out_classes_are_never_chosen_and_the_rest_share_the_confidence() {
+    let poses = shell_poses();
+    let ct = camera_T_table();
+    let refiner = PlanarRefiner::new(ct, &poses, &[], PlanarConfig::default()).unwrap();
+    // Lying on its +x side, leaning 20° towards face up: +x is the best class, +z the next.
+    let lean = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 20f64.to_radians());
+    let truth = poses[2].table_T_part(0.01, -0.02, 0.4);
+    let estimate = ct * Isometry3::from_parts(truth.translation, lean * truth.rotation);
+    let all = refiner.refine(&estimate).unwrap();
+    assert_eq!(all.class, 2);
+    let others = ClassSet::filter(poses.len(), |c| c != 2);
+    let ruled = refiner.refine_in(&estimate, others).unwrap();
+    assert_eq!(Some(ruled.class), all.runner_up);
+    assert_ne!(ruled.runner_up, Some(2));
+    // +z, 70° off, is far nearer than −z (110°) or −x (180°): the posterior is nearly all its.
+    assert!(ruled.confidence > 0.99, "{}", ruled.confidence);
+    assert_eq!(
+        ruled.table_T_part.translation.z,
+        poses[ruled.class].rest_height
+    );
+    // With +z ruled out, +x stands and has no runner-up: the keypoints' next choice is gone.
+    let no_face_up = refiner
+        .refine_in(&estimate, ClassSet::filter(poses.len(), |c| c != 0))
+        .unwrap();
+    assert_eq!((no_face_up.class, no_face_up.runner_up), (2, None));
+    assert!(no_face_up.confidence >= all.confidence);
+    let none = ClassSet::filter(poses.len(), |_| false);
+    assert!(none.is_empty_below(poses.len()) && !ClassSet::ALL.is_empty_below(poses.len()));
+    assert_eq!(
+        refiner.refine_in(&estimate, none),
+        Err(PlanarError::NoAdmittedClass)
+    );
 }
 
 #[test]

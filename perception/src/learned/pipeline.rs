@@ -23,6 +23,7 @@ use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimate,
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
 use crate::part::Catalog;
+use crate::planar::ClassSet;
 use crate::stacking::StackingCheck;
 use crate::voting::{KeypointVote, VoteError, VotingConfig};
 
@@ -49,6 +50,9 @@ pub struct PipelineConfig {
     /// gets no confidence, so the cell does not pick it: no stable pose describes it, and on the
     /// eval sets such estimates were mostly of parts lying on another part.
     pub max_lean: f64,
+    /// A detection whose mask covers more of the table than this multiple of a stable pose's
+    /// footprint is not posed in that stable pose: lying so, the part could not cover it.
+    pub max_overfill: f64,
 }
 
 impl Default for PipelineConfig {
@@ -62,6 +66,7 @@ impl Default for PipelineConfig {
             contour: Some(ContourConfig::default()),
             stacking_tolerance: Some(STACKING_TOLERANCE),
             max_lean: MAX_LEAN,
+            max_overfill: MAX_OVERFILL,
         }
     }
 }
@@ -71,6 +76,12 @@ impl Default for PipelineConfig {
 /// another part and 1 in another stable pose from being picked, at the cost of 2 assembly-grade
 /// picks; 25° and 20° also took 4 and 9 assembly-grade picks away (docs/perception.md).
 pub const MAX_LEAN: f64 = std::f64::consts::PI / 6.0;
+
+/// Default largest mask for a stable pose, as a multiple of its footprint: masks of parts posed
+/// in the right stable pose covered at most 1.27 times its footprint on the four eval sets and
+/// seed 3 (a narrow side-lying insert mold, its mask a cell wider all round), while 11 main
+/// shells and insert molds taken for a side pose showed 1.5–2.5 times that pose's footprint.
+pub const MAX_OVERFILL: f64 = 1.4;
 
 /// Default deepest overlap of two estimates put down to estimation error, metres: several times
 /// the contour-aligned lateral error (≈ 0.05 mm median, 0.2 mm at the 90th percentile).
@@ -91,6 +102,8 @@ pub struct LearnedPipeline {
     estimator: Option<(Isometry3<f64>, PoseEstimator)>,
     contour: Option<ContourStage>,
     stacking: Option<StackingCheck>,
+    /// Each part's footprint in each of its stable poses, mm² (part, then class).
+    footprints: Vec<Vec<f64>>,
 }
 
 impl LearnedPipeline {
@@ -163,6 +176,16 @@ impl LearnedPipeline {
         let stacking = config
             .stacking_tolerance
             .map(|t| StackingCheck::new(&meshes, t));
+        let footprints = specs
+            .iter()
+            .zip(&meshes)
+            .map(|(spec, mesh)| {
+                spec.stable_poses
+                    .iter()
+                    .map(|s| s.footprint_mm2(mesh))
+                    .collect()
+            })
+            .collect();
         Ok(Self {
             parts: models.parts().to_vec(),
             catalog: catalog.clone(),
@@ -177,6 +200,7 @@ impl LearnedPipeline {
             estimator: None,
             contour,
             stacking,
+            footprints,
         })
     }
 
@@ -267,8 +291,8 @@ impl LearnedPipeline {
             self.owners.set(&instances, w, h, sensor);
         }
         let owners = &self.owners;
-        let max_lean = self.config.max_lean;
-        let parts = &self.parts;
+        let (max_lean, max_overfill) = (self.config.max_lean, self.config.max_overfill);
+        let (parts, footprints) = (&self.parts, &self.footprints);
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
         let pose_of = |k: usize| {
             let ((inst, origin), votes) = &jobs[k];
@@ -280,6 +304,8 @@ impl LearnedPipeline {
                 covered: &|y, x, row: &mut [bool]| owners.cover_row(k, y, x, row),
                 px_per_mm,
                 max_lean,
+                footprints: &footprints[inst.part],
+                max_overfill,
             };
             let visible_mm2 =
                 (inst.cells.len() * SEGMENTER_STRIDE.pow(2)) as f64 / px_per_mm.powi(2);
@@ -361,11 +387,16 @@ struct PoseContext<'a> {
     px_per_mm: f64,
     /// [`PipelineConfig::max_lean`].
     max_lean: f64,
+    /// The detected part's footprint in each of its stable poses, mm².
+    footprints: &'a [f64],
+    /// [`PipelineConfig::max_overfill`].
+    max_overfill: f64,
 }
 
 impl PoseContext<'_> {
     /// Keypoints → pose estimate → contour alignment for one detection of part `class` whose mask
-    /// covers `visible_mm2` of the table (or, when the keypoints place nothing, its outline alone).
+    /// covers `visible_mm2` of the table (or, when the keypoints place nothing, its outline alone),
+    /// in a stable pose whose footprint can show that much.
     fn pose(
         &self,
         class: usize,
@@ -379,7 +410,23 @@ impl PoseContext<'_> {
             Err(e) => return (Vec::new(), Err(format!("voting: {e}")), None),
         };
         let (keypoints, observations) = sensor_observations(v, origin);
-        match self.estimator.estimate(part, self.camera, &observations) {
+        let footprints = self.footprints;
+        let admitted = ClassSet::filter(footprints.len(), |c| {
+            visible_mm2 <= self.max_overfill * footprints[c]
+        });
+        if admitted.is_empty_below(footprints.len()) {
+            let largest = footprints.iter().copied().fold(0.0, f64::max);
+            let reason = format!(
+                "its mask covers {visible_mm2:.0} mm² of the table, more than {:.1} × the {largest:.0} mm² \
+                 a {part} covers lying in any stable pose",
+                self.max_overfill
+            );
+            return (keypoints, Err(reason), None);
+        }
+        match self
+            .estimator
+            .estimate_in(part, self.camera, &observations, admitted)
+        {
             Ok(mut pose) => {
                 if let Some(stage) = self.contour {
                     stage.refine(
@@ -390,6 +437,7 @@ impl PoseContext<'_> {
                         self.image,
                         self.camera,
                         origin,
+                        admitted,
                         self.covered,
                     );
                 }
@@ -421,6 +469,7 @@ impl PoseContext<'_> {
                         centre.position,
                         self.px_per_mm,
                         visible_mm2,
+                        admitted,
                         self.covered,
                     )
                 {
@@ -544,6 +593,7 @@ mod tests {
     use crate::learned::crops::crop_camera;
     use crate::learned::keypoint_net::field_to_crop;
     use crate::learned::models::{CROP_SIZE, FIELD_SIZE};
+    use crate::part::PartSpec;
     use crate::voting::{VectorField, Voter};
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
     use std::path::Path;
@@ -740,6 +790,56 @@ mod tests {
         }
     }
 
+    /// The pose stage without contour alignment, for a part with these `footprints`.
+    fn keypoints_only<'a>(
+        estimator: &'a PoseEstimator,
+        camera: &'a Camera,
+        image: &'a FrameImage,
+        footprints: &'a [f64],
+    ) -> PoseContext<'a> {
+        PoseContext {
+            estimator,
+            contour: None,
+            image,
+            camera,
+            covered: &|_, _, row: &mut [bool]| row.fill(false),
+            px_per_mm: 7.0,
+            max_lean: MAX_LEAN,
+            footprints,
+            max_overfill: MAX_OVERFILL,
+        }
+    }
+
+    /// Votes exactly on the keypoints of `part` at `camera_T_part`, with their crop's origin.
+    #[allow(non_snake_case)]
+    fn exact_votes(
+        camera: &Camera,
+        camera_T_part: &Isometry3<f64>,
+        part: &PartSpec,
+    ) -> (Vec<KeypointVote>, [i64; 2]) {
+        let sensor = keypoint_pixels(camera, camera_T_part, part);
+        let origin = crop_origin([sensor[8].x, sensor[8].y]);
+        let votes = sensor
+            .iter()
+            .map(|p| KeypointVote {
+                position: Point2::new(p.x - origin[0] as f64, p.y - origin[1] as f64),
+                covariance: nalgebra::Matrix2::identity() * 0.25,
+                inliers: 500,
+                inlier_ratio: 0.9,
+                hypotheses: 128,
+            })
+            .collect();
+        (votes, origin)
+    }
+
+    /// Each stable pose's footprint of catalog part `name`, mm².
+    fn footprints(catalog: &Catalog, name: &str) -> Vec<f64> {
+        let part = catalog.part(name).unwrap();
+        let mesh = catalog.load_mesh(part).unwrap();
+        let footprints = part.stable_poses.iter().map(|s| s.footprint_mm2(&mesh));
+        footprints.collect()
+    }
+
     /// A part lying on another one leans away from every stable pose: its keypoint pose is kept
     /// (no reprojection gate here refuses it) but gets no confidence, so the cell does not pick
     /// it; the same part resting flat keeps its confidence.
@@ -747,15 +847,9 @@ mod tests {
     #[allow(non_snake_case)]
     fn a_keypoint_pose_leaning_past_the_limit_gets_no_confidence() {
         let (catalog, camera, camera_T_table, estimator) = overhead(1e4);
-        let ctx = PoseContext {
-            estimator: &estimator,
-            contour: None,
-            image: &FrameImage::full(image::DynamicImage::new_luma8(1, 1)),
-            camera: &camera,
-            covered: &|_, _, row: &mut [bool]| row.fill(false),
-            px_per_mm: 7.0,
-            max_lean: MAX_LEAN,
-        };
+        let image = FrameImage::full(image::DynamicImage::new_luma8(1, 1));
+        let footprints = footprints(&catalog, "top_shell");
+        let ctx = keypoints_only(&estimator, &camera, &image, &footprints);
         let part = catalog.part("top_shell").unwrap();
         let flat = part.stable_poses[0].table_T_part(0.004, -0.003, 0.7);
         // Propped up 40° about the part's x axis, as on the edge of a neighbour.
@@ -765,18 +859,7 @@ mod tests {
                 UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 40f64.to_radians()),
             );
         let confidence = |table_T_part: &Isometry3<f64>| {
-            let sensor = keypoint_pixels(&camera, &(camera_T_table * table_T_part), part);
-            let origin = crop_origin([sensor[8].x, sensor[8].y]);
-            let votes: Vec<KeypointVote> = sensor
-                .iter()
-                .map(|p| KeypointVote {
-                    position: Point2::new(p.x - origin[0] as f64, p.y - origin[1] as f64),
-                    covariance: nalgebra::Matrix2::identity() * 0.25,
-                    inliers: 500,
-                    inlier_ratio: 0.9,
-                    hypotheses: 128,
-                })
-                .collect();
+            let (votes, origin) = exact_votes(&camera, &(camera_T_table * table_T_part), part);
             let (_, pose, _) = ctx.pose(2, "top_shell", &Ok(votes), origin, 60.0);
             let pose = pose.unwrap();
             (pose.planar.tilt.to_degrees(), pose.confidence)
@@ -787,6 +870,45 @@ mod tests {
         assert!(
             tilt > 30.0 && c == 0.0,
             "propped: tilt {tilt}°, confidence {c}"
+        );
+    }
+
+    /// A main shell's keypoints that say it lies on its side, in a mask that shows a face-up
+    /// shell's area: no side pose can show that much, so the estimate is snapped onto a face-up
+    /// or face-down pose; a mask larger than any pose can show is refused.
+    #[test]
+    #[allow(non_snake_case)]
+    fn a_mask_larger_than_a_stable_poses_footprint_rules_that_pose_out() {
+        let (catalog, camera, camera_T_table, estimator) = overhead(1e4);
+        let image = FrameImage::full(image::DynamicImage::new_luma8(1, 1));
+        let footprints = footprints(&catalog, "main_shell");
+        let ctx = keypoints_only(&estimator, &camera, &image, &footprints);
+        let part = catalog.part("main_shell").unwrap();
+        let side = part.stable_pose("+x").unwrap();
+        let on_side = camera_T_table * side.table_T_part(0.002, 0.001, 0.3);
+        let area = |pose: &str| {
+            footprints[part
+                .stable_poses
+                .iter()
+                .position(|s| s.name == pose)
+                .unwrap()]
+        };
+        assert!(area("+z") > 2.5 * area("+x"), "{footprints:?}");
+        let stable_pose = |visible_mm2: f64| {
+            let (votes, origin) = exact_votes(&camera, &on_side, part);
+            let (_, pose, _) = ctx.pose(0, "main_shell", &Ok(votes), origin, visible_mm2);
+            pose.map(|p| p.stable_pose)
+        };
+        assert_eq!(stable_pose(area("+x")).unwrap(), "+x");
+        assert_eq!(stable_pose(MAX_OVERFILL * area("+x") * 0.99).unwrap(), "+x");
+        let taken = stable_pose(0.95 * area("+z")).unwrap();
+        assert!(taken == "+z" || taken == "-z", "{taken}");
+        let largest = footprints.iter().copied().fold(0.0, f64::max);
+        assert_eq!(largest, area("+z"));
+        let reason = stable_pose(MAX_OVERFILL * largest + 1.0).unwrap_err();
+        assert!(
+            reason.contains("mm²") && reason.contains("main_shell"),
+            "{reason}"
         );
     }
 }

@@ -1,7 +1,11 @@
 //! Stable poses: the ways a part comes to rest on a flat table.
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use parry3d_f64::math::Vector3 as HullVector;
+use parry3d_f64::transformation::convex_hull;
 use serde::{Deserialize, Serialize};
+
+use super::TriMesh;
 
 /// One class of resting orientations: the face a part lies on, with yaw about the table normal free.
 ///
@@ -26,6 +30,26 @@ impl StablePose {
     /// The canonical rest rotation `table_R_part` at yaw 0.
     pub fn rest_rotation(&self) -> UnitQuaternion<f64> {
         UnitQuaternion::from_scaled_axis(Vector3::from(self.rotation))
+    }
+
+    /// The area the part (`mesh`, its frame in metres) covers seen from above when it rests in
+    /// this class, mm²: its convex hull's faces that look up, each by its area projected onto
+    /// the table. A segmentation mask much larger than this cannot be the part in this class.
+    pub fn footprint_mm2(&self, mesh: &TriMesh) -> f64 {
+        let up = HullVector::from(self.up_in_part).normalize();
+        let points: Vec<HullVector> = mesh
+            .vertices
+            .iter()
+            .map(|p| HullVector::new(p.x, p.y, p.z) * 1e3)
+            .collect();
+        let (vertices, triangles) = convex_hull(&points);
+        triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| vertices[i as usize]);
+                (0.5 * (b - a).cross(c - a).dot(up)).max(0.0)
+            })
+            .sum()
     }
 
     /// `table_T_part` for a part resting in this class at (x, y) with the given yaw.
@@ -106,6 +130,24 @@ mod tests {
         assert_eq!(
             StablePose::name_for(&Vector3::new(0.0, -0.651847488, 0.758350085)),
             "+z~-y40.7"
+        );
+    }
+
+    #[test]
+    fn the_insert_mold_covers_its_floor_upside_down_and_half_of_it_on_its_side() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = crate::part::Catalog::load(&path).unwrap();
+        let mold = catalog.part("insert_mold").unwrap();
+        let mesh = catalog.load_mesh(mold).unwrap();
+        let area = |pose: &str| mold.stable_pose(pose).unwrap().footprint_mm2(&mesh);
+        // An 8.4 × 8.5 × 4.2 mm block: its floor from above, a side face on its side.
+        assert!((area("-z") - 8.4 * 8.5).abs() < 1.5, "{}", area("-z"));
+        assert!((area("-z") - area("+z")).abs() < 0.5);
+        assert!(
+            (area("+x~+z2.1") - 8.5 * 4.2).abs() < 2.0,
+            "{}",
+            area("+x~+z2.1")
         );
     }
 }
