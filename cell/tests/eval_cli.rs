@@ -76,6 +76,8 @@ fn cell_eval_on_a_rendered_feeder_split() {
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("eval.json")).unwrap()).unwrap();
     assert_eq!(json["meta"]["split"], "test_feeder");
+    // Picks are counted at the cell's default bar unless `--pick-confidence` says otherwise.
+    assert_eq!(json["meta"]["options"]["pick_confidence"], 0.2);
     let s = &json["summary"];
     assert_eq!(s["frames"], 2);
     assert_eq!(s["frame_failures"], 0);
@@ -153,4 +155,15 @@ fn a_missing_dataset_is_a_clear_error() {
     assert!(!run.status.success());
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("nothing") && err.contains("split"), "{err}");
+}
+
+#[test]
+fn a_pick_confidence_outside_0_to_1_is_refused() {
+    let run = cell(&["eval", "ds", "--pick-confidence", "1.5", "--quiet"]);
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("--pick-confidence") && err.contains("between 0 and 1"),
+        "{err}"
+    );
 }

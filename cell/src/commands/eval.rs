@@ -9,14 +9,14 @@ use std::time::Instant;
 
 use anyhow::Context;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
-use cell::eval::table1::{
-    ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, pick_confidence, summarise, text_table,
-};
+use cell::eval::table1::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split, stable_poses};
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
 use perception::part::Catalog;
+
+use cell::scenario::DEFAULT_MIN_PICK_CONFIDENCE;
 
 /// Arguments of `cell eval`.
 #[derive(Debug, clap::Args)]
@@ -52,6 +52,10 @@ pub struct Args {
     /// their reason (the learned scenario's `[perception] max_rms_px` is 12).
     #[arg(long, default_value_t = 4.0)]
     pub max_rms_px: f64,
+    /// The least confidence of a pose the cell would pick, in [0, 1] (a scenario's
+    /// `[policy] min_pick_confidence`, default 0.2): the picks line counts those poses.
+    #[arg(long, default_value_t = DEFAULT_MIN_PICK_CONFIDENCE, value_parser = unit_interval)]
+    pub pick_confidence: f64,
     /// Keypoint poses only: skip the contour alignment on the frame's edges (for comparison).
     #[arg(long)]
     pub no_contour: bool,
@@ -64,6 +68,15 @@ pub struct Args {
     pub quiet: bool,
 }
 
+/// A confidence: a number in [0, 1].
+fn unit_interval(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("a confidence is between 0 and 1, got {v}")),
+        Err(e) => Err(format!("not a number: {e}")),
+    }
+}
+
 /// Runs the evaluation and writes its report.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let options = EvalOptions {
@@ -71,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         min_visib_fract: args.min_visib,
         gallery: args.gallery,
         limit: args.limit,
+        pick_confidence: args.pick_confidence,
         ..EvalOptions::default()
     };
     let catalog = Catalog::load(&args.catalog)?;
@@ -173,7 +187,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         p.poses,
         percent(p.assembly_grade, p.poses),
         p.pickable,
-        pick_confidence(),
+        options.pick_confidence,
         p.pickable_assembly_grade,
         percent(p.pickable_assembly_grade, p.pickable)
     );
@@ -182,7 +196,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "picks the cell would make (confidence ≥ {}, a stable pose it has a grasp for): {}; \
          assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
          another part {}, on no part {}",
-        pick_confidence(),
+        options.pick_confidence,
         k.picks,
         k.assembly_grade,
         percent(k.assembly_grade, k.picks),

@@ -113,6 +113,14 @@ pub struct EvalOptions {
     pub limit: Option<usize>,
     /// Surface points sampled per part for ADD(-S), MSSD and MSPD.
     pub model_points: usize,
+    /// The least confidence of a pose the cell would pick (a scenario's
+    /// `[policy] min_pick_confidence`).
+    #[serde(default = "default_pick_confidence")]
+    pub pick_confidence: f64,
+}
+
+fn default_pick_confidence() -> f64 {
+    crate::scenario::DEFAULT_MIN_PICK_CONFIDENCE
 }
 
 impl Default for EvalOptions {
@@ -125,6 +133,7 @@ impl Default for EvalOptions {
             gallery: 24,
             limit: None,
             model_points: 1000,
+            pick_confidence: default_pick_confidence(),
         }
     }
 }

@@ -559,7 +559,7 @@ fn render(
          has a grasp for), by what the picked part turned out to be.</p><table><tr>\
          <th class=l>part</th><th>picks</th><th>assembly-grade</th><th>further off</th>\
          <th>other stable pose</th><th>on or under another part</th><th>on no part</th></tr>",
-        super::table1::pick_confidence()
+        meta.options.pick_confidence
     );
     for p in &all {
         let k = &p.picks;

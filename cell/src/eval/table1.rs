@@ -170,7 +170,7 @@ pub struct PartSummary {
     /// Those poses within [`ASSEMBLY_GRADE_MM`] and [`ASSEMBLY_GRADE_DEG`] of the truth.
     #[serde(default)]
     pub assembly_grade: usize,
-    /// Those poses confident enough for the cell to pick ([`pick_confidence`]).
+    /// Those poses confident enough for the cell to pick ([`EvalOptions::pick_confidence`]).
     #[serde(default)]
     pub pickable: usize,
     /// The pickable poses that are assembly-grade.
@@ -190,7 +190,7 @@ pub struct PartSummary {
     pub stable_pose_rate: f64,
 }
 
-/// The poses the cell would pick (confidence at least [`pick_confidence`], in a stable pose it
+/// The poses the cell would pick (confidence at least [`EvalOptions::pick_confidence`], in a stable pose it
 /// has a grasp for), over every detection and not only the resting parts', by what each was.
 /// A pick that is not assembly-grade costs the cell a failed insertion or a wasted grasp.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -279,11 +279,6 @@ impl Picks {
 fn is_assembly_grade(e: &PoseErrors, flip_deg: Option<f64>) -> bool {
     e.x_mm.hypot(e.y_mm) <= ASSEMBLY_GRADE_MM
         && flip_deg.unwrap_or(e.angle_deg) <= ASSEMBLY_GRADE_DEG
-}
-
-/// The smallest confidence of a detection the cell picks (its default selection settings).
-pub fn pick_confidence() -> f64 {
-    crate::orchestrator::SelectionConfig::default().min_confidence
 }
 
 /// Mean, median and p95 of one stage, ms.
@@ -434,7 +429,7 @@ fn part_summary(
     let mut misses = MissCauses::default();
     let mut fp_causes = FalsePositiveCauses::default();
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
-    let pick_at = pick_confidence();
+    let pick_at = options.pick_confidence;
     let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
     let mut picks = Picks::default();
     for f in frames {

@@ -53,13 +53,16 @@ pub struct Setup {
 }
 
 impl Setup {
-    /// Builds the planning model of `scenario`, with the default policies.
+    /// Builds the planning model of `scenario`, with the default policies and the scenario's
+    /// pick bar (`[policy] min_pick_confidence`).
     pub fn new(scenario: Scenario) -> Result<Self, KnowledgeError> {
         let knowledge = CellKnowledge::new(&scenario)?;
+        let mut settings = EpisodeSettings::default();
+        settings.selection.min_confidence = scenario.spec.policy.min_pick_confidence;
         Ok(Self {
             scenario,
             knowledge,
-            settings: EpisodeSettings::default(),
+            settings,
         })
     }
 

@@ -15,6 +15,7 @@ use perception::part::Catalog;
 use robots::kinematics::Joints;
 
 use super::geometry::CellKnowledge;
+use crate::scenario::DEFAULT_MIN_PICK_CONFIDENCE;
 use perception::DetectedPart;
 
 /// Selection tuning.
@@ -38,7 +39,7 @@ impl Default for SelectionConfig {
         Self {
             finger_margin: 0.0005,
             max_orientation_error: 10f64.to_radians(),
-            min_confidence: 0.2,
+            min_confidence: DEFAULT_MIN_PICK_CONFIDENCE,
             approach_height: 0.015,
             confidence_band: 0.05,
         }

@@ -211,4 +211,33 @@ mod tests {
         let err = Scenario::parse(&t, &path).expect_err("negative shake time");
         assert_eq!(err.0[0].key.as_deref(), Some("cell.feeder.shake_time"));
     }
+
+    #[test]
+    fn the_pick_bar_has_a_default_reaches_the_selection_and_is_bounded_at_its_line() {
+        let (text, path) = nominal();
+        let s = Scenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            s.spec.policy.min_pick_confidence,
+            DEFAULT_MIN_PICK_CONFIDENCE
+        );
+        let with = |c: f64| format!("{text}\n[policy]\nmin_pick_confidence = {c:?}\n");
+        let s = Scenario::parse(&with(0.5), &path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(s.spec.policy.min_pick_confidence, 0.5);
+        let setup = crate::orchestrator::Setup::new(s).expect("the nominal cell plans");
+        assert_eq!(setup.settings.selection.min_confidence, 0.5);
+        for bad in [-0.1, 1.5] {
+            let t = with(bad);
+            let err = Scenario::parse(&t, &path).expect_err("out of range");
+            let p = &err.0[0];
+            let line = t
+                .lines()
+                .position(|l| l.starts_with("min_pick_confidence"))
+                .expect("written")
+                + 1;
+            let column = "min_pick_confidence = ".len() + 1;
+            assert_eq!((p.line, p.column), (line, column), "{err}");
+            assert_eq!(p.key.as_deref(), Some("policy.min_pick_confidence"));
+            assert!(p.message.contains("between 0 and 1"), "{err}");
+        }
+    }
 }

@@ -55,7 +55,10 @@ pub const DEFAULT_INSERTION_ATTEMPTS: u32 = 3;
 /// The most insertion attempts per step a scenario may ask for.
 pub const MAX_INSERTION_ATTEMPTS: u32 = 10;
 
-/// Recovery bounds (`[policy]`): every recovery path of an episode is bounded.
+/// The least perception confidence the cell picks a part at, unless `[policy]` says otherwise.
+pub const DEFAULT_MIN_PICK_CONFIDENCE: f64 = 0.2;
+
+/// Recovery bounds and the pick bar (`[policy]`): every recovery path of an episode is bounded.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PolicySpec {
@@ -64,14 +67,24 @@ pub struct PolicySpec {
     /// released with its cause (1 = no retry).
     #[serde(default = "default_insertion_attempts")]
     pub max_insertion_attempts: u32,
+    /// The least perception confidence a detected part needs to be picked, in [0, 1]: below it
+    /// the part is left where it lies (and, with no other candidate, the feeder shakes). Feeders
+    /// where parts pile up gain from a higher bar, sparse ones lose cycle time to it.
+    #[serde(default = "default_min_pick_confidence")]
+    pub min_pick_confidence: f64,
 }
 
 impl Default for PolicySpec {
     fn default() -> Self {
         Self {
             max_insertion_attempts: DEFAULT_INSERTION_ATTEMPTS,
+            min_pick_confidence: DEFAULT_MIN_PICK_CONFIDENCE,
         }
     }
+}
+
+fn default_min_pick_confidence() -> f64 {
+    DEFAULT_MIN_PICK_CONFIDENCE
 }
 
 fn default_insertion_attempts() -> u32 {

@@ -105,6 +105,13 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
             ),
         ));
     }
+    let bar = spec.policy.min_pick_confidence;
+    if !(0.0..=1.0).contains(&bar) {
+        issues.push((
+            root().key("policy").key("min_pick_confidence"),
+            format!("min_pick_confidence must be between 0 and 1, got {bar}"),
+        ));
+    }
     let pp = root().key("perception");
     let learned_models = match (&spec.perception.mode, &spec.perception.models) {
         (PerceptionMode::Learned, None) => {
