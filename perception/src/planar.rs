@@ -110,7 +110,7 @@ pub struct PlanarPose {
     pub yaw: f64,
     /// How far the input estimate leaned away from the chosen class, radians.
     pub tilt: f64,
-    /// Posterior probability of the chosen class among all classes (softmax of the scores).
+    /// Posterior probability of the chosen class among the admitted ones (softmax of the scores).
     pub confidence: f64,
     /// Score margin (log-likelihood units) to the runner-up; infinite without one.
     pub margin: f64,
