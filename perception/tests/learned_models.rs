@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 
 use image::{DynamicImage, Rgb, Rgb32FImage, RgbImage};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use perception::learned::{LearnedError, LearnedModels, LearnedPerception, LearnedPipeline};
+use perception::learned::{
+    LearnedError, LearnedModels, LearnedPerception, LearnedPipeline, PipelineConfig,
+};
 use perception::onnx::{OnnxError, Runtime};
 use perception::part::Catalog;
 use perception::{Camera, Frame, FrameContent, FrameImage, PartPerception, PerceptionError};
@@ -368,4 +370,63 @@ fn a_size_the_graph_leaves_dynamic_is_checked_on_every_run() {
         e.to_string().contains("does not fit image [-1, 3, -1, -1]"),
         "{e}"
     );
+}
+
+#[test]
+fn settings_out_of_range_are_refused_and_named() {
+    let models = LearnedModels::in_dir(&fixture_dir()).unwrap_or_else(|e| panic!("{e}"));
+    let base = PipelineConfig::default();
+    for (config, named) in [
+        (PipelineConfig { threads: 0, ..base }, "threads"),
+        (
+            PipelineConfig {
+                min_score: 1.5,
+                ..base
+            },
+            "min_score",
+        ),
+        (
+            PipelineConfig {
+                stacking_tolerance: Some(-1e-3),
+                ..base
+            },
+            "stacking_tolerance",
+        ),
+        (
+            PipelineConfig {
+                max_lean: f64::NAN,
+                ..base
+            },
+            "max_lean",
+        ),
+        (
+            PipelineConfig {
+                max_lean: 0.0,
+                ..base
+            },
+            "max_lean",
+        ),
+        (
+            PipelineConfig {
+                max_overfill: 0.0,
+                ..base
+            },
+            "max_overfill",
+        ),
+        (
+            PipelineConfig {
+                max_overfill: f64::INFINITY,
+                ..base
+            },
+            "max_overfill",
+        ),
+    ] {
+        match LearnedPipeline::with_config(&models, &catalog(), &runtime(), config) {
+            Err(LearnedError::Settings(m)) => assert!(m.contains(named), "{named}: {m}"),
+            Err(e) => panic!("{named}: another error: {e}"),
+            Ok(_) => panic!("{named}: accepted"),
+        }
+    }
+    LearnedPipeline::with_config(&models, &catalog(), &runtime(), base)
+        .unwrap_or_else(|e| panic!("the defaults: {e}"));
 }

@@ -25,5 +25,5 @@ pub use instances::{Instance, InstanceConfig, InstanceGrouper};
 pub use keypoint_net::KeypointNet;
 pub use models::LearnedModels;
 pub use perception::LearnedPerception;
-pub use pipeline::{LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
+pub use pipeline::{LearnedPipeline, MAX_LEAN, MAX_OVERFILL, PipelineConfig, STACKING_TOLERANCE};
 pub use segmenter::{SegmentMap, Segmenter};

@@ -133,15 +133,6 @@ impl LearnedPipeline {
                 config.min_score
             )));
         }
-        models.check_catalog(catalog)?;
-        let segmenter = BatchSession::open(runtime, &models.segmenter.path, config.threads)?;
-        let keypoints = BatchSession::open(runtime, &models.keypoints.path, config.threads)?;
-        // The files may have changed since `models` was read: check the contract again.
-        LearnedModels {
-            segmenter: segmenter.manifest().clone(),
-            keypoints: keypoints.manifest().clone(),
-        }
-        .check_catalog(catalog)?;
         if config
             .stacking_tolerance
             .is_some_and(|t| !(t.is_finite() && t >= 0.0))
@@ -151,6 +142,27 @@ impl LearnedPipeline {
                 config.stacking_tolerance
             )));
         }
+        if !(config.max_lean > 0.0 && config.max_lean <= std::f64::consts::PI) {
+            return Err(LearnedError::Settings(format!(
+                "max_lean must lie in (0, π] rad, got {}",
+                config.max_lean
+            )));
+        }
+        if !(config.max_overfill.is_finite() && config.max_overfill > 0.0) {
+            return Err(LearnedError::Settings(format!(
+                "max_overfill must be a positive multiple of a footprint, got {}",
+                config.max_overfill
+            )));
+        }
+        models.check_catalog(catalog)?;
+        let segmenter = BatchSession::open(runtime, &models.segmenter.path, config.threads)?;
+        let keypoints = BatchSession::open(runtime, &models.keypoints.path, config.threads)?;
+        // The files may have changed since `models` was read: check the contract again.
+        LearnedModels {
+            segmenter: segmenter.manifest().clone(),
+            keypoints: keypoints.manifest().clone(),
+        }
+        .check_catalog(catalog)?;
         let specs = models
             .parts()
             .iter()
