@@ -11,12 +11,11 @@ use anyhow::Context;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split, stable_poses};
+use cell::scenario::DEFAULT_MIN_PICK_CONFIDENCE;
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
 use perception::part::Catalog;
-
-use cell::scenario::DEFAULT_MIN_PICK_CONFIDENCE;
 
 /// Arguments of `cell eval`.
 #[derive(Debug, clap::Args)]

@@ -57,13 +57,19 @@ pub(super) struct ContourStage {
 }
 
 impl ContourStage {
-    /// Outlines of the detectable parts (`specs` with their `meshes`, in the models' class
-    /// order) and their declared near-symmetries.
-    pub(super) fn new(specs: &[&PartSpec], meshes: &[TriMesh], config: ContourConfig) -> Self {
+    /// Outlines of the detectable parts (`specs` with their `meshes` and their stable poses'
+    /// `footprints`, mm², in the models' class order) and their declared near-symmetries.
+    pub(super) fn new(
+        specs: &[&PartSpec],
+        meshes: &[TriMesh],
+        footprints: &[Vec<f64>],
+        config: ContourConfig,
+    ) -> Self {
         let parts = specs
             .iter()
             .zip(meshes)
-            .map(|(spec, mesh)| OutlinedPart {
+            .zip(footprints)
+            .map(|((spec, mesh), footprints)| OutlinedPart {
                 outline: PartOutline::new(mesh)
                     .with_final_edge(final_edge(spec.material))
                     .with_hole_weight(spec.hole_weight.get()),
@@ -82,7 +88,7 @@ impl ContourStage {
                         Some(Featureless {
                             class,
                             order: v.order,
-                            footprint_mm2: spec.stable_poses[class].footprint_mm2(mesh),
+                            footprint_mm2: footprints[class],
                         })
                     })
                     .collect(),

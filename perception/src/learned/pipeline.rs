@@ -22,7 +22,7 @@ use crate::contour::ContourConfig;
 use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
-use crate::part::Catalog;
+use crate::part::{Catalog, footprints_mm2};
 use crate::planar::ClassSet;
 use crate::stacking::StackingCheck;
 use crate::voting::{KeypointVote, VoteError, VotingConfig};
@@ -182,22 +182,17 @@ impl LearnedPipeline {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
+        let footprints: Vec<Vec<f64>> = specs
+            .iter()
+            .zip(&meshes)
+            .map(|(spec, mesh)| footprints_mm2(mesh, &spec.stable_poses))
+            .collect();
         let contour = config
             .contour
-            .map(|c| ContourStage::new(&specs, &meshes, c));
+            .map(|c| ContourStage::new(&specs, &meshes, &footprints, c));
         let stacking = config
             .stacking_tolerance
             .map(|t| StackingCheck::new(&meshes, t));
-        let footprints = specs
-            .iter()
-            .zip(&meshes)
-            .map(|(spec, mesh)| {
-                spec.stable_poses
-                    .iter()
-                    .map(|s| s.footprint_mm2(mesh))
-                    .collect()
-            })
-            .collect();
         Ok(Self {
             parts: models.parts().to_vec(),
             catalog: catalog.clone(),
@@ -848,8 +843,7 @@ mod tests {
     fn footprints(catalog: &Catalog, name: &str) -> Vec<f64> {
         let part = catalog.part(name).unwrap();
         let mesh = catalog.load_mesh(part).unwrap();
-        let footprints = part.stable_poses.iter().map(|s| s.footprint_mm2(&mesh));
-        footprints.collect()
+        footprints_mm2(&mesh, &part.stable_poses)
     }
 
     /// A part lying on another one leans away from every stable pose: its keypoint pose is kept

@@ -19,4 +19,4 @@ pub use mesh::{MeshDefect, OpenRegion, TriMesh};
 pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};
 pub use mesh_repair::{MeshRepairs, WELD_TOLERANCE_REL};
 pub use pieces::{ConvexPieces, convex_pieces};
-pub use stable_pose::StablePose;
+pub use stable_pose::{StablePose, footprints_mm2};

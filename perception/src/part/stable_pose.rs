@@ -32,26 +32,6 @@ impl StablePose {
         UnitQuaternion::from_scaled_axis(Vector3::from(self.rotation))
     }
 
-    /// The area the part (`mesh`, its frame in metres) covers seen from above when it rests in
-    /// this class, mm²: its convex hull's faces that look up, each by its area projected onto
-    /// the table. A segmentation mask much larger than this cannot be the part in this class.
-    pub fn footprint_mm2(&self, mesh: &TriMesh) -> f64 {
-        let up = HullVector::from(self.up_in_part).normalize();
-        let points: Vec<HullVector> = mesh
-            .vertices
-            .iter()
-            .map(|p| HullVector::new(p.x, p.y, p.z) * 1e3)
-            .collect();
-        let (vertices, triangles) = convex_hull(&points);
-        triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| vertices[i as usize]);
-                (0.5 * (b - a).cross(c - a).dot(up)).max(0.0)
-            })
-            .sum()
-    }
-
     /// `table_T_part` for a part resting in this class at (x, y) with the given yaw.
     #[allow(non_snake_case)]
     pub fn table_T_part(&self, x: f64, y: f64, yaw: f64) -> Isometry3<f64> {
@@ -103,6 +83,31 @@ impl StablePose {
     }
 }
 
+/// The area the part (`mesh`, its frame in metres) covers seen from above when it rests in each
+/// of `poses`, mm²: its convex hull's faces that look up, each by its area projected onto the
+/// table. A segmentation mask much larger than this cannot be the part in that pose.
+pub fn footprints_mm2(mesh: &TriMesh, poses: &[StablePose]) -> Vec<f64> {
+    let points: Vec<HullVector> = mesh
+        .vertices
+        .iter()
+        .map(|p| HullVector::new(p.x, p.y, p.z) * 1e3)
+        .collect();
+    let (vertices, triangles) = convex_hull(&points);
+    poses
+        .iter()
+        .map(|pose| {
+            let up = HullVector::from(pose.up_in_part).normalize();
+            triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| vertices[i as usize]);
+                    (0.5 * (b - a).cross(c - a).dot(up)).max(0.0)
+                })
+                .sum()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -140,7 +145,11 @@ mod tests {
         let catalog = crate::part::Catalog::load(&path).unwrap();
         let mold = catalog.part("insert_mold").unwrap();
         let mesh = catalog.load_mesh(mold).unwrap();
-        let area = |pose: &str| mold.stable_pose(pose).unwrap().footprint_mm2(&mesh);
+        let footprints = footprints_mm2(&mesh, &mold.stable_poses);
+        let area = |pose: &str| {
+            let class = mold.stable_poses.iter().position(|s| s.name == pose);
+            footprints[class.unwrap()]
+        };
         // An 8.4 × 8.5 × 4.2 mm block: its floor from above, a side face on its side.
         assert!((area("-z") - 8.4 * 8.5).abs() < 1.5, "{}", area("-z"));
         assert!((area("-z") - area("+z")).abs() < 0.5);
