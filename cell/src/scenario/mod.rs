@@ -177,6 +177,22 @@ mod tests {
         (text, dir.join("policy_variant.toml"))
     }
 
+    /// Asserts that `text` (whose last line sets `[policy] key`) is refused at that value's line
+    /// and column, under the key `policy.key`, with a message that holds `says`.
+    fn refused_at_its_value(text: &str, path: &Path, key: &str, says: &str) {
+        let err = Scenario::parse(text, path).expect_err("out of range");
+        let p = &err.0[0];
+        let line = text
+            .lines()
+            .position(|l| l.starts_with(key))
+            .expect("written")
+            + 1;
+        let column = format!("{key} = ").len() + 1;
+        assert_eq!((p.line, p.column), (line, column), "{err}");
+        assert_eq!(p.key.as_deref(), Some(format!("policy.{key}").as_str()));
+        assert!(p.message.contains(says), "{err}");
+    }
+
     #[test]
     fn insertion_attempts_default_from_the_policy_and_are_bounded_with_their_location() {
         let (text, path) = nominal();
@@ -189,19 +205,8 @@ mod tests {
         let s = Scenario::parse(&with(5), &path).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(s.spec.policy.max_insertion_attempts, 5);
         for bad in [0, MAX_INSERTION_ATTEMPTS + 1] {
-            let t = with(bad);
-            let err = Scenario::parse(&t, &path).expect_err("out of range");
-            let p = &err.0[0];
-            let line = t
-                .lines()
-                .position(|l| l.starts_with("max_insertion_attempts"))
-                .expect("written")
-                + 1;
             // Located at the offending value.
-            let column = "max_insertion_attempts = ".len() + 1;
-            assert_eq!((p.line, p.column), (line, column), "{err}");
-            assert_eq!(p.key.as_deref(), Some("policy.max_insertion_attempts"));
-            assert!(p.message.contains("between 1 and"), "{err}");
+            refused_at_its_value(&with(bad), &path, "max_insertion_attempts", "between 1 and");
         }
         // A typo is an unknown key, never a silent default.
         let t = format!("{text}\n[policy]\nmax_insertion_attempt = 2\n");
@@ -226,18 +231,7 @@ mod tests {
         let setup = crate::orchestrator::Setup::new(s).expect("the nominal cell plans");
         assert_eq!(setup.settings.selection.min_confidence, 0.5);
         for bad in [-0.1, 1.5] {
-            let t = with(bad);
-            let err = Scenario::parse(&t, &path).expect_err("out of range");
-            let p = &err.0[0];
-            let line = t
-                .lines()
-                .position(|l| l.starts_with("min_pick_confidence"))
-                .expect("written")
-                + 1;
-            let column = "min_pick_confidence = ".len() + 1;
-            assert_eq!((p.line, p.column), (line, column), "{err}");
-            assert_eq!(p.key.as_deref(), Some("policy.min_pick_confidence"));
-            assert!(p.message.contains("between 0 and 1"), "{err}");
+            refused_at_its_value(&with(bad), &path, "min_pick_confidence", "between 0 and 1");
         }
     }
 }
