@@ -129,8 +129,7 @@ impl PartOutline {
     }
 
     /// The same outline, its samples on the edges of holes through the silhouette weighing
-    /// `weight` times the others in the rounds after the first (screening), where they also take
-    /// the nearest step
+    /// `weight` times the others in the finest round, where they also take the nearest step
     /// (see [`crate::part::PartSpec::hole_weight`]).
     pub fn with_hole_weight(mut self, weight: f64) -> Self {
         self.hole_weight = weight;
@@ -609,11 +608,8 @@ impl ContourAligner {
                 _ => (self.config.edge_share, FinalEdge::Nearest),
             };
             // The outline is re-found once per round; within a round its points move with the pose.
-            // Holes are told apart only where they weigh more: in the rounds after screening,
-            // once the outline lies within the coarse reach of the part's. A wall's rim and
-            // shadow band can hold the outer outline a wall's width off, beyond the finest
-            // round's reach, where only the window's clean steps still pull it home.
-            let holes = round > 0 && outline.hole_weight != 1.0;
+            // Holes are told apart only where they weigh more: in the finest round.
+            let holes = round == finest && outline.hole_weight != 1.0;
             let points = outline.outline(camera, &pose(&q), self.config.spacing_px, holes);
             for _ in 0..self.config.iterations {
                 let table_T_part = stable.table_T_part(q.x, q.y, q.z);

@@ -185,9 +185,9 @@ pub struct PartSpec {
     #[serde(default)]
     pub symmetries: Vec<Symmetry>,
     /// How many times the other outline samples the edges of holes through the part (cut-outs
-    /// in a flat face) weigh in the contour fit's rounds after screening: a cut-out's edge is one
-    /// clean step at the face, where a thin-walled shell's outer outline is a wall whose rim,
-    /// outer face and shadow blur it by a pixel or two. Absent: 1, like any other sample.
+    /// in a flat face) weigh in the contour fit's last round: a cut-out's edge is one clean step
+    /// at the face, where a thin-walled shell's outer outline is a wall whose rim, outer face and
+    /// shadow blur it by a pixel or two. Absent: 1, like any other sample.
     #[serde(default, skip_serializing_if = "HoleWeight::is_one")]
     pub hole_weight: HoleWeight,
     /// Stable poses whose view from above repeats on a turn: the learned pipeline poses a part
