@@ -139,10 +139,10 @@ fn bench(c: &mut Criterion) {
                 origin: [0, 0],
             }),
         };
-        let parts = perception
+        let seen = perception
             .perceive(&frame)
             .unwrap_or_else(|e| panic!("{e}"));
-        (decoded, t.elapsed() - decoded, parts.len())
+        (decoded, t.elapsed() - decoded, seen.parts.len())
     };
     eprintln!(
         "{} × {} sensor, feeder window {roi:?}; median of 10 captures:",

@@ -1,7 +1,38 @@
 //! What perception reports: each detected part with its pose, stable pose, confidence and
-//! uncertainty. This is the output side of the perception seam.
+//! uncertainty, and each part it found but could not pose, as the space it may take up. This is
+//! the output side of the perception seam.
 
-use nalgebra::{Isometry3, Matrix6};
+use nalgebra::{Isometry3, Matrix6, Point3};
+
+/// What perception made of one frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Perceived {
+    /// The parts it posed, ordered as the detector found them.
+    pub parts: Vec<DetectedPart>,
+    /// The parts it found but could not pose: the cell keeps its fingers clear of them.
+    pub unposed: Vec<UnposedPart>,
+}
+
+impl Perceived {
+    /// Posed parts only (a perception that poses every part it finds).
+    pub fn posed(parts: Vec<DetectedPart>) -> Self {
+        Self {
+            parts,
+            unposed: Vec::new(),
+        }
+    }
+}
+
+/// A part perception found but could not pose (its keypoints failed the gate, it lies on
+/// another part, ...): the space it may take up, so that no finger comes down on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnposedPart {
+    /// Catalog name.
+    pub part: String,
+    /// Points in the table frame (metres) whose convex hull holds the part: where its mask's
+    /// outline meets the table, and the same rays at the part's largest extent above it.
+    pub table_points: Vec<Point3<f64>>,
+}
 
 /// One detected part instance with its estimated pose.
 #[derive(Debug, Clone, PartialEq)]

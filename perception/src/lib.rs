@@ -8,7 +8,7 @@ pub mod camera;
 pub mod part;
 
 pub use camera::{Camera, CameraError, Distortion};
-pub use detection::DetectedPart;
+pub use detection::{DetectedPart, Perceived, UnposedPart};
 pub use frame::{Frame, FrameContent, FrameImage, TruePart};
 pub use perceive::{PartPerception, PerceptionError};
 pub mod ablation;

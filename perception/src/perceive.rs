@@ -1,7 +1,7 @@
 //! The perception seam: a frame in, detected parts out. Keypoint-noise perception (simulation
 //! only) and the learned pipeline implement [`PartPerception`]; the orchestrator knows only it.
 
-use crate::detection::DetectedPart;
+use crate::detection::Perceived;
 use crate::frame::Frame;
 
 /// Why perception failed as a whole (single instances that fail are just not reported).
@@ -36,6 +36,7 @@ pub enum PerceptionError {
 
 /// The embedded perception module's interface: a frame in, detected part poses out.
 pub trait PartPerception: Send {
-    /// Detects the parts in `frame`, ordered as the detector found them.
-    fn perceive(&mut self, frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError>;
+    /// Detects the parts in `frame`: those it posed, ordered as the detector found them, and
+    /// those it found but could not pose.
+    fn perceive(&mut self, frame: &Frame) -> Result<Perceived, PerceptionError>;
 }

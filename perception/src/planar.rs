@@ -310,18 +310,7 @@ impl PlanarRefiner {
 
     /// Table-frame (x, y) where the camera-frame ray direction `ray` meets the plane at `height`.
     fn intersect_ray(&self, ray: &Vector3<f64>, height: f64) -> Result<(f64, f64), PlanarError> {
-        let table_t_camera = self.camera_T_table.inverse();
-        let origin = table_t_camera.translation.vector;
-        let dir = table_t_camera.rotation * ray;
-        if dir.z.abs() < 1e-12 {
-            return Err(PlanarError::RayMissesPlane);
-        }
-        let s = (height - origin.z) / dir.z;
-        if !(s.is_finite() && s > 0.0) {
-            return Err(PlanarError::RayMissesPlane);
-        }
-        let p = origin + dir * s;
-        Ok((p.x, p.y))
+        ray_on_table(&self.camera_T_table, ray, height)
     }
 
     /// [`PlanarRefiner::refine_in`] `classes`, then x, y and yaw fitted to the keypoints by
@@ -555,4 +544,26 @@ fn class_confidence(
 fn isometry_finite(t: &Isometry3<f64>) -> bool {
     t.translation.vector.iter().all(|v| v.is_finite())
         && t.rotation.coords.iter().all(|v| v.is_finite())
+}
+
+/// Table-frame (x, y) where the camera-frame ray direction `ray` meets the plane `height` above
+/// the table at `camera_T_table`; an error when the ray runs parallel to it or away from it.
+#[allow(non_snake_case)]
+pub fn ray_on_table(
+    camera_T_table: &Isometry3<f64>,
+    ray: &Vector3<f64>,
+    height: f64,
+) -> Result<(f64, f64), PlanarError> {
+    let table_t_camera = camera_T_table.inverse();
+    let origin = table_t_camera.translation.vector;
+    let dir = table_t_camera.rotation * ray;
+    if dir.z.abs() < 1e-12 {
+        return Err(PlanarError::RayMissesPlane);
+    }
+    let s = (height - origin.z) / dir.z;
+    if !(s.is_finite() && s > 0.0) {
+        return Err(PlanarError::RayMissesPlane);
+    }
+    let p = origin + dir * s;
+    Ok((p.x, p.y))
 }

@@ -183,13 +183,13 @@ fn learned_perception_refuses_simulated_frames_and_bad_images() {
             .contains("does not fit the 5472 × 3648 sensor"),
         "{e}"
     );
-    // A good frame: the fixture's keypoints fail to vote, so no part is reported (no error).
+    // A good frame: the fixture's keypoints fail to vote, so no part is posed (no error).
     let good = perception
         .perceive(&frame(FrameContent::Image(
             FrameImage::full(square_image()),
         )))
         .unwrap();
-    assert!(good.is_empty());
+    assert!(good.parts.is_empty());
 }
 
 #[test]

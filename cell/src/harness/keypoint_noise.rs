@@ -7,7 +7,9 @@ use nalgebra::{Isometry3, Point2};
 use perception::estimate::{EstimatorConfig, Observation, PoseEstimator};
 use perception::keypoint_noise::KeypointNoiseModel;
 use perception::part::Catalog;
-use perception::{Camera, DetectedPart, Frame, FrameContent, PartPerception, PerceptionError};
+use perception::{
+    Camera, DetectedPart, Frame, FrameContent, PartPerception, Perceived, PerceptionError,
+};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use sim::cell::noise::PERCEPTION_STREAM;
@@ -84,7 +86,7 @@ impl<R: Rng + Send> KeypointNoise<R> {
 }
 
 impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
-    fn perceive(&mut self, frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
+    fn perceive(&mut self, frame: &Frame) -> Result<Perceived, PerceptionError> {
         let parts = match &frame.content {
             FrameContent::Simulated(parts) => parts,
             FrameContent::Image(_) => {
@@ -119,7 +121,7 @@ impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
                 covariance: estimate.pnp.covariance,
             });
         }
-        Ok(out)
+        Ok(Perceived::posed(out))
     }
 }
 

@@ -6,7 +6,7 @@ use std::sync::Mutex;
 
 use nalgebra::Isometry3;
 use perception::learned::{LearnedModels, LearnedPerception, LearnedPipeline};
-use perception::{DetectedPart, Frame, PartPerception, PerceptionError};
+use perception::{Frame, PartPerception, Perceived, PerceptionError};
 
 use super::{HarnessError, keypoint_noise_for};
 use crate::learned;
@@ -110,7 +110,7 @@ pub enum EpisodePerception<'a> {
 }
 
 impl PartPerception for EpisodePerception<'_> {
-    fn perceive(&mut self, frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
+    fn perceive(&mut self, frame: &Frame) -> Result<Perceived, PerceptionError> {
         match self {
             EpisodePerception::KeypointNoise(p) => p.perceive(frame),
             EpisodePerception::Learned { perception, .. } => match perception {

@@ -13,13 +13,13 @@ use super::context::EpisodeContext;
 use super::events::EventLog;
 use super::geometry::CellKnowledge;
 use super::planning::{Motion, Planner, Speeds, grasped_offset};
-use super::selection::{Rejection, Selection, select};
+use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
 use super::step::StepState;
 use crate::episode::{
     EpisodeRecord, GRASP_MISSED, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome,
 };
-use perception::{DetectedPart, PartPerception};
+use perception::{DetectedPart, PartPerception, Perceived};
 
 /// Error-budget name of a step given up because the feeder held none of its part.
 pub const FEEDER_EXHAUSTED: &str = "feeder.parts";
@@ -202,11 +202,15 @@ impl<'a> Engine<'a> {
     fn perceive(&mut self) -> State {
         let r = match self.step.frame.take() {
             Some(f) => self.perception.perceive(&f),
-            None => Ok(Vec::new()),
+            None => Ok(Perceived::default()),
         };
         match r {
-            Ok(d) => {
-                self.step.detections = d;
+            Ok(p) => {
+                let base_T_table = &self.ctx.knowledge.geometry.base_T_table;
+                self.step.unposed = (p.unposed.iter())
+                    .filter_map(|u| UnposedObstacle::new(u, base_T_table))
+                    .collect();
+                self.step.detections = p.parts;
                 State::Select
             }
             Err(e) => self.finish_step(
@@ -235,6 +239,7 @@ impl<'a> Engine<'a> {
             c.catalog,
             self.index,
             &candidates,
+            &self.step.unposed,
             &here,
             &c.settings.selection,
         );
@@ -574,6 +579,7 @@ impl<'a> Engine<'a> {
             c.catalog,
             next,
             &rest,
+            &self.step.unposed,
             here,
             &c.settings.selection,
         );

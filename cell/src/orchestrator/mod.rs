@@ -58,7 +58,9 @@ pub use planning::{
 pub use production::{
     ProductionCellIo, ProductionError, ProductionOptions, open_camera, preflight,
 };
-pub use selection::{Rejection, Selection, SelectionConfig, SelectionResult, select};
+pub use selection::{
+    Rejection, Selection, SelectionConfig, SelectionResult, UnposedObstacle, select,
+};
 pub use state::{State, Timeouts};
 
 use crate::episode::EpisodeRecord;

@@ -3,7 +3,9 @@
 //! An instance qualifies when its stable pose has a catalog grasp, that grasp leads to the
 //! step's insertion orientation (a part lying the wrong way up is never picked), the approach,
 //! grasp and insertion poses are reachable by IK, and the open fingers clear every other
-//! detection by a margin (parry distance against their convex hulls at the estimated poses).
+//! detection by a margin (parry distance against their convex hulls at the estimated poses) and
+//! every part perception found but could not pose ([`UnposedObstacle`]: the space its mask
+//! outlines on the table, up to the part's largest extent).
 //! Qualified instances are ranked by perception confidence in bands of
 //! [`SelectionConfig::confidence_band`] (confidences within a band are equally trustworthy);
 //! ties are broken by the motion the pick and insertion need (the largest joint travel from the
@@ -11,8 +13,11 @@
 //! time), then by the estimated position (table x, then y), so the choice is deterministic.
 
 use nalgebra::{Isometry3, Vector3};
+use parry3d_f64::shape::SharedShape;
+use perception::UnposedPart;
 use perception::part::Catalog;
 use robots::kinematics::Joints;
+use sim::convert::vec_from_point;
 
 use super::geometry::CellKnowledge;
 use crate::scenario::DEFAULT_MIN_PICK_CONFIDENCE;
@@ -66,6 +71,50 @@ pub enum Rejection {
         /// The distance, metres.
         distance: f64,
     },
+    /// An open finger would come closer than the margin to a part perception found but could
+    /// not pose.
+    UnposedTooClose {
+        /// The unposed part's catalog name.
+        part: String,
+        /// The distance, metres.
+        distance: f64,
+    },
+}
+
+/// A part perception found but could not pose, as the fingers must avoid it: the convex hull,
+/// in the robot base frame, of what its mask outlines between the table and the part's largest
+/// extent above it.
+#[derive(Clone)]
+pub struct UnposedObstacle {
+    /// Catalog name.
+    pub part: String,
+    /// The hull, in the base frame.
+    pub hull: SharedShape,
+}
+
+impl std::fmt::Debug for UnposedObstacle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("UnposedObstacle")
+            .field("part", &self.part)
+            .finish_non_exhaustive()
+    }
+}
+
+impl UnposedObstacle {
+    /// The obstacle of `unposed`, its points in the frame of the table at `base_T_table`;
+    /// `None` when they span no volume (a mask whose rays all missed the table).
+    #[allow(non_snake_case)]
+    pub fn new(unposed: &UnposedPart, base_T_table: &Isometry3<f64>) -> Option<Self> {
+        let points: Vec<_> = unposed
+            .table_points
+            .iter()
+            .map(|p| vec_from_point(&(base_T_table * p)))
+            .collect();
+        Some(Self {
+            part: unposed.part.clone(),
+            hull: SharedShape::convex_hull(&points)?,
+        })
+    }
 }
 
 /// A chosen instance with its grasp.
@@ -104,6 +153,9 @@ impl SelectionResult {
                 Rejection::WrongOrientation(_) => "wrong orientation for the target",
                 Rejection::Unreachable(_) => "unreachable",
                 Rejection::NeighbourTooClose { .. } => "neighbour too close for the fingers",
+                Rejection::UnposedTooClose { .. } => {
+                    "a part found but not posed too close for the fingers"
+                }
             };
             *counts.entry(k).or_default() += 1;
         }
@@ -118,15 +170,16 @@ impl SelectionResult {
     }
 }
 
-/// Chooses the instance of step `step`'s part to pick among `detections`, for an arm at joints
-/// `home` (the grasp's jaw orientation, of the two the parallel jaws allow, is the one nearest
-/// the arm's current wrist yaw).
+/// Chooses the instance of step `step`'s part to pick among `detections`, whose fingers clear
+/// `unposed` too, for an arm at joints `home` (the grasp's jaw orientation, of the two the
+/// parallel jaws allow, is the one nearest the arm's current wrist yaw).
 #[allow(non_snake_case)]
 pub fn select(
     knowledge: &CellKnowledge,
     catalog: &Catalog,
     step: usize,
     detections: &[DetectedPart],
+    unposed: &[UnposedObstacle],
     home: &Joints,
     config: &SelectionConfig,
 ) -> SelectionResult {
@@ -232,6 +285,16 @@ pub fn select(
                 break;
             }
         }
+        if blocked.is_none() {
+            blocked = unposed.iter().find_map(|u| {
+                let identity = Isometry3::identity();
+                let dist = knowledge.finger_distance(&base_T_grasp, u.hull.as_ref(), &identity);
+                (dist < config.finger_margin).then(|| Rejection::UnposedTooClose {
+                    part: u.part.clone(),
+                    distance: dist,
+                })
+            });
+        }
         if let Some(r) = blocked {
             rejected.push((d.index, r));
             continue;
@@ -261,5 +324,98 @@ pub fn select(
     SelectionResult {
         chosen: qualified.into_iter().next(),
         rejected,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use nalgebra::{Matrix6, Point3};
+
+    use super::*;
+    use crate::harness::SimSetup;
+    use crate::scenario::Scenario;
+
+    /// A face-up main shell at the nominal cell's feeder centre, posed, and the cell's home.
+    #[allow(non_snake_case)]
+    fn shell_at_the_feeder() -> (SimSetup, DetectedPart) {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
+        let setup = SimSetup::new(Scenario::load(&path).unwrap()).unwrap();
+        let k = &setup.engine.knowledge;
+        let [x, y] = k.spec.feeder.center;
+        let spec = setup.engine.scenario.catalog.part("main_shell").unwrap();
+        let table_T_part = spec.stable_pose("+z").unwrap().table_T_part(x, y, 0.3);
+        let shell = DetectedPart {
+            part: "main_shell".into(),
+            index: 0,
+            truth_instance: None,
+            base_T_part: k.geometry.base_T_table * table_T_part,
+            table_T_part,
+            stable_pose: "+z".into(),
+            confidence: 0.9,
+            rms_px: 1.0,
+            covariance: Matrix6::identity() * 1e-10,
+        };
+        (setup, shell)
+    }
+
+    /// An unposed top shell's space: a box `size` wide and 9 mm tall centred at table (x, y).
+    fn unposed_box(x: f64, y: f64, size: f64) -> UnposedPart {
+        let h = size / 2.0;
+        let table_points = [(-h, -h), (h, -h), (-h, h), (h, h)]
+            .iter()
+            .flat_map(|(dx, dy)| [0.0, 0.009].map(|z| Point3::new(x + dx, y + dy, z)))
+            .collect();
+        UnposedPart {
+            part: "top_shell".into(),
+            table_points,
+        }
+    }
+
+    #[test]
+    fn the_fingers_keep_clear_of_a_part_found_but_not_posed() {
+        let (setup, shell) = shell_at_the_feeder();
+        let (k, catalog) = (&setup.engine.knowledge, &setup.engine.scenario.catalog);
+        let home = setup.model.home;
+        let config = SelectionConfig::default();
+        let select_with = |unposed: &[UnposedObstacle]| {
+            select(
+                k,
+                catalog,
+                0,
+                std::slice::from_ref(&shell),
+                unposed,
+                &home,
+                &config,
+            )
+        };
+        let alone = select_with(&[]);
+        assert!(alone.chosen.is_some(), "{:?}", alone.rejected);
+        // Something found but not posed where the fingers go down: the shell is not picked.
+        let [x, y] = k.spec.feeder.center;
+        let base_T_table = &k.geometry.base_T_table;
+        let over = UnposedObstacle::new(&unposed_box(x, y, 0.02), base_T_table).unwrap();
+        let blocked = select_with(&[over]);
+        assert!(blocked.chosen.is_none());
+        assert!(
+            matches!(
+                &blocked.rejected[..],
+                [(0, Rejection::UnposedTooClose { part, distance })]
+                    if part == "top_shell" && *distance < config.finger_margin
+            ),
+            "{:?}",
+            blocked.rejected
+        );
+        assert!(blocked.summary().contains("found but not posed"));
+        // The same 5 cm away leaves the fingers room.
+        let away = UnposedObstacle::new(&unposed_box(x + 0.05, y, 0.02), base_T_table).unwrap();
+        assert!(select_with(&[away]).chosen.is_some());
+        // A mask whose rays all missed the table spans nothing.
+        let flat = UnposedPart {
+            part: "top_shell".into(),
+            table_points: vec![Point3::new(x, y, 0.0); 4],
+        };
+        assert!(UnposedObstacle::new(&flat, base_T_table).is_none());
     }
 }

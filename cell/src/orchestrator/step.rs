@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use nalgebra::{Isometry3, Vector3};
 
 use super::planning::{Motion, Plan};
-use super::selection::Selection;
+use super::selection::{Selection, UnposedObstacle};
 use crate::episode::{PerceptionVerdict, PoseError, StepOutcome, StepRecord};
 use perception::{DetectedPart, Frame};
 
@@ -30,6 +30,8 @@ pub(super) struct StepState {
     pub frame: Option<Frame>,
     /// What the last frame showed.
     pub detections: Vec<DetectedPart>,
+    /// The parts the last frame showed that perception could not pose.
+    pub unposed: Vec<UnposedObstacle>,
     /// Detections of this frame ruled out (unplannable, or blocked by an excluded neighbour).
     pub excluded: BTreeSet<usize>,
     /// Where (base frame) picks of this step closed on nothing since the feeder last moved:
@@ -72,6 +74,7 @@ impl StepState {
             pending: Vec::new(),
             frame: None,
             detections: Vec::new(),
+            unposed: Vec::new(),
             excluded: BTreeSet::new(),
             missed_at: Vec::new(),
             selection: None,

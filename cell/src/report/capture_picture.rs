@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use image::{Rgb, RgbImage};
-use perception::{DetectedPart, Frame, FrameContent, PartPerception, PerceptionError};
+use perception::{DetectedPart, Frame, FrameContent, PartPerception, Perceived, PerceptionError};
 
 use super::pictures::PictureError;
 use crate::episode::EpisodeRecord;
@@ -24,9 +24,9 @@ struct Recording<'a> {
 }
 
 impl PartPerception for Recording<'_> {
-    fn perceive(&mut self, frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
+    fn perceive(&mut self, frame: &Frame) -> Result<Perceived, PerceptionError> {
         let found = self.inner.perceive(frame)?;
-        self.last = Some((frame.clone(), found.clone()));
+        self.last = Some((frame.clone(), found.parts.clone()));
         Ok(found)
     }
 }

@@ -369,14 +369,14 @@ fn image_perception(scenario: &Scenario) -> Result<Box<dyn PartPerception>, Perc
 mod tests {
     use super::*;
     use crate::camera::{FilesCamera, Sensor};
-    use perception::{DetectedPart, Frame, PerceptionError};
+    use perception::{Frame, Perceived, PerceptionError};
 
     /// Stands in for the learned perception, which has no trained models yet; the guarded run
     /// never gets as far as perceiving.
     struct NoModels;
 
     impl PartPerception for NoModels {
-        fn perceive(&mut self, _frame: &Frame) -> Result<Vec<DetectedPart>, PerceptionError> {
+        fn perceive(&mut self, _frame: &Frame) -> Result<Perceived, PerceptionError> {
             Err(PerceptionError::Settings("no trained models".into()))
         }
     }

@@ -3,7 +3,11 @@
 
 use std::time::Duration;
 
+use nalgebra::{Isometry3, Point2, Point3};
+
+use crate::Camera;
 use crate::estimate::PoseEstimate;
+use crate::planar::ray_on_table;
 use crate::voting::KeypointVote;
 
 /// A binary instance mask over a box of the image.
@@ -33,6 +37,45 @@ impl InstanceMask {
     /// Pixels on the instance.
     pub fn area(&self) -> usize {
         self.bits.iter().filter(|b| **b).count()
+    }
+
+    /// Points in the table frame whose convex hull holds whatever `camera` sees through the
+    /// mask between the table at `camera_T_table` and `height` above it: the outer corners of
+    /// each row's first and last pixel, met by their rays on both planes. Rays that miss a
+    /// plane give no point.
+    #[allow(non_snake_case)]
+    pub fn on_table(
+        &self,
+        camera: &Camera,
+        camera_T_table: &Isometry3<f64>,
+        height: f64,
+    ) -> Vec<Point3<f64>> {
+        let mut points = Vec::new();
+        let (x0, y0) = (f64::from(self.origin[0]), f64::from(self.origin[1]));
+        for (row, bits) in self.bits.chunks(self.width.max(1) as usize).enumerate() {
+            let (Some(first), Some(last)) =
+                (bits.iter().position(|b| *b), bits.iter().rposition(|b| *b))
+            else {
+                continue;
+            };
+            let y = y0 + row as f64;
+            for (x, y) in [
+                (first as f64 - 0.5, y - 0.5),
+                (last as f64 + 0.5, y - 0.5),
+                (first as f64 - 0.5, y + 0.5),
+                (last as f64 + 0.5, y + 0.5),
+            ] {
+                let Ok(ray) = camera.pixel_ray(Point2::new(x0 + x, y)) else {
+                    continue;
+                };
+                for z in [0.0, height] {
+                    if let Ok((tx, ty)) = ray_on_table(camera_T_table, &ray, z) {
+                        points.push(Point3::new(tx, ty, z));
+                    }
+                }
+            }
+        }
+        points
     }
 }
 
@@ -95,4 +138,60 @@ pub struct LearnedDetections {
     pub detections: Vec<LearnedDetection>,
     /// Time per stage.
     pub times: StageTimes,
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    use super::*;
+
+    #[test]
+    #[allow(non_snake_case)]
+    fn a_mask_on_the_table_is_its_rows_outer_corners_on_both_planes() {
+        let camera = Camera::basler_seed();
+        // Looking down at the table from 1.5 m, a little tilted.
+        let camera_T_table = Isometry3::from_parts(
+            Translation3::new(0.01, -0.02, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI - 0.05),
+        );
+        // Rows: a run with a gap after it, an empty row, and a row whose middle is off.
+        let bits = [
+            [false, true, true, false, false],
+            [false; 5],
+            [true, false, false, false, true],
+        ];
+        let mask = InstanceMask {
+            origin: [2000, 1500],
+            width: 5,
+            height: 3,
+            bits: bits.iter().flatten().copied().collect(),
+        };
+        let height = 0.009;
+        let points = mask.on_table(&camera, &camera_T_table, height);
+        // The outer corners of each row's first and last pixel (pixel centres on integers).
+        let mut corners = Vec::new();
+        for (row, (first, last)) in [(0, (1.0, 2.0)), (2, (0.0, 4.0))] {
+            let y = 1500.0 + f64::from(row);
+            for (x, y) in [
+                (first - 0.5, y - 0.5),
+                (last + 0.5, y - 0.5),
+                (first - 0.5, y + 0.5),
+                (last + 0.5, y + 0.5),
+            ] {
+                corners.push(Point2::new(2000.0 + x, y));
+            }
+        }
+        assert_eq!(points.len(), 2 * corners.len(), "{points:?}");
+        for (k, p) in points.iter().enumerate() {
+            let corner = corners[k / 2];
+            let z = [0.0, height][k % 2];
+            assert!((p.z - z).abs() < 1e-12, "point {k} at height {}", p.z);
+            let seen = camera.project(&(camera_T_table * p)).unwrap();
+            assert!(
+                (seen - corner).norm() < 1e-6,
+                "point {k} is seen at {seen}, not at its corner {corner}"
+            );
+        }
+    }
 }

@@ -104,6 +104,8 @@ pub struct LearnedPipeline {
     stacking: Option<StackingCheck>,
     /// Each part's footprint in each of its stable poses, mm² (part, then class).
     footprints: Vec<Vec<f64>>,
+    /// Each part's largest extent (its mesh's bounding box), metres.
+    extents: Vec<f64>,
 }
 
 impl LearnedPipeline {
@@ -187,6 +189,7 @@ impl LearnedPipeline {
             .zip(&meshes)
             .map(|(spec, mesh)| footprints_mm2(mesh, &spec.stable_poses))
             .collect();
+        let extents = meshes.iter().map(|m| m.extents().max()).collect();
         let contour = config
             .contour
             .map(|c| ContourStage::new(&specs, &meshes, &footprints, c));
@@ -208,12 +211,20 @@ impl LearnedPipeline {
             contour,
             stacking,
             footprints,
+            extents,
         })
     }
 
     /// The parts it detects, in the models' class order.
     pub fn parts(&self) -> &[String] {
         &self.parts
+    }
+
+    /// The largest extent of detectable part `part` (its mesh's bounding box), metres: how far
+    /// above the table a part it cannot pose may reach.
+    pub fn part_extent(&self, part: &str) -> Option<f64> {
+        let i = self.parts.iter().position(|p| p == part)?;
+        self.extents.get(i).copied()
     }
 
     /// Its settings.
