@@ -13,16 +13,6 @@ pub struct Perceived {
     pub unposed: Vec<UnposedPart>,
 }
 
-impl Perceived {
-    /// Posed parts only (a perception that poses every part it finds).
-    pub fn posed(parts: Vec<DetectedPart>) -> Self {
-        Self {
-            parts,
-            unposed: Vec::new(),
-        }
-    }
-}
-
 /// A part perception found but could not pose (its keypoints failed the gate, it lies on
 /// another part, ...): the space it may take up, so that no finger comes down on it.
 #[derive(Debug, Clone, PartialEq)]

@@ -9,6 +9,7 @@ use perception::keypoint_noise::KeypointNoiseModel;
 use perception::part::Catalog;
 use perception::{
     Camera, DetectedPart, Frame, FrameContent, PartPerception, Perceived, PerceptionError,
+    UnposedPart,
 };
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -96,7 +97,8 @@ impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
                 });
             }
         };
-        let mut out = Vec::new();
+        let mut out = Perceived::default();
+        let table_T_camera = self.base_T_table.inverse() * frame.base_T_camera;
         for (index, seen) in parts.iter().enumerate() {
             let observed = self.observe(&frame.camera, &seen.camera_T_part, &seen.part);
             if observed.is_empty() {
@@ -106,10 +108,18 @@ impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
                 .estimator
                 .estimate(&seen.part, &frame.camera, &observed)
             else {
+                // Seen but not posed: the space it takes up, here the hull of its true
+                // keypoints (this mode perturbs the truth; the learned one outlines the mask).
+                let table_T_part = table_T_camera * seen.camera_T_part;
+                let keypoints = self.estimator.keypoints(&seen.part).unwrap_or_default();
+                out.unposed.push(UnposedPart {
+                    part: seen.part.clone(),
+                    table_points: keypoints.iter().map(|k| table_T_part * k).collect(),
+                });
                 continue;
             };
             let table_T_part = estimate.planar.table_T_part;
-            out.push(DetectedPart {
+            out.parts.push(DetectedPart {
                 part: seen.part.clone(),
                 index,
                 truth_instance: Some(seen.instance),
@@ -121,7 +131,7 @@ impl<R: Rng + Send> PartPerception for KeypointNoise<R> {
                 covariance: estimate.pnp.covariance,
             });
         }
-        Ok(Perceived::posed(out))
+        Ok(out)
     }
 }
 
@@ -143,4 +153,69 @@ pub fn keypoint_noise_for(
         KeypointNoiseModel::new(p.keypoint_noise_px, p.outlier_fraction),
         rng,
     )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
+    use parry3d_f64::math::Pose;
+    use parry3d_f64::query::PointQuery;
+    use parry3d_f64::shape::SharedShape;
+    use perception::TruePart;
+    use rand::SeedableRng;
+    use sim::convert::vec_from_point;
+
+    use super::*;
+
+    #[test]
+    #[allow(non_snake_case)]
+    fn a_part_seen_but_not_posed_comes_out_as_the_space_it_takes_up() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        let catalog = Catalog::load(&path).unwrap();
+        // The table is the base frame; the camera looks straight down from 1.5 m.
+        let base_T_camera = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let noise = KeypointNoiseModel::new(0.5, 0.0);
+        let rng = ChaCha8Rng::seed_from_u64(7);
+        let mut perception =
+            KeypointNoise::new(&catalog, Isometry3::identity(), base_T_camera, noise, rng).unwrap();
+        let spec = catalog.part("main_shell").unwrap();
+        let resting = spec.stable_pose("+z").unwrap().table_T_part(0.0, 0.0, 0.3);
+        // Propped up on a corner, in no stable pose: no planar pose explains its keypoints.
+        let propped = Isometry3::from_parts(
+            Translation3::new(0.02, 0.01, 0.005),
+            UnitQuaternion::from_euler_angles(0.7, 0.5, 0.2),
+        );
+        let seen = |instance, table_T_part: Isometry3<f64>| TruePart {
+            instance,
+            part: "main_shell".into(),
+            camera_T_part: base_T_camera.inverse() * table_T_part,
+        };
+        let frame = Frame {
+            camera: Camera::basler_seed(),
+            base_T_camera,
+            content: FrameContent::Simulated(vec![seen(1, resting), seen(2, propped)]),
+        };
+        let found = perception.perceive(&frame).unwrap();
+        assert_eq!(found.parts.len(), 1, "{:?}", found.parts);
+        assert_eq!(found.parts[0].truth_instance, Some(1));
+        assert_eq!(found.unposed.len(), 1);
+        let space = &found.unposed[0];
+        assert_eq!(space.part, "main_shell");
+        let hull = SharedShape::convex_hull(
+            &space
+                .table_points
+                .iter()
+                .map(vec_from_point)
+                .collect::<Vec<_>>(),
+        )
+        .unwrap();
+        let centre = Point3::from(propped.translation.vector);
+        assert!(hull.contains_point(&Pose::IDENTITY, vec_from_point(&centre)));
+        assert!(!hull.contains_point(&Pose::IDENTITY, vec_from_point(&Point3::origin())));
+    }
 }
