@@ -161,7 +161,6 @@ mod tests {
 
     use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
     use parry3d_f64::math::Pose;
-    use parry3d_f64::query::PointQuery;
     use parry3d_f64::shape::SharedShape;
     use perception::TruePart;
     use rand::SeedableRng;
