@@ -84,20 +84,12 @@ pub enum Rejection {
 /// A part perception found but could not pose, as the fingers must avoid it: the convex hull,
 /// in the robot base frame, of what its mask outlines between the table and the part's largest
 /// extent above it.
-#[derive(Clone)]
+#[derive(Debug, Clone)]
 pub struct UnposedObstacle {
     /// Catalog name.
     pub part: String,
     /// The hull, in the base frame.
     pub hull: SharedShape,
-}
-
-impl std::fmt::Debug for UnposedObstacle {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("UnposedObstacle")
-            .field("part", &self.part)
-            .finish_non_exhaustive()
-    }
 }
 
 impl UnposedObstacle {
