@@ -1,12 +1,13 @@
 //! The capture of a failed learned-perception episode with what perception made of it: the
 //! rendered feeder window of its last capture, and over it each detection's keypoints (projected
-//! from its estimated pose through the calibrated camera) and centre, so a person sees at once
-//! whether a part was missed, mistaken or misplaced.
+//! from its estimated pose through the calibrated camera) and centre, and the outline on the table
+//! of each part it found but could not pose, so a person sees at once whether a part was missed,
+//! mistaken, misplaced or left unposed.
 
 use std::path::{Path, PathBuf};
 
 use image::{Rgb, RgbImage};
-use perception::{DetectedPart, Frame, FrameContent, PartPerception, Perceived, PerceptionError};
+use perception::{Frame, FrameContent, PartPerception, Perceived, PerceptionError};
 
 use super::pictures::PictureError;
 use crate::episode::EpisodeRecord;
@@ -16,17 +17,19 @@ use crate::harness::{SimSetup, run_sim_episode_with};
 const KEYPOINT: Rgb<u8> = Rgb([255, 220, 0]);
 /// Colour of a detection's centre box.
 const CENTRE: Rgb<u8> = Rgb([255, 40, 200]);
+/// Colour of the outline of a part found but not posed.
+const UNPOSED: Rgb<u8> = Rgb([0, 220, 255]);
 
 /// Perception that remembers the last frame it saw and what it found there.
 struct Recording<'a> {
     inner: &'a mut dyn PartPerception,
-    last: Option<(Frame, Vec<DetectedPart>)>,
+    last: Option<(Frame, Perceived)>,
 }
 
 impl PartPerception for Recording<'_> {
     fn perceive(&mut self, frame: &Frame) -> Result<Perceived, PerceptionError> {
         let found = self.inner.perceive(frame)?;
-        self.last = Some((frame.clone(), found.parts.clone()));
+        self.last = Some((frame.clone(), found.clone()));
         Ok(found)
     }
 }
@@ -55,7 +58,7 @@ pub fn capture_picture(
         .map_err(|e| cell_err(e.to_string()))?;
     rt.block_on(run_sim_episode_with(setup, record.episode, &mut recording))
         .map_err(|e| cell_err(e.to_string()))?;
-    let Some((frame, detections)) = recording.last else {
+    let Some((frame, found)) = recording.last else {
         return Ok(None);
     };
     let FrameContent::Image(shot) = &frame.content else {
@@ -64,7 +67,7 @@ pub fn capture_picture(
     let mut picture = shot.pixels.to_rgb8();
     let [ox, oy] = shot.origin.map(f64::from);
     let camera_T_base = frame.base_T_camera.inverse();
-    for d in &detections {
+    for d in &found.parts {
         let Some(part) = scenario.catalog.parts.iter().find(|p| p.name == d.part) else {
             continue;
         };
@@ -79,6 +82,20 @@ pub fn capture_picture(
                 square(&mut picture, x, y, 5, CENTRE);
             } else {
                 cross(&mut picture, x, y, 3, KEYPOINT);
+            }
+        }
+    }
+    let camera_T_table = camera_T_base * setup.engine.knowledge.geometry.base_T_table;
+    for u in &found.unposed {
+        // Where its mask's outline meets the table (the points on the table plane).
+        for p in u.table_points.iter().filter(|p| p.z == 0.0) {
+            if let Ok(px) = frame.camera.project(&(camera_T_table * p)) {
+                put(
+                    &mut picture,
+                    (px.x - ox).round() as i64,
+                    (px.y - oy).round() as i64,
+                    UNPOSED,
+                );
             }
         }
     }
