@@ -282,7 +282,7 @@ impl PlanarRefiner {
         let pose = &self.stable_poses[class];
         // The origin's viewing ray meets the plane z = rest_height (table frame).
         let ray = camera_T_part.translation.vector;
-        let (x, y) = self.intersect_ray(&ray, pose.rest_height)?;
+        let (x, y) = ray_on_table(&self.camera_T_table, &ray, pose.rest_height)?;
         let table_T_part = pose.table_T_part(x, y, yaw);
         Ok(PlanarPose {
             camera_T_part: self.camera_T_table * table_T_part,
@@ -305,12 +305,11 @@ impl PlanarRefiner {
         pixel: Point2<f64>,
         height: f64,
     ) -> Result<(f64, f64), PlanarError> {
-        self.intersect_ray(&camera.pixel_ray(pixel)?.into_inner(), height)
-    }
-
-    /// Table-frame (x, y) where the camera-frame ray direction `ray` meets the plane at `height`.
-    fn intersect_ray(&self, ray: &Vector3<f64>, height: f64) -> Result<(f64, f64), PlanarError> {
-        ray_on_table(&self.camera_T_table, ray, height)
+        ray_on_table(
+            &self.camera_T_table,
+            &camera.pixel_ray(pixel)?.into_inner(),
+            height,
+        )
     }
 
     /// [`PlanarRefiner::refine_in`] `classes`, then x, y and yaw fitted to the keypoints by
