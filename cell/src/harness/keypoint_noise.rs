@@ -161,12 +161,12 @@ mod tests {
 
     use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
     use parry3d_f64::math::Pose;
-    use parry3d_f64::shape::SharedShape;
     use perception::TruePart;
     use rand::SeedableRng;
     use sim::convert::vec_from_point;
 
     use super::*;
+    use crate::orchestrator::UnposedObstacle;
 
     #[test]
     #[allow(non_snake_case)]
@@ -205,14 +205,10 @@ mod tests {
         assert_eq!(found.unposed.len(), 1);
         let space = &found.unposed[0];
         assert_eq!(space.part, "main_shell");
-        let hull = SharedShape::convex_hull(
-            &space
-                .table_points
-                .iter()
-                .map(vec_from_point)
-                .collect::<Vec<_>>(),
-        )
-        .unwrap();
+        // The table is the base frame: the obstacle the cell's selection keeps the fingers from.
+        let hull = UnposedObstacle::new(space, &Isometry3::identity())
+            .unwrap()
+            .hull;
         let centre = Point3::from(propped.translation.vector);
         assert!(hull.contains_point(&Pose::IDENTITY, vec_from_point(&centre)));
         assert!(!hull.contains_point(&Pose::IDENTITY, vec_from_point(&Point3::origin())));

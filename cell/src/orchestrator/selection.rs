@@ -263,30 +263,27 @@ pub fn select(
             rejected.push((d.index, Rejection::Unreachable(why)));
             continue;
         }
-        let mut blocked = None;
-        for n in detections.iter().filter(|n| n.index != d.index) {
-            let Some(g) = knowledge.part(&n.part) else {
-                continue;
-            };
-            let dist = knowledge.finger_distance(&base_T_grasp, g.hull.as_ref(), &n.base_T_part);
-            if dist < config.finger_margin {
-                blocked = Some(Rejection::NeighbourTooClose {
+        // The first neighbour an open finger comes too close to: posed, then found but not posed.
+        let margin = config.finger_margin;
+        let blocked = (detections.iter().filter(|n| n.index != d.index))
+            .find_map(|n| {
+                let hull = knowledge.part(&n.part)?.hull.as_ref();
+                let distance = knowledge.finger_distance(&base_T_grasp, hull, &n.base_T_part);
+                (distance < margin).then_some(Rejection::NeighbourTooClose {
                     neighbour: n.index,
-                    distance: dist,
-                });
-                break;
-            }
-        }
-        if blocked.is_none() {
-            blocked = unposed.iter().find_map(|u| {
-                let identity = Isometry3::identity();
-                let dist = knowledge.finger_distance(&base_T_grasp, u.hull.as_ref(), &identity);
-                (dist < config.finger_margin).then(|| Rejection::UnposedTooClose {
-                    part: u.part.clone(),
-                    distance: dist,
+                    distance,
+                })
+            })
+            .or_else(|| {
+                unposed.iter().find_map(|u| {
+                    let base = Isometry3::identity();
+                    let distance = knowledge.finger_distance(&base_T_grasp, u.hull.as_ref(), &base);
+                    (distance < margin).then(|| Rejection::UnposedTooClose {
+                        part: u.part.clone(),
+                        distance,
+                    })
                 })
             });
-        }
         if let Some(r) = blocked {
             rejected.push((d.index, r));
             continue;
