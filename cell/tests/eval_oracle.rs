@@ -7,11 +7,13 @@
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
+use cell::eval::fingers::FingerCheck;
 use cell::eval::gallery::GalleryItem;
 use cell::eval::matching::mask_from_raster;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::summarise;
 use cell::eval::{EvalDataset, EvalOptions, FrameDetector, camera_of, evaluate, resolve_split};
+use cell::scenario::Scenario;
 use nalgebra::{Isometry3, Matrix2, Point3, Vector3};
 use perception::estimate::{EstimatorConfig, Observation, PoseEstimator};
 use perception::learned::{InstanceMask, LearnedDetection, LearnedDetections, StageTimes};
@@ -200,7 +202,7 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
     let (mut detector, expect) = oracle(&root, &split, &catalog, &options);
     assert!(expect.counted >= 4, "{expect:?}");
     let mut calls = 0;
-    let run = evaluate(&dataset, &mut detector, &options, |_, _| calls += 1).unwrap();
+    let run = evaluate(&dataset, &mut detector, &options, None, |_, _| calls += 1).unwrap();
     assert_eq!((run.frames.len(), calls), (2, 2));
     let parts: Vec<(String, f64)> = dataset
         .parts
@@ -344,6 +346,82 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
 }
 
 #[test]
+fn picks_need_room_for_the_open_fingers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("ds");
+    let catalog = catalog();
+    tiny_dataset(&root, &catalog);
+    let scenario = Scenario::load(&workspace().join("scenarios/usbc_nominal.toml")).unwrap();
+    let fingers = FingerCheck::new(&scenario).unwrap();
+    let checked = EvalOptions {
+        finger_margin: Some(fingers.margin()),
+        ..EvalOptions::default()
+    };
+    let split = resolve_split(&root, None);
+    let dataset = EvalDataset::open(&root, &split, &catalog, &checked).unwrap();
+    let (mut detector, _) = oracle(&root, &split, &catalog, &checked);
+    let run = evaluate(&dataset, &mut detector, &checked, Some(&fingers), |_, _| {}).unwrap();
+    let parts: Vec<(String, f64)> = dataset
+        .parts
+        .values()
+        .map(|p| (p.name.clone(), p.diameter_mm))
+        .collect();
+    // The open fingers reach at most this far from the grasped part's origin, metres.
+    let g = &scenario.spec.cell.gripper;
+    let reach = (g.stroke / 2.0 + g.finger_thickness).hypot(g.finger_width / 2.0) + 0.005;
+    let mut measured = 0;
+    for f in &run.frames {
+        let centres: Vec<Option<[f64; 3]>> = (f.detections.iter())
+            .map(|d| d.pose.map(|p| p.t_mm))
+            .collect();
+        for (i, d) in f.detections.iter().enumerate() {
+            let Some(clearance) = d.finger_clearance_mm else {
+                assert!(!d.graspable || f.detections.len() == 1, "{d:?}");
+                continue;
+            };
+            assert!(d.graspable && clearance >= 0.0, "{d:?}");
+            measured += 1;
+            // No nearer than the nearest other posed part's origin allows.
+            let own = centres[i].unwrap();
+            let nearest = (centres.iter().enumerate())
+                .filter(|(j, _)| *j != i)
+                .filter_map(|(_, c)| *c)
+                .map(|c| (0..3).map(|a| (c[a] - own[a]).powi(2)).sum::<f64>().sqrt())
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                clearance <= nearest + reach * 1e3,
+                "{clearance} mm, {nearest} mm"
+            );
+        }
+    }
+    assert!(measured >= 4, "{measured} picks measured");
+    // The same picks without the check: those without room are the difference.
+    let unchecked = EvalOptions::default();
+    let with = summarise(&run.frames, &parts, &checked).pooled.picks;
+    let without = summarise(&run.frames, &parts, &unchecked).pooled.picks;
+    assert_eq!(without.crowded, 0);
+    assert_eq!(
+        with.picks + with.crowded,
+        without.picks,
+        "{with:?} {without:?}"
+    );
+    // A wider margin than these sparse frames need turns the picks with less room away.
+    let mut room: Vec<f64> = (run.frames.iter().flat_map(|f| &f.detections))
+        .filter(|d| d.graspable && d.confidence.is_some_and(|c| c >= checked.pick_confidence))
+        .filter_map(|d| d.finger_clearance_mm)
+        .collect();
+    room.sort_by(f64::total_cmp);
+    let median = room[room.len() / 2];
+    let wide = EvalOptions {
+        finger_margin: Some(median / 1e3),
+        ..checked
+    };
+    let crowded = summarise(&run.frames, &parts, &wide).pooled.picks;
+    assert_eq!(crowded.crowded, room.len() / 2, "{room:?}");
+    assert_eq!(crowded.picks + crowded.crowded, without.picks);
+}
+
+#[test]
 fn bad_datasets_name_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path().join("ds");
@@ -391,7 +469,7 @@ fn bad_datasets_name_the_file() {
     let mut none = Oracle {
         frames: VecDeque::new(),
     };
-    let text = evaluate(&dataset, &mut none, &options, |_, _| {})
+    let text = evaluate(&dataset, &mut none, &options, None, |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(text.contains("rgb/000000.png"), "{text}");

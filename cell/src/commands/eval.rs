@@ -8,10 +8,11 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
+use cell::eval::fingers::FingerCheck;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::table1::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, summarise, text_table};
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split, stable_poses};
-use cell::scenario::DEFAULT_MIN_PICK_CONFIDENCE;
+use cell::scenario::{DEFAULT_MIN_PICK_CONFIDENCE, Scenario};
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
 use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
@@ -55,6 +56,13 @@ pub struct Args {
     /// `[policy] min_pick_confidence`, default 0.2): the picks line counts those poses.
     #[arg(long, default_value_t = DEFAULT_MIN_PICK_CONFIDENCE, value_parser = unit_interval)]
     pub pick_confidence: f64,
+    /// The scenario whose gripper, grasps and finger margin check that each pick leaves the open
+    /// fingers room (reach is not checked: a dataset's parts lie where its drops put them).
+    #[arg(long, default_value = "scenarios/usbc_learned.toml")]
+    pub scenario: PathBuf,
+    /// Count picks without checking room for the fingers (an upper bound on the picks).
+    #[arg(long)]
+    pub no_finger_check: bool,
     /// Keypoint poses only: skip the contour alignment on the frame's edges (for comparison).
     #[arg(long)]
     pub no_contour: bool,
@@ -78,12 +86,21 @@ fn unit_interval(s: &str) -> Result<f64, String> {
 
 /// Runs the evaluation and writes its report.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let fingers = if args.no_finger_check {
+        None
+    } else {
+        let scenario = Scenario::load(&args.scenario)?;
+        let check = FingerCheck::new(&scenario)
+            .with_context(|| format!("the cell of {}", args.scenario.display()))?;
+        Some(check)
+    };
     let options = EvalOptions {
         min_iou: args.min_iou,
         min_visib_fract: args.min_visib,
         gallery: args.gallery,
         limit: args.limit,
         pick_confidence: args.pick_confidence,
+        finger_margin: fingers.as_ref().map(FingerCheck::margin),
         ..EvalOptions::default()
     };
     let catalog = Catalog::load(&args.catalog)?;
@@ -103,12 +120,18 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut detector = pipeline;
     let started = Instant::now();
     let quiet = args.quiet;
-    let run = evaluate(&dataset, &mut detector, &options, |done, total| {
-        if !quiet {
-            eprint!("\r{done}/{total} images");
-            let _ = std::io::stderr().flush();
-        }
-    })?;
+    let run = evaluate(
+        &dataset,
+        &mut detector,
+        &options,
+        fingers.as_ref(),
+        |done, total| {
+            if !quiet {
+                eprint!("\r{done}/{total} images");
+                let _ = std::io::stderr().flush();
+            }
+        },
+    )?;
     if !quiet {
         eprintln!();
     }
@@ -191,10 +214,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         percent(p.pickable_assembly_grade, p.pickable)
     );
     let k = &p.picks;
+    let room = options.finger_margin.map_or_else(
+        || "room for the fingers not checked".to_string(),
+        |m| format!("{:.1} mm of room for the fingers", m * 1e3),
+    );
     println!(
-        "picks the cell would make (confidence ≥ {}, a stable pose it has a grasp for): {}; \
-         assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
-         another part {}, on no part {}",
+        "picks the cell would make (confidence ≥ {}, a stable pose it has a grasp for, {room}): \
+         {}; assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
+         another part {}, on no part {}; {} more without room for the fingers",
         options.pick_confidence,
         k.picks,
         k.assembly_grade,
@@ -202,7 +229,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         k.off,
         k.wrong_stable_pose,
         k.not_resting,
-        k.unmatched
+        k.unmatched,
+        k.crowded
     );
     println!(
         "parts not resting on the table (leaning on or lying on another part, in no stable pose): \

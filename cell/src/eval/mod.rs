@@ -9,6 +9,7 @@
 //! [`report_html`] writes eval.json, eval.html, plots and the [`gallery`] of the worst crops.
 
 pub mod bop_results;
+pub mod fingers;
 pub mod gallery;
 pub mod matching;
 pub mod report_html;
@@ -32,6 +33,7 @@ use sim::dataset::{
     BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop, pose_to_bop,
 };
 
+use fingers::FingerCheck;
 use gallery::{FailedCrop, GalleryItem, GalleryKeeper};
 use matching::{Candidate, Truth, greedy_match, mask_from_raster, touching_flags};
 
@@ -117,6 +119,11 @@ pub struct EvalOptions {
     /// `[policy] min_pick_confidence`).
     #[serde(default = "default_pick_confidence")]
     pub pick_confidence: f64,
+    /// The least clearance between an open finger and any other part that the cell picks with,
+    /// metres, when a scenario's gripper checks each pick ([`fingers::FingerCheck`]); without
+    /// one, picks are not checked for room for the fingers.
+    #[serde(default)]
+    pub finger_margin: Option<f64>,
 }
 
 fn default_pick_confidence() -> f64 {
@@ -134,6 +141,7 @@ impl Default for EvalOptions {
             limit: None,
             model_points: 1000,
             pick_confidence: default_pick_confidence(),
+            finger_margin: None,
         }
     }
 }
@@ -487,6 +495,9 @@ pub struct DetectionRecord {
     pub crop_origin: [i64; 2],
     /// Voted keypoints in image pixels, in the catalog's keypoint order.
     pub keypoints_px: Vec<[f64; 2]>,
+    /// Each voted keypoint's pixel covariance `[σxx, σxy, σyy]` (px²), as PnP weighs it.
+    #[serde(default)]
+    pub keypoint_covariances_px: Vec<[f64; 3]>,
     /// Matched ground-truth instance.
     pub truth: Option<usize>,
     /// Mask IoU with it.
@@ -528,6 +539,10 @@ pub struct DetectionRecord {
     /// Whether its pose is in a stable pose the cell has a grasp for (so it may be picked).
     #[serde(default)]
     pub graspable: bool,
+    /// How near the open fingers of its grasp come to the nearest other part of the frame, mm
+    /// (with a finger check, a grasp for its pose, and other parts in the frame).
+    #[serde(default)]
+    pub finger_clearance_mm: Option<f64>,
 }
 
 /// A ground-truth instance and its mask IoU with a detection.
@@ -596,6 +611,7 @@ pub fn evaluate(
     dataset: &EvalDataset,
     detector: &mut dyn FrameDetector,
     options: &EvalOptions,
+    fingers: Option<&FingerCheck>,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<EvalRun, EvalError> {
     options.validate()?;
@@ -616,6 +632,7 @@ pub fn evaluate(
             image,
             detector,
             options,
+            fingers,
             &mut galleries,
         )?);
         progress(i + 1, total);
@@ -643,6 +660,7 @@ fn evaluate_image(
     image: &BopImage,
     detector: &mut dyn FrameDetector,
     options: &EvalOptions,
+    fingers: Option<&FingerCheck>,
     galleries: &mut Galleries,
 ) -> Result<FrameRecord, EvalError> {
     let scene_camera = scene.dir.join("scene_camera.json");
@@ -807,6 +825,7 @@ fn evaluate_image(
         matching::most_overlapping(truth_masks.iter(), c.mask)
             .map(|(truth, iou)| TruthOverlap { truth, iou })
     };
+    let clearances = fingers.map(|f| f.clearances(&found, &camera, &camera_T_table));
     let mut detections = Vec::with_capacity(found.detections.len());
     for (d, (det, m)) in found.detections.iter().zip(&matches).enumerate() {
         let own_part = dataset.parts.values().find(|p| p.name == det.part);
@@ -817,6 +836,7 @@ fn evaluate_image(
                 .pose
                 .as_ref()
                 .is_ok_and(|p| own_part.is_some_and(|own| own.graspable.contains(&p.stable_pose))),
+            finger_clearance_mm: clearances.as_ref().and_then(|c| c[d]).map(|c| c * 1e3),
             part: det.part.clone(),
             score: det.score,
             crop_origin: det.crop_origin,
@@ -824,6 +844,14 @@ fn evaluate_image(
                 .keypoints
                 .iter()
                 .map(|k| [k.position.x, k.position.y])
+                .collect(),
+            keypoint_covariances_px: det
+                .keypoints
+                .iter()
+                .map(|k| {
+                    let c = k.covariance;
+                    [c[(0, 0)], c[(0, 1)], c[(1, 1)]]
+                })
                 .collect(),
             truth: m.map(|m| m.truth),
             iou: m.map(|m| m.iou),

@@ -553,12 +553,18 @@ fn render(
         );
     }
     h.push_str("</table>");
+    let room = meta.options.finger_margin.map_or_else(
+        || "; room for the fingers not checked".to_string(),
+        |m| format!(", with {:.1} mm of room for the open fingers", m * 1e3),
+    );
     let _ = write!(
         h,
         "<h2>Picks</h2><p>The poses the cell would pick (confidence ≥ {}, in a stable pose it \
-         has a grasp for), by what the picked part turned out to be.</p><table><tr>\
+         has a grasp for{room}), by what the picked part turned out to be; reach is not checked.\
+         </p><table><tr>\
          <th class=l>part</th><th>picks</th><th>assembly-grade</th><th>further off</th>\
-         <th>other stable pose</th><th>on or under another part</th><th>on no part</th></tr>",
+         <th>other stable pose</th><th>on or under another part</th><th>on no part</th>\
+         <th>no room for the fingers</th></tr>",
         meta.options.pick_confidence
     );
     for p in &all {
@@ -566,7 +572,7 @@ fn render(
         let _ = write!(
             h,
             "<tr><td class=l>{}</td><td>{}</td><td>{} ({})</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td></tr>",
+             <td>{}</td><td>{}</td></tr>",
             escape(&p.part),
             k.picks,
             k.assembly_grade,
@@ -574,7 +580,8 @@ fn render(
             k.off,
             k.wrong_stable_pose,
             k.not_resting,
-            k.unmatched
+            k.unmatched,
+            k.crowded
         );
     }
     h.push_str("</table>");

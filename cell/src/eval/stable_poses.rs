@@ -150,6 +150,7 @@ mod tests {
             score: 0.9,
             crop_origin: [0, 0],
             keypoints_px: Vec::new(),
+            keypoint_covariances_px: Vec::new(),
             truth: Some(truth),
             iou: Some(0.9),
             pose_failure: posed_as.is_none().then(|| "reprojection RMS 30 px".into()),
@@ -166,6 +167,7 @@ mod tests {
             obj_id: None,
             closest_truth: None,
             graspable: false,
+            finger_clearance_mm: None,
         }
     }
 

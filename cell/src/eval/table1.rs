@@ -191,8 +191,10 @@ pub struct PartSummary {
 }
 
 /// The poses the cell would pick (confidence at least [`EvalOptions::pick_confidence`], in a stable pose it
-/// has a grasp for), over every detection and not only the resting parts', by what each was.
-/// A pick that is not assembly-grade costs the cell a failed insertion or a wasted grasp.
+/// has a grasp for, and with a finger check, room for the open fingers:
+/// [`EvalOptions::finger_margin`]), over every detection and not only the resting parts', by
+/// what each was. A pick that is not assembly-grade costs the cell a failed insertion or a
+/// wasted grasp.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Picks {
     /// All of them.
@@ -208,6 +210,10 @@ pub struct Picks {
     pub not_resting: usize,
     /// A detection matched to no part.
     pub unmatched: usize,
+    /// Poses confident enough and in a stable pose with a grasp whose open fingers would come
+    /// nearer another part than the finger margin: not picks.
+    #[serde(default)]
+    pub crowded: usize,
 }
 
 /// Missed instances by the detection that overlaps each one most
@@ -251,13 +257,26 @@ pub const ASSEMBLY_GRADE_DEG: f64 = 1.0;
 
 impl Picks {
     /// Counts detection `d` (against its frame's `truths`) when the cell would pick it at
-    /// confidence `pick_at`; picks of ignored (barely visible) instances are not counted.
-    fn count(&mut self, d: &DetectionRecord, truths: &[TruthRecord], pick_at: f64) {
+    /// confidence `pick_at` with fingers that need `finger_margin` metres of room (unchecked
+    /// when `None`); picks of ignored (barely visible) instances are not counted.
+    fn count(
+        &mut self,
+        d: &DetectionRecord,
+        truths: &[TruthRecord],
+        pick_at: f64,
+        finger_margin: Option<f64>,
+    ) {
         if !(d.graspable && d.stable_pose.is_some() && d.confidence.is_some_and(|c| c >= pick_at)) {
             return;
         }
         let truth = d.truth.and_then(|t| truths.get(t));
         if truth.is_some_and(|t| t.ignored) {
+            return;
+        }
+        if let (Some(margin), Some(clearance)) = (finger_margin, d.finger_clearance_mm)
+            && clearance < margin * 1e3
+        {
+            self.crowded += 1;
             return;
         }
         self.picks += 1;
@@ -458,7 +477,7 @@ fn part_summary(
         }
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
             detections += 1;
-            picks.count(d, &f.truths, pick_at);
+            picks.count(d, &f.truths, pick_at, options.finger_margin);
             let Some(t) = d.truth else {
                 fp += 1;
                 match d
@@ -741,6 +760,7 @@ mod tests {
             score: 0.9,
             crop_origin: [0, 0],
             keypoints_px: Vec::new(),
+            keypoint_covariances_px: Vec::new(),
             truth,
             iou: truth.map(|_| 0.8),
             pose_failure: if pose.is_none() && truth.is_some() {
@@ -761,6 +781,7 @@ mod tests {
             obj_id: None,
             closest_truth: None,
             graspable: false,
+            finger_clearance_mm: None,
         }
     }
 
@@ -1026,23 +1047,45 @@ mod tests {
             det("a", Some(4), Some((0.12, 0.8))),
             det("a", Some(0), Some((0.12, 0.8))),
             det("a", Some(0), Some((0.12, 0.8))),
+            // Assembly-grade, with 0.3 mm and 0.7 mm of room for the open fingers.
+            det("a", Some(0), Some((0.12, 0.8))),
+            det("a", Some(0), Some((0.12, 0.8))),
         ];
         for (k, d) in frame.detections.iter_mut().enumerate() {
             d.confidence = Some(if k == 6 { 0.1 } else { 0.9 });
             d.graspable = k != 7;
+            d.finger_clearance_mm = [(8, 0.3), (9, 0.7)]
+                .iter()
+                .find_map(|&(i, c)| (i == k).then_some(c));
         }
-        let s = summarise(&[frame], &[("a".into(), 10.0)], &EvalOptions::default());
-        assert_eq!(
-            s.parts[0].picks,
-            Picks {
-                picks: 5,
-                assembly_grade: 1,
-                off: 1,
-                wrong_stable_pose: 1,
-                not_resting: 1,
-                unmatched: 1,
-            }
+        let parts = [("a".into(), 10.0)];
+        let s = summarise(
+            std::slice::from_ref(&frame),
+            &parts,
+            &EvalOptions::default(),
         );
+        let picks = Picks {
+            picks: 7,
+            assembly_grade: 3,
+            off: 1,
+            wrong_stable_pose: 1,
+            not_resting: 1,
+            unmatched: 1,
+            crowded: 0,
+        };
+        assert_eq!(s.parts[0].picks, picks, "room for the fingers not checked");
+        let options = EvalOptions {
+            finger_margin: Some(0.0005),
+            ..EvalOptions::default()
+        };
+        let s = summarise(&[frame], &parts, &options);
+        let crowded = Picks {
+            picks: 6,
+            assembly_grade: 2,
+            crowded: 1,
+            ..picks
+        };
+        assert_eq!(s.parts[0].picks, crowded, "the 0.3 mm one has no room");
     }
 
     #[test]

@@ -59,7 +59,8 @@ pub use production::{
     ProductionCellIo, ProductionError, ProductionOptions, open_camera, preflight,
 };
 pub use selection::{
-    Rejection, Selection, SelectionConfig, SelectionResult, UnposedObstacle, select,
+    Neighbour, Rejection, Selection, SelectionConfig, SelectionResult, UnposedObstacle,
+    nearest_to_fingers, select,
 };
 pub use state::{State, Timeouts};
 

@@ -162,6 +162,42 @@ impl SelectionResult {
     }
 }
 
+/// What the open fingers come nearest to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Neighbour {
+    /// The posed detection with this index.
+    Posed(usize),
+    /// A part found but not posed, by catalog name.
+    Unposed(String),
+}
+
+/// How near the open fingers of a TCP at `base_T_grasp` come to anything else on the table, and
+/// to what: every detection but the one with index `own` (its convex hull at its pose), and
+/// every part found but not posed; `None` when there is nothing else.
+#[allow(non_snake_case)]
+pub fn nearest_to_fingers(
+    knowledge: &CellKnowledge,
+    base_T_grasp: &Isometry3<f64>,
+    own: usize,
+    detections: &[DetectedPart],
+    unposed: &[UnposedObstacle],
+) -> Option<(f64, Neighbour)> {
+    let posed = detections
+        .iter()
+        .filter(|n| n.index != own)
+        .filter_map(|n| {
+            let hull = knowledge.part(&n.part)?.hull.as_ref();
+            let distance = knowledge.finger_distance(base_T_grasp, hull, &n.base_T_part);
+            Some((distance, Neighbour::Posed(n.index)))
+        });
+    let base = Isometry3::identity();
+    let found = unposed.iter().map(|u| {
+        let distance = knowledge.finger_distance(base_T_grasp, u.hull.as_ref(), &base);
+        (distance, Neighbour::Unposed(u.part.clone()))
+    });
+    posed.chain(found).min_by(|a, b| a.0.total_cmp(&b.0))
+}
+
 /// Chooses the instance of step `step`'s part to pick among `detections`, whose fingers clear
 /// `unposed` too, for an arm at joints `home` (the grasp's jaw orientation, of the two the
 /// parallel jaws allow, is the one nearest the arm's current wrist yaw).
@@ -263,29 +299,18 @@ pub fn select(
             rejected.push((d.index, Rejection::Unreachable(why)));
             continue;
         }
-        // The first neighbour an open finger comes too close to: posed, then found but not posed.
-        let margin = config.finger_margin;
-        let blocked = (detections.iter().filter(|n| n.index != d.index))
-            .find_map(|n| {
-                let hull = knowledge.part(&n.part)?.hull.as_ref();
-                let distance = knowledge.finger_distance(&base_T_grasp, hull, &n.base_T_part);
-                (distance < margin).then_some(Rejection::NeighbourTooClose {
-                    neighbour: n.index,
+        let near = nearest_to_fingers(knowledge, &base_T_grasp, d.index, detections, unposed);
+        if let Some((distance, neighbour)) = near
+            && distance < config.finger_margin
+        {
+            let why = match neighbour {
+                Neighbour::Posed(neighbour) => Rejection::NeighbourTooClose {
+                    neighbour,
                     distance,
-                })
-            })
-            .or_else(|| {
-                unposed.iter().find_map(|u| {
-                    let base = Isometry3::identity();
-                    let distance = knowledge.finger_distance(&base_T_grasp, u.hull.as_ref(), &base);
-                    (distance < margin).then(|| Rejection::UnposedTooClose {
-                        part: u.part.clone(),
-                        distance,
-                    })
-                })
-            });
-        if let Some(r) = blocked {
-            rejected.push((d.index, r));
+                },
+                Neighbour::Unposed(part) => Rejection::UnposedTooClose { part, distance },
+            };
+            rejected.push((d.index, why));
             continue;
         }
         qualified.push(Selection {
@@ -320,7 +345,7 @@ pub fn select(
 mod tests {
     use std::path::Path;
 
-    use nalgebra::{Matrix6, Point3};
+    use nalgebra::{Matrix6, Point3, Translation3, UnitQuaternion};
 
     use super::*;
     use crate::harness::SimSetup;
@@ -360,6 +385,59 @@ mod tests {
             part: "top_shell".into(),
             table_points,
         }
+    }
+
+    #[test]
+    fn the_nearest_thing_to_the_open_fingers_is_measured_from_their_faces() {
+        let (setup, shell) = shell_at_the_feeder();
+        let k = &setup.engine.knowledge;
+        let spec = setup.engine.scenario.catalog.part("main_shell").unwrap();
+        let grasp = spec.grasp_for("+z").unwrap();
+        let base_T_grasp = k
+            .grasp_tcp(
+                &shell.base_T_part,
+                &Vector3::from(grasp.closing_axis),
+                grasp.grip_height,
+                0.0,
+            )
+            .unwrap();
+        let alone = nearest_to_fingers(k, &base_T_grasp, 0, std::slice::from_ref(&shell), &[]);
+        assert_eq!(alone, None, "the grasped part itself is not a neighbour");
+        // 2 cm boxes, 9 mm tall (beside the fingers, which reach down to the grip height),
+        // 5 cm out along the closing axis and 3 cm out across it.
+        let g = k.gripper();
+        let yaw = k.tcp_yaw(&base_T_grasp);
+        let centre = Translation3::from(shell.table_T_part.translation.vector.xy().push(0.0));
+        let base_T_table = &k.geometry.base_T_table;
+        // Box faces square to the closing axis.
+        let box_at = |along: f64, across: f64| {
+            let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+            let mut turned = unposed_box(0.0, 0.0, 0.02);
+            for p in &mut turned.table_points {
+                *p = centre * (turn * Point3::new(p.x + along, p.y + across, p.z));
+            }
+            UnposedObstacle::new(&turned, base_T_table).unwrap()
+        };
+        let along = nearest_to_fingers(k, &base_T_grasp, 0, &[], &[box_at(0.05, 0.0)]).unwrap();
+        let outer_face = g.stroke / 2.0 + g.finger_thickness;
+        assert!((along.0 - (0.04 - outer_face)).abs() < 1e-9, "{along:?}");
+        let both = [box_at(0.05, 0.0), box_at(0.0, 0.03)];
+        let (distance, what) = nearest_to_fingers(k, &base_T_grasp, 0, &[], &both).unwrap();
+        assert!(
+            (distance - (0.02 - g.finger_width / 2.0)).abs() < 1e-9,
+            "{distance}"
+        );
+        assert_eq!(what, Neighbour::Unposed("top_shell".into()));
+        // A posed neighbour nearer than both is the one reported.
+        let mut near = shell.clone();
+        near.index = 1;
+        let offset = Vector3::new(-0.012 * yaw.sin(), 0.012 * yaw.cos(), 0.0);
+        near.table_T_part.translation.vector += offset;
+        near.base_T_part = base_T_table * near.table_T_part;
+        let (d, what) =
+            nearest_to_fingers(k, &base_T_grasp, 0, &[shell.clone(), near], &both).unwrap();
+        assert_eq!(what, Neighbour::Posed(1));
+        assert!(d < 0.02 - g.finger_width / 2.0, "{d}");
     }
 
     #[test]

@@ -6,6 +6,7 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Point2, Point3};
 
 use crate::Camera;
+use crate::detection::{DetectedPart, Perceived, UnposedPart};
 use crate::estimate::PoseEstimate;
 use crate::planar::ray_on_table;
 use crate::voting::KeypointVote;
@@ -138,6 +139,45 @@ pub struct LearnedDetections {
     pub detections: Vec<LearnedDetection>,
     /// Time per stage.
     pub times: StageTimes,
+}
+
+impl LearnedDetections {
+    /// What the perception seam reports of this frame of `camera`, looking at the table at
+    /// `camera_T_table` (which lies at `base_T_table` in the robot base frame): each posed
+    /// detection in the base frame, its `index` that of the detection here, and each one found
+    /// but not posed as the space its mask sweeps up to `extent(part)` above the table.
+    #[allow(non_snake_case)]
+    pub fn perceived(
+        &self,
+        camera: &Camera,
+        camera_T_table: &Isometry3<f64>,
+        base_T_table: &Isometry3<f64>,
+        extent: impl Fn(&str) -> f64,
+    ) -> Perceived {
+        let mut out = Perceived::default();
+        for (index, d) in self.detections.iter().enumerate() {
+            let (Some(confidence), Ok(pose)) = (d.confidence(), &d.pose) else {
+                out.unposed.push(UnposedPart {
+                    part: d.part.clone(),
+                    table_points: d.mask.on_table(camera, camera_T_table, extent(&d.part)),
+                });
+                continue;
+            };
+            let table_T_part = pose.planar.table_T_part;
+            out.parts.push(DetectedPart {
+                part: d.part.clone(),
+                index,
+                truth_instance: None,
+                base_T_part: base_T_table * table_T_part,
+                table_T_part,
+                stable_pose: pose.stable_pose.clone(),
+                confidence,
+                rms_px: pose.rms_px,
+                covariance: pose.pnp.covariance,
+            });
+        }
+        out
+    }
 }
 
 #[cfg(test)]

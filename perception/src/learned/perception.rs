@@ -5,7 +5,7 @@
 use nalgebra::Isometry3;
 
 use super::pipeline::LearnedPipeline;
-use crate::detection::{DetectedPart, Perceived, UnposedPart};
+use crate::detection::Perceived;
 use crate::frame::{Frame, FrameContent, FrameImage};
 use crate::perceive::{PartPerception, PerceptionError};
 
@@ -89,30 +89,11 @@ impl PartPerception for LearnedPerception {
         let found = self
             .pipeline
             .detect(image, &frame.camera, &camera_T_table, roi)?;
-        let mut out = Perceived::default();
-        for d in found.detections {
-            let (Some(confidence), Ok(pose)) = (d.confidence(), d.pose) else {
-                // Found but not posed: the space it may take up, up to its largest extent.
-                let height = self.pipeline.part_extent(&d.part).unwrap_or(0.0);
-                out.unposed.push(UnposedPart {
-                    table_points: d.mask.on_table(&frame.camera, &camera_T_table, height),
-                    part: d.part,
-                });
-                continue;
-            };
-            let table_T_part = pose.planar.table_T_part;
-            out.parts.push(DetectedPart {
-                part: d.part,
-                index: out.parts.len(),
-                truth_instance: None,
-                base_T_part: self.base_T_table * table_T_part,
-                table_T_part,
-                stable_pose: pose.stable_pose,
-                confidence,
-                rms_px: pose.rms_px,
-                covariance: pose.pnp.covariance,
-            });
-        }
-        Ok(out)
+        let pipeline = &self.pipeline;
+        Ok(
+            found.perceived(&frame.camera, &camera_T_table, &self.base_T_table, |part| {
+                pipeline.part_extent(part).unwrap_or(0.0)
+            }),
+        )
     }
 }
