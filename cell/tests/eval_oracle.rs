@@ -292,6 +292,23 @@ fn ground_truth_detections_score_perfectly_and_the_report_is_written() {
         assert_eq!((png.width(), png.height()), (256, 256));
         assert!(page.contains(&item.file_name()));
     }
+    // Each miss and false positive has its picture: the missed truth outlined green, the false
+    // detection yellow; the oracle's false detections overlap no instance.
+    assert_eq!(run.missed.len(), expect.counted - expect.detected);
+    assert_eq!(run.false_positives.len(), 2);
+    for (item, colour, cause) in (run.missed.iter().map(|i| (i, [0, 230, 70], ""))).chain(
+        run.false_positives
+            .iter()
+            .map(|i| (i, [255, 220, 0], "empty table")),
+    ) {
+        let png = image::open(out.join("gallery").join(item.file_name()))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(png.dimensions(), (256, 256));
+        assert!(png.pixels().any(|p| p.0 == colour), "{}", item.file_name());
+        assert!(item.caption.contains(cause), "{}", item.caption);
+        assert!(page.contains(&item.file_name()));
+    }
     for plot in ["angle_cdf", "depth_cdf"] {
         let png = image::open(out.join("plots").join(format!("{plot}.png"))).unwrap();
         assert!(png.width() >= 800);

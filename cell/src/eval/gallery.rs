@@ -6,7 +6,7 @@
 use image::{DynamicImage, GenericImageView, Rgb, RgbImage};
 use nalgebra::{Isometry3, Point2};
 use perception::Camera;
-use perception::learned::LearnedDetection;
+use perception::learned::{InstanceMask, LearnedDetection};
 use perception::metrics::PoseErrors;
 
 use super::PartData;
@@ -16,8 +16,8 @@ pub const CROP: u32 = 128;
 /// Upscaling of the gallery pictures.
 pub const ZOOM: u32 = 2;
 
-const YELLOW: Rgb<u8> = Rgb([255, 220, 0]);
-const GREEN: Rgb<u8> = Rgb([0, 230, 70]);
+pub(super) const YELLOW: Rgb<u8> = Rgb([255, 220, 0]);
+pub(super) const GREEN: Rgb<u8> = Rgb([0, 230, 70]);
 const RED: Rgb<u8> = Rgb([255, 40, 40]);
 const MAGENTA: Rgb<u8> = Rgb([255, 0, 255]);
 const OUTSIDE: Rgb<u8> = Rgb([96, 96, 96]);
@@ -136,38 +136,9 @@ pub fn draw_crop(
     estimate: Option<&Isometry3<f64>>,
 ) -> RgbImage {
     let [ox, oy] = detection.crop_origin;
-    let side = CROP * ZOOM;
-    let mut out = RgbImage::from_pixel(side, side, OUTSIDE);
-    let inside = |x: i64, y: i64| {
-        x >= 0
-            && y >= 0
-            && (x as u64) < u64::from(image.width())
-            && (y as u64) < u64::from(image.height())
-    };
-    let in_mask = |x: i64, y: i64| x >= 0 && y >= 0 && detection.mask.contains(x as u32, y as u32);
-    for cy in 0..CROP {
-        for cx in 0..CROP {
-            let (x, y) = (ox + i64::from(cx), oy + i64::from(cy));
-            let mut colour = if inside(x, y) {
-                let p = image.get_pixel(x as u32, y as u32);
-                Rgb([p.0[0], p.0[1], p.0[2]])
-            } else {
-                OUTSIDE
-            };
-            if in_mask(x, y)
-                && [(1, 0), (-1, 0), (0, 1), (0, -1)]
-                    .iter()
-                    .any(|(dx, dy)| !in_mask(x + dx, y + dy))
-            {
-                colour = YELLOW;
-            }
-            for sy in 0..ZOOM {
-                for sx in 0..ZOOM {
-                    out.put_pixel(cx * ZOOM + sx, cy * ZOOM + sy, colour);
-                }
-            }
-        }
-    }
+    let mut out = zoomed_window(image, [ox, oy], |x, y| {
+        on_outline(&detection.mask, x, y).then_some(YELLOW)
+    });
     // Image pixel → picture pixel (pixel centres at integers in both).
     let z = f64::from(ZOOM);
     let to_pic = |p: Point2<f64>| {
@@ -196,6 +167,51 @@ pub fn draw_crop(
         cross(&mut out, to_pic(v.position), 5.0, RED);
     }
     out
+}
+
+/// The `CROP` × `CROP` window of `image` whose top-left is image pixel `origin`, upscaled
+/// `ZOOM` times, each pixel in the colour `mark` gives it (else the image's; grey outside it).
+pub fn zoomed_window(
+    image: &DynamicImage,
+    [ox, oy]: [i64; 2],
+    mark: impl Fn(i64, i64) -> Option<Rgb<u8>>,
+) -> RgbImage {
+    let side = CROP * ZOOM;
+    let mut out = RgbImage::from_pixel(side, side, OUTSIDE);
+    let inside = |x: i64, y: i64| {
+        x >= 0
+            && y >= 0
+            && (x as u64) < u64::from(image.width())
+            && (y as u64) < u64::from(image.height())
+    };
+    for cy in 0..CROP {
+        for cx in 0..CROP {
+            let (x, y) = (ox + i64::from(cx), oy + i64::from(cy));
+            let colour = mark(x, y).unwrap_or_else(|| {
+                if inside(x, y) {
+                    let p = image.get_pixel(x as u32, y as u32);
+                    Rgb([p.0[0], p.0[1], p.0[2]])
+                } else {
+                    OUTSIDE
+                }
+            });
+            for sy in 0..ZOOM {
+                for sx in 0..ZOOM {
+                    out.put_pixel(cx * ZOOM + sx, cy * ZOOM + sy, colour);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Whether image pixel (x, y) is on `mask` with a 4-neighbour off it.
+pub fn on_outline(mask: &InstanceMask, x: i64, y: i64) -> bool {
+    let on = |x: i64, y: i64| x >= 0 && y >= 0 && mask.contains(x as u32, y as u32);
+    on(x, y)
+        && [(1, 0), (-1, 0), (0, 1), (0, -1)]
+            .iter()
+            .any(|(dx, dy)| !on(x + dx, y + dy))
 }
 
 fn put(img: &mut RgbImage, x: f64, y: f64, c: Rgb<u8>) {

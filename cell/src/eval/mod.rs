@@ -9,6 +9,7 @@
 //! [`report_html`] writes eval.json, eval.html, plots and the [`gallery`] of the worst crops.
 
 pub mod bop_results;
+pub mod detection_gallery;
 pub mod fingers;
 pub mod gallery;
 pub mod matching;
@@ -33,6 +34,7 @@ use sim::dataset::{
     BopDataset, BopImage, BopScene, DatasetError, SceneCamera, pose_from_bop, pose_to_bop,
 };
 
+use detection_gallery::{DetectionErrorCrop, DetectionErrorKind, draw_window};
 use fingers::FingerCheck;
 use gallery::{FailedCrop, GalleryItem, GalleryKeeper};
 use matching::{Candidate, Truth, greedy_match, mask_from_raster, touching_flags};
@@ -603,6 +605,10 @@ pub struct EvalRun {
     pub misplaced: Vec<GalleryItem>,
     /// Matched detections without a pose, highest score first.
     pub failures: Vec<FailedCrop>,
+    /// Missed instances, the most visible first.
+    pub missed: Vec<DetectionErrorCrop>,
+    /// False positives, highest score first.
+    pub false_positives: Vec<DetectionErrorCrop>,
 }
 
 /// Runs `detector` over the images of `dataset` (at most `options.limit`), calling `progress`
@@ -624,6 +630,8 @@ pub fn evaluate(
         worst: GalleryKeeper::new(options.gallery),
         misplaced: GalleryKeeper::new(options.gallery.div_ceil(3)),
         failed: GalleryKeeper::new(options.gallery.div_ceil(3)),
+        missed: GalleryKeeper::new(options.gallery.div_ceil(2)),
+        false_positives: GalleryKeeper::new(options.gallery.div_ceil(2)),
     };
     for (i, (scene, image)) in dataset.images().take(total).enumerate() {
         frames.push(evaluate_image(
@@ -642,6 +650,8 @@ pub fn evaluate(
         gallery: galleries.worst.into_items(),
         misplaced: galleries.misplaced.into_items(),
         failures: galleries.failed.into_items(),
+        missed: galleries.missed.into_items(),
+        false_positives: galleries.false_positives.into_items(),
     })
 }
 
@@ -650,6 +660,8 @@ struct Galleries {
     worst: GalleryKeeper,
     misplaced: GalleryKeeper,
     failed: GalleryKeeper<FailedCrop>,
+    missed: GalleryKeeper<DetectionErrorCrop>,
+    false_positives: GalleryKeeper<DetectionErrorCrop>,
 }
 
 /// Evaluates one image.
@@ -965,6 +977,14 @@ fn evaluate_image(
         }
         detections.push(rec);
     }
+    offer_detection_errors(
+        galleries,
+        (scene.id, image.id),
+        &frame_image.pixels,
+        (&truths, &truth_masks),
+        (&detections, &found),
+        options.min_iou,
+    );
     Ok(FrameRecord {
         scene: scene.id,
         image: image.id,
@@ -973,6 +993,96 @@ fn evaluate_image(
         truths,
         detections,
     })
+}
+
+/// Offers the frame's missed instances (the most visible first) and false positives (the
+/// highest score first) to their galleries, each captioned with its cause.
+fn offer_detection_errors(
+    galleries: &mut Galleries,
+    (scene, image): (usize, usize),
+    pixels: &image::DynamicImage,
+    (truths, truth_masks): (&[TruthRecord], &[InstanceMask]),
+    (records, found): (&[DetectionRecord], &LearnedDetections),
+    min_iou: f64,
+) {
+    let masks: Vec<&InstanceMask> = found.detections.iter().map(|d| &d.mask).collect();
+    let others = |own: Option<usize>| -> Vec<&InstanceMask> {
+        (masks.iter().enumerate())
+            .filter(|(i, _)| Some(*i) != own)
+            .map(|(_, m)| *m)
+            .collect()
+    };
+    for (k, t) in truths.iter().enumerate() {
+        if t.ignored || t.detection.is_some() {
+            continue;
+        }
+        let closest = t.closest.and_then(|c| Some((records.get(c.detection)?, c)));
+        let cause = table1::miss_cause(&t.part, closest.map(|(d, c)| (&d.part, c.iou)), min_iou);
+        let caption = match closest {
+            Some((d, c)) => format!(
+                "{}: the {} detection {} overlaps it most (IoU {:.2})",
+                cause.describe(),
+                d.part,
+                c.detection,
+                c.iou
+            ),
+            None => cause.describe().to_string(),
+        };
+        let near = closest.map(|(_, c)| c.detection);
+        galleries
+            .missed
+            .offer(t.visible_px as f64, || DetectionErrorCrop {
+                scene,
+                image,
+                kind: DetectionErrorKind::Missed,
+                index: k,
+                part: t.part.clone(),
+                caption: format!("{caption}; {:.0} % visible", 100.0 * t.visib_fract),
+                crop: draw_window(
+                    pixels,
+                    &truth_masks[k],
+                    Some(&truth_masks[k]),
+                    near.map(|d| masks[d]),
+                    &others(near),
+                ),
+            });
+    }
+    for (i, d) in records
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.truth.is_none())
+    {
+        let cause = table1::false_positive_cause(d, truths, min_iou);
+        let closest = d.closest_truth.filter(|c| c.truth < truth_masks.len());
+        let caption = match closest {
+            Some(c) => format!(
+                "{}: overlaps the {} truth {} most (IoU {:.2}); score {:.2}",
+                cause.describe(),
+                truths[c.truth].part,
+                c.truth,
+                c.iou,
+                d.score
+            ),
+            None => format!("{}; score {:.2}", cause.describe(), d.score),
+        };
+        galleries
+            .false_positives
+            .offer(d.score, || DetectionErrorCrop {
+                scene,
+                image,
+                kind: DetectionErrorKind::FalsePositive,
+                index: i,
+                part: d.part.clone(),
+                caption,
+                crop: draw_window(
+                    pixels,
+                    masks[i],
+                    closest.map(|c| &truth_masks[c.truth]),
+                    Some(masks[i]),
+                    &others(Some(i)),
+                ),
+            });
+    }
 }
 
 #[cfg(test)]

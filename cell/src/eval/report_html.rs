@@ -11,6 +11,7 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::bop_results;
+use super::detection_gallery::{DetectionErrorCrop, DetectionErrorKind};
 use super::gallery::{FailedCrop, GalleryItem};
 use super::stable_poses::StablePoseRow;
 use super::table1::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, Table1Row, seed_row};
@@ -155,7 +156,16 @@ pub fn write_eval_report(
     let worst = saved(&run.gallery, |i| save(i.file_name(), &i.crop))?;
     let misplaced = saved(&run.misplaced, |i| save(i.file_name(), &i.crop))?;
     let failed = saved(&run.failures, |i| save(i.file_name(), &i.crop))?;
-    let html = render(meta, summary, &plots, [&worst, &misplaced], &failed);
+    let missed = saved(&run.missed, |i| save(i.file_name(), &i.crop))?;
+    let false_positives = saved(&run.false_positives, |i| save(i.file_name(), &i.crop))?;
+    let html = render(
+        meta,
+        summary,
+        &plots,
+        [&worst, &misplaced],
+        &failed,
+        [&missed, &false_positives],
+    );
     write(HTML_FILE, html.as_bytes())?;
     Ok(EvalFiles {
         json: out.join(JSON_FILE),
@@ -385,6 +395,7 @@ fn render(
     plots: &[(String, &str)],
     [worst, misplaced]: [&[(String, &GalleryItem)]; 2],
     failed: &[(String, &FailedCrop)],
+    [missed, false_positives]: [&[(String, &DetectionErrorCrop)]; 2],
 ) -> String {
     let mut h = String::new();
     let _ = write!(
@@ -666,6 +677,43 @@ fn render(
             item.iou,
             escape(&item.reason)
         );
+    }
+    for (items, title, of) in [
+        (
+            missed,
+            "Missed instances",
+            s.pooled.truths - s.pooled.true_positives,
+        ),
+        (false_positives, "False positives", s.pooled.false_positives),
+    ] {
+        if items.is_empty() {
+            continue;
+        }
+        let _ = write!(
+            h,
+            "<h2>{title} ({} of {of})</h2><p>The frame around each × 2: the true visible mask \
+             outlined green, the detection in question yellow, every other detection cyan. \
+             Missed instances the most visible first, false positives the highest score first.</p>",
+            items.len()
+        );
+        for (rel, item) in items {
+            let _ = write!(
+                h,
+                "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{} — scene {} image {} {} {}<br>{}\
+                 </figcaption></figure>",
+                escape(rel),
+                escape(&item.part),
+                escape(&item.part),
+                item.scene,
+                item.image,
+                match item.kind {
+                    DetectionErrorKind::Missed => "truth",
+                    DetectionErrorKind::FalsePositive => "det",
+                },
+                item.index,
+                escape(&item.caption)
+            );
+        }
     }
     h.push_str("</html>\n");
     h

@@ -249,6 +249,114 @@ pub struct FalsePositiveCauses {
     pub nothing: usize,
 }
 
+/// Why a ground-truth instance was missed ([`MissCauses`] counts them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MissCause {
+    /// Another part's detection covers it at the IoU threshold or above.
+    WrongPart,
+    /// A detection of its own part covers it, below the threshold.
+    Partial,
+    /// Only another part's detection touches it, below the threshold.
+    Covered,
+    /// No detection overlaps it.
+    Nothing,
+}
+
+impl MissCause {
+    /// What it means, for captions.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::WrongPart => "found as another part",
+            Self::Partial => "a split or merged mask of its own part",
+            Self::Covered => "swallowed by a neighbour's instance or hidden under it",
+            Self::Nothing => "no detection overlaps it",
+        }
+    }
+}
+
+/// Why a missed instance of `part` was missed, from the detection overlapping it most
+/// (its part and IoU), at match threshold `min_iou`.
+pub fn miss_cause(part: &str, closest: Option<(&String, f64)>, min_iou: f64) -> MissCause {
+    match closest {
+        None => MissCause::Nothing,
+        Some((p, _)) if p == part => MissCause::Partial,
+        Some((_, iou)) if iou >= min_iou => MissCause::WrongPart,
+        Some(_) => MissCause::Covered,
+    }
+}
+
+impl MissCauses {
+    /// The counter of `cause`.
+    fn slot(&mut self, cause: MissCause) -> &mut usize {
+        match cause {
+            MissCause::WrongPart => &mut self.wrong_part,
+            MissCause::Partial => &mut self.partial,
+            MissCause::Covered => &mut self.covered,
+            MissCause::Nothing => &mut self.nothing,
+        }
+    }
+}
+
+/// Why a detection matched no instance ([`FalsePositiveCauses`] counts them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FalsePositiveCause {
+    /// It covers another part's instance at the IoU threshold or above.
+    WrongPart,
+    /// It overlaps an instance of its own part that another detection matched.
+    Duplicate,
+    /// It overlaps an unmatched instance of its own part, below the threshold.
+    Partial,
+    /// It overlaps other parts' instances only, below the threshold.
+    Straddling,
+    /// It overlaps no instance.
+    Nothing,
+}
+
+impl FalsePositiveCause {
+    /// What it means, for captions.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::WrongPart => "another part, taken for this one",
+            Self::Duplicate => "a second instance of a part found already",
+            Self::Partial => "a poor mask of a missed part of its own kind",
+            Self::Straddling => "a mask over other parts",
+            Self::Nothing => "a part seen on the empty table",
+        }
+    }
+}
+
+/// Why detection `d`, matched to no instance of its frame's `truths`, is a false positive, at
+/// match threshold `min_iou`.
+pub fn false_positive_cause(
+    d: &DetectionRecord,
+    truths: &[TruthRecord],
+    min_iou: f64,
+) -> FalsePositiveCause {
+    match d
+        .closest_truth
+        .and_then(|c| Some((truths.get(c.truth)?, c.iou)))
+    {
+        None => FalsePositiveCause::Nothing,
+        Some((t, _)) if t.part == d.part && t.detection.is_some() => FalsePositiveCause::Duplicate,
+        Some((t, _)) if t.part == d.part => FalsePositiveCause::Partial,
+        Some((_, iou)) if iou >= min_iou => FalsePositiveCause::WrongPart,
+        Some(_) => FalsePositiveCause::Straddling,
+    }
+}
+
+impl FalsePositiveCauses {
+    /// The counter of `cause`.
+    fn slot(&mut self, cause: FalsePositiveCause) -> &mut usize {
+        match cause {
+            FalsePositiveCause::WrongPart => &mut self.wrong_part,
+            FalsePositiveCause::Duplicate => &mut self.duplicate,
+            FalsePositiveCause::Partial => &mut self.partial,
+            FalsePositiveCause::Straddling => &mut self.straddling,
+            FalsePositiveCause::Nothing => &mut self.nothing,
+        }
+    }
+}
+
 /// Lateral error (camera x, y) of a pose that the cell's insertions take with margin, mm: the
 /// learned scenario's capture bands are 0.145 mm (insert mold, top shell) to 0.33 mm.
 pub const ASSEMBLY_GRADE_MM: f64 = 0.1;
@@ -468,30 +576,14 @@ fn part_summary(
             let closest = t
                 .closest
                 .and_then(|c| f.detections.get(c.detection).map(|d| (&d.part, c.iou)));
-            match closest {
-                None => misses.nothing += 1,
-                Some((p, _)) if *p == t.part => misses.partial += 1,
-                Some((_, iou)) if iou >= options.min_iou => misses.wrong_part += 1,
-                Some(_) => misses.covered += 1,
-            }
+            *misses.slot(miss_cause(&t.part, closest, options.min_iou)) += 1;
         }
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
             detections += 1;
             picks.count(d, &f.truths, pick_at, options.finger_margin);
             let Some(t) = d.truth else {
                 fp += 1;
-                match d
-                    .closest_truth
-                    .and_then(|c| Some((f.truths.get(c.truth)?, c.iou)))
-                {
-                    None => fp_causes.nothing += 1,
-                    Some((t, _)) if t.part == d.part && t.detection.is_some() => {
-                        fp_causes.duplicate += 1
-                    }
-                    Some((t, _)) if t.part == d.part => fp_causes.partial += 1,
-                    Some((_, iou)) if iou >= options.min_iou => fp_causes.wrong_part += 1,
-                    Some(_) => fp_causes.straddling += 1,
-                }
+                *fp_causes.slot(false_positive_cause(d, &f.truths, options.min_iou)) += 1;
                 continue;
             };
             if f.truths[t].ignored {
