@@ -420,6 +420,13 @@ fn settings_out_of_range_are_refused_and_named() {
             },
             "max_overfill",
         ),
+        (
+            PipelineConfig {
+                max_joined_fill: -0.5,
+                ..base
+            },
+            "max_joined_fill",
+        ),
     ] {
         match LearnedPipeline::with_config(&models, &catalog(), &runtime(), config) {
             Err(LearnedError::Settings(m)) => assert!(m.contains(named), "{named}: {m}"),

@@ -125,6 +125,74 @@ impl Instance {
     }
 }
 
+/// Shared border, in cells, from which two instances count as one part split in two.
+const MIN_SHARED_BORDER: usize = 3;
+
+/// Joins instances of one part that share a border of at least [`MIN_SHARED_BORDER`] cells and
+/// together hold no more than `max_cells[part]` cells, the pair with the longest border first,
+/// until none is left: a long part lying on its side is sometimes seen as two instances, its far
+/// cells' offsets falling short of its centre. The joined instance's centre and score are the
+/// cell-weighted means of the two. `map_width` × `map_height` is the segment map's size.
+pub fn join_split(
+    instances: &mut Vec<Instance>,
+    map_width: usize,
+    map_height: usize,
+    max_cells: &[usize],
+) {
+    let mut owner = vec![usize::MAX; map_width * map_height];
+    loop {
+        owner.fill(usize::MAX);
+        for (k, inst) in instances.iter().enumerate() {
+            for &c in &inst.cells {
+                owner[c as usize] = k;
+            }
+        }
+        let mut best: Option<(usize, usize, usize)> = None;
+        for (i, a) in instances.iter().enumerate() {
+            let mut borders: Vec<(usize, usize)> = Vec::new();
+            for &c in &a.cells {
+                let c = c as usize;
+                let (y, x) = (c / map_width, c % map_width);
+                let neighbours = [
+                    (x > 0).then(|| c - 1),
+                    (x + 1 < map_width).then(|| c + 1),
+                    (y > 0).then(|| c - map_width),
+                    (y + 1 < map_height).then(|| c + map_width),
+                ];
+                for j in neighbours.into_iter().flatten().map(|n| owner[n]) {
+                    if j == usize::MAX || j <= i || instances[j].part != a.part {
+                        continue;
+                    }
+                    match borders.iter_mut().find(|(o, _)| *o == j) {
+                        Some((_, n)) => *n += 1,
+                        None => borders.push((j, 1)),
+                    }
+                }
+            }
+            let limit = max_cells.get(a.part).copied().unwrap_or(0);
+            for (j, border) in borders {
+                let fits = a.cells.len() + instances[j].cells.len() <= limit;
+                if border >= MIN_SHARED_BORDER && fits && best.is_none_or(|(_, _, b)| border > b) {
+                    best = Some((i, j, border));
+                }
+            }
+        }
+        let Some((i, j, _)) = best else {
+            return;
+        };
+        let b = instances.remove(j);
+        let a = &mut instances[i];
+        let (na, nb) = (a.cells.len() as f64, b.cells.len() as f64);
+        let mean = |x: f64, y: f64| (x * na + y * nb) / (na + nb);
+        a.score = mean(a.score, b.score);
+        a.centre = [
+            mean(a.centre[0], b.centre[0]),
+            mean(a.centre[1], b.centre[1]),
+        ];
+        a.cells.extend(b.cells);
+    }
+}
+
 /// Groups cells into instances, reusing its buffers between frames.
 #[derive(Debug, Clone, Default)]
 pub struct InstanceGrouper {
@@ -360,6 +428,50 @@ mod tests {
 
     /// The default settings' own image scale.
     const REFERENCE: f64 = 7.14;
+
+    /// An instance of `part` over the cells of columns `cols` × rows `rows` of a 10-wide map.
+    fn block(part: usize, cols: std::ops::Range<u32>, rows: std::ops::Range<u32>) -> Instance {
+        let cells: Vec<u32> = rows
+            .flat_map(|i| cols.clone().map(move |j| i * 10 + j))
+            .collect();
+        Instance {
+            part,
+            score: 0.5 + 0.1 * part as f64,
+            centre: [0.0, 0.0],
+            cells,
+        }
+    }
+
+    #[test]
+    fn halves_of_one_part_are_joined_and_neighbours_are_not() {
+        // Part 0 split into a 3 × 4 and a 2 × 4 block sharing a 4-cell border; a part-1 block
+        // borders it too; a part-0 block one column away shares no border.
+        let mut left = block(0, 0..3, 0..4);
+        left.centre = [6.0, 8.0];
+        let mut right = block(0, 3..5, 0..4);
+        right.centre = [16.0, 8.0];
+        right.score = 0.8;
+        let other = block(1, 5..7, 0..4);
+        let apart = block(0, 8..10, 0..4);
+        let all = vec![left, right, other, apart];
+        let mut joined = all.clone();
+        join_split(&mut joined, 10, 4, &[20, 20]);
+        assert_eq!(joined.len(), 3);
+        let j = &joined[0];
+        assert_eq!((j.part, j.cells.len()), (0, 20));
+        // Cell-weighted means: 12 and 8 cells.
+        assert!((j.centre[0] - 10.0).abs() < 1e-12 && (j.centre[1] - 8.0).abs() < 1e-12);
+        assert!((j.score - (0.5 * 12.0 + 0.8 * 8.0) / 20.0).abs() < 1e-12);
+        assert_eq!((joined[1].part, joined[2].cells.len()), (1, 8));
+        // Together larger than the part may be: both kept.
+        let mut kept = all.clone();
+        join_split(&mut kept, 10, 4, &[19, 19]);
+        assert_eq!(kept, all);
+        // A border of two cells is a touch, not a split.
+        let mut touching = vec![block(0, 0..3, 0..2), block(0, 3..5, 1..3)];
+        join_split(&mut touching, 10, 4, &[20, 20]);
+        assert_eq!(touching.len(), 2);
+    }
 
     /// A map of two touching discs (classes 1 and 3) whose cells point at their centres with
     /// small deterministic offset noise, plus a 3-cell speck of class 2 far away.

@@ -21,9 +21,11 @@ pub mod segmenter;
 pub use crops::{CropBatch, crop_camera, crop_origin};
 pub use detection::{InstanceMask, LearnedDetection, LearnedDetections, StageTimes};
 pub use error::LearnedError;
-pub use instances::{Instance, InstanceConfig, InstanceGrouper};
+pub use instances::{Instance, InstanceConfig, InstanceGrouper, join_split};
 pub use keypoint_net::KeypointNet;
 pub use models::LearnedModels;
 pub use perception::LearnedPerception;
-pub use pipeline::{LearnedPipeline, MAX_LEAN, MAX_OVERFILL, PipelineConfig, STACKING_TOLERANCE};
+pub use pipeline::{
+    LearnedPipeline, MAX_JOINED_FILL, MAX_LEAN, MAX_OVERFILL, PipelineConfig, STACKING_TOLERANCE,
+};
 pub use segmenter::{SegmentMap, Segmenter};
