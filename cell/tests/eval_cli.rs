@@ -129,21 +129,28 @@ fn cell_eval_on_a_rendered_feeder_split() {
     // assembly-grade poses.
     let picks = &p["picks"];
     let n = picks["picks"].as_u64().unwrap();
-    assert_eq!(causes(picks) - n, n, "{picks}");
+    let crowded = picks["crowded"].as_u64().unwrap();
+    assert_eq!(causes(picks) - n - crowded, n, "{picks}");
     assert!(
         picks["assembly_grade"].as_u64().unwrap() <= p["pickable_assembly_grade"].as_u64().unwrap(),
         "{p}"
     );
     let html = std::fs::read_to_string(out.join("eval.html")).unwrap();
     assert!(html.contains("Table 1") && html.contains("By stable pose") && html.contains("Picks"));
-    // The gallery holds the 4 worst posed crops (resting or not) and the ⌈4 / 3⌉ = 2 worst
-    // detections without a pose, as far as there are such (no instance of these frames is
-    // ignored).
+    // The gallery holds the 4 worst posed crops (resting or not), the ⌈4 / 3⌉ = 2 worst
+    // detections without a pose and the ⌈4 / 2⌉ = 2 most visible misses and highest-scoring
+    // false positives, as far as there are such (no instance of these frames is ignored).
     assert_eq!(p["ignored"].as_u64(), Some(0), "{p}");
-    let posed = (p["poses"].as_u64().unwrap() + p["not_resting_posed"].as_u64().unwrap()) as usize;
-    let unposed = p["pose_failures"].as_u64().unwrap() as usize;
+    let count = |key: &str| p[key].as_u64().unwrap() as usize;
+    let posed = count("poses") + count("not_resting_posed");
+    let unposed = count("pose_failures");
+    let (missed, false_positives) = (count("truths") - count("true_positives"), fp as usize);
     let gallery: Vec<_> = std::fs::read_dir(out.join("gallery")).unwrap().collect();
-    assert_eq!(gallery.len(), posed.min(4) + unposed.min(2), "{p}");
+    assert_eq!(
+        gallery.len(),
+        posed.min(4) + unposed.min(2) + missed.min(2) + false_positives.min(2),
+        "{p}"
+    );
     assert!(posed >= 1, "no pose passes the gate: {p}");
 }
 
