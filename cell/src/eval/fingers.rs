@@ -54,9 +54,7 @@ impl FingerCheck {
         let base_T_table = &k.geometry.base_T_table;
         let extent = |part: &str| k.part(part).map_or(0.0, |p| (p.aabb.1 - p.aabb.0).max());
         let perceived = found.perceived(camera, camera_T_table, base_T_table, extent);
-        let unposed: Vec<UnposedObstacle> = (perceived.unposed.iter())
-            .filter_map(|u| UnposedObstacle::new(u, base_T_table))
-            .collect();
+        let unposed = UnposedObstacle::all(&perceived.unposed, base_T_table);
         let mut out = vec![None; found.detections.len()];
         for d in &perceived.parts {
             let Some(grasp) =

@@ -207,9 +207,7 @@ impl<'a> Engine<'a> {
         match r {
             Ok(p) => {
                 let base_T_table = &self.ctx.knowledge.geometry.base_T_table;
-                self.step.unposed = (p.unposed.iter())
-                    .filter_map(|u| UnposedObstacle::new(u, base_T_table))
-                    .collect();
+                self.step.unposed = UnposedObstacle::all(&p.unposed, base_T_table);
                 self.step.detections = p.parts;
                 State::Select
             }

@@ -107,6 +107,15 @@ impl UnposedObstacle {
             hull: SharedShape::convex_hull(&points)?,
         })
     }
+
+    /// The obstacles of a frame's `unposed` parts on the table at `base_T_table`, leaving out
+    /// those that span no volume.
+    #[allow(non_snake_case)]
+    pub fn all(unposed: &[UnposedPart], base_T_table: &Isometry3<f64>) -> Vec<Self> {
+        (unposed.iter())
+            .filter_map(|u| Self::new(u, base_T_table))
+            .collect()
+    }
 }
 
 /// A chosen instance with its grasp.
