@@ -11,7 +11,7 @@ use cell::eval::fingers::FingerCheck;
 use cell::eval::gallery::GalleryItem;
 use cell::eval::matching::mask_from_raster;
 use cell::eval::report_html::{EvalMeta, write_eval_report};
-use cell::eval::table1::summarise;
+use cell::eval::summary::summarise;
 use cell::eval::{EvalDataset, EvalOptions, FrameDetector, camera_of, evaluate, resolve_split};
 use cell::scenario::Scenario;
 use nalgebra::{Isometry3, Matrix2, Point3, Vector3};

@@ -14,7 +14,8 @@ use super::bop_results;
 use super::detection_gallery::{DetectionErrorCrop, DetectionErrorKind};
 use super::gallery::{FailedCrop, GalleryItem};
 use super::stable_poses::StablePoseRow;
-use super::table1::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary, Table1Row, seed_row};
+use super::summary::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary};
+use super::table1::{Table1Row, seed_row};
 use super::{EvalOptions, EvalRun, FrameRecord};
 use crate::report::html::escape;
 
