@@ -262,6 +262,57 @@ fn feeder_frames_are_crowded_full_resolution_bop_scenes() {
     }
 }
 
+/// Mean distance between the part centres of each test feeder frame made with drop half-size
+/// `half` (metres).
+fn feeder_spread(out: PathBuf, models: &[PartModel], half: f64) -> Vec<f64> {
+    let mut cfg = tiny(out.clone());
+    cfg.crops_train = 0;
+    cfg.crops_test = 0;
+    cfg.overviews_train = 0;
+    cfg.overviews_test = 0;
+    cfg.feeder_test = 3;
+    cfg.feeder_drop_half = half;
+    generate(&cfg, models).unwrap();
+    let ds = BopDataset::load(&out, "test_feeder").unwrap();
+    ds.scenes
+        .iter()
+        .flat_map(|s| &s.images)
+        .map(|im| {
+            let c: Vec<_> = (0..im.gt.len())
+                .map(|k| im.camera_T_part(k).unwrap().translation.vector)
+                .collect();
+            let d: Vec<f64> = (0..c.len())
+                .flat_map(|i| (i + 1..c.len()).map(move |j| (i, j)))
+                .map(|(i, j)| (c[i] - c[j]).norm())
+                .collect();
+            d.iter().sum::<f64>() / d.len() as f64
+        })
+        .collect()
+}
+
+#[test]
+fn a_wider_drop_spreads_the_feeder_parts_like_the_cells_feeder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let models = models(tmp.path());
+    // Uniform drops over a square of side L lie about 0.52 L apart on average: 16 mm for the
+    // default heap (±15 mm), 36 mm for ±35 mm, give or take the bounces (three frames of 6–8
+    // parts each: 19 and 37 mm).
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    let heap = mean(feeder_spread(tmp.path().join("heap"), &models, 0.015));
+    let spread = mean(feeder_spread(tmp.path().join("spread"), &models, 0.035));
+    assert!((0.013..0.025).contains(&heap), "heap: parts {heap} m apart");
+    assert!(
+        (0.029..0.045).contains(&spread),
+        "spread: parts {spread} m apart"
+    );
+    assert!(spread > 1.6 * heap, "{spread} against {heap} m");
+    // A drop square of no size is refused by name.
+    let mut cfg = tiny(tmp.path().join("none"));
+    cfg.feeder_drop_half = 0.0;
+    let err = generate(&cfg, &models).unwrap_err().to_string();
+    assert!(err.contains("feeder drop half-size 0 m"), "{err}");
+}
+
 #[test]
 fn bad_input_is_a_clear_error_and_leaves_nothing_half_written() {
     let tmp = tempfile::tempdir().unwrap();
