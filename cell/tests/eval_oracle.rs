@@ -422,6 +422,26 @@ fn picks_need_room_for_the_open_fingers() {
         without.picks,
         "{with:?} {without:?}"
     );
+    // The cell's first pick: one per frame and part that has any pick at all.
+    let margin_mm = fingers.margin() * 1e3;
+    let wanted: usize = (run.frames.iter())
+        .map(|f| {
+            let mut picked: Vec<&str> = (f.detections.iter())
+                .filter(|d| d.graspable && d.stable_pose.is_some())
+                .filter(|d| d.confidence.is_some_and(|c| c >= checked.pick_confidence))
+                .filter(|d| d.finger_clearance_mm.is_none_or(|c| c >= margin_mm))
+                .filter(|d| d.truth.is_none_or(|t| !f.truths[t].ignored))
+                .map(|d| d.part.as_str())
+                .collect();
+            picked.sort_unstable();
+            picked.dedup();
+            picked.len()
+        })
+        .sum();
+    let first = summarise(&run.frames, &parts, &checked).pooled.first_picks;
+    assert!(wanted >= 2, "{wanted} first picks");
+    assert_eq!(first.picks, wanted, "{first:?}");
+    assert_eq!(first.crowded, 0);
     // A wider margin than these sparse frames need turns the picks with less room away.
     let mut room: Vec<f64> = (run.frames.iter().flat_map(|f| &f.detections))
         .filter(|d| d.graspable && d.confidence.is_some_and(|c| c >= checked.pick_confidence))

@@ -234,6 +234,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         k.unmatched,
         k.crowded
     );
+    let k = &p.first_picks;
+    println!(
+        "the cell's first pick, per frame and part the most confident of those: {}; \
+         assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
+         another part {}, on no part {}",
+        k.picks,
+        k.assembly_grade,
+        percent(k.assembly_grade, k.picks),
+        k.off,
+        k.wrong_stable_pose,
+        k.not_resting,
+        k.unmatched
+    );
     println!(
         "parts not resting on the table (leaning on or lying on another part, in no stable pose): \
          {} of {}; {} of them matched with a pose, left out of the refined rows",

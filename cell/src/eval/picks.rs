@@ -38,10 +38,42 @@ pub const ASSEMBLY_GRADE_MM: f64 = 0.1;
 /// Angle error of an assembly-grade pose, degrees.
 pub const ASSEMBLY_GRADE_DEG: f64 = 1.0;
 
+/// What the cell would make of a detection at a pick bar ([`Picks::judge`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Pickable {
+    /// Not confident enough, in no stable pose with a grasp, or a barely visible part.
+    No,
+    /// A pick, but the open fingers would come too near another part.
+    Crowded,
+    /// A pick.
+    Yes,
+}
+
 impl Picks {
-    /// Counts detection `d` (against its frame's `truths`) when the cell would pick it at
-    /// confidence `pick_at` with fingers that need `finger_margin` metres of room (unchecked
-    /// when `None`); picks of ignored (barely visible) instances are not counted.
+    /// Whether the cell would pick detection `d` (against its frame's `truths`) at confidence
+    /// `pick_at` with fingers that need `finger_margin` metres of room (unchecked when `None`);
+    /// picks of ignored (barely visible) instances are not counted.
+    pub(super) fn judge(
+        d: &DetectionRecord,
+        truths: &[TruthRecord],
+        pick_at: f64,
+        finger_margin: Option<f64>,
+    ) -> Pickable {
+        let confident = d.confidence.is_some_and(|c| c >= pick_at);
+        let ignored = d
+            .truth
+            .and_then(|t| truths.get(t))
+            .is_some_and(|t| t.ignored);
+        if !(d.graspable && d.stable_pose.is_some() && confident) || ignored {
+            return Pickable::No;
+        }
+        match (finger_margin, d.finger_clearance_mm) {
+            (Some(margin), Some(clearance)) if clearance < margin * 1e3 => Pickable::Crowded,
+            _ => Pickable::Yes,
+        }
+    }
+
+    /// Counts detection `d` as [`Self::judge`] finds it.
     pub(super) fn count(
         &mut self,
         d: &DetectionRecord,
@@ -49,21 +81,17 @@ impl Picks {
         pick_at: f64,
         finger_margin: Option<f64>,
     ) {
-        if !(d.graspable && d.stable_pose.is_some() && d.confidence.is_some_and(|c| c >= pick_at)) {
-            return;
+        match Self::judge(d, truths, pick_at, finger_margin) {
+            Pickable::No => {}
+            Pickable::Crowded => self.crowded += 1,
+            Pickable::Yes => self.add(d, truths),
         }
-        let truth = d.truth.and_then(|t| truths.get(t));
-        if truth.is_some_and(|t| t.ignored) {
-            return;
-        }
-        if let (Some(margin), Some(clearance)) = (finger_margin, d.finger_clearance_mm)
-            && clearance < margin * 1e3
-        {
-            self.crowded += 1;
-            return;
-        }
+    }
+
+    /// Counts pick `d` by what the picked part turned out to be.
+    pub(super) fn add(&mut self, d: &DetectionRecord, truths: &[TruthRecord]) {
         self.picks += 1;
-        let slot = match (truth, d.refined) {
+        let slot = match (d.truth.and_then(|t| truths.get(t)), d.refined) {
             (None, _) => &mut self.unmatched,
             (Some(t), _) if !t.resting => &mut self.not_resting,
             (Some(_), _) if d.stable_pose != d.true_stable_pose => &mut self.wrong_stable_pose,

@@ -13,6 +13,7 @@ use serde::Serialize;
 use super::bop_results;
 use super::detection_gallery::{DetectionErrorCrop, DetectionErrorKind};
 use super::gallery::{FailedCrop, GalleryItem};
+use super::picks::Picks;
 use super::stable_poses::StablePoseRow;
 use super::summary::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary};
 use super::table1::{Table1Row, seed_row};
@@ -579,13 +580,12 @@ fn render(
          <th>no room for the fingers</th></tr>",
         meta.options.pick_confidence
     );
-    for p in &all {
-        let k = &p.picks;
+    let row = |h: &mut String, part: &str, k: &Picks, crowded: bool| {
         let _ = write!(
             h,
             "<tr><td class=l>{}</td><td>{}</td><td>{} ({})</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td></tr>",
-            escape(&p.part),
+             <td>{}</td>",
+            escape(part),
             k.picks,
             k.assembly_grade,
             pct(k.assembly_grade as f64 / k.picks.max(1) as f64),
@@ -593,8 +593,23 @@ fn render(
             k.wrong_stable_pose,
             k.not_resting,
             k.unmatched,
-            k.crowded
         );
+        if crowded {
+            let _ = write!(h, "<td>{}</td>", k.crowded);
+        }
+        h.push_str("</tr>");
+    };
+    for p in &all {
+        row(&mut h, &p.part, &p.picks, true);
+    }
+    h.push_str(
+        "</table><p>The cell's first pick: per frame and part, the most confident of those \
+         picks.</p><table><tr><th class=l>part</th><th>first picks</th><th>assembly-grade</th>\
+         <th>further off</th><th>other stable pose</th><th>on or under another part</th>\
+         <th>on no part</th></tr>",
+    );
+    for p in &all {
+        row(&mut h, &p.part, &p.first_picks, false);
     }
     h.push_str("</table>");
     for p in &s.parts {

@@ -3,11 +3,13 @@
 //! miss and false positive, pose errors raw and refined, BOP MSSD / MSPD recall, stable-pose rate,
 //! the picks the cell would make, and time per stage.
 
+use std::collections::BTreeMap;
+
 use perception::metrics::{ErrorSummary, PoseErrors, Summary, SummaryOptions};
 use serde::{Deserialize, Serialize};
 
 use super::causes::{FalsePositiveCauses, MissCauses, false_positive_cause, miss_cause};
-use super::picks::{Picks, is_assembly_grade};
+use super::picks::{Pickable, Picks, is_assembly_grade};
 use super::table1::{Table1Entry, Table1Row};
 use super::{DetectionRecord, EvalOptions, FrameRecord, StageMs};
 
@@ -94,6 +96,10 @@ pub struct PartSummary {
     /// The poses the cell would pick, by what they turned out to be.
     #[serde(default)]
     pub picks: Picks,
+    /// Per frame and part, the most confident of those picks (the one the cell takes first),
+    /// by what it turned out to be (`crowded` stays 0: a crowded pose is not a pick).
+    #[serde(default)]
+    pub first_picks: Picks,
     /// Raw PnP errors.
     pub raw: PoseStats,
     /// Errors after planar refinement, over the resting instances.
@@ -240,9 +246,11 @@ fn part_summary(
     let mut fp_causes = FalsePositiveCauses::default();
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
     let pick_at = options.pick_confidence;
-    let mut kinds: std::collections::BTreeMap<String, usize> = Default::default();
-    let mut picks = Picks::default();
+    let mut kinds: BTreeMap<String, usize> = Default::default();
+    let (mut picks, mut first_picks) = (Picks::default(), Picks::default());
     for f in frames {
+        // The cell takes the most confident pick of the part it needs.
+        let mut first: BTreeMap<&str, &DetectionRecord> = BTreeMap::new();
         for t in f.truths.iter().filter(|t| mine(&t.part)) {
             if t.ignored {
                 ignored += 1;
@@ -264,6 +272,12 @@ fn part_summary(
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
             detections += 1;
             picks.count(d, &f.truths, pick_at, options.finger_margin);
+            if Picks::judge(d, &f.truths, pick_at, options.finger_margin) == Pickable::Yes {
+                let best = first.entry(&d.part).or_insert(d);
+                if d.confidence > best.confidence {
+                    *best = d;
+                }
+            }
             let Some(t) = d.truth else {
                 fp += 1;
                 *fp_causes.slot(false_positive_cause(d, &f.truths, options.min_iou)) += 1;
@@ -307,6 +321,9 @@ fn part_summary(
                 }
             }
         }
+        for d in first.into_values() {
+            first_picks.add(d, &f.truths);
+        }
     }
     let raw = pose_stats(&raw_estimates, truths, diameter_mm, options);
     let refined = pose_stats(&refined_estimates, truths, diameter_mm, options);
@@ -337,6 +354,7 @@ fn part_summary(
         pickable,
         pickable_assembly_grade,
         picks,
+        first_picks,
         raw,
         refined,
         stable_pose_right: stable_right,
@@ -756,9 +774,19 @@ mod tests {
             // Assembly-grade, with 0.3 mm and 0.7 mm of room for the open fingers.
             det("a", Some(0), Some((0.12, 0.8))),
             det("a", Some(0), Some((0.12, 0.8))),
+            // Another part, matched to nothing.
+            det("b", None, Some((0.12, 0.8))),
         ];
         for (k, d) in frame.detections.iter_mut().enumerate() {
-            d.confidence = Some(if k == 6 { 0.1 } else { 0.9 });
+            // The first pick is the most confident: the ignored and the ungraspable ones are
+            // no picks, so the 0.3 mm one, or without room for it the further-off one.
+            d.confidence = Some(match k {
+                5 | 7 => 0.999,
+                8 => 0.99,
+                1 => 0.95,
+                6 => 0.1,
+                _ => 0.9,
+            });
             d.graspable = k != 7;
             d.finger_clearance_mm = [(8, 0.3), (9, 0.7)]
                 .iter()
@@ -780,6 +808,21 @@ mod tests {
             crowded: 0,
         };
         assert_eq!(s.parts[0].picks, picks, "room for the fingers not checked");
+        let one = |slot: fn(&mut Picks) -> &mut usize| {
+            let mut p = Picks {
+                picks: 1,
+                ..Picks::default()
+            };
+            *slot(&mut p) += 1;
+            p
+        };
+        assert_eq!(s.parts[0].first_picks, one(|p| &mut p.assembly_grade));
+        // Pooled, each part's first pick counts: part b's is matched to nothing.
+        let pooled = &s.pooled.first_picks;
+        assert_eq!(
+            (pooled.picks, pooled.assembly_grade, pooled.unmatched),
+            (2, 1, 1)
+        );
         let options = EvalOptions {
             finger_margin: Some(0.0005),
             ..EvalOptions::default()
@@ -792,6 +835,7 @@ mod tests {
             ..picks
         };
         assert_eq!(s.parts[0].picks, crowded, "the 0.3 mm one has no room");
+        assert_eq!(s.parts[0].first_picks, one(|p| &mut p.off));
     }
 
     #[test]
