@@ -28,8 +28,9 @@ pub struct EvalOptions {
     #[serde(default = "default_pick_confidence")]
     pub pick_confidence: f64,
     /// The least clearance between an open finger and any other part that the cell picks with,
-    /// metres, when a scenario's gripper checks each pick ([`fingers::FingerCheck`]); without
-    /// one, picks are not checked for room for the fingers.
+    /// metres, when a scenario's gripper checks each pick
+    /// ([`super::fingers::FingerCheck`]); without one, picks are not checked for room for the
+    /// fingers.
     #[serde(default)]
     pub finger_margin: Option<f64>,
 }

@@ -77,12 +77,12 @@ pub struct TruthRecord {
     pub visible_px: usize,
     /// Whether its visible mask touches another instance's.
     pub touching: bool,
-    /// Too little visible to count (see [`EvalOptions::min_visib_fract`]).
+    /// Too little visible to count (see [`super::EvalOptions::min_visib_fract`]).
     pub ignored: bool,
-    /// Whether it rests on the table in a stable pose ([`PlanarPose::rests`]: within 1° and
-    /// 0.2 mm of the nearest one). A part leaning on or lying on another one is in no stable
-    /// pose, so no planar estimate of it can be right: it is left out of the refined rows and
-    /// counted apart.
+    /// Whether it rests on the table in a stable pose
+    /// ([`perception::planar::PlanarPose::rests`]: within 1° and 0.2 mm of the nearest one). A
+    /// part leaning on or lying on another one is in no stable pose, so no planar estimate of it
+    /// can be right: it is left out of the refined rows and counted apart.
     #[serde(default = "resting_by_default")]
     pub resting: bool,
     /// The stable pose it rests in (the planar refiner's class of its true pose), when resting.

@@ -1,4 +1,4 @@
-//! Reports of a results set: `summary.json` (the [`Summary`](crate::run::Summary)), a small
+//! Reports of a results set: `summary.json` (the [`crate::run::Summary`]), a small
 //! `report.html`, its plots as SVG files in `plots/`, linking each failed episode's event log
 //! (`events/`) and pictures (`pictures/`) where they exist.
 
