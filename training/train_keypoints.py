@@ -173,22 +173,6 @@ def evaluate(model, data, device, voting=False):
     return metrics
 
 
-def tilted_weights(data, weight):
-    """Per crop, how often to draw it: each part as often as the others whatever its crop count,
-    and a top shell whose z axis lies 25-60 degrees from the camera's axis (its tilted rest pose,
-    under 2 % of dropped top shells) `weight` times as often as its part's other crops; None when
-    `weight` is 1 (plain shuffling)."""
-    if weight == 1.0:
-        return None
-    top = PARTS.index("top_shell")
-    cos_tilt = np.array([abs(np.asarray(R)[2, 2]) for R, *_ in data["poses"]])
-    tilted = (data["part"] == top) & (cos_tilt < np.cos(np.radians(25))) & (cos_tilt > np.cos(np.radians(60)))
-    counts = np.bincount(data["part"], minlength=len(PARTS)).astype(np.float64)
-    w = np.where(tilted, weight, 1.0) / counts[data["part"]]
-    print(f"{int(tilted.sum())} of {int(counts[top])} top-shell crops tilted, drawn {weight}x as often", flush=True)
-    return torch.from_numpy(w)
-
-
 def prepare(raw, device):
     """Adds the tensors and stride-2 targets to a crop set."""
     raw["rgb_t"] = torch.from_numpy(raw["rgb"]).permute(0, 3, 1, 2).contiguous()
@@ -211,8 +195,6 @@ def main(argv=None):
     ap.add_argument("--widths", default=",".join(map(str, KeypointNet.WIDTHS)), help="channels at strides 2, 4, 8, 16, 32")
     ap.add_argument("--eval-every", type=int, default=1, help="epochs between test evaluations")
     ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
-    ap.add_argument("--tilted-weight", type=float, default=1.0,
-                    help="draw top shells resting tilted (their z axis 25-60 deg from the camera axis) this many times as often")
     args = ap.parse_args(argv)
 
     device = setup(args.seed, args.threads)
@@ -234,7 +216,6 @@ def main(argv=None):
     total = steps_per_epoch * args.epochs
     cx, cy = cell_centres(device)
     gen = torch.Generator().manual_seed(args.seed)
-    draw_weights = tilted_weights(train, args.tilted_weight)
     gen_dev = torch.Generator(device=device).manual_seed(args.seed)
     # On a GPU the training set lives there: batches are gathered without host copies.
     for key in ("rgb_t", "part_t", "mask_t", "kp_t"):
@@ -256,10 +237,7 @@ def main(argv=None):
     acc, k = torch.zeros(3, device=device), 0
     for epoch in range(args.epochs):
         model.train()
-        if draw_weights is None:
-            perm = torch.randperm(n, generator=gen)
-        else:
-            perm = torch.multinomial(draw_weights, n, replacement=True, generator=gen)
+        perm = torch.randperm(n, generator=gen)
         for s in range(steps_per_epoch):
             lr, progress = progress_lr(opt, args.lr, step, total, time.time() - t_train, 60 * args.max_minutes)
             idx = perm[s * args.batch : (s + 1) * args.batch].to(device)
