@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Rebuilds the committed USB-C models from nothing: venv -> datasets (fixed seeds) -> segmenter
-# -> keypoint net -> ONNX + manifests in scenarios/models/usbc -> `cell eval` on the test set
+# -> keypoint net -> ONNX + manifests in scenarios/models/usbc -> `cell eval` on the test set and
+# at the cell's feeder density
 # (when that subcommand exists). See training/README.md. Sizes can be overridden by environment:
 #   TRAIN_CROPS (per part), TEST_CROPS, TRAIN_FEEDER, TEST_FEEDER, EARLY_CROPS and EARLY_FEEDER
 #   (the first cycles' share of the training set), KP_EPOCHS, KP_MINUTES, KP_FT_MINUTES,
@@ -17,6 +18,7 @@ DATA="${DATA:-training/data}"
 OUT="${OUT:-scenarios/models/usbc}"
 TRAIN_SEED=1
 TEST_SEED=2
+CELL_FEEDER_SEED=4
 TRAIN_CROPS="${TRAIN_CROPS:-4000}"
 TEST_CROPS="${TEST_CROPS:-300}"
 TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
@@ -47,6 +49,9 @@ cell dataset --out "$DATA/usbc_train" --seed "$TRAIN_SEED" --train-crops "$TRAIN
     --preview "$DATA/preview_train.png"
 cell dataset --out "$DATA/usbc_test" --seed "$TEST_SEED" --train-crops 0 \
     --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" --quiet
+# The cell's own feeder density: parts spread over ±35 mm at the seed's 1.51 m.
+cell dataset --out "$DATA/cell_feeder" --seed "$CELL_FEEDER_SEED" --train-crops 0 --test-crops 0 \
+    --train-overviews 0 --test-overviews 0 --test-feeder 100 --camera-distance 1.51 --feeder-drop-half 0.035 --quiet
 
 echo "== segmenter (three cycles: from scratch and at half the learning rate on the early share, then at half the learning rate on the whole set with quarter-turned crops)"
 seg() { (cd training && "$py" train_segmenter.py --train "$root/$DATA/usbc_train" --test "$root/$DATA/usbc_test" \
@@ -77,6 +82,8 @@ echo "== evaluation"
 if cell eval --help >/dev/null 2>&1; then
     cell eval "$DATA/usbc_test" --split test_feeder --models "$OUT" --out "$DATA/eval" \
         || echo "cell eval failed (see above); the models are written"
+    cell eval "$DATA/cell_feeder" --models "$OUT" --out "$DATA/eval_cell_feeder" --max-rms-px 12 \
+        || echo "cell eval at the cell's feeder density failed (see above)"
 else
     echo "skipped: this build of cell has no 'eval' subcommand"
 fi

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Rebuilds the USB-C models on one H100 in about ten minutes: larger datasets (fixed seeds) -> the
 # segmenter and the keypoint net trained side by side, one cycle each -> ONNX + manifests in OUT
-# -> `cell eval` on the test feeder frames. The CPU recipe is training/build_models.sh; this one
-# differs only in sizes, batches and budgets. The committed pair (training/README.md): the
-# segmenter from scratch with these defaults; the keypoint net, in an earlier run (2400 training
-# frames, 5.5 min, 6 workers), from the CPU-trained weights of commit e235716:
+# -> `cell eval` on the test feeder frames and at the cell's feeder density. The CPU recipe is
+# training/build_models.sh; this one differs only in sizes, batches and budgets. The committed
+# pair (training/README.md): the segmenter from scratch with these defaults; the keypoint net, in
+# an earlier run (2400 training frames, 5.5 min, 6 workers), from the CPU-trained weights of
+# commit e235716:
 #   git show e235716:scenarios/models/usbc/keypoints.pt > /tmp/keypoints_cpu.pt
 #   KP_INIT=/tmp/keypoints_cpu.pt TRAIN_FEEDER=2400 MINUTES=5.5 WORKERS=6 training/build_models_gpu.sh
 # A further keypoint cycle from the committed weights (KP_INIT=scenarios/models/usbc/keypoints.pt)
@@ -31,6 +32,7 @@ OUT="$(realpath -m "${OUT:-scenarios/models/usbc}")"
 LOGS="$(realpath -m "${LOGS:-training/runs}")"
 TRAIN_SEED=1
 TEST_SEED=2
+CELL_FEEDER_SEED=4
 TRAIN_CROPS="${TRAIN_CROPS:-6000}"
 TEST_CROPS="${TEST_CROPS:-300}"
 TRAIN_FEEDER="${TRAIN_FEEDER:-3600}"
@@ -51,6 +53,9 @@ if [[ " $STAGES " == *" data "* ]]; then
         --test-crops 0 --train-overviews 0 --test-overviews 0 --train-feeder "$TRAIN_FEEDER" --quiet
     "${cell[@]}" dataset --out "$DATA/usbc_test" --seed "$TEST_SEED" --train-crops 0 \
         --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" --quiet
+    # The cell's own feeder density: parts spread over ±35 mm at the seed's 1.51 m.
+    "${cell[@]}" dataset --out "$DATA/cell_feeder" --seed "$CELL_FEEDER_SEED" --train-crops 0 --test-crops 0 \
+        --train-overviews 0 --test-overviews 0 --test-feeder 100 --camera-distance 1.51 --feeder-drop-half 0.035 --quiet
 fi
 
 if [[ " $STAGES " == *" train "* ]]; then
@@ -81,7 +86,8 @@ if [[ " $STAGES " == *" train "* ]]; then
 fi
 
 if [[ " $STAGES " == *" eval "* ]]; then
-    echo "== cell eval on the test feeder frames, $(date +%T)"
+    echo "== cell eval on the test feeder frames and at the cell's feeder density, $(date +%T)"
     "${cell[@]}" eval "$DATA/usbc_test" --split test_feeder --models "$OUT" --out "$DATA/eval" --max-rms-px 12 --quiet
+    "${cell[@]}" eval "$DATA/cell_feeder" --models "$OUT" --out "$DATA/eval_cell_feeder" --max-rms-px 12 --quiet
 fi
 echo "== done, $(date +%T)"
