@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use cell::eval::fingers::FingerCheck;
-use cell::eval::picks::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM};
+use cell::eval::picks::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, Picks};
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::summary::summarise;
 use cell::eval::table1::text_table;
@@ -222,30 +222,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     );
     println!(
         "picks the cell would make (confidence ≥ {}, a stable pose it has a grasp for, {room}): \
-         {}; assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
-         another part {}, on no part {}; {} more without room for the fingers",
+         {}; {} more without room for the fingers",
         options.pick_confidence,
-        k.picks,
-        k.assembly_grade,
-        percent(k.assembly_grade, k.picks),
-        k.off,
-        k.wrong_stable_pose,
-        k.not_resting,
-        k.unmatched,
+        pick_outcomes(k),
         k.crowded
     );
-    let k = &p.first_picks;
     println!(
-        "the cell's first pick, per frame and part the most confident of those: {}; \
-         assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
-         another part {}, on no part {}",
-        k.picks,
-        k.assembly_grade,
-        percent(k.assembly_grade, k.picks),
-        k.off,
-        k.wrong_stable_pose,
-        k.not_resting,
-        k.unmatched
+        "the cell's first pick, per frame and part the most confident of those: {}",
+        pick_outcomes(&p.first_picks)
     );
     println!(
         "parts not resting on the table (leaning on or lying on another part, in no stable pose): \
@@ -290,4 +274,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         files.html.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// What the picks `k` turned out to be, for the picks lines.
+fn pick_outcomes(k: &Picks) -> String {
+    format!(
+        "{}; assembly-grade {} ({:.1} %), further off {}, in another stable pose {}, on or under \
+         another part {}, on no part {}",
+        k.picks,
+        k.assembly_grade,
+        100.0 * k.assembly_grade as f64 / k.picks.max(1) as f64,
+        k.off,
+        k.wrong_stable_pose,
+        k.not_resting,
+        k.unmatched
+    )
 }

@@ -82,8 +82,8 @@ pub fn draw_window(
 /// Mean image pixel of a mask (its box centre when empty).
 fn centroid(mask: &InstanceMask) -> [f64; 2] {
     let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
+    let w = mask.width.max(1) as usize;
     for (i, _) in mask.bits.iter().enumerate().filter(|(_, b)| **b) {
-        let w = mask.width.max(1) as usize;
         sx += (i % w) as f64;
         sy += (i / w) as f64;
         n += 1.0;

@@ -52,7 +52,8 @@ pub(super) enum Pickable {
 impl Picks {
     /// Whether the cell would pick detection `d` (against its frame's `truths`) at confidence
     /// `pick_at` with fingers that need `finger_margin` metres of room (unchecked when `None`);
-    /// picks of ignored (barely visible) instances are not counted.
+    /// picks of ignored (barely visible) instances are not counted. The one rule for every pick
+    /// count: a crowded one goes to [`Self::crowded`], a pick to [`Self::add`].
     pub(super) fn judge(
         d: &DetectionRecord,
         truths: &[TruthRecord],
@@ -70,21 +71,6 @@ impl Picks {
         match (finger_margin, d.finger_clearance_mm) {
             (Some(margin), Some(clearance)) if clearance < margin * 1e3 => Pickable::Crowded,
             _ => Pickable::Yes,
-        }
-    }
-
-    /// Counts detection `d` as [`Self::judge`] finds it.
-    pub(super) fn count(
-        &mut self,
-        d: &DetectionRecord,
-        truths: &[TruthRecord],
-        pick_at: f64,
-        finger_margin: Option<f64>,
-    ) {
-        match Self::judge(d, truths, pick_at, finger_margin) {
-            Pickable::No => {}
-            Pickable::Crowded => self.crowded += 1,
-            Pickable::Yes => self.add(d, truths),
         }
     }
 

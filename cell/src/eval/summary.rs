@@ -271,11 +271,15 @@ fn part_summary(
         }
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
             detections += 1;
-            picks.count(d, &f.truths, pick_at, options.finger_margin);
-            if Picks::judge(d, &f.truths, pick_at, options.finger_margin) == Pickable::Yes {
-                let best = first.entry(&d.part).or_insert(d);
-                if d.confidence > best.confidence {
-                    *best = d;
+            match Picks::judge(d, &f.truths, pick_at, options.finger_margin) {
+                Pickable::No => {}
+                Pickable::Crowded => picks.crowded += 1,
+                Pickable::Yes => {
+                    picks.add(d, &f.truths);
+                    let best = first.entry(&d.part).or_insert(d);
+                    if d.confidence > best.confidence {
+                        *best = d;
+                    }
                 }
             }
             let Some(t) = d.truth else {
