@@ -32,6 +32,12 @@ impl StablePose {
         UnitQuaternion::from_scaled_axis(Vector3::from(self.rotation))
     }
 
+    /// How far a part turned by `table_r_part` is tilted from lying in this class, radians: the
+    /// angle between the table's up in the part frame and this class's.
+    pub fn tilt(&self, table_r_part: &UnitQuaternion<f64>) -> f64 {
+        (table_r_part.inverse() * Vector3::z()).angle(&Vector3::from(self.up_in_part))
+    }
+
     /// `table_T_part` for a part resting in this class at (x, y) with the given yaw.
     #[allow(non_snake_case)]
     pub fn table_T_part(&self, x: f64, y: f64, yaw: f64) -> Isometry3<f64> {

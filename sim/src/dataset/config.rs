@@ -67,6 +67,11 @@ pub struct DatasetConfig {
     pub crop_size: u32,
     /// Crops rendered from one physics drop (with independent lights, camera and sensor).
     pub views_per_drop: usize,
+    /// Share of the crop drops whose target is held lying in a stable pose drawn uniformly while
+    /// its neighbours fall around it, instead of falling from a random orientation: rare poses
+    /// then get images too (the scene drops' convex hulls leave the top shell in its 40° tilt in
+    /// 0.5 % of crops, against 8.7 % of the true part's drops). 0 shows every pose as it falls.
+    pub posed_crop_share: f64,
     /// Downscaling of the overview images relative to the full camera.
     pub overview_scale: f64,
     /// Overview window (width, height) around the board, px at the reduced resolution.
@@ -113,6 +118,7 @@ impl DatasetConfig {
             overviews_test: 200,
             crop_size: 128,
             views_per_drop: 4,
+            posed_crop_share: 0.0,
             overview_scale: 0.4,
             overview_size: (1000, 700),
             parts_per_class: (1, 3),
@@ -156,6 +162,12 @@ impl DatasetConfig {
             return Err(DatasetError::Config(format!(
                 "feeder drop half-size {} m must be positive",
                 self.feeder_drop_half
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.posed_crop_share) {
+            return Err(DatasetError::Config(format!(
+                "posed crop share {} must be between 0 and 1",
+                self.posed_crop_share
             )));
         }
         if let Some(d) = self.feeder_camera_distance

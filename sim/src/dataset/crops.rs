@@ -3,7 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::Point3;
+use nalgebra::{Point3, UnitQuaternion, Vector3};
+use perception::part::StablePose;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -13,8 +14,10 @@ use super::config::item_seed;
 use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, Window, instance_mask, render};
-use crate::scene::{PartModel, PlacedPart, SceneRequest, dress_scene, drop_parts, label_instance};
-use crate::stable_poses::{DropOutcome, leaning};
+use crate::scene::{
+    PartModel, PlacedPart, Resting, SceneRequest, dress_scene, drop_parts_around, label_instance,
+};
+use crate::stable_poses::{CLASS_ANGLE_RAD, DropOutcome, leaning};
 
 /// Labels of one crop (crops/PART/SPLIT/NNNNNN.json); units mm and px, OpenCV camera frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -39,6 +42,10 @@ pub struct CropLabel {
     pub cam_t_m2c: [f64; 3],
     /// The 9 keypoints in crop pixels (8 surface points, then the centre).
     pub keypoints: Vec<[f64; 2]>,
+    /// The stable pose the part lies in on the table (`None`: leaning on a neighbour, or tilted
+    /// off every pose), so that training and checks can count the crops of each.
+    #[serde(default)]
+    pub stable_pose: Option<String>,
     /// Visible fraction of the part within the crop (visible / full silhouette pixels).
     pub visib_fract: f64,
     /// Visible pixels of the part in the crop.
@@ -66,6 +73,21 @@ pub(crate) fn target_leans(part: &PlacedPart, model: &PartModel) -> bool {
         time: 0.0,
     };
     leaning(&[outcome], &model.mesh)[0]
+}
+
+/// The stable pose `part` lies in on the table: the nearest within [`CLASS_ANGLE_RAD`], unless
+/// it leans on a neighbour.
+fn resting_pose<'a>(part: &PlacedPart, model: &'a PartModel) -> Option<&'a StablePose> {
+    let rotation = &part.table_T_part.rotation;
+    model
+        .spec
+        .stable_poses
+        .iter()
+        .map(|s| (s.tilt(rotation), s))
+        .filter(|(tilt, _)| *tilt < CLASS_ANGLE_RAD)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, s)| s)
+        .filter(|_| !target_leans(part, model))
 }
 
 /// Folder of a part's crops of a split.
@@ -108,18 +130,33 @@ pub(crate) fn write_crop_group(
         rng.random_range(-0.06..=0.06),
         rng.random_range(-0.06..=0.06),
     );
-    // A target that came to rest on a neighbour is dropped again (up to LEAN_RETRIES times):
-    // the crops must show the parts' stable poses on the table with their probabilities, not
-    // the leaning poses a crowded drop adds (a quarter of the crops otherwise).
-    let mut parts = drop_parts(models, &counts, centre, 0.012, &mut rng)
-        .map_err(crate::scene::SceneError::from)?;
-    for _ in 0..LEAN_RETRIES {
-        if !target_leans(&parts[target], &models[model]) {
+    // A share of the drops hold the target lying in a stable pose drawn uniformly (no draw at
+    // all when the share is 0, so such datasets stay bit-identical to those made before it).
+    let stable_poses = &models[model].spec.stable_poses;
+    let posed = (cfg.posed_crop_share > 0.0
+        && !stable_poses.is_empty()
+        && rng.random_bool(cfg.posed_crop_share))
+    .then(|| &stable_poses[rng.random_range(0..stable_poses.len())]);
+    // A target that came to rest on a neighbour is dropped again, up to LEAN_RETRIES times: the
+    // crops must show the parts' stable poses on the table, not the leaning poses a crowded drop
+    // adds (a quarter of the crops otherwise).
+    let mut parts = Vec::new();
+    for _ in 0..=LEAN_RETRIES {
+        let resting = posed.map(|pose| Resting {
+            index: target,
+            rotation: UnitQuaternion::from_axis_angle(
+                &Vector3::z_axis(),
+                rng.random_range(0.0..std::f64::consts::TAU),
+            ) * pose.rest_rotation(),
+        });
+        parts = drop_parts_around(models, &counts, centre, 0.012, resting, &mut rng)
+            .map_err(crate::scene::SceneError::from)?;
+        // A target held in its pose stays in it.
+        if posed.is_some() || !target_leans(&parts[target], &models[model]) {
             break;
         }
-        parts = drop_parts(models, &counts, centre, 0.012, &mut rng)
-            .map_err(crate::scene::SceneError::from)?;
     }
+    let stable_pose = resting_pose(&parts[target], &models[model]).map(|s| s.name.clone());
     let request = SceneRequest {
         counts,
         drop_centre: centre,
@@ -207,6 +244,7 @@ pub(crate) fn write_crop_group(
             cam_R_m2c: r,
             cam_t_m2c: t,
             keypoints: label.keypoints.iter().map(|p| [p.x, p.y]).collect(),
+            stable_pose: stable_pose.clone(),
             visib_fract: label.visib_fract,
             px_count_visib: label.px_count_visib as u64,
             bbox_obj: label.bbox_obj,

@@ -1,7 +1,7 @@
 //! Multi-part drops: several parts fall onto the tag board together with rapier and come to
 //! rest touching the board and each other, giving physically realistic scene poses.
 
-use nalgebra::{Isometry3, Translation3, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
 use rapier3d_f64::math::Vector;
 use rapier3d_f64::prelude::{ColliderBuilder, RigidBodyBuilder};
@@ -11,7 +11,7 @@ use crate::convert::{
     rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
     vector_from_vec,
 };
-use crate::stable_poses::drop::{drop_world, random_rotation};
+use crate::stable_poses::drop::{drop_world, geometric_rest_height, random_rotation};
 
 /// A part resting in a scene.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,6 +43,18 @@ const REST_TIME: f64 = 0.04;
 const BOARD_HALF: f64 = 0.105;
 const BOARD_THICKNESS: f64 = 0.003;
 
+/// One part of a drop that lies on the board in a chosen orientation and is held there while
+/// the others fall onto and around it, so that a rare stable pose can be shown as often as a
+/// common one (the drops' convex hulls cannot rest in every stable pose of the true mesh: the
+/// top shell's 40° tilt stands on its skirt, inside its hull).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resting {
+    /// Its index among the dropped parts (in model order, as [`drop_parts`] returns them).
+    pub index: usize,
+    /// Its orientation on the board, `table_R_part`.
+    pub rotation: UnitQuaternion<f64>,
+}
+
 /// Drops `counts[i]` copies of `models[i]` from random orientations over the square of half-size
 /// `half` centred on (`cx`, `cy`) of the board, and returns their rest poses.
 ///
@@ -50,8 +62,22 @@ const BOARD_THICKNESS: f64 = 0.003;
 pub fn drop_parts(
     models: &[PartModel],
     counts: &[usize],
+    centre: (f64, f64),
+    half: f64,
+    rng: &mut impl Rng,
+) -> Result<Vec<PlacedPart>, DropError> {
+    drop_parts_around(models, counts, centre, half, None, rng)
+}
+
+/// As [`drop_parts`], except that the part `resting` names lies on the board in its orientation
+/// (at its lowest point's height, at a random place in the square as the others) and does not
+/// move while the rest fall onto and around it.
+pub fn drop_parts_around(
+    models: &[PartModel],
+    counts: &[usize],
     (cx, cy): (f64, f64),
     half: f64,
+    resting: Option<Resting>,
     rng: &mut impl Rng,
 ) -> Result<Vec<PlacedPart>, DropError> {
     if !(half.is_finite() && half > 0.0) {
@@ -72,7 +98,10 @@ pub fn drop_parts(
     world.colliders.insert(table);
 
     let mut bodies = Vec::new();
-    let mut z = 0.0;
+    // The falling parts start above the resting one, which lies within its diameter of the board.
+    let mut z = resting
+        .and_then(|r| model_of(counts, r.index))
+        .map_or(0.0, |m| models[m].mesh.extents().norm());
     for (m, model) in models.iter().enumerate() {
         let count = counts.get(m).copied().unwrap_or(0);
         if count == 0 {
@@ -83,18 +112,33 @@ pub fn drop_parts(
             .ok_or_else(|| DropError::NoHull(model.name.clone()))?;
         let radius = model.mesh.extents().norm() / 2.0;
         for _ in 0..count {
-            z += radius + 0.002;
-            let centre = Vector3::new(
+            let (x, y) = (
                 cx + rng.random_range(-half..=half),
                 cy + rng.random_range(-half..=half),
-                z,
             );
-            z += radius;
-            let rotation = random_rotation(rng);
-            let rb = RigidBodyBuilder::dynamic()
+            let (builder, centre, rotation) = match resting.filter(|r| r.index == bodies.len()) {
+                Some(r) => {
+                    let height = geometric_rest_height(&model.mesh, &r.rotation);
+                    (
+                        RigidBodyBuilder::fixed(),
+                        Vector3::new(x, y, height),
+                        r.rotation,
+                    )
+                }
+                None => {
+                    z += radius + 0.002;
+                    let centre = Vector3::new(x, y, z);
+                    z += radius;
+                    (
+                        RigidBodyBuilder::dynamic().ccd_enabled(true),
+                        centre,
+                        random_rotation(rng),
+                    )
+                }
+            };
+            let rb = builder
                 .translation(vec_from_vector(&centre))
                 .rotation(rot_from_unit_quaternion(&rotation).to_scaled_axis())
-                .ccd_enabled(true)
                 .build();
             let h = world.bodies.insert(rb);
             let collider = shape
@@ -133,4 +177,13 @@ pub fn drop_parts(
             }
         })
         .collect())
+}
+
+/// The model of the `index`-th dropped part when `counts[m]` copies of each model `m` are dropped.
+fn model_of(counts: &[usize], index: usize) -> Option<usize> {
+    let mut first = 0;
+    counts.iter().position(|&n| {
+        first += n;
+        index < first
+    })
 }

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use perception::part::Catalog;
 use robots::ur_arm::UrArm;
 use sim::config::{AssemblyStep, CellSpec, NoiseSpec};
+use sim::scene::PartModel;
 
 /// The simulator's share of a scenario file.
 #[derive(Clone, serde::Deserialize)]
@@ -41,4 +42,13 @@ pub fn arm() -> UrArm {
 /// `scenarios/parts/usbc.toml` (committed prepared: keypoints and stable poses).
 pub fn catalog() -> Catalog {
     Catalog::load(&scenarios().join("parts/usbc.toml")).unwrap()
+}
+
+/// The three USB-C parts of the catalog, ready for scenes and renders.
+pub fn usbc_models() -> Vec<PartModel> {
+    let names: Vec<String> = ["main_shell", "insert_mold", "top_shell"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    PartModel::from_catalog(&catalog(), &names).unwrap()
 }
