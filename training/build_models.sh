@@ -6,7 +6,9 @@
 #   TRAIN_CROPS (per part), TEST_CROPS, TRAIN_FEEDER, TEST_FEEDER, EARLY_CROPS and EARLY_FEEDER
 #   (the first cycles' share of the training set), KP_EPOCHS, KP_MINUTES, KP_FT_MINUTES,
 #   KP_FT2_MINUTES, SEG_STEPS, SEG_MINUTES, SEG_FT_STEPS, SEG_FT_MINUTES, SEG_FT2_STEPS,
-#   SEG_FT2_MINUTES, THREADS (per net), DATA (dataset folder), OUT (model folder). The committed
+#   SEG_FT2_MINUTES, THREADS (per net), DATA (dataset folder), OUT (model folder), POSED_CROPS
+#   (share of the training crop drops holding their part in a stable pose drawn uniformly, 0 for
+#   the committed models; use a fresh DATA, the dataset folders resume). The committed
 #   models were made with the defaults on 2 busy CPU cores, the two nets trained side by side with
 #   one thread each (run the two trainings in parallel by hand to repeat that; this script runs
 #   them one after the other). Each net has three cycles: from scratch on the early share, a
@@ -22,6 +24,7 @@ CELL_FEEDER_SEED=4
 TRAIN_CROPS="${TRAIN_CROPS:-4000}"
 TEST_CROPS="${TEST_CROPS:-300}"
 TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
+POSED_CROPS="${POSED_CROPS:-0}"
 EARLY_CROPS="${EARLY_CROPS:-2000}"
 EARLY_FEEDER="${EARLY_FEEDER:-400}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
@@ -45,7 +48,8 @@ echo "== datasets (train seed $TRAIN_SEED, test seed $TEST_SEED)"
 # Through cargo: it puts the MuJoCo library the binary links on the library path.
 cell() { cargo run --release -q -p cell -- "$@"; }
 cell dataset --out "$DATA/usbc_train" --seed "$TRAIN_SEED" --train-crops "$TRAIN_CROPS" \
-    --test-crops 0 --train-overviews 0 --test-overviews 0 --train-feeder "$TRAIN_FEEDER" --quiet \
+    --posed-crops "$POSED_CROPS" --test-crops 0 --train-overviews 0 --test-overviews 0 \
+    --train-feeder "$TRAIN_FEEDER" --quiet \
     --preview "$DATA/preview_train.png"
 cell dataset --out "$DATA/usbc_test" --seed "$TEST_SEED" --train-crops 0 \
     --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" --quiet

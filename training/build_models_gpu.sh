@@ -19,6 +19,9 @@
 #   DATA, OUT    dataset folder [training/data], model folder [scenarios/models/usbc]
 #   LOGS         the trainers' logs [training/runs]
 #   TRAIN_CROPS (per part) [6000], TEST_CROPS [300], TRAIN_FEEDER [3600], TEST_FEEDER [100]
+#   POSED_CROPS  share of the training crop drops that hold their part in a stable pose drawn
+#                uniformly (`cell dataset --posed-crops`) [0, as the committed models; 0.3 shows
+#                the rare poses; use a fresh DATA, the dataset folders resume]
 #   MINUTES      training budget of each net [6.2]
 #   KP_INIT, SEG_INIT  weights (.pt) to start each net from [none: from scratch]
 #   KP_LR, SEG_LR  peak learning rates [2e-3 from scratch, 1e-3 from weights]
@@ -36,6 +39,7 @@ CELL_FEEDER_SEED=4
 TRAIN_CROPS="${TRAIN_CROPS:-6000}"
 TEST_CROPS="${TEST_CROPS:-300}"
 TRAIN_FEEDER="${TRAIN_FEEDER:-3600}"
+POSED_CROPS="${POSED_CROPS:-0}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
 MINUTES="${MINUTES:-6.2}"
 KP_INIT="${KP_INIT:+$(realpath "$KP_INIT")}"
@@ -50,7 +54,8 @@ WORKERS="${WORKERS:-8}"
 if [[ " $STAGES " == *" data "* ]]; then
     echo "== datasets (train seed $TRAIN_SEED, test seed $TEST_SEED), $(date +%T)"
     "${cell[@]}" dataset --out "$DATA/usbc_train" --seed "$TRAIN_SEED" --train-crops "$TRAIN_CROPS" \
-        --test-crops 0 --train-overviews 0 --test-overviews 0 --train-feeder "$TRAIN_FEEDER" --quiet
+        --posed-crops "$POSED_CROPS" --test-crops 0 --train-overviews 0 --test-overviews 0 \
+        --train-feeder "$TRAIN_FEEDER" --quiet
     "${cell[@]}" dataset --out "$DATA/usbc_test" --seed "$TEST_SEED" --train-crops 0 \
         --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" --quiet
     # The cell's own feeder density: parts spread over ±35 mm at the seed's 1.51 m.
