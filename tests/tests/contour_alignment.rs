@@ -16,7 +16,8 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
     let mut xy_um = Vec::new();
     let mut yaw_deg = Vec::new();
     let mut lost = 0;
-    for seed in [21, 22] {
+    // Twelve frames: a quantile of two frames' parts moves with the frames' luck.
+    for seed in 21..33 {
         let feeder = render_feeder(&catalog, seed);
         let camera_T_table = feeder.table_T_camera.inverse();
         let aligner = ContourAligner::new(camera_T_table, ContourConfig::default());
@@ -68,14 +69,17 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
          yaw error median {yaw50:.3}°, 90 % {yaw90:.3}°"
     );
     assert!(
-        n >= 16,
+        n >= 70,
         "only {n} parts resting on a stable pose were aligned"
     );
     assert!(lost <= 1, "{lost} fits found too few edges");
-    // Measured: 39 / 79 µm, 0.30 / 0.73° (17 parts; 52 µm and 0.34° with a forward-difference
-    // Jacobian).
-    assert!(xy50 < 50.0, "median xy error {xy50:.1} µm");
-    assert!(xy90 < 120.0, "90 % xy error {xy90:.1} µm");
-    assert!(yaw50 < 0.40, "median yaw error {yaw50:.3}°");
-    assert!(yaw90 < 1.0, "90 % yaw error {yaw90:.3}°");
+    // Measured over these 12 frames: 61.5 / 258 µm, 0.26 / 1.14° (84 parts). The misses over
+    // 150 µm are main shells (17 of 20), whose inner rims pull the outline in a crowd. Until
+    // the drops weighed each part as itself, two frames (21, 22) gave 39 / 79 µm and 0.30 /
+    // 0.73°; the 12 frames of that physics gave 56.5 / 189 µm, 0.16 / 0.94° (98 parts): two
+    // frames were too few to bound a quantile.
+    assert!(xy50 < 70.0, "median xy error {xy50:.1} µm");
+    assert!(xy90 < 300.0, "90 % xy error {xy90:.1} µm");
+    assert!(yaw50 < 0.35, "median yaw error {yaw50:.3}°");
+    assert!(yaw90 < 1.3, "90 % yaw error {yaw90:.3}°");
 }

@@ -34,9 +34,9 @@ pub struct Args {
     pub test_crops: usize,
     /// Share of the crop drops (0–1) whose target is held lying in one of its stable poses,
     /// drawn uniformly, while the other parts fall around it, instead of falling from a random
-    /// orientation (default 0: every pose as the drops leave it). 0.3 gives each of a part's
-    /// poses several per cent of its crops, the top shell's 40° tilt included, which the drops'
-    /// convex hulls otherwise leave in 0.5 % of them.
+    /// orientation (default 0: every pose as often as the drops leave parts in it). 0.3 gives
+    /// each of a part's poses several per cent of its crops, the rare ones included (the top
+    /// shell's −y: 0.6 % of its drops).
     #[arg(long, default_value_t = 0.0)]
     pub posed_crops: f64,
     /// Overview images with all parts (BOP train_pbr), for segmentation training (full set:

@@ -69,8 +69,8 @@ pub struct DatasetConfig {
     pub views_per_drop: usize,
     /// Share of the crop drops whose target is held lying in a stable pose drawn uniformly while
     /// its neighbours fall around it, instead of falling from a random orientation: rare poses
-    /// then get images too (the scene drops' convex hulls leave the top shell in its 40° tilt in
-    /// 0.5 % of crops, against 8.7 % of the true part's drops). 0 shows every pose as it falls.
+    /// (the top shell's −y, 0.6 % of its drops) then get images too. 0 shows every pose as often
+    /// as the drops leave parts in it.
     pub posed_crop_share: f64,
     /// Downscaling of the overview images relative to the full camera.
     pub overview_scale: f64,
