@@ -131,7 +131,7 @@ pub(crate) fn write_crop_group(
         rng.random_range(-0.06..=0.06),
     );
     // A share of the drops hold the target lying in a stable pose drawn uniformly (no draw at
-    // all when the share is 0, so such datasets stay bit-identical to those made before it).
+    // all when the share is 0: those drops keep the random stream they had without the option).
     let stable_poses = &models[model].spec.stable_poses;
     let posed = (cfg.posed_crop_share > 0.0
         && !stable_poses.is_empty()

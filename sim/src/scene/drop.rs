@@ -111,8 +111,9 @@ pub fn drop_parts_around(
             .ok_or_else(|| DropError::NoHull(model.name.clone()))?;
         // The part collides by its hull but weighs as itself: a hollow shell's centre of mass
         // lies elsewhere than its filled hull's, and which faces it comes to rest on follows it
-        // (the top shell, weighed as its hull, never stayed in its 40° tilt; weighed as itself
-        // it does as often as in the catalog's drops).
+        // (weighed as its hull, the top shell rested in its 40° tilt in 2 % of the crop drops
+        // and face up in 40 %, against the catalog's 8.7 % and 25 %; weighed as itself, in 6 %
+        // and 20 %).
         let mass = MassProperties::from_trimesh(model.density, &hull, &model.mesh.triangles);
         let radius = model.mesh.extents().norm() / 2.0;
         for _ in 0..count {
