@@ -13,7 +13,7 @@ use sim::render::{
     window_covering,
 };
 use sim::scene::{
-    Randomisation, Resting, SceneRequest, dress_scene, drop_parts, drop_parts_around,
+    HeldPart, Randomisation, SceneRequest, dress_scene, drop_parts, drop_parts_around,
     label_instances, nominal_scene, sample_scene,
 };
 
@@ -131,9 +131,9 @@ fn a_held_part_keeps_its_stable_pose_while_the_others_fall_onto_and_around_it() 
         for pose in &model.spec.stable_poses {
             let rotation =
                 UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.7) * pose.rest_rotation();
-            let resting = Resting { index, rotation };
+            let held = HeldPart { index, rotation };
             let parts =
-                drop_parts_around(&models, &counts, (0.0, 0.0), 0.012, Some(resting), &mut rng)
+                drop_parts_around(&models, &counts, (0.0, 0.0), 0.012, Some(held), &mut rng)
                     .unwrap();
             let held = &parts[index];
             assert_eq!(held.model, m);

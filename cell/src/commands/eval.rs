@@ -201,7 +201,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         100.0 * p.refined.ar_mspd,
         100.0 * p.raw.ar_mspd
     );
-    let percent = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
     println!(
         "assembly-grade poses (within {} mm and {}° of the truth): {} of {} ({:.1} %); of the {} \
          confident enough for the cell to pick (≥ {}): {} ({:.1} %)",
@@ -283,10 +282,15 @@ fn pick_outcomes(k: &Picks) -> String {
          another part {}, on no part {}",
         k.picks,
         k.assembly_grade,
-        100.0 * k.assembly_grade as f64 / k.picks.max(1) as f64,
+        percent(k.assembly_grade, k.picks),
         k.off,
         k.wrong_stable_pose,
         k.not_resting,
         k.unmatched
     )
+}
+
+/// `a` as a percentage of `b` (0 when `b` is 0).
+fn percent(a: usize, b: usize) -> f64 {
+    100.0 * a as f64 / b.max(1) as f64
 }

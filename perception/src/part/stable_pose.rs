@@ -38,6 +38,18 @@ impl StablePose {
         (table_r_part.inverse() * Vector3::z()).angle(&Vector3::from(self.up_in_part))
     }
 
+    /// The class of `poses` a part turned by `table_r_part` lies nearest to, with its
+    /// [`tilt`](Self::tilt) from it; `None` for no classes.
+    pub fn nearest<'a>(
+        poses: &'a [StablePose],
+        table_r_part: &UnitQuaternion<f64>,
+    ) -> Option<(&'a StablePose, f64)> {
+        poses
+            .iter()
+            .map(|s| (s, s.tilt(table_r_part)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
     /// `table_T_part` for a part resting in this class at (x, y) with the given yaw.
     #[allow(non_snake_case)]
     pub fn table_T_part(&self, x: f64, y: f64, yaw: f64) -> Isometry3<f64> {

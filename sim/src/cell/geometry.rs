@@ -105,13 +105,9 @@ impl PartGeometry {
     /// the table's up expressed in the part frame.
     #[allow(non_snake_case)]
     pub fn stable_pose_of(&self, table_T_part: &Isometry3<f64>) -> Option<&StablePose> {
-        let up = table_T_part.rotation.inverse() * Vector3::z();
-        self.stable_poses
-            .iter()
-            .map(|s| (Vector3::from(s.up_in_part).normalize().dot(&up), s))
-            .filter(|(c, _)| *c > 0.9)
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, s)| s)
+        StablePose::nearest(&self.stable_poses, &table_T_part.rotation)
+            .filter(|(_, tilt)| tilt.cos() > 0.9)
+            .map(|(s, _)| s)
     }
 }
 

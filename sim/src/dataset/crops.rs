@@ -15,7 +15,7 @@ use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, Window, instance_mask, render};
 use crate::scene::{
-    PartModel, PlacedPart, Resting, SceneRequest, dress_scene, drop_parts_around, label_instance,
+    HeldPart, PartModel, PlacedPart, SceneRequest, dress_scene, drop_parts_around, label_instance,
 };
 use crate::stable_poses::{CLASS_ANGLE_RAD, DropOutcome, leaning};
 
@@ -75,21 +75,6 @@ pub(crate) fn target_leans(part: &PlacedPart, model: &PartModel) -> bool {
     leaning(&[outcome], &model.mesh)[0]
 }
 
-/// The stable pose `part` lies in on the table: the nearest within [`CLASS_ANGLE_RAD`], unless
-/// it leans on a neighbour.
-fn resting_pose<'a>(part: &PlacedPart, model: &'a PartModel) -> Option<&'a StablePose> {
-    let rotation = &part.table_T_part.rotation;
-    model
-        .spec
-        .stable_poses
-        .iter()
-        .map(|s| (s.tilt(rotation), s))
-        .filter(|(tilt, _)| *tilt < CLASS_ANGLE_RAD)
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, s)| s)
-        .filter(|_| !target_leans(part, model))
-}
-
 /// Folder of a part's crops of a split.
 pub(crate) fn crop_dir(out: &Path, part: &str, split: Split) -> PathBuf {
     out.join("crops").join(part).join(split.name())
@@ -140,23 +125,27 @@ pub(crate) fn write_crop_group(
     // A target that came to rest on a neighbour is dropped again, up to LEAN_RETRIES times: the
     // crops must show the parts' stable poses on the table, not the leaning poses a crowded drop
     // adds (a quarter of the crops otherwise).
-    let mut parts = Vec::new();
+    let (mut parts, mut leans) = (Vec::new(), false);
     for _ in 0..=LEAN_RETRIES {
-        let resting = posed.map(|pose| Resting {
+        let held = posed.map(|pose| HeldPart {
             index: target,
             rotation: UnitQuaternion::from_axis_angle(
                 &Vector3::z_axis(),
                 rng.random_range(0.0..std::f64::consts::TAU),
             ) * pose.rest_rotation(),
         });
-        parts = drop_parts_around(models, &counts, centre, 0.012, resting, &mut rng)
+        parts = drop_parts_around(models, &counts, centre, 0.012, held, &mut rng)
             .map_err(crate::scene::SceneError::from)?;
         // A target held in its pose stays in it.
-        if posed.is_some() || !target_leans(&parts[target], &models[model]) {
+        leans = posed.is_none() && target_leans(&parts[target], &models[model]);
+        if !leans {
             break;
         }
     }
-    let stable_pose = resting_pose(&parts[target], &models[model]).map(|s| s.name.clone());
+    // The stable pose the target lies in: the nearest within the classes' own spread.
+    let stable_pose = StablePose::nearest(stable_poses, &parts[target].table_T_part.rotation)
+        .filter(|(_, tilt)| !leans && *tilt < CLASS_ANGLE_RAD)
+        .map(|(s, _)| s.name.clone());
     let request = SceneRequest {
         counts,
         drop_centre: centre,

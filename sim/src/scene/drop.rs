@@ -47,7 +47,7 @@ const BOARD_THICKNESS: f64 = 0.003;
 /// the others fall onto and around it, so that a rare stable pose can be shown as often as a
 /// common one.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Resting {
+pub struct HeldPart {
     /// Its index among the dropped parts (in model order, as [`drop_parts`] returns them).
     pub index: usize,
     /// Its orientation on the board, `table_R_part`.
@@ -68,7 +68,7 @@ pub fn drop_parts(
     drop_parts_around(models, counts, centre, half, None, rng)
 }
 
-/// As [`drop_parts`], except that the part `resting` names lies on the board in its orientation
+/// As [`drop_parts`], except that the part `held` names lies on the board in its orientation
 /// (at its lowest point's height, at a random place in the square as the others) and does not
 /// move while the rest fall onto and around it.
 pub fn drop_parts_around(
@@ -76,7 +76,7 @@ pub fn drop_parts_around(
     counts: &[usize],
     (cx, cy): (f64, f64),
     half: f64,
-    resting: Option<Resting>,
+    held: Option<HeldPart>,
     rng: &mut impl Rng,
 ) -> Result<Vec<PlacedPart>, DropError> {
     if !(half.is_finite() && half > 0.0) {
@@ -97,9 +97,9 @@ pub fn drop_parts_around(
     world.colliders.insert(table);
 
     let mut bodies = Vec::new();
-    // The falling parts start above the resting one, which lies within its diameter of the board.
-    let mut z = resting
-        .and_then(|r| model_of(counts, r.index))
+    // The falling parts start above the held one, which lies within its diameter of the board.
+    let mut z = held
+        .and_then(|h| model_of(counts, h.index))
         .map_or(0.0, |m| models[m].mesh.extents().norm());
     for (m, model) in models.iter().enumerate() {
         let count = counts.get(m).copied().unwrap_or(0);
@@ -121,7 +121,7 @@ pub fn drop_parts_around(
                 cx + rng.random_range(-half..=half),
                 cy + rng.random_range(-half..=half),
             );
-            let (builder, centre, rotation) = match resting.filter(|r| r.index == bodies.len()) {
+            let (builder, centre, rotation) = match held.filter(|h| h.index == bodies.len()) {
                 Some(r) => {
                     let height = geometric_rest_height(&model.mesh, &r.rotation);
                     (

@@ -13,7 +13,7 @@ pub use compose::{
     METER_FLOOR, METER_SHARE, METER_TARGET, SampledScene, SceneError, SceneRequest, dress_scene,
     look_at, nominal_scene, sample_scene,
 };
-pub use drop::{DropError, PlacedPart, Resting, drop_parts, drop_parts_around};
+pub use drop::{DropError, HeldPart, PlacedPart, drop_parts, drop_parts_around};
 pub use labels::{InstanceLabel, keypoint_vectors, label_instance, label_instances};
 pub use model::{PartModel, PartModelError};
 pub use randomisation::{Randomisation, RandomisationError, Range};
