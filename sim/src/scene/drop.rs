@@ -4,12 +4,11 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
 use rapier3d_f64::math::Vector;
-use rapier3d_f64::prelude::{ColliderBuilder, MassProperties, RigidBodyBuilder};
+use rapier3d_f64::prelude::{ColliderBuilder, RigidBodyBuilder};
 
 use super::PartModel;
 use crate::convert::{
-    rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
-    vector_from_vec,
+    rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_vector, vector_from_vec,
 };
 use crate::stable_poses::drop::{drop_world, geometric_rest_height, random_rotation};
 
@@ -26,9 +25,6 @@ pub struct PlacedPart {
 /// Why a drop could not be simulated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DropError {
-    /// The part's vertices span no volume: rapier cannot build its convex hull.
-    #[error("part {0}: no convex hull for physics (degenerate mesh)")]
-    NoHull(String),
     /// The region to drop parts into is not a positive, finite size.
     #[error("drop region half-size {0} m must be positive and finite")]
     BadRegion(f64),
@@ -106,15 +102,6 @@ pub fn drop_parts_around(
         if count == 0 {
             continue;
         }
-        let hull: Vec<Vector> = model.mesh.vertices.iter().map(vec_from_point).collect();
-        let shape = ColliderBuilder::convex_hull(&hull)
-            .ok_or_else(|| DropError::NoHull(model.name.clone()))?;
-        // The part collides by its hull but weighs as itself: a hollow shell's centre of mass
-        // lies elsewhere than its filled hull's, and which faces it comes to rest on follows it
-        // (weighed as its hull, the top shell rested in its 40° tilt in 2 % of the crop drops
-        // and face up in 40 %, against the catalog's 8.7 % and 25 %; weighed as itself, in 6 %
-        // and 20 %).
-        let mass = MassProperties::from_trimesh(model.density, &hull, &model.mesh.triangles);
         let radius = model.mesh.extents().norm() / 2.0;
         for _ in 0..count {
             let (x, y) = (
@@ -146,9 +133,9 @@ pub fn drop_parts_around(
                 .rotation(rot_from_unit_quaternion(&rotation).to_scaled_axis())
                 .build();
             let h = world.bodies.insert(rb);
-            let collider = shape
-                .clone()
-                .mass_properties(mass)
+            // Collides by its hull, weighs as itself (`PartModel::mass` says why).
+            let collider = ColliderBuilder::new(model.hull.clone())
+                .mass_properties(model.mass)
                 .friction(0.4)
                 .restitution(0.1)
                 .build();

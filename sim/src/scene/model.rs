@@ -5,6 +5,9 @@ use std::sync::Arc;
 use nalgebra::Point3;
 use perception::part::{Catalog, Material, PartError, PartSpec, TriMesh};
 
+use rapier3d_f64::prelude::{MassProperties, SharedShape};
+
+use crate::convert::vec_from_point;
 use crate::render::{Appearance, RenderMesh};
 
 /// Why a part could not be prepared for rendering.
@@ -16,6 +19,9 @@ pub enum PartModelError {
     /// The mesh has no triangles or a parry BVH could not be built from it.
     #[error("part {0}: mesh has no usable triangles")]
     EmptyMesh(String),
+    /// The part's vertices span no volume: rapier cannot build its convex hull.
+    #[error("part {0}: no convex hull for physics (degenerate mesh)")]
+    NoHull(String),
 }
 
 /// A part with everything scenes, renders and labels need.
@@ -37,6 +43,11 @@ pub struct PartModel {
     pub accent: Option<Material>,
     /// Density, kg/m³.
     pub density: f64,
+    /// Its convex hull: the shape it collides by in scene drops (cheap to clone, shared).
+    pub hull: SharedShape,
+    /// Its mass properties as the part it is at `density`, not as its filled hull: a hollow
+    /// shell's centre of mass, and with it the face it comes to rest on, differ from its hull's.
+    pub mass: MassProperties,
     /// The catalog entry.
     pub spec: PartSpec,
 }
@@ -51,6 +62,13 @@ impl PartModel {
             Vec::new()
         };
         let accent = flags.iter().any(|f| *f).then_some(Material::Gold);
+        let points: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
+        let hull = SharedShape::convex_hull(&points)
+            .ok_or_else(|| PartModelError::NoHull(spec.name.clone()))?;
+        let density = spec.density();
+        // Weighed as its hull, the top shell rested in its 40° tilt in 2 % of the crop drops and
+        // face up in 40 %, against the catalog's 8.7 % and 25 %; weighed as itself, in 6 % and 20 %.
+        let mass = MassProperties::from_trimesh(density, &points, &mesh.triangles);
         let render_mesh = RenderMesh::new(&mesh)
             .ok_or_else(|| PartModelError::EmptyMesh(spec.name.clone()))?
             .with_accent(flags);
@@ -71,7 +89,9 @@ impl PartModel {
             keypoints,
             material: spec.material,
             accent,
-            density: spec.density(),
+            density,
+            hull,
+            mass,
             spec: spec.clone(),
             mesh,
         })
