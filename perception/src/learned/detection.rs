@@ -97,8 +97,9 @@ pub struct LearnedDetection {
     pub keypoints: Vec<KeypointVote>,
     /// The pose, or why there is none.
     pub pose: Result<PoseEstimate, String>,
-    /// An estimate the pipeline refused: the reprojection gate, or a part lying on or under
-    /// another one (evaluation still reports its raw PnP).
+    /// An estimate the pipeline refused: the reprojection gate, a mask larger than any stable
+    /// pose can show, or a part lying on or under another one (evaluation still reports its raw
+    /// PnP).
     pub refused: Option<PoseEstimate>,
 }
 

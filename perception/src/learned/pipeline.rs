@@ -464,7 +464,14 @@ impl PoseContext<'_> {
                  a {part} covers lying in any stable pose",
                 self.max_overfill
             );
-            return (keypoints, Err(reason), None);
+            // The keypoints' own estimate, in any stable pose, is still what evaluation reports
+            // as this detection's raw PnP.
+            let refused = match self.estimator.estimate(part, self.camera, &observations) {
+                Ok(estimate) => Some(estimate),
+                Err(EstimateError::Rms { estimate, .. }) => Some(*estimate),
+                Err(_) => None,
+            };
+            return (keypoints, Err(reason), refused);
         }
         match self
             .estimator
@@ -952,5 +959,17 @@ mod tests {
             reason.contains("mm²") && reason.contains("main_shell"),
             "{reason}"
         );
+        // The refused detection still carries its keypoints' estimate, for evaluation's raw PnP.
+        let (votes, origin) = exact_votes(&camera, &on_side, part);
+        let (_, _, refused) = ctx.pose(
+            0,
+            "main_shell",
+            &Ok(votes),
+            origin,
+            MAX_OVERFILL * largest + 1.0,
+        );
+        let raw = refused.expect("the keypoints' estimate").pnp.camera_T_part;
+        let off = (raw.translation.vector - on_side.translation.vector).norm();
+        assert!(off < 1e-4, "raw PnP {:.3} mm off", off * 1e3);
     }
 }
