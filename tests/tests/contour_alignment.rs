@@ -7,7 +7,6 @@ mod feeder_support;
 use feeder_support::{catalog, render_feeder, snapped};
 use nalgebra::Point3;
 use perception::contour::{ContourAligner, ContourConfig, ContourView, GreyPatch, PartOutline};
-use perception::planar::RESTING_TILT;
 
 #[test]
 #[allow(non_snake_case)]
@@ -16,17 +15,18 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
     let mut xy_um = Vec::new();
     let mut yaw_deg = Vec::new();
     let mut lost = 0;
-    // Twelve frames: a quantile of two frames' parts moves with the frames' luck.
-    for seed in 21..33 {
+    // 24 frames: a quantile of a few frames' parts moves with the frames' luck.
+    for seed in 21..45 {
         let feeder = render_feeder(&catalog, seed);
         let camera_T_table = feeder.table_T_camera.inverse();
         let aligner = ContourAligner::new(camera_T_table, ContourConfig::default());
         for (name, table_T_part) in &feeder.truth {
             let spec = catalog.part(name).expect("a catalog part");
             let outline = PartOutline::new(&catalog.load_mesh(spec).expect("its mesh"));
-            // The truth on its stable pose (parts leaning on a neighbour are not on one).
+            // The truth on its stable pose: only parts resting on the table are on one (a part
+            // leaning on a neighbour or lying on top of one is not).
             let truth = snapped(&catalog, &camera_T_table, name, table_T_part);
-            if truth.tilt > RESTING_TILT {
+            if !truth.rests(table_T_part) {
                 continue;
             }
             let stable = &spec.stable_poses[truth.class];
@@ -69,17 +69,19 @@ fn outline_fits_land_on_the_true_pose_from_a_perturbed_start() {
          yaw error median {yaw50:.3}°, 90 % {yaw90:.3}°"
     );
     assert!(
-        n >= 70,
+        n >= 150,
         "only {n} parts resting on a stable pose were aligned"
     );
     assert!(lost <= 1, "{lost} fits found too few edges");
-    // Measured over these 12 frames: 61.5 / 258 µm, 0.26 / 1.14° (84 parts). The misses over
-    // 150 µm are main shells (17 of 20), whose inner rims pull the outline in a crowd. Until
-    // the drops weighed each part as itself, two frames (21, 22) gave 39 / 79 µm and 0.30 /
-    // 0.73°; the 12 frames of that physics gave 56.5 / 189 µm, 0.16 / 0.94° (98 parts): two
-    // frames were too few to bound a quantile.
+    // Measured over these 24 frames: 65.2 / 227 µm, 0.25 / 1.35° (184 parts). The misses over
+    // 150 µm are mostly main shells, whose inner rims pull the outline in a crowd. Before the
+    // drops' contacts between parts were stiffened (parts heaped on each other sank up to 3 mm
+    // into each other) the same frames gave 61.9 / 249 µm, 0.24 / 1.53° (173 parts), where the
+    // first 12 alone gave 0.26 / 1.14°: 12 frames were too few to bound the 90 % yaw quantile.
+    // Parts lying flat on top of another one are not resting and are left out; with stiff
+    // contacts they lie 3 mm up, where a fit on the table plane misses by 0.2–1 mm.
     assert!(xy50 < 70.0, "median xy error {xy50:.1} µm");
-    assert!(xy90 < 300.0, "90 % xy error {xy90:.1} µm");
-    assert!(yaw50 < 0.35, "median yaw error {yaw50:.3}°");
-    assert!(yaw90 < 1.3, "90 % yaw error {yaw90:.3}°");
+    assert!(xy90 < 250.0, "90 % xy error {xy90:.1} µm");
+    assert!(yaw50 < 0.3, "median yaw error {yaw50:.3}°");
+    assert!(yaw90 < 1.45, "90 % yaw error {yaw90:.3}°");
 }
