@@ -216,7 +216,7 @@ fn learned_perception_finds_every_feeder_part_from_pixels() {
 // as itself (2026-11-27; before, as its filled hull), these 12 frames hold other scenes: 136
 // found, 3.01 px, 10.95 px, 32 poses, 103 of 104 unposed parts held; with the keypoint net's
 // fifth cycle (2026-11-27, on the fixed drops): 136, 3.03 px, 10.67 px, 30 poses. Since the
-// drops' contacts between parts are stiff (2026-11-28; before, heaped parts sank up to 3 mm
+// drops' contacts between parts are stiff (2026-11-27; before, heaped parts sank up to 3 mm
 // into each other), other scenes again: 137 found, 2.79 px, 8.80 px, 31 poses, 104 of 106
 // unposed parts held.
 const MIN_FOUND: usize = 135;
@@ -326,7 +326,7 @@ fn upside_down_insert_molds_are_posed_by_their_outline() {
 // pose (13 with the fourth cycle). A known weakness: the outline's support cannot tell these
 // apart. On frames 11–22 with the drops weighing parts as their filled hulls (2026-11-26), the
 // scenes held 19 upside-down insert molds, all posed, and 2 leaning ones posed so; the same
-// frames now hold 6 and 7. Since the drops' contacts between parts are stiff (2026-11-28) the
+// frames now hold 6 and 7. Since the drops' contacts between parts are stiff (2026-11-27) the
 // frames hold 15 upside-down insert molds, all posed so, and 7 outline poses of insert molds
 // resting otherwise.
 const MIN_OUTLINE_RIGHT: usize = 14;
