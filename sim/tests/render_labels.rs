@@ -212,9 +212,9 @@ fn heaped_parts_rest_on_each_other_without_sinking_in() {
             for b in &parts[i + 1..] {
                 let contact = parry3d_f64::query::contact(
                     &pose_from_isometry(&a.table_T_part),
-                    &*models[a.model].hull,
+                    &**models[a.model].body.hull().unwrap(),
                     &pose_from_isometry(&b.table_T_part),
-                    &*models[b.model].hull,
+                    &**models[b.model].body.hull().unwrap(),
                     0.0,
                 )
                 .unwrap();

@@ -133,9 +133,13 @@ pub fn drop_parts_around(
                 .rotation(rot_from_unit_quaternion(&rotation).to_scaled_axis())
                 .build();
             let h = world.bodies.insert(rb);
-            // Collides by its hull, weighs as itself (`PartModel::mass` says why).
-            let collider = ColliderBuilder::new(model.hull.clone())
-                .mass_properties(model.mass)
+            // Collides by its hull, weighs as itself (`PartModel::body` says why).
+            let hull = model
+                .body
+                .hull()
+                .expect("PartModel::new refuses parts without one");
+            let collider = ColliderBuilder::new(hull.clone())
+                .mass_properties(model.body.mass)
                 .friction(0.4)
                 .restitution(0.1)
                 .build();

@@ -4,10 +4,9 @@ use std::sync::Arc;
 
 use nalgebra::Point3;
 use perception::part::{Catalog, Material, PartError, PartSpec, TriMesh};
-use rapier3d_f64::prelude::{MassProperties, SharedShape};
 
-use crate::convert::vec_from_point;
 use crate::render::{Appearance, RenderMesh};
+use crate::stable_poses::DropBody;
 
 /// Why a part could not be prepared for scenes (rendering and physics).
 #[derive(Debug, thiserror::Error)]
@@ -42,13 +41,9 @@ pub struct PartModel {
     pub material: Material,
     /// Material of the mesh's accent triangles (the insert's gold pins), if it has any.
     pub accent: Option<Material>,
-    /// Density, kg/m³.
-    pub density: f64,
-    /// Its convex hull: the shape it collides by in scene drops (cheap to clone, shared).
-    pub hull: SharedShape,
-    /// Its mass properties as the part it is at `density`, not as its filled hull: a hollow
-    /// shell's centre of mass, and with it the face it comes to rest on, differ from its hull's.
-    pub mass: MassProperties,
+    /// Its physics body, the one stable-pose drops use: scene drops collide it by its convex
+    /// hull and weigh it as the part itself (at the catalog's density), not as its filled hull.
+    pub body: DropBody,
     /// The catalog entry.
     pub spec: PartSpec,
 }
@@ -66,15 +61,11 @@ impl PartModel {
         let render_mesh = RenderMesh::new(&mesh)
             .ok_or_else(|| PartModelError::EmptyMesh(spec.name.clone()))?
             .with_accent(flags);
-        let points: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
-        let no_volume = || PartModelError::NoVolume(spec.name.clone());
-        let hull = SharedShape::convex_hull(&points).ok_or_else(no_volume)?;
-        let density = spec.density();
         // Weighed as its hull, the top shell rested in its 40° tilt in 2 % of the crop drops and
         // face up in 40 %, against the catalog's 8.7 % and 25 %; weighed as itself, in 6 % and 20 %.
-        let mass = MassProperties::from_trimesh(density, &points, &mesh.triangles);
-        if !(mass.mass() > 0.0 && mass.mass().is_finite()) {
-            return Err(no_volume());
+        let body = DropBody::new(&mesh, spec.density());
+        if !body.has_volume() {
+            return Err(PartModelError::NoVolume(spec.name.clone()));
         }
         let keypoints = if spec.keypoints.len() == 9 {
             spec.keypoint_points()
@@ -93,9 +84,7 @@ impl PartModel {
             keypoints,
             material: spec.material,
             accent,
-            density,
-            hull,
-            mass,
+            body,
             spec: spec.clone(),
             mesh,
         })
@@ -189,8 +178,9 @@ mod tests {
     fn a_shell_weighs_as_itself_not_as_its_filled_hull() {
         let catalog = catalog();
         for model in PartModel::from_catalog(&catalog, &[]).unwrap() {
-            let filled = model.hull.mass_properties(model.density).mass();
-            let own = model.mass.mass();
+            let hull = model.body.hull().expect("a hull");
+            let filled = hull.mass_properties(model.spec.density()).mass();
+            let own = model.body.mass.mass();
             assert!(
                 own > 0.0 && own <= filled * (1.0 + 1e-9),
                 "{}: {own} kg against {filled} kg filled",

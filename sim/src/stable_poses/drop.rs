@@ -6,7 +6,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d_f64::prelude::{
     ColliderBuilder, Group, InteractionGroups, InteractionTestMode, MassProperties, PhysicsWorld,
-    RigidBodyBuilder, Vector,
+    RigidBodyBuilder, SharedShape, Vector,
 };
 
 use crate::convert::{
@@ -180,10 +180,13 @@ const PARTS: Group = Group::GROUP_3;
 /// contacts, which rapier clusters into one manifold per plane, so the whole face carries the
 /// part. Alone, the triangles let the insert mold rock between hull triangles 0.4° apart;
 /// together both rest.
+#[derive(Debug, Clone)]
 pub struct DropBody {
-    hull: Vec<parry3d_f64::math::Vector>,
+    hull: Option<SharedShape>,
     facets: (Vec<parry3d_f64::math::Vector>, Vec<[u32; 3]>),
-    pub(super) mass: MassProperties,
+    /// Mass properties of the part itself, not of its filled hull: a hollow shell's centre of
+    /// mass, and with it the face it comes to rest on, differ from its hull's.
+    pub(crate) mass: MassProperties,
     pub(super) mesh: TriMesh,
     pub(super) diameter: f64,
 }
@@ -196,11 +199,21 @@ impl DropBody {
         let (lo, hi) = mesh.aabb();
         Self {
             facets: parry3d_f64::transformation::convex_hull(&verts),
-            hull: verts,
+            hull: SharedShape::convex_hull(&verts),
             mass,
             mesh: mesh.clone(),
             diameter: (hi - lo).norm(),
         }
+    }
+
+    /// The convex hull it collides by as a solid, `None` when the mesh spans no volume.
+    pub fn hull(&self) -> Option<&SharedShape> {
+        self.hull.as_ref()
+    }
+
+    /// Whether physics can shape and weigh the part: its mesh spans a volume of positive mass.
+    pub fn has_volume(&self) -> bool {
+        self.hull.is_some() && self.mass.mass() > 0.0 && self.mass.mass().is_finite()
     }
 
     /// Mass in kg and centre of mass in the part frame.
@@ -305,7 +318,7 @@ pub fn simulate_batch(
         ))
         .build();
     world.colliders.insert(ground);
-    let Some(hull) = ColliderBuilder::convex_hull(&body.hull) else {
+    let Some(hull) = body.hull.clone().map(ColliderBuilder::new) else {
         return Vec::new();
     };
     let Ok(facets) = ColliderBuilder::trimesh(body.facets.0.clone(), body.facets.1.clone()) else {
