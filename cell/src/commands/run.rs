@@ -56,7 +56,8 @@ pub struct Args {
     #[arg(long, default_value = "5s", value_name = "DURATION", value_parser = parse_timeout)]
     pub capture_timeout: std::time::Duration,
     /// Failed episodes to draw pictures of (the failing insertion from two views with its
-    /// capture band, and the feeder), linked from the report; 0 for none.
+    /// capture band, and the feeder), linked from the report; 0 for none. Unless 0, the report
+    /// also opens with the first episode's first capture and what perception found in it.
     #[arg(long, default_value_t = 20)]
     pub pictures: usize,
 }
@@ -70,8 +71,9 @@ pub fn parse_timeout(s: &str) -> Result<std::time::Duration, String> {
     Ok(d)
 }
 
-/// Draws the pictures of the first `limit` failed episodes of a simulated run into
-/// `dir/pictures` and rewrites the report so it shows them; returns how many episodes.
+/// Draws the report's opening picture (the first episode's first capture with its detections)
+/// and the pictures of the first `limit` failed episodes of a simulated run into
+/// `dir/pictures`, and rewrites the report so it shows them; returns how many failed episodes.
 fn draw_failures(
     loaded: &LoadedScenario,
     dir: &std::path::Path,
@@ -90,11 +92,12 @@ fn draw_failures(
         .filter(|r| !r.success)
         .take(limit)
         .collect();
-    if failed.is_empty() {
+    let Some(&first) = records.keys().next() else {
         return Ok(0);
-    }
+    };
     let setup = cell::harness::SimSetup::new(loaded.scenario.clone())?;
     let pictures = dir.join(cell::report::PICTURES_DIR);
+    cell::report::capture_picture::first_capture_picture(&setup, first, &pictures)?;
     for r in &failed {
         let feeder = setup
             .cell(r.episode)?

@@ -243,6 +243,76 @@ fn encode_png(name: &str, img: &image::RgbImage) -> Result<Vec<u8>, EvalReportEr
     Ok(buf)
 }
 
+/// Size of a CDF plot, pixels.
+const CDF_SIZE: (u32, u32) = (1000, 560);
+/// Legend text size of a CDF plot, pixels.
+const CDF_LEGEND_PX: u32 = 15;
+
+/// Draws the cumulative distribution of each series (share of values ≤ x) on `root`, the legend
+/// beside the plotting area.
+fn draw_cdf<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    x_label: &str,
+    x_max: f64,
+    series: &[Series],
+) -> Result<(), String> {
+    use crate::report::plots::{Mark, legend_beside, legend_room};
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let legend: Vec<(&str, Mark)> = series
+        .iter()
+        .filter(|s| !s.3.is_empty())
+        .map(|(label, colour, dashed, _)| {
+            let mark = if *dashed {
+                Mark::Dashed(*colour)
+            } else {
+                Mark::Line(*colour)
+            };
+            (label.as_str(), mark)
+        })
+        .collect();
+    let labels: Vec<&str> = legend.iter().map(|l| l.0).collect();
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .margin_right(12 + legend_room(&labels, CDF_LEGEND_PX))
+        .x_label_area_size(44)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..x_max, 0.0..100.0)
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc("estimates (%)")
+        .label_style(("sans-serif", 15))
+        .draw()
+        .map_err(|x| e(&x))?;
+    for (_, colour, dashed, values) in series {
+        if values.is_empty() {
+            continue;
+        }
+        let n = values.len() as f64;
+        let mut pts: Vec<(f64, f64)> = vec![(0.0, 0.0)];
+        for (i, v) in values.iter().enumerate() {
+            let x = v.min(x_max);
+            pts.push((x, 100.0 * i as f64 / n));
+            pts.push((x, 100.0 * (i + 1) as f64 / n));
+        }
+        let last_y = pts.last().map_or(0.0, |p| p.1);
+        pts.push((x_max, last_y));
+        let style = colour.stroke_width(2);
+        let drawn = if *dashed {
+            chart.draw_series(DashedLineSeries::new(pts, 6, 4, style))
+        } else {
+            chart.draw_series(LineSeries::new(pts, style))
+        };
+        drawn.map_err(|x| e(&x))?;
+    }
+    legend_beside(root, chart.plotting_area(), &legend, CDF_LEGEND_PX).map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))
+}
+
 /// A cumulative-distribution plot of each series (share of values ≤ x), as PNG bytes.
 fn cdf_plot(
     name: &str,
@@ -252,74 +322,52 @@ fn cdf_plot(
     series: &[Series],
 ) -> Result<Vec<u8>, EvalReportError> {
     crate::report::plots::register_font();
-    let (w, h) = (1000u32, 560u32);
+    let (w, h) = CDF_SIZE;
     let mut rgb = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        let e = |x: &dyn std::fmt::Display| draw_error(name)(x.to_string());
-        root.fill(&WHITE).map_err(|x| e(&x))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 22))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(56)
-            .build_cartesian_2d(0.0..x_max, 0.0..100.0)
-            .map_err(|x| e(&x))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc("estimates (%)")
-            .label_style(("sans-serif", 15))
-            .draw()
-            .map_err(|x| e(&x))?;
-        for (label, colour, dashed, values) in series {
-            if values.is_empty() {
-                continue;
-            }
-            let n = values.len() as f64;
-            let mut pts: Vec<(f64, f64)> = vec![(0.0, 0.0)];
-            for (i, v) in values.iter().enumerate() {
-                let x = v.min(x_max);
-                pts.push((x, 100.0 * i as f64 / n));
-                pts.push((x, 100.0 * (i + 1) as f64 / n));
-            }
-            let last_y = pts.last().map_or(0.0, |p| p.1);
-            pts.push((x_max, last_y));
-            let style = colour.stroke_width(2);
-            let drawn = if *dashed {
-                chart.draw_series(DashedLineSeries::new(pts, 6, 4, style))
-            } else {
-                chart.draw_series(LineSeries::new(pts, style))
-            };
-            let c = *colour;
-            drawn
-                .map_err(|x| e(&x))?
-                .label(label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()
-            .map_err(|x| e(&x))?;
-        root.present().map_err(|x| e(&x))?;
+        draw_cdf(&root, title, x_label, x_max, series).map_err(draw_error(name))?;
     }
     let img = image::RgbImage::from_raw(w, h, rgb).expect("the buffer has w × h × 3 bytes");
     encode_png(name, &img)
 }
 
-const STYLE: &str = "body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}\
-table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 7px;text-align:right;white-space:nowrap}\
-th{background:#f3f3f3}td.l,th.l{text-align:left}tr.seed td{color:#777;font-style:italic}\
+/// The CDF plot of the eval report drawn as SVG text instead of PNG, the same layout: for
+/// checking where its legend lies. Each series is (label, RGB colour, dashed, values).
+pub fn cdf_plot_svg(
+    title: &str,
+    x_label: &str,
+    x_max: f64,
+    series: &[(String, [u8; 3], bool, Vec<f64>)],
+) -> Result<String, String> {
+    crate::report::plots::register_font();
+    let series: Vec<Series> = series
+        .iter()
+        .map(|(l, [r, g, b], d, v)| {
+            let mut v = v.clone();
+            v.sort_by(f64::total_cmp);
+            (l.clone(), RGBColor(*r, *g, *b), *d, v)
+        })
+        .collect();
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, CDF_SIZE).into_drawing_area();
+        draw_cdf(&root, title, x_label, x_max, &series)?;
+    }
+    Ok(out)
+}
+
+/// The page's CSS. Every table fits a page 800 px wide without scrolling: at most 9 columns,
+/// header text wraps, left-aligned text cells wrap, numbers do not.
+pub const STYLE: &str = "body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}\
+table{border-collapse:collapse;margin:1em 0;max-width:100%;font-size:15px}\
+td,th{border:1px solid #ccc;padding:3px 6px;text-align:right;white-space:nowrap}\
+th{background:#f3f3f3;white-space:normal;vertical-align:bottom}\
+td.l,th.l{text-align:left}td.l{white-space:normal}tr.seed td{color:#777;font-style:italic}\
 img.plot{max-width:100%;height:auto;display:block;margin:1em 0}\
-figure{display:inline-block;margin:4px;width:256px;vertical-align:top;font-size:12px}\
-figure img{width:256px;height:256px;image-rendering:pixelated;border:1px solid #ccc}\
-.scroll{overflow-x:auto}code{background:#f3f3f3;padding:1px 4px}";
+figure{display:inline-block;margin:4px;width:256px;max-width:100%;vertical-align:top;font-size:12px}\
+figure img{width:256px;height:256px;max-width:100%;image-rendering:pixelated;border:1px solid #ccc}\
+code{background:#f3f3f3;padding:1px 4px;overflow-wrap:anywhere}";
 
 /// Detection and posing by the stable pose the parts truly rest in.
 fn stable_pose_table(h: &mut String, rows: &[StablePoseRow]) {
@@ -436,7 +484,7 @@ fn render(
          axis (z is depth) and of the geodesic angle θ, over matched estimates. The seed drops \
          estimates with θ &gt; {}° from every statistic (\"seed-style\"); we count them (\"out\") \
          and also give the statistics over all estimates. The average row is the seed's: the \
-         mean of the parts' means and σs.</p><div class=scroll><table><tr><th class=l>part</th>\
+         mean of the parts' means and σs.</p><table><tr><th class=l>part</th>\
          <th class=l>estimate</th><th>n</th><th>out</th><th>x (mm)</th><th>y (mm)</th>\
          <th>z (mm)</th><th>θ (deg)</th></tr>",
         meta.options.outlier_deg
@@ -478,18 +526,16 @@ fn render(
             }
         }
     }
-    h.push_str("</table></div>");
+    h.push_str("</table>");
 
-    // Detection.
+    // Detection: counts and rates, then why instances were missed, then what the false
+    // positives were.
     let _ = write!(
         h,
         "<h2>Detection</h2><p>Touching: the visible mask comes within {} px of another \
          instance's.</p><table><tr><th class=l>part</th><th>instances</th><th>ignored</th>\
          <th>touching</th><th>detections</th><th>true pos.</th><th>false pos.</th>\
-         <th>precision</th><th>recall</th><th>recall touching</th><th>recall isolated</th>\
-         <th>missed: wrong part</th><th>split or merged</th><th>under another</th>\
-         <th>nothing</th><th>false pos.: wrong part</th><th>second instance</th>\
-         <th>poor mask</th><th>over others</th><th>on the table</th></tr>",
+         <th>precision</th><th>recall</th></tr>",
         meta.options.touch_gap_px
     );
     let all: Vec<&PartSummary> = s.parts.iter().chain(std::iter::once(&s.pooled)).collect();
@@ -497,8 +543,7 @@ fn render(
         let _ = write!(
             h,
             "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&p.part),
             p.truths,
             p.ignored,
@@ -508,12 +553,40 @@ fn render(
             p.false_positives,
             pct(p.precision),
             pct(p.recall),
+        );
+    }
+    h.push_str(
+        "</table><p>Recall of touching and isolated instances, and what became of the missed \
+         ones.</p><table><tr><th class=l>part</th><th>recall touching</th>\
+         <th>recall isolated</th><th>missed: wrong part</th><th>split or merged</th>\
+         <th>under another</th><th>nothing</th></tr>",
+    );
+    for p in &all {
+        let _ = write!(
+            h,
+            "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td></tr>",
+            escape(&p.part),
             pct(p.recall_touching),
             pct(p.recall_isolated),
             p.misses.wrong_part,
             p.misses.partial,
             p.misses.covered,
             p.misses.nothing,
+        );
+    }
+    h.push_str(
+        "</table><p>What the false positives were.</p><table><tr><th class=l>part</th>\
+         <th>false pos.</th><th>wrong part</th><th>second instance</th><th>poor mask</th>\
+         <th>over others</th><th>on the table</th></tr>",
+    );
+    for p in &all {
+        let _ = write!(
+            h,
+            "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td></tr>",
+            escape(&p.part),
+            p.false_positives,
             p.false_positive_causes.wrong_part,
             p.false_positive_causes.duplicate,
             p.false_positive_causes.partial,
@@ -532,9 +605,8 @@ fn render(
          (off the table: instances / of them posed). Flips: outliers within {}° of a \
          near-symmetric equivalent of the truth. AR: BOP average recall over the counted \
          instances, MSSD at {}–{} × diameter, MSPD at {}–{} px.</p><table><tr><th class=l>part</th>\
-         <th>matched</th><th>no pose</th><th>off the table</th><th>stable pose right</th><th>θ p50 / p95 PnP</th>\
-         <th>θ p50 / p95 refined</th><th>flips PnP / refined</th><th>AR<sub>MSSD</sub> PnP / \
-         refined</th><th>AR<sub>MSPD</sub> PnP / refined</th></tr>",
+         <th>matched</th><th>no pose</th><th>off the table</th><th>stable pose right</th>\
+         <th>flips PnP / refined</th></tr>",
         meta.options.outlier_deg,
         MSSD_FRACTIONS[0],
         MSSD_FRACTIONS[MSSD_FRACTIONS.len() - 1],
@@ -545,7 +617,7 @@ fn render(
         let _ = write!(
             h,
             "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{} / {}</td><td>{} ({})</td>\
-             <td>{} / {}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td></tr>",
+             <td>{} / {}</td></tr>",
             escape(&p.part),
             p.true_positives,
             p.pose_failures,
@@ -553,12 +625,25 @@ fn render(
             p.not_resting_posed,
             pct(p.stable_pose_rate),
             p.stable_pose_right,
+            p.raw.symmetry_flips,
+            p.refined.symmetry_flips,
+        );
+    }
+    h.push_str(
+        "</table><table><tr><th class=l>part</th><th>θ p50 / p95 PnP</th>\
+         <th>θ p50 / p95 refined</th><th>AR<sub>MSSD</sub> PnP / refined</th>\
+         <th>AR<sub>MSPD</sub> PnP / refined</th></tr>",
+    );
+    for p in &all {
+        let _ = write!(
+            h,
+            "<tr><td class=l>{}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td>\
+             <td>{} / {}</td></tr>",
+            escape(&p.part),
             num(p.raw.all.angle_deg.p50, 2),
             num(p.raw.all.angle_deg.p95, 2),
             num(p.refined.all.angle_deg.p50, 2),
             num(p.refined.all.angle_deg.p95, 2),
-            p.raw.symmetry_flips,
-            p.refined.symmetry_flips,
             pct(p.raw.ar_mssd),
             pct(p.refined.ar_mssd),
             pct(p.raw.ar_mspd),

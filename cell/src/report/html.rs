@@ -43,14 +43,26 @@ pub fn seconds_text(s: f64) -> String {
     }
 }
 
-/// Where a report links for each episode: its event log and its pictures, as paths relative to
-/// the report.
+/// What the report's opening picture shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Opening {
+    /// The first capture's pixels with the detections drawn (perception that reads pixels).
+    Capture,
+    /// The feeder rendered from above as the first capture found it, with what perception
+    /// reported drawn (keypoint-noise perception, which reads no pixels).
+    Feeder,
+}
+
+/// Where a report links for each episode: its event log and its pictures, and its opening
+/// picture, as paths relative to the report.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct EpisodeLinks {
     /// Event log (JSON lines) by episode.
     pub events: BTreeMap<u32, String>,
     /// Pictures by episode.
     pub pictures: BTreeMap<u32, Vec<String>>,
+    /// The opening picture (see [`crate::report::capture_picture::first_capture_picture`]).
+    pub opening: Option<(String, Opening)>,
 }
 
 /// A rendered report: the page and the image files it refers to (relative path, bytes).
@@ -81,13 +93,20 @@ fn dist_cells(d: &Option<Distribution>, scale: f64) -> String {
     }
 }
 
-const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}\
-.scroll{overflow-x:auto}table{border-collapse:collapse;margin:1em 0}\
-td,th{border:1px solid #ccc;padding:4px 8px;text-align:right;white-space:nowrap}\
-th{background:#f3f3f3}td.l,th.l{text-align:left}td.w{white-space:normal;min-width:16em}\
+/// The page's CSS. Every table fits a page 800 px wide without scrolling: at most 8 columns,
+/// header text wraps, long text cells (`w`) wrap, numbers and names do not, pictures of a failed
+/// episode get a row of their own.
+pub const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}\
+table{border-collapse:collapse;margin:1em 0;max-width:100%;font-size:15px}\
+td,th{border:1px solid #ccc;padding:3px 6px;text-align:right;white-space:nowrap}\
+th{background:#f3f3f3;white-space:normal;vertical-align:bottom}\
+td.l,th.l{text-align:left}td.w{white-space:normal;overflow-wrap:anywhere}\
 .big{font-size:1.6em}img.plot{max-width:100%;height:auto;display:block;margin:1em 0}\
-img.pic{width:240px;max-width:45%;margin:2px;border:1px solid #ccc}\
-code{background:#f3f3f3;padding:1px 4px;word-break:break-all}";
+td.pics{white-space:normal;text-align:left;border-top:none}\
+img.pic{width:240px;max-width:31%;margin:2px;border:1px solid #ccc}\
+figure.opening{margin:1em 0}figure.opening img{max-width:100%;height:auto;display:block}\
+figcaption{font-size:14px;color:#555;margin-top:4px}\
+code{background:#f3f3f3;padding:1px 4px;overflow-wrap:anywhere}";
 
 /// Adds a plot file to `files` and an image of it to the page.
 fn plot(h: &mut String, files: &mut Vec<(String, Vec<u8>)>, name: &str, alt: &str, svg: String) {
@@ -138,7 +157,26 @@ pub fn render_html(
         seconds_text(wall / f64::from(s.episodes.max(1)))
     );
 
-    h.push_str("<h2>Steps</h2>\n<div class=scroll><table><tr><th class=l>step</th><th>reached</th><th>seated</th><th>jammed</th><th>missed</th><th>aborted</th><th>seated rate</th><th>95 % interval</th><th>attempts / episode</th><th>insertions / inserted episode</th><th>seated after a retry</th><th>shakes</th><th>lateral error p50 / p95 (mm)</th><th>tilt p95 (°)</th></tr>\n");
+    opening(&mut h, links);
+
+    h.push_str("<h2>Steps</h2>\n<table><tr><th class=l>step</th><th>reached</th><th>seated</th><th>jammed</th><th>missed</th><th>aborted</th><th>seated rate</th><th>95 % interval</th></tr>\n");
+    for t in &s.steps {
+        let _ = writeln!(
+            h,
+            "<tr><td class=l>{}: {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} – {}</td></tr>",
+            t.index,
+            escape(&t.part),
+            t.reached,
+            t.seated,
+            t.jammed,
+            t.missed,
+            t.aborted,
+            pct(t.rate),
+            pct(t.ci95.lo),
+            pct(t.ci95.hi),
+        );
+    }
+    h.push_str("</table>\n<table><tr><th class=l>step</th><th>attempts per episode</th><th>insertions per inserted episode</th><th>seated after a retry</th><th>shakes</th><th>lateral error p50 / p95 (mm)</th><th>tilt p95 (°)</th></tr>\n");
     for t in &s.steps {
         let (lat, tilt) = match &t.pose_error {
             Some(e) => (
@@ -155,22 +193,14 @@ pub fn render_html(
         };
         let _ = writeln!(
             h,
-            "<tr><td class=l>{}: {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} – {}</td><td>{:.2}</td><td>{insertions}</td><td>{retried}</td><td>{}</td><td>{lat}</td><td>{tilt}</td></tr>",
+            "<tr><td class=l>{}: {}</td><td>{:.2}</td><td>{insertions}</td><td>{retried}</td><td>{}</td><td>{lat}</td><td>{tilt}</td></tr>",
             t.index,
             escape(&t.part),
-            t.reached,
-            t.seated,
-            t.jammed,
-            t.missed,
-            t.aborted,
-            pct(t.rate),
-            pct(t.ci95.lo),
-            pct(t.ci95.hi),
             t.mean_attempts,
             t.shakes
         );
     }
-    h.push_str("</table></div>\n");
+    h.push_str("</table>\n");
     plot(
         &mut h,
         &mut files,
@@ -183,7 +213,7 @@ pub fn render_html(
     if s.failures == 0 {
         h.push_str("<p>No episode failed.</p>\n");
     } else {
-        h.push_str("<p>Failures grouped by mechanism; the numbers each cause carried are given as their range, and the first one (the offset, tilt, … that failed) as median and 95th percentile.</p>\n<div class=scroll><table><tr><th class=l>step</th><th class=l>mechanism</th><th>episodes</th><th>share</th><th>median</th><th>p95</th><th class=l>causes</th></tr>\n");
+        h.push_str("<p>Failures grouped by mechanism; the numbers each cause carried are given as their range, and the first one (the offset, tilt, … that failed) as median and 95th percentile.</p>\n<table><tr><th class=l>step</th><th class=l>mechanism</th><th>episodes</th><th>share</th><th>median</th><th>p95</th><th class=l>causes</th></tr>\n");
         for m in &s.failure_mechanisms {
             let (p50, p95) = match &m.value {
                 Some(v) => (format!("{:.3}", v.p50), format!("{:.3}", v.p95)),
@@ -191,7 +221,7 @@ pub fn render_html(
             };
             let _ = writeln!(
                 h,
-                "<tr><td class=l>{}</td><td class=l>{}</td><td>{}</td><td>{}</td><td>{p50}</td><td>{p95}</td><td class=\"l w\">{}</td></tr>",
+                "<tr><td class=l>{}</td><td class=\"l w\">{}</td><td>{}</td><td>{}</td><td>{p50}</td><td>{p95}</td><td class=\"l w\">{}</td></tr>",
                 escape(m.part.as_deref().unwrap_or("episode")),
                 escape(&m.mechanism),
                 m.count,
@@ -199,7 +229,7 @@ pub fn render_html(
                 escape(&m.detail)
             );
         }
-        h.push_str("</table></div>\n");
+        h.push_str("</table>\n");
         plot(
             &mut h,
             &mut files,
@@ -208,7 +238,7 @@ pub fn render_html(
             plots::failure_mechanisms(s, 12)?,
         );
         failed_episodes(&mut h, &recs, links);
-        h.push_str("<h2>Error budget</h2>\n<p>Each failed episode is charged to the error sources its failing step blamed (an episode may blame several, so shares can add up to more than 100 %).</p>\n<div class=scroll><table><tr><th class=l>error source</th><th>failed episodes</th><th>share</th></tr>\n");
+        h.push_str("<h2>Error budget</h2>\n<p>Each failed episode is charged to the error sources its failing step blamed (an episode may blame several, so shares can add up to more than 100 %).</p>\n<table><tr><th class=l>error source</th><th>failed episodes</th><th>share</th></tr>\n");
         for e in &s.error_budget {
             let _ = writeln!(
                 h,
@@ -218,7 +248,7 @@ pub fn render_html(
                 pct(e.share)
             );
         }
-        h.push_str("</table></div>\n");
+        h.push_str("</table>\n");
         plot(
             &mut h,
             &mut files,
@@ -257,12 +287,40 @@ pub fn render_html(
     Ok(Page { html: h, files })
 }
 
+/// The opening picture, where there is one: a capture with what perception found in it.
+fn opening(h: &mut String, links: &EpisodeLinks) {
+    let Some((path, kind)) = &links.opening else {
+        return;
+    };
+    let caption = match kind {
+        Opening::Capture => {
+            "The first episode's first capture (the camera's feeder window) with what perception \
+             found in it: each posed part outlined at its estimated pose (its mesh projected) \
+             and labelled with its confidence, keypoints yellow crosses, centre a magenta square; \
+             parts found but not posed outlined cyan where they meet the table."
+        }
+        Opening::Feeder => {
+            "The feeder as the first episode's first capture found it. This scenario's \
+             perception (keypoint noise) reads no pixels: it perturbs the parts' true keypoints. \
+             So the feeder is rendered from above with the parts at their true poses, and each \
+             part perception reported is outlined at its estimated pose and labelled with its \
+             confidence, keypoints yellow crosses, centre a magenta square."
+        }
+    };
+    let _ = writeln!(
+        h,
+        "<figure class=opening><a href=\"{0}\"><img src=\"{0}\" alt=\"first capture with detections\"></a><figcaption>{1}</figcaption></figure>",
+        escape(path),
+        escape(caption)
+    );
+}
+
 /// The failed episodes: failing step, outcome, cause, and links to the event log and pictures.
 fn failed_episodes(h: &mut String, recs: &[&EpisodeRecord], links: &EpisodeLinks) {
     let failed: Vec<&&EpisodeRecord> = recs.iter().filter(|r| !r.success).collect();
     let _ = writeln!(
         h,
-        "<h2>Failed episodes</h2>\n<p>{} failed{}. Replay one with <code>cell replay RESULTS --episode N</code>.</p>\n<div class=scroll><table><tr><th>episode</th><th class=l>step</th><th class=l>outcome</th><th class=l>cause</th><th class=l>events</th><th class=l>pictures</th></tr>",
+        "<h2>Failed episodes</h2>\n<p>{} failed{}. Replay one with <code>cell replay RESULTS --episode N</code>. An episode's pictures, where drawn, are in the row below it.</p>\n<table><tr><th>episode</th><th class=l>step</th><th class=l>outcome</th><th class=l>cause</th><th class=l>events</th></tr>",
         failed.len(),
         if failed.len() > MAX_LISTED_FAILURES {
             format!(" (the first {MAX_LISTED_FAILURES} listed)")
@@ -283,29 +341,27 @@ fn failed_episodes(h: &mut String, recs: &[&EpisodeRecord], links: &EpisodeLinks
         let events = links.events.get(&r.episode).map_or("–".to_string(), |p| {
             format!("<a href=\"{}\">events</a>", escape(p))
         });
-        let pictures = links
-            .pictures
-            .get(&r.episode)
-            .map_or("–".to_string(), |ps| {
-                ps.iter()
-                    .map(|p| {
-                        format!(
-                            "<a href=\"{0}\"><img class=pic src=\"{0}\" alt=\"episode {1}\"></a>",
-                            escape(p),
-                            r.episode
-                        )
-                    })
-                    .collect::<Vec<_>>()
-                    .join("")
-            });
         let _ = writeln!(
             h,
-            "<tr id=\"episode-{0}\"><td>{0}</td><td class=l>{1}</td><td class=l>{2}</td><td class=\"l w\">{3}</td><td class=l>{events}</td><td class=l>{pictures}</td></tr>",
+            "<tr id=\"episode-{0}\"><td>{0}</td><td class=l>{1}</td><td class=l>{2}</td><td class=\"l w\">{3}</td><td class=l>{events}</td></tr>",
             r.episode,
             escape(part),
             outcome,
             escape(cause)
         );
+        if let Some(ps) = links.pictures.get(&r.episode) {
+            let pictures: String = ps
+                .iter()
+                .map(|p| {
+                    format!(
+                        "<a href=\"{0}\"><img class=pic src=\"{0}\" alt=\"episode {1}\"></a>",
+                        escape(p),
+                        r.episode
+                    )
+                })
+                .collect();
+            let _ = writeln!(h, "<tr><td class=pics colspan=5>{pictures}</td></tr>");
+        }
     }
-    h.push_str("</table></div>\n");
+    h.push_str("</table>\n");
 }

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use crate::episode::EpisodeRecord;
 use crate::run::Summary;
 
-pub use html::{EpisodeLinks, Page, render_html};
+pub use html::{EpisodeLinks, Opening, Page, render_html};
 pub use plots::PlotError;
 
 /// Name of the JSON summary in a results folder.
@@ -31,7 +31,7 @@ pub fn events_file(episode: u32) -> String {
 }
 
 /// What exists for each of `episodes` under `dir` (or, for a merged report, in the shard
-/// folders beside it), as links relative to `dir`.
+/// folders beside it), and the opening picture, as links relative to `dir`.
 pub fn find_links(dir: &Path, episodes: impl IntoIterator<Item = u32>) -> EpisodeLinks {
     let mut places: Vec<(PathBuf, String)> = vec![(dir.to_path_buf(), String::new())];
     if let Some(parent) = dir.parent()
@@ -59,7 +59,20 @@ pub fn find_links(dir: &Path, episodes: impl IntoIterator<Item = u32>) -> Episod
                 })
         })
         .collect();
-    let mut links = EpisodeLinks::default();
+    // The opening picture: the first place (this folder, then the shards) that has one.
+    let opening = places.iter().find_map(|(p, prefix)| {
+        [
+            (capture_picture::FIRST_CAPTURE_FILE, Opening::Capture),
+            (capture_picture::FIRST_FEEDER_FILE, Opening::Feeder),
+        ]
+        .into_iter()
+        .find(|(name, _)| p.join(PICTURES_DIR).join(name).is_file())
+        .map(|(name, kind)| (format!("{prefix}{PICTURES_DIR}/{name}"), kind))
+    });
+    let mut links = EpisodeLinks {
+        opening,
+        ..EpisodeLinks::default()
+    };
     for e in episodes {
         let name = events_file(e);
         if let Some((_, prefix)) = places

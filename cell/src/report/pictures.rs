@@ -335,14 +335,26 @@ pub fn failure_pictures(
     Ok(written)
 }
 
-/// The feeder region from above at the start of the episode, each part's true position ringed
-/// (yellow: a part an assembly step needs; grey: others).
+/// The feeder region rendered from above, `width` pixels wide, with `parts` at their true poses:
+/// the picture, its camera and the camera's pose in the table frame.
 #[allow(non_snake_case)]
-fn feeder_picture(
+pub fn feeder_view(
     scenario: &Scenario,
     parts: &[sim::cell::feeder::FeederPart],
-    path: &Path,
-) -> Result<PathBuf, PictureError> {
+    width: u32,
+) -> Result<(image::RgbImage, Camera, Isometry3<f64>), PictureError> {
+    let (picture, camera, table_T_camera) = feeder_render(scenario, parts, width)?;
+    let img = image::RgbImage::from_raw(picture.width, picture.height, picture.rgb)
+        .expect("a render has width × height × 3 bytes");
+    Ok((img, camera, table_T_camera))
+}
+
+#[allow(non_snake_case)]
+fn feeder_render(
+    scenario: &Scenario,
+    parts: &[sim::cell::feeder::FeederPart],
+    width: u32,
+) -> Result<(Picture, Camera, Isometry3<f64>), PictureError> {
     let spec = &scenario.spec;
     let f = &spec.cell.feeder;
     let instances = parts
@@ -352,22 +364,36 @@ fn feeder_picture(
     let centre = Point3::new(f.center[0], f.center[1], 0.0);
     let scene = RenderScene::new(instances, None, Some(table()), lights(&centre), [0.12; 3]);
     let aspect = f.size[1] / f.size[0];
-    let height = ((f64::from(FEEDER_PX) * aspect).round() as u32).max(16);
+    let width = width.max(16);
+    let height = ((f64::from(width) * aspect).round() as u32).max(16);
     let distance = 0.4;
-    let focal = f64::from(FEEDER_PX) * distance / (f.size[0] * 1.1);
+    let focal = f64::from(width) * distance / (f.size[0] * 1.1);
     let camera = Camera::new(
         focal,
         focal,
-        f64::from(FEEDER_PX - 1) / 2.0,
+        f64::from(width - 1) / 2.0,
         f64::from(height - 1) / 2.0,
-        FEEDER_PX,
+        width,
         height,
         Distortion::default(),
     )
     .map_err(|e| PictureError::Camera(e.to_string()))?;
     let eye = centre + Vector3::new(0.0, -1e-4, distance);
     let table_T_camera = look_at(&eye, &centre, &Vector3::x(), 0.0);
-    let mut picture = Picture::from_render(&scene, &camera, &table_T_camera);
+    let picture = Picture::from_render(&scene, &camera, &table_T_camera);
+    Ok((picture, camera, table_T_camera))
+}
+
+/// The feeder region from above at the start of the episode, each part's true position ringed
+/// (yellow: a part an assembly step needs; grey: others).
+#[allow(non_snake_case)]
+fn feeder_picture(
+    scenario: &Scenario,
+    parts: &[sim::cell::feeder::FeederPart],
+    path: &Path,
+) -> Result<PathBuf, PictureError> {
+    let spec = &scenario.spec;
+    let (mut picture, camera, table_T_camera) = feeder_render(scenario, parts, FEEDER_PX)?;
     let needed: Vec<&str> = spec.assembly.iter().map(|s| s.part.as_str()).collect();
     for p in parts {
         let o = p.table_T_part * Point3::origin();

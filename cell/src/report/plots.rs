@@ -93,6 +93,116 @@ pub fn tick_decimals(span: f64, ticks: usize) -> usize {
 /// Font size of tick labels and axis descriptions, pixels (the SVGs are shown at about their
 /// own width, so this stays readable at 800 px).
 const LABEL_PX: u32 = 16;
+/// Font size of legend text, pixels.
+const LEGEND_PX: u32 = 15;
+
+/// Gap between the plotting area and the legend beside it, pixels.
+const LEGEND_GAP: i32 = 16;
+/// The legend box: width of the marker column and margin around the entries, pixels.
+const LEGEND_MARKER_PX: u32 = 30;
+const LEGEND_MARGIN_PX: u32 = 8;
+
+/// The marker of a legend entry.
+#[derive(Debug, Clone, Copy)]
+pub enum Mark {
+    /// A filled square (bars).
+    Square(RGBColor),
+    /// A filled circle (points).
+    Dot(RGBColor),
+    /// A solid line.
+    Line(RGBColor),
+    /// A dashed line.
+    Dashed(RGBColor),
+}
+
+fn text_width(label: &str, font_px: u32) -> u32 {
+    ("sans-serif", font_px)
+        .into_font()
+        .box_size(label)
+        .map_or(label.chars().count() as u32 * font_px * 6 / 10, |(w, _)| w)
+}
+
+/// Room to leave right of the plotting area for a legend of `labels` in `font_px` text, pixels
+/// (pass it to `ChartBuilder::margin_right`): legends go beside the plot, never over its data.
+pub fn legend_room(labels: &[&str], font_px: u32) -> u32 {
+    register_font();
+    let text = labels
+        .iter()
+        .map(|l| text_width(l, font_px))
+        .max()
+        .unwrap_or(0);
+    text + LEGEND_MARKER_PX + 2 * LEGEND_MARGIN_PX + LEGEND_GAP as u32 + 4
+}
+
+/// Draws a legend of `items` on `root` (the whole picture) as a box right of `plot` (the
+/// chart's plotting area), top-aligned with it, in the room that [`legend_room`] left there.
+pub fn legend_beside<DB, CT>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    plot: &DrawingArea<DB, CT>,
+    items: &[(&str, Mark)],
+    font_px: u32,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend,
+    CT: plotters::coord::CoordTranslate,
+{
+    if items.is_empty() {
+        return Ok(());
+    }
+    register_font();
+    let (px, py) = plot.get_base_pixel();
+    let left = px + plot.dim_in_pixel().0 as i32 + LEGEND_GAP;
+    let top = py;
+    let line = (font_px * 3 / 2) as i32;
+    let margin = LEGEND_MARGIN_PX as i32;
+    let text = items
+        .iter()
+        .map(|(l, _)| text_width(l, font_px))
+        .max()
+        .unwrap_or(0) as i32;
+    let right = left + 2 * margin + LEGEND_MARKER_PX as i32 + text;
+    let bottom = top + 2 * margin + line * items.len() as i32;
+    root.draw(&Rectangle::new(
+        [(left, top), (right, bottom)],
+        WHITE.filled(),
+    ))?;
+    root.draw(&Rectangle::new([(left, top), (right, bottom)], BLACK))?;
+    let font = ("sans-serif", font_px).into_font();
+    for (i, (label, mark)) in items.iter().enumerate() {
+        let y = top + margin + line * i as i32 + line / 2;
+        let x = left + margin;
+        match *mark {
+            Mark::Square(c) => root.draw(&Rectangle::new(
+                [(x + 4, y - 6), (x + 16, y + 6)],
+                c.filled(),
+            ))?,
+            Mark::Dot(c) => root.draw(&Circle::new((x + 10, y), 5, c.filled()))?,
+            Mark::Line(c) => root.draw(&PathElement::new(
+                vec![(x, y), (x + 22, y)],
+                c.stroke_width(2),
+            ))?,
+            Mark::Dashed(c) => {
+                for k in [0, 9, 18] {
+                    root.draw(&PathElement::new(
+                        vec![(x + k, y), (x + k + 5, y)],
+                        c.stroke_width(2),
+                    ))?;
+                }
+            }
+        }
+        root.draw(&Text::new(
+            label.to_string(),
+            (x + LEGEND_MARKER_PX as i32, y),
+            font.clone()
+                .into_text_style(root)
+                .pos(plotters::style::text_anchor::Pos::new(
+                    plotters::style::text_anchor::HPos::Left,
+                    plotters::style::text_anchor::VPos::Center,
+                )),
+        ))?;
+    }
+    Ok(())
+}
 
 /// The lower end of a percentage axis that shows the differences between `lows` (the lowest
 /// interval ends): 0 when something is far from 100 %, otherwise a round number below them,
@@ -305,10 +415,12 @@ pub fn cycle_time_histogram(records: &[&EpisodeRecord]) -> Result<String, PlotEr
         .max()
         .unwrap_or(1)
         .max(1);
+    let room = legend_room(&["succeeded", "failed"], LEGEND_PX);
     svg("cycle time", (800, 400), |root| {
         let mut chart = ChartBuilder::on(root)
             .caption("Simulated cycle time", ("sans-serif", 22))
             .margin(12)
+            .margin_right(12 + room)
             .x_label_area_size(40)
             .y_label_area_size(60)
             .build_cartesian_2d(lo..lo + width * bins as f64, 0.0..f64::from(top) * 1.1)?;
@@ -322,33 +434,38 @@ pub fn cycle_time_histogram(records: &[&EpisodeRecord]) -> Result<String, PlotEr
             .y_desc("episodes")
             .draw()?;
         let x = |b: usize| lo + width * b as f64;
-        chart
-            .draw_series((0..bins).map(|b| {
-                Rectangle::new(
-                    [(x(b), 0.0), (x(b + 1), f64::from(ok[b]))],
-                    GREEN.mix(0.7).filled(),
-                )
-            }))?
-            .label("succeeded")
-            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], GREEN.filled()));
-        chart
-            .draw_series((0..bins).map(|b| {
-                let base = f64::from(ok[b]);
-                Rectangle::new(
-                    [(x(b), base), (x(b + 1), base + f64::from(failed[b]))],
-                    RED.mix(0.7).filled(),
-                )
-            }))?
-            .label("failed")
-            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], RED.filled()));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        chart.draw_series((0..bins).map(|b| {
+            Rectangle::new(
+                [(x(b), 0.0), (x(b + 1), f64::from(ok[b]))],
+                GREEN.mix(0.7).filled(),
+            )
+        }))?;
+        chart.draw_series((0..bins).map(|b| {
+            let base = f64::from(ok[b]);
+            Rectangle::new(
+                [(x(b), base), (x(b + 1), base + f64::from(failed[b]))],
+                RED.mix(0.7).filled(),
+            )
+        }))?;
+        legend_beside(
+            root,
+            chart.plotting_area(),
+            &[
+                ("succeeded", Mark::Square(GREEN)),
+                ("failed", Mark::Square(RED)),
+            ],
+            LEGEND_PX,
+        )?;
         Ok(())
     })
 }
+
+const OUTCOMES: [StepOutcome; 4] = [
+    StepOutcome::Seated,
+    StepOutcome::Jammed,
+    StepOutcome::Missed,
+    StepOutcome::Aborted,
+];
 
 fn outcome_colour(o: StepOutcome) -> RGBColor {
     match o {
@@ -386,10 +503,15 @@ pub fn pose_error_scatter(
         .fold(band.unwrap_or(0.0), f64::max)
         .max(0.01)
         * 1.15;
-    svg("pose error", (520, 520), |root| {
+    let band_label = band.map(|c| format!("capture band ±{c:.3} mm"));
+    let mut labels: Vec<&str> = band_label.iter().map(String::as_str).collect();
+    labels.extend(OUTCOMES.iter().map(|o| outcome_name(*o)));
+    let room = legend_room(&labels, LEGEND_PX);
+    svg("pose error", (520 + room, 520), |root| {
         let mut chart = ChartBuilder::on(root)
             .caption(format!("{index}: {part}"), ("sans-serif", 20))
             .margin(12)
+            .margin_right(12 + room)
             .x_label_area_size(44)
             .y_label_area_size(70)
             .build_cartesian_2d(-r..r, -r..r)?;
@@ -402,7 +524,8 @@ pub fn pose_error_scatter(
             .x_desc("dx (mm)")
             .y_desc("dy (mm)")
             .draw()?;
-        if let Some(c) = band {
+        let mut legend: Vec<(&str, Mark)> = Vec::new();
+        if let (Some(c), Some(label)) = (band, band_label.as_deref()) {
             let corners = [(-c, -c), (c, -c), (c, c), (-c, c), (-c, -c)];
             let dashes: Vec<PathElement<(f64, f64)>> = corners
                 .windows(2)
@@ -421,19 +544,10 @@ pub fn pose_error_scatter(
                     })
                 })
                 .collect();
-            chart
-                .draw_series(dashes)?
-                .label(format!("capture band ±{c:.3} mm"))
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(2))
-                });
+            chart.draw_series(dashes)?;
+            legend.push((label, Mark::Dashed(BLACK)));
         }
-        for o in [
-            StepOutcome::Seated,
-            StepOutcome::Jammed,
-            StepOutcome::Missed,
-            StepOutcome::Aborted,
-        ] {
+        for o in OUTCOMES {
             let c = outcome_colour(o);
             let pts: Vec<(f64, f64)> = points
                 .iter()
@@ -443,17 +557,10 @@ pub fn pose_error_scatter(
             if pts.is_empty() {
                 continue;
             }
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new(*p, 3, c.mix(0.8).filled())))?
-                .label(outcome_name(o))
-                .legend(move |(x, y)| Circle::new((x + 6, y), 4, c.filled()));
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 3, c.mix(0.8).filled())))?;
+            legend.push((outcome_name(o), Mark::Dot(c)));
         }
-        chart
-            .configure_series_labels()
-            .label_font(("sans-serif", 14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+        legend_beside(root, chart.plotting_area(), &legend, LEGEND_PX)?;
         Ok(())
     })
 }
