@@ -3,8 +3,9 @@
 
 use mujoco_rs::prelude::MjModel;
 
+use super::available::check_version;
+use super::error::MujocoError;
 use super::mjcf::Mjcf;
-use super::{MujocoError, VERSION};
 
 /// A compiled model with the document it came from (for error messages and debugging).
 #[derive(Debug)]
@@ -13,27 +14,6 @@ pub struct Compiled {
     pub model: MjModel,
     /// The MJCF it was compiled from.
     pub xml: String,
-}
-
-/// Checks that the loaded library is MuJoCo 3.17.0 (the bindings assert it and would panic).
-pub(super) fn check_version() -> Result<(), MujocoError> {
-    // SAFETY: mj_version only returns a constant of the loaded library; it takes no arguments
-    // and touches no state.
-    #[allow(unsafe_code)]
-    let loaded = unsafe { mujoco_rs::mujoco_c::mj_version() };
-    if i64::from(loaded) == i64::from(mujoco_rs::mujoco_c::mjVERSION_HEADER) {
-        return Ok(());
-    }
-    Err(MujocoError::Unavailable(format!(
-        "the MuJoCo library loaded is version {}.{}.{}, expected {VERSION} (the version \
-         mujoco-rs 7 is generated for): unset MUJOCO_DYNAMIC_LINK_DIR to let the build provision \
-         {VERSION} from its PyPI wheel, or point it at a MuJoCo {VERSION} lib folder (loaded \
-         from the build's {})",
-        loaded / 1_000_000,
-        loaded / 1000 % 1000,
-        loaded % 1000,
-        mujoco_provision::LIB_DIR
-    )))
 }
 
 /// Compiles `xml` (generated from `mjcf`); an error that names one of the meshes is reported

@@ -2,7 +2,7 @@
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector2, Vector3};
 
-use super::{PoseError, tilt_of, twist_about_z};
+use super::pose_error::{PoseError, tilt_of, twist_about_z};
 use crate::cell::geometry::{PartGeometry, destination_T_insertion};
 use crate::config::{AssemblyStep, Tolerances};
 

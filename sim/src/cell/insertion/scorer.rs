@@ -3,9 +3,10 @@
 //! line in [`Scorer::build`](super::Scorer::build).
 
 use nalgebra::Isometry3;
-use thiserror::Error;
 
-use super::{InsertionResult, Mating, ReceiverPart};
+use super::error::ScorerError;
+use super::mating::{Mating, ReceiverPart};
+use super::outcome::InsertionResult;
 use crate::cell::geometry::PartGeometry;
 
 /// One insertion to score: the step's geometry and where the held part starts.
@@ -31,37 +32,6 @@ pub struct Scored {
     pub simulated_time: f64,
     /// Physics steps taken (zero for an analytic scorer).
     pub steps: usize,
-}
-
-/// Why a scorer could not be built or could not score.
-#[derive(Debug, Error)]
-pub enum ScorerError {
-    /// The scorer is not part of this build or its native library is missing.
-    #[error("insertion scorer {scorer:?} is unavailable: {reason}")]
-    Unavailable {
-        /// The scorer's name.
-        scorer: &'static str,
-        /// Why, and how to make it available.
-        reason: String,
-    },
-    /// A part's shape cannot be turned into the engine's model.
-    #[error("part {part:?}, convex piece {piece}: {reason}")]
-    Geometry {
-        /// The part.
-        part: String,
-        /// Index of the convex piece in the part's pieces.
-        piece: usize,
-        /// Why the engine rejects it.
-        reason: String,
-    },
-    /// The engine failed on a model it accepted.
-    #[error("insertion scorer {scorer:?} failed: {reason}")]
-    Engine {
-        /// The scorer's name.
-        scorer: &'static str,
-        /// What the engine said.
-        reason: String,
-    },
 }
 
 /// Decides how an insertion ends, from the step's geometry and the start pose.
