@@ -43,6 +43,7 @@ mod capture;
 pub mod error;
 pub mod feasible;
 pub mod feeder;
+mod feeder_window;
 pub mod geometry;
 pub mod gripper;
 pub mod insertion;
@@ -51,8 +52,9 @@ pub mod motion;
 pub mod noise;
 mod sim_cell;
 
-pub use capture::{FeederImage, calibrated_feeder_window, feeder_window};
+pub use capture::FeederImage;
 pub use error::CellError;
 pub use feasible::check_feasible;
+pub use feeder_window::{calibrated_feeder_window, feeder_window};
 pub use model::CellModel;
 pub use sim_cell::{CameraPart, HeldPart, PlacedPart, ReleaseReport, SimCell};

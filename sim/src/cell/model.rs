@@ -10,9 +10,9 @@ use robots::limits::InvalidLimits;
 use robots::robot::Robot;
 use robots::ur_arm::UrArm;
 
-use super::capture::calibrated_feeder_window;
 use super::error::CellError;
 use super::feasible::check_feasible;
+use super::feeder_window::calibrated_feeder_window;
 use super::geometry::{CellGeometry, PartGeometry, destination_T_insertion};
 use super::insertion::{InsertionScorer, Scorer};
 use crate::config::{AssemblyStep, CellSpec, Destination, NoiseSpec};
