@@ -6,7 +6,7 @@ use nalgebra::{Isometry3, Point3};
 use perception::camera::Camera;
 use rand::Rng;
 
-use super::geometry::box_corners;
+use super::aabb::box_corners;
 use super::{RenderOutput, RenderScene, RenderSettings, SensorError, SensorModel, Window, render};
 
 /// Pixels added around the projected corners of a region: its edges bow slightly between the

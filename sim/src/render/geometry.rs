@@ -9,7 +9,9 @@ use parry3d_f64::partitioning::BvhNode;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
+use super::aabb::box_corners;
 use super::instance_grid::{InstanceGrid, slab_range};
+use super::light::PointLight;
 use super::shadow_grid::ShadowGrid;
 use super::{Appearance, TagBoard};
 
@@ -186,18 +188,6 @@ pub struct Table {
     pub height: f64,
     /// How the table looks.
     pub appearance: Appearance,
-}
-
-/// A point light in the table frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PointLight {
-    /// Position in the table frame, metres.
-    pub position: Point3<f64>,
-    /// Radiant intensity per channel (linear RGB, W/sr-like units: irradiance at 1 m).
-    pub intensity: [f64; 3],
-    /// Radius of the emitting sphere, metres (0 for a point): softens shadows and widens
-    /// highlights.
-    pub radius: f64,
 }
 
 /// What a ray hit.
@@ -421,23 +411,6 @@ impl Iterator for Bits {
         self.0 &= self.0 - 1;
         Some(i)
     }
-}
-
-/// The eight corners of the box from `lo` to `hi`.
-pub(crate) fn box_corners(lo: &Point3<f64>, hi: &Point3<f64>) -> [Point3<f64>; 8] {
-    std::array::from_fn(|k| {
-        Point3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        )
-    })
-}
-
-/// The corners of the cube around a light's sphere (its centre, eight times, for a point light).
-pub(crate) fn light_cube(light: &PointLight) -> [Point3<f64>; 8] {
-    let r = Vector3::repeat(light.radius);
-    box_corners(&(light.position - r), &(light.position + r))
 }
 
 /// Table-frame bounding box of an instance (the part box's corners, transformed).

@@ -8,7 +8,8 @@
 use nalgebra::Isometry3;
 use perception::camera::Camera;
 
-use super::geometry::{box_corners, light_cube};
+use super::aabb::box_corners;
+use super::light::light_cube;
 use super::renderer::full_masks;
 use super::{CentreRays, RenderOutput, RenderScene, RenderSettings, Window, render_with_rays};
 

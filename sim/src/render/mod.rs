@@ -6,12 +6,14 @@
 
 #![allow(non_snake_case)]
 
+mod aabb;
 mod appearance;
 mod capture;
 mod geometry;
 mod incremental;
 mod instance_grid;
 mod kernels;
+mod light;
 mod output;
 mod renderer;
 mod sensor;
@@ -21,8 +23,9 @@ mod tag_board;
 
 pub use appearance::Appearance;
 pub use capture::{Capture, capture, window_covering};
-pub use geometry::{Hit, Instance, PointLight, RenderMesh, RenderScene, SurfaceKind, Table};
+pub use geometry::{Hit, Instance, RenderMesh, RenderScene, SurfaceKind, Table};
 pub use incremental::IncrementalRenderer;
+pub use light::PointLight;
 pub use output::{InstanceMask, RenderOutput, Window};
 pub use renderer::{CentreRays, RenderSettings, instance_mask, render, render_with_rays};
 pub use sensor::{SensorError, SensorModel};

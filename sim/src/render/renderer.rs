@@ -9,7 +9,8 @@ use nalgebra::{Isometry3, Point2, Point3, Vector3};
 use perception::camera::Camera;
 use rayon::prelude::*;
 
-use super::geometry::{SurfaceKind, box_corners};
+use super::aabb::box_corners;
+use super::geometry::SurfaceKind;
 use super::shading::{ambient, brdf_cos};
 use super::shadow_grid::ShadowGrid;
 use super::{Appearance, BoardMark, Hit, InstanceMask, RenderOutput, RenderScene, Window};

@@ -5,8 +5,8 @@
 
 use nalgebra::Point3;
 
-use super::PointLight;
-use super::geometry::{box_corners, light_cube};
+use super::aabb::box_corners;
+use super::light::{PointLight, light_cube};
 
 /// Shadow-ray origins within this height of the board's top (z = 0) may use the grid, metres
 /// (shadow rays start a fraction of a micrometre above the surface they shade).
