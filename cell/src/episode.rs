@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::orchestrator::State;
+
 /// Format version of episode records; a results file with another version is refused.
 pub const RECORD_VERSION: u32 = 1;
 
@@ -138,4 +140,32 @@ pub struct EpisodeRecord {
     /// Why the episode stopped early, if it did (safety stop, lost connection, ...).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub abort: Option<String>,
+    /// Where the cycle's simulated time went, state by state in order; the spans add up to
+    /// `cycle_time_s` (empty in records from before they were kept).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub phases: Vec<PhaseSpan>,
+}
+
+/// Simulated time spent in one state of the orchestrator, on the critical path of the cycle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PhaseSpan {
+    /// The state.
+    pub state: State,
+    /// The assembly step it served, when inside one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<usize>,
+    /// Simulated seconds spent in it.
+    #[serde(rename = "s")]
+    pub duration_s: f64,
+}
+
+impl EpisodeRecord {
+    /// Simulated seconds spent in each state over the whole cycle.
+    pub fn time_by_state(&self) -> std::collections::BTreeMap<State, f64> {
+        let mut out = std::collections::BTreeMap::new();
+        for p in &self.phases {
+            *out.entry(p.state).or_insert(0.0) += p.duration_s;
+        }
+        out
+    }
 }

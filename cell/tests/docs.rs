@@ -461,14 +461,22 @@ fn small_inputs_cap_sizes_and_keep_everything_else() {
     let dataset = small(&words("dataset --out d --test-feeder 100"));
     assert!(dataset.windows(2).any(|w| w == ["--test-feeder", "2"]));
     assert!(!dataset.iter().any(|a| a == "--train-feeder"));
-    assert_eq!(small(&words("replay r --episode 3")), words("replay r --episode 3"));
     assert_eq!(
-        ci_script("cargo run --release -p cell -- run s.toml  # main job\ncargo test --workspace\n"),
+        small(&words("replay r --episode 3")),
+        words("replay r --episode 3")
+    );
+    assert_eq!(
+        ci_script(
+            "cargo run --release -p cell -- run s.toml  # main job\ncargo test --workspace\n"
+        ),
         vec!["cell run s.toml --episodes 2".to_string()]
     );
     assert_eq!(
         ci_script("cell virtual-ur --duration-s 120 &\nsleep 2"),
-        vec!["cell virtual-ur --duration-s 60 &".to_string(), "sleep 2".to_string()]
+        vec![
+            "cell virtual-ur --duration-s 60 &".to_string(),
+            "sleep 2".to_string()
+        ]
     );
     assert_eq!(
         ci_script("cell dataset --out d \\\n  --test-feeder 9 --train-crops 0 --test-crops 0 --train-overviews 0 --test-overviews 0"),

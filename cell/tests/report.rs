@@ -73,10 +73,17 @@ fn a_noisy_run_reports_mechanisms_and_links_every_failed_episode_to_its_events()
             &["capture band ±0.145 mm", "seated", "missed"][..],
         ),
         ("plots/cycle_time.svg", &["succeeded", "failed"][..]),
+        ("plots/cycle_timeline.svg", &["pick", "insert"][..]),
     ] {
         let svg = std::fs::read_to_string(dir.join(plot)).unwrap();
         assert_legend_beside_the_data(plot, &svg, labels);
     }
+    // Where the time goes: a table of the states' mean seconds that add up to the mean cycle,
+    // and the timelines of a typical and of the slowest successful episode.
+    assert!(html.contains("Where the time goes"));
+    assert!(html.contains("plots/cycle_timeline.svg"));
+    let timeline = std::fs::read_to_string(dir.join("plots/cycle_timeline.svg")).unwrap();
+    assert!(timeline.contains("typical: ") && timeline.contains("slowest: "));
     // Tables fit 800 px.
     assert_tables_fit_800_px("run report", &html, cell::report::html::STYLE);
     // The page opens with the first episode's first capture: keypoint-noise perception reads
@@ -103,6 +110,13 @@ fn a_noisy_run_reports_mechanisms_and_links_every_failed_episode_to_its_events()
         serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
     let failures = summary["failures"].as_u64().unwrap();
     let mechanisms = summary["failure_mechanisms"].as_array().unwrap();
+    let phases = summary["cycle_phases"].as_array().unwrap();
+    let phased: f64 = phases.iter().map(|p| p["mean_s"].as_f64().unwrap()).sum();
+    let mean_cycle = summary["cycle_time_s"]["mean"].as_f64().unwrap();
+    assert!(
+        (phased - mean_cycle).abs() < 1e-9,
+        "phases {phased} s against the mean cycle {mean_cycle} s"
+    );
     assert!(failures >= 8, "only {failures} failures at 3 px");
     assert!(mechanisms.len() <= 6, "{mechanisms:?}");
     let grouped: u64 = mechanisms

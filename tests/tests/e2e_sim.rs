@@ -65,6 +65,29 @@ fn nominal_scenario_assembles_at_least_95_percent_of_200_episodes() {
             assert_eq!(w[0].to, w[1].from, "transitions chain");
             assert!(w[1].sim_time_s >= w[0].sim_time_s && w[1].wall_time_s >= w[0].wall_time_s);
         }
+        // The cycle's time is accounted for state by state: the phases add up to the cycle
+        // time, start after Home and carry the step they served.
+        let phased: f64 = r.phases.iter().map(|p| p.duration_s).sum();
+        assert!(
+            (phased - r.cycle_time_s).abs() < 1e-9,
+            "episode {}: phases {phased} s against cycle {} s",
+            r.episode,
+            r.cycle_time_s
+        );
+        assert!(
+            r.phases
+                .iter()
+                .all(|p| p.duration_s >= 0.0 && p.state != State::Home)
+        );
+        assert_eq!(
+            r.phases.first().map(|p| (p.state, p.step)),
+            Some((State::Capture, Some(0)))
+        );
+        assert!(
+            r.phases
+                .iter()
+                .any(|p| p.state == State::Insert && p.step == Some(2))
+        );
         if r.success {
             assert_eq!(r.steps.len(), 3);
             for s in &r.steps {

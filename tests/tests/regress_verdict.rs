@@ -53,6 +53,7 @@ fn episode(i: u32, success: bool) -> EpisodeRecord {
         steps,
         wall_time_s: 0.0,
         abort: None,
+        phases: vec![],
     }
 }
 

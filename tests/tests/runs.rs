@@ -94,6 +94,7 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
         steps,
         wall_time_s: 0.01,
         abort: None,
+        phases: vec![],
     }
 }
 

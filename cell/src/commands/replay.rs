@@ -29,8 +29,15 @@ pub struct Args {
 
 /// The deterministic part of a record (everything but wall-clock time).
 fn same_outcome(a: &EpisodeRecord, b: &EpisodeRecord) -> bool {
+    // Records from before phases were kept have none: compare the rest.
+    let keep_phases = !a.phases.is_empty() && !b.phases.is_empty();
     let strip = |r: &EpisodeRecord| EpisodeRecord {
         wall_time_s: 0.0,
+        phases: if keep_phases {
+            r.phases.clone()
+        } else {
+            vec![]
+        },
         ..r.clone()
     };
     strip(a) == strip(b)
@@ -123,7 +130,26 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             .parent()
             .map_or_else(|| PathBuf::from(PICTURES_DIR), |p| p.join(PICTURES_DIR)),
     };
+    let by_state = r.time_by_state();
+    if !by_state.is_empty() {
+        let parts: Vec<String> = by_state
+            .iter()
+            .filter(|(_, s)| **s > 0.0)
+            .map(|(state, s)| format!("{} {s:.2} s", state.name()))
+            .collect();
+        println!("where the time went: {}", parts.join(", "));
+    }
     let mut pictures = failure_pictures(&loaded.scenario, r, Some(&feeder), &dir)?;
+    if !r.phases.is_empty() {
+        let path = dir.join(format!("episode-{:06}-timeline.svg", r.episode));
+        let svg = cell::report::timeline::cycle_timeline(&[(
+            format!("episode {} ({:.1} s)", r.episode, r.cycle_time_s),
+            r,
+        )])?;
+        std::fs::create_dir_all(&dir)?;
+        sim::fsutil::write_atomic(&path, svg.as_bytes())?;
+        pictures.push(path);
+    }
     if !r.success && setup.perception.needs_pixels() {
         pictures.extend(cell::report::capture_picture::capture_picture(
             &setup, r, &dir,

@@ -193,6 +193,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             100.0 * e.share
         );
     }
+    if let Some(line) = cell::run::phases::breakdown_line(&done.summary.cycle_phases) {
+        println!("  {line}");
+    }
     let o = &done.outcome;
     println!(
         "ran {} in {:.1} s{} ({} resumed); results {}, report {}",

@@ -138,6 +138,7 @@ impl<'a> Engine<'a> {
             cycle_time_s: self.clock() - self.cycle_start,
             wall_time_s: self.log.wall_time_s(),
             abort: self.abort.take(),
+            phases: self.log.phases(),
         };
         (record, self.log)
     }

@@ -6,6 +6,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::state::State;
+use crate::episode::PhaseSpan;
 
 /// One transition of the state machine.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -76,6 +77,28 @@ impl EventLog {
     /// The events so far.
     pub fn events(&self) -> &[Event] {
         &self.events
+    }
+
+    /// Where the cycle's simulated time went: each state entered after the cycle started (the
+    /// arm at home), in order, with the simulated seconds spent in it. The spans add up to the
+    /// cycle time.
+    pub fn phases(&self) -> Vec<PhaseSpan> {
+        let mut spans = Vec::new();
+        // (simulated time, step) at which the state being timed was entered.
+        let mut entered: Option<(f64, Option<usize>)> = None;
+        for e in &self.events {
+            if let Some((start, step)) = entered {
+                spans.push(PhaseSpan {
+                    state: e.from,
+                    step,
+                    duration_s: e.sim_time_s - start,
+                });
+            }
+            if entered.is_some() || (e.from == State::Home && e.to != State::Home) {
+                entered = Some((e.sim_time_s, e.step));
+            }
+        }
+        spans
     }
 
     /// Writes the events as JSON lines.

@@ -4,8 +4,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-/// A state of the episode state machine.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// A state of the episode state machine (ordered as one step passes through them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum State {
     /// Open the gripper and move to the home joints.
@@ -40,6 +40,26 @@ pub enum State {
 }
 
 impl State {
+    /// The state's name as records and reports write it (`plan_pick`).
+    pub fn name(self) -> &'static str {
+        match self {
+            State::Home => "home",
+            State::Capture => "capture",
+            State::Perceive => "perceive",
+            State::Select => "select",
+            State::PlanPick => "plan_pick",
+            State::Pick => "pick",
+            State::VerifyGrasp => "verify_grasp",
+            State::PlanInsert => "plan_insert",
+            State::Insert => "insert",
+            State::Verify => "verify",
+            State::Shake => "shake",
+            State::Retract => "retract",
+            State::Done => "done",
+            State::SafeStop => "safe_stop",
+        }
+    }
+
     /// Whether the episode ends in this state.
     pub fn is_terminal(self) -> bool {
         matches!(self, State::Done | State::SafeStop)

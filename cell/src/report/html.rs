@@ -273,6 +273,7 @@ pub fn render_html(
             plots::cycle_time_histogram(&recs)?,
         );
     }
+    cycle_phases(&mut h, &mut files, s, &recs)?;
     h.push_str("<h2>Pose error at insertion</h2>\n<p>True offset of the held part from its target in the target frame when insertion started. The dashed square is the step's capture band (clearance / 2 + lead-in): outside it a part misses; inside it, a failure is a tilt or yaw.</p>\n");
     for t in &s.steps {
         plot(
@@ -285,6 +286,57 @@ pub fn render_html(
     }
     h.push_str("</body></html>\n");
     Ok(Page { html: h, files })
+}
+
+/// Where the cycle time goes: the mean seconds per state, and the timelines of a typical and
+/// of the slowest successful episode.
+fn cycle_phases(
+    h: &mut String,
+    files: &mut Vec<(String, Vec<u8>)>,
+    s: &Summary,
+    recs: &[&EpisodeRecord],
+) -> Result<(), plots::PlotError> {
+    if s.cycle_phases.is_empty() {
+        return Ok(());
+    }
+    h.push_str("<h3>Where the time goes</h3>\n<p>Mean simulated seconds per successful assembly in each state of the orchestrator, on the cycle's critical path: work overlapped with a move (a shake started during an insertion) counts in the move, and <code>capture</code> includes waiting for the feeder to settle after a shake.</p>\n<table><tr><th class=l>state</th><th>mean (s)</th><th>share</th></tr>\n");
+    for m in &s.cycle_phases {
+        let _ = writeln!(
+            h,
+            "<tr><td class=l>{}</td><td>{:.3}</td><td>{}</td></tr>",
+            m.state.name(),
+            m.mean_s,
+            pct(m.share)
+        );
+    }
+    h.push_str("</table>\n");
+    if let Some((typical, slowest)) = crate::run::phases::typical_and_slowest(recs.iter().copied())
+    {
+        let mut rows = vec![(
+            format!(
+                "typical: {} ({:.1} s)",
+                typical.episode, typical.cycle_time_s
+            ),
+            typical,
+        )];
+        if slowest.episode != typical.episode {
+            rows.push((
+                format!(
+                    "slowest: {} ({:.1} s)",
+                    slowest.episode, slowest.cycle_time_s
+                ),
+                slowest,
+            ));
+        }
+        plot(
+            h,
+            files,
+            "cycle_timeline",
+            "timelines of a typical and of the slowest successful episode, coloured by state",
+            super::timeline::cycle_timeline(&rows)?,
+        );
+    }
+    Ok(())
 }
 
 /// The opening picture, where there is one: a capture with what perception found in it.

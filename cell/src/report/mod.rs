@@ -6,6 +6,7 @@ pub mod capture_picture;
 pub mod html;
 pub mod pictures;
 pub mod plots;
+pub mod timeline;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -39,7 +39,7 @@ pub fn register_font() {
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
 /// Draws into an SVG string of `size` pixels.
-fn svg<F>(plot: &'static str, size: (u32, u32), draw: F) -> Result<String, PlotError>
+pub(crate) fn svg<F>(plot: &'static str, size: (u32, u32), draw: F) -> Result<String, PlotError>
 where
     F: FnOnce(&DrawingArea<SVGBackend<'_>, plotters::coord::Shift>) -> DrawResult,
 {
@@ -92,9 +92,9 @@ pub fn tick_decimals(span: f64, ticks: usize) -> usize {
 
 /// Font size of tick labels and axis descriptions, pixels (the SVGs are shown at about their
 /// own width, so this stays readable at 800 px).
-const LABEL_PX: u32 = 16;
+pub(crate) const LABEL_PX: u32 = 16;
 /// Font size of legend text, pixels.
-const LEGEND_PX: u32 = 15;
+pub(crate) const LEGEND_PX: u32 = 15;
 
 /// Gap between the plotting area and the legend beside it, pixels.
 const LEGEND_GAP: i32 = 16;

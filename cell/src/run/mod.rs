@@ -2,10 +2,13 @@
 //! (`<root>/<scenario>/<shard>/episodes.jsonl`), sharded for external schedulers, merged back,
 //! and summarised.
 
+pub mod distribution;
 pub mod execute;
 pub mod header;
 pub mod mechanism;
 pub mod merge;
+pub mod outcomes;
+pub mod phases;
 pub mod robot_target;
 pub mod runner;
 pub mod shard;

@@ -7,7 +7,12 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+pub use super::distribution::Distribution;
+pub use super::mechanism::MechanismCount;
+pub use super::outcomes::{OUTCOMES, outcome_index, outcome_name};
+
 use super::header::ResultsHeader;
+use super::mechanism::Mechanisms;
 use crate::episode::{EpisodeRecord, StepOutcome};
 use crate::regress::stats::{Counts, Interval, wilson};
 
@@ -16,57 +21,6 @@ pub const CONFIDENCE: f64 = 0.95;
 
 /// Error-budget entry for failures whose step named no error source.
 pub const UNATTRIBUTED: &str = "unattributed";
-
-/// Summary statistics of a sample.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Distribution {
-    /// Sample size.
-    pub n: usize,
-    /// Mean.
-    pub mean: f64,
-    /// Sample standard deviation (0 for one value).
-    pub std: f64,
-    /// Smallest value.
-    pub min: f64,
-    /// Median (linear interpolation).
-    pub p50: f64,
-    /// 95th percentile (linear interpolation).
-    pub p95: f64,
-    /// Largest value.
-    pub max: f64,
-}
-
-impl Distribution {
-    /// Statistics of `values`, or `None` when empty.
-    pub fn of(values: &[f64]) -> Option<Self> {
-        if values.is_empty() {
-            return None;
-        }
-        let mut v = values.to_vec();
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        let mean = v.iter().sum::<f64>() / n as f64;
-        let var = if n > 1 {
-            v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64
-        } else {
-            0.0
-        };
-        let q = |p: f64| {
-            let h = p * (n - 1) as f64;
-            let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
-            v[lo] + (h - lo as f64) * (v[hi] - v[lo])
-        };
-        Some(Self {
-            n,
-            mean,
-            std: var.sqrt(),
-            min: v[0],
-            p50: q(0.5),
-            p95: q(0.95),
-            max: v[n - 1],
-        })
-    }
-}
 
 /// Pose error at insertion of one step, over the episodes that inserted.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -143,26 +97,6 @@ pub struct CauseCount {
     pub count: u32,
 }
 
-/// How often one failure mechanism ended an episode, with the numbers its causes carried.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MechanismCount {
-    /// The failing step's part (`None`: the episode stopped outside any step).
-    pub part: Option<String>,
-    /// The failing step's outcome.
-    pub outcome: Option<StepOutcome>,
-    /// The mechanism in words ("missed: lateral offset beyond the capture band").
-    pub mechanism: String,
-    /// The causes with every number replaced by its range over these episodes.
-    pub detail: String,
-    /// Failed episodes with this mechanism.
-    pub count: u32,
-    /// The first number of each cause (the offset, tilt, ... that failed), when causes have one.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub value: Option<Distribution>,
-    /// The failed episodes, in order.
-    pub episodes: Vec<u32>,
-}
-
 /// One error source's share of the failures.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SourceShare {
@@ -207,6 +141,10 @@ pub struct Summary {
     pub error_budget: Vec<SourceShare>,
     /// Simulated cycle time of successful episodes, seconds.
     pub cycle_time_s: Option<Distribution>,
+    /// Where that time goes: the mean seconds of each orchestrator state per successful
+    /// assembly (empty for records from before phases were kept).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cycle_phases: Vec<super::phases::PhaseMean>,
 }
 
 impl Summary {
@@ -227,7 +165,7 @@ impl Summary {
 
         let mut steps: Vec<StepAcc> = Vec::new();
         let mut causes: BTreeMap<(Option<String>, Option<usize>, String), u32> = BTreeMap::new();
-        let mut mechanisms = super::mechanism::Mechanisms::default();
+        let mut mechanisms = Mechanisms::default();
         let mut sources: BTreeMap<String, u32> = BTreeMap::new();
         let mut cycle = Vec::new();
         for r in &records {
@@ -320,35 +258,8 @@ impl Summary {
             failure_mechanisms: mechanisms.finish(),
             error_budget,
             cycle_time_s: Distribution::of(&cycle),
+            cycle_phases: super::phases::phase_means(records.iter().copied()),
         }
-    }
-}
-
-/// Every step outcome, in the order summaries use.
-pub const OUTCOMES: [StepOutcome; 4] = [
-    StepOutcome::Seated,
-    StepOutcome::Jammed,
-    StepOutcome::Missed,
-    StepOutcome::Aborted,
-];
-
-/// Position of an outcome in [`OUTCOMES`].
-pub fn outcome_index(o: StepOutcome) -> usize {
-    match o {
-        StepOutcome::Seated => 0,
-        StepOutcome::Jammed => 1,
-        StepOutcome::Missed => 2,
-        StepOutcome::Aborted => 3,
-    }
-}
-
-/// The snake_case name of an outcome, as in the records.
-pub fn outcome_name(o: StepOutcome) -> &'static str {
-    match o {
-        StepOutcome::Seated => "seated",
-        StepOutcome::Jammed => "jammed",
-        StepOutcome::Missed => "missed",
-        StepOutcome::Aborted => "aborted",
     }
 }
 
