@@ -4,7 +4,7 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::mesh_repair::{Edge, EdgeUses, edge_uses, find, union};
+use super::mesh_topology::{Edge, EdgeUses, edge_uses, find, union};
 
 /// A connected group of open edges: where a mesh is open, in the mesh's own unit (metres once
 /// loaded), shown in millimetres.

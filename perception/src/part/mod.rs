@@ -7,6 +7,7 @@ mod keypoints;
 mod mesh;
 mod mesh_io;
 mod mesh_repair;
+mod mesh_topology;
 mod pieces;
 mod stable_pose;
 
