@@ -4,8 +4,31 @@
 
 use std::collections::BTreeMap;
 
-use super::summary::{Distribution, MechanismCount, outcome_name};
+use serde::{Deserialize, Serialize};
+
+use super::distribution::Distribution;
+use super::outcomes::{outcome_index, outcome_name};
 use crate::episode::StepOutcome;
+
+/// How often one failure mechanism ended an episode, with the numbers its causes carried.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MechanismCount {
+    /// The failing step's part (`None`: the episode stopped outside any step).
+    pub part: Option<String>,
+    /// The failing step's outcome.
+    pub outcome: Option<StepOutcome>,
+    /// The mechanism in words ("missed: lateral offset beyond the capture band").
+    pub mechanism: String,
+    /// The causes with every number replaced by its range over these episodes.
+    pub detail: String,
+    /// Failed episodes with this mechanism.
+    pub count: u32,
+    /// The first number of each cause (the offset, tilt, ... that failed), when causes have one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<Distribution>,
+    /// The failed episodes, in order.
+    pub episodes: Vec<u32>,
+}
 
 /// A cause's text with each number replaced by `#`, and the numbers in order.
 pub fn pattern(cause: &str) -> (String, Vec<f64>) {
@@ -127,11 +150,7 @@ impl Mechanisms {
     ) {
         let (pat, numbers) = pattern(cause);
         let name = mechanism_name(&pat, outcome);
-        let key = (
-            part,
-            outcome.map(super::summary::outcome_index),
-            name.clone(),
-        );
+        let key = (part, outcome.map(outcome_index), name.clone());
         let g = self
             .groups
             .entry(key)
