@@ -33,6 +33,7 @@ pub mod report_html;
 pub mod stable_poses;
 pub mod summary;
 pub mod table1;
+pub mod table1_text;
 
 use std::path::PathBuf;
 

@@ -451,7 +451,7 @@ pub fn summarise(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::table1::text_table;
+    use crate::eval::table1_text::text_table;
     use crate::eval::{DetectionOverlap, TruthOverlap, TruthRecord};
 
     fn errors(x: f64, angle: f64) -> PoseErrors {
