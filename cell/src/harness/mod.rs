@@ -20,6 +20,7 @@
 #![allow(non_snake_case)]
 
 mod audit;
+mod error;
 mod keypoint_noise;
 mod over_rtde;
 mod sim_camera;
@@ -27,6 +28,7 @@ mod sim_io;
 mod sim_perception;
 mod verdict;
 
+pub use error::HarnessError;
 pub use keypoint_noise::{KeypointNoise, keypoint_noise_for};
 pub use over_rtde::{
     OverRtdeError, SimOverRtde, connect_sim_over_rtde, sim_cell_io, sim_episode_over_rtde,
@@ -40,32 +42,9 @@ use std::sync::{Arc, Mutex};
 
 use sim::cell::{CellModel, SimCell};
 
-use crate::orchestrator::{EpisodeOutput, KnowledgeError, Setup, run_episode};
-use crate::scenario::{PerceptionMode, Scenario};
-use perception::{PartPerception, PerceptionError};
-
-/// Why a simulated episode could not be set up (nothing ran).
-#[derive(Debug, thiserror::Error)]
-pub enum HarnessError {
-    /// The simulated cell could not be built.
-    #[error("simulated cell: {0}")]
-    Cell(#[from] sim::cell::CellError),
-    /// The planning model could not be built.
-    #[error(transparent)]
-    Knowledge(#[from] KnowledgeError),
-    /// Perception could not be set up.
-    #[error(transparent)]
-    Perception(#[from] PerceptionError),
-    /// Keypoint-noise perception was asked for a scenario in another perception mode.
-    #[error("keypoint-noise perception asked for, but the scenario's mode is {0:?}")]
-    ModeUnavailable(PerceptionMode),
-    /// No tokio runtime could be built.
-    #[error("tokio runtime: {0}")]
-    Runtime(String),
-    /// The cell's limits are unusable, so its robot cannot be driven.
-    #[error(transparent)]
-    Limits(#[from] robots::limits::InvalidLimits),
-}
+use crate::orchestrator::{EpisodeOutput, Setup, run_episode};
+use crate::scenario::Scenario;
+use perception::PartPerception;
 
 /// What stays the same across a scenario's simulated episodes.
 pub struct SimSetup {
