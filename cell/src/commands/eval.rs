@@ -12,7 +12,7 @@ use cell::eval::fingers::FingerCheck;
 use cell::eval::picks::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, Picks};
 use cell::eval::report_html::{EvalMeta, write_eval_report};
 use cell::eval::summary::summarise;
-use cell::eval::table1::text_table;
+use cell::eval::table1_text::text_table;
 use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split, stable_poses};
 use cell::scenario::{DEFAULT_MIN_PICK_CONFIDENCE, Scenario};
 use perception::contour::ContourConfig;

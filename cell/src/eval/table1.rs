@@ -1,14 +1,10 @@
 //! The seed's Table 1: mean ± σ of |e_x|, |e_y|, |e_z| in mm and e_θ in degrees, raw PnP and
 //! after planar refinement, with outliers (θ > 10°) counted and reported; statistics both over
 //! all estimates and seed-style without the outliers. The compact text table with the seed's
-//! numbers beside ours is [`text_table`].
+//! numbers beside ours is in `table1_text`.
 
 use perception::metrics::{ErrorSummary, Summary};
 use serde::{Deserialize, Serialize};
-
-/// The text table, kept at this path for callers (`cell eval`); it lives in `table1_text` because
-/// it reads the whole summary.
-pub use super::table1_text::text_table;
 
 /// The seed's Table 1 (raw PnP, θ > 10° dropped): part, then (mean, σ) of x, y, z (mm), θ (deg).
 pub const SEED_TABLE1: [(&str, [(f64, f64); 4]); 3] = [
