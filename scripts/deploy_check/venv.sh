@@ -5,21 +5,8 @@
 # Usage: scripts/deploy_check/venv.sh [VENV_DIR]   (default: <repo>/target/venv-deploy-check); prints the python path.
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-venv="${1:-$repo/target/venv-deploy-check}"
 kv="1.37.0"
 dp="2.0.1"
-py="$venv/bin/python"
-check="import importlib.metadata as m; assert m.version('kubernetes-validate') == '$kv'; assert m.version('dockerfile-parse') == '$dp'; import kubernetes_validate, dockerfile_parse"
-if [ -x "$py" ] && "$py" -c "$check" 2>/dev/null; then
-  echo "$py"
-  exit 0
-fi
-mkdir -p "$(dirname "$venv")"
-exec 9>"$venv.lock"
-flock 9
-if ! { [ -x "$py" ] && "$py" -c "$check" 2>/dev/null; }; then
-  python3 -m venv "$venv" >&2
-  "$py" -m pip install --quiet "kubernetes-validate==$kv" "dockerfile-parse==$dp" >&2
-fi
-"$py" -c "$check" >&2
-echo "$py"
+exec "$repo/scripts/pinned_venv.sh" "${1:-$repo/target/venv-deploy-check}" \
+  "import importlib.metadata as m; assert m.version('kubernetes-validate') == '$kv'; assert m.version('dockerfile-parse') == '$dp'; import kubernetes_validate, dockerfile_parse" \
+  "kubernetes-validate==$kv" "dockerfile-parse==$dp"
