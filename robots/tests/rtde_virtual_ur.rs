@@ -801,14 +801,6 @@ mod ur_rtde_handshake {
             self.c.write_inputs(CONN, &[f], &[Value::Int32(v)]);
         }
 
-        pub fn set_doubles(&self, values: &[f64]) {
-            let fields: Vec<_> = (0..values.len())
-                .map(|i| self.field(&format!("input_double_register_{i}")))
-                .collect();
-            let values: Vec<_> = values.iter().map(|v| Value::Double(*v)).collect();
-            self.c.write_inputs(CONN, &fields, &values);
-        }
-
         pub fn ticks(&mut self, n: usize) {
             for _ in 0..n {
                 self.c.tick();
@@ -866,11 +858,19 @@ mod ur_rtde_handshake {
                 self.ticks(1);
                 waited += 1;
             }
+            // One package, as ur_rtde's recipe for the command: the command id with its
+            // parameters.
+            let mut fields = vec![self.field("input_int_register_0")];
+            let mut values = vec![Value::Int32(command)];
             for &(i, v) in ints {
-                self.set_int(i, v);
+                fields.push(self.field(&format!("input_int_register_{i}")));
+                values.push(Value::Int32(v));
             }
-            self.set_doubles(doubles);
-            self.set_int(0, command);
+            for (i, v) in doubles.iter().enumerate() {
+                fields.push(self.field(&format!("input_double_register_{i}")));
+                values.push(Value::Double(*v));
+            }
+            self.c.write_inputs(CONN, &fields, &values);
             if CLIENT_REALTIME.contains(&command) || CLIENT_REALTIME_MORE.contains(&command) {
                 return true;
             }
@@ -993,9 +993,18 @@ fn issue15_item1_a_move_after_a_realtime_query_runs() {
     u.send(urcmd::GET_STEPTIME, &[], &[]);
     u.ticks(2);
     assert_eq!(u.out_doubles()[0], 0.002);
-    // getJointTorques is not simulated: the program stops, so the next moveJ returns False.
+    // getJointTorques answers (the torques beyond the arm's own: none without contact) and the
+    // program runs on.
     let mut u = UrRtde::start();
     assert!(u.send(urcmd::GET_JOINT_TORQUES, &[], &[]));
+    u.ticks(2);
+    assert!(u.running());
+    assert_eq!(u.out_doubles(), [0.0; 6]);
+    assert!(u.move_j(TARGET_Q), "moveJ after getJointTorques");
+    // getMassMatrix (a PolyScope 5.23 function) is not simulated: the program stops, so the
+    // next moveJ returns False.
+    let mut u = UrRtde::start();
+    let _ = u.send(67, &[], &[]);
     u.ticks(2);
     assert!(!u.running());
     assert!(
@@ -1003,11 +1012,7 @@ fn issue15_item1_a_move_after_a_realtime_query_runs() {
         "moveJ after an unsupported command fails"
     );
     assert!(diff(&u.q(), &HOME) < 1e-12, "and the arm did not move");
-    assert!(
-        u.messages().contains("get_joint_torques"),
-        "{}",
-        u.messages()
-    );
+    assert!(u.messages().contains("mass matrix"), "{}", u.messages());
 }
 
 #[test]
@@ -1267,4 +1272,100 @@ fn issue15_item9_stop_l_decelerates_in_tool_space() {
     assert!(t <= 0.125 + 0.008, "stopped in {t} s");
     assert!(travelled <= 0.0157 + 0.0006, "travelled {travelled} m");
     assert!(off_line < 1e-6, "left the line by {off_line} m");
+}
+
+#[test]
+fn issue43_item1_forward_kinematics_of_given_joints_uses_the_active_tcp() {
+    let kin = UrKinematics::ur5e();
+    let mut u = UrRtde::start();
+    // moveJ leaves its speed and acceleration (1.05, 1.4) in input registers 6-7.
+    assert!(u.move_j(TARGET_Q));
+    let q = [0.3, -1.4, 1.5, -1.7, -FRAC_PI_2, 0.2];
+    // getForwardKinematics(q): ur_rtde sends q alone (registers 0-5).
+    assert!(u.send(urcmd::GET_FK_ARGS, &[], &q));
+    let want = ur_rtde_handshake::pose_of(&kin.forward_tcp(&q));
+    assert!(
+        diff(&u.out_doubles(), &want) < 1e-12,
+        "{:?} vs {want:?}",
+        u.out_doubles()
+    );
+    assert!(dist(&want[..3], &[-0.5004, -0.2943, 0.4455]) < 1e-3);
+    // With the TCP set, the active TCP is the one used.
+    let tcp = [0.0, 0.0, 0.15, 0.0, 0.0, 0.0];
+    assert!(u.send(urcmd::SET_TCP, &[], &tcp));
+    assert!(u.send(urcmd::GET_FK_ARGS, &[], &q));
+    let with_tcp = kin.forward_flange(&q) * robots::kinematics::from_ur_pose(&tcp);
+    assert!(diff(&u.out_doubles(), &ur_rtde_handshake::pose_of(&with_tcp)) < 1e-12);
+}
+
+#[test]
+fn issue43_item2_getters_answer_and_the_program_runs_on() {
+    let kin = UrKinematics::ur5e();
+    let mut u = UrRtde::start();
+    // getTargetWaypoint at rest: the target TCP pose.
+    assert!(u.send(urcmd::GET_TARGET_WAYPOINT, &[], &[]));
+    assert!(diff(&u.out_doubles(), &u.tcp()) < 1e-12);
+    // During an asynchronous moveJ: the move's target, not the pose on the way.
+    let mut d = TARGET_Q.to_vec();
+    d.extend([0.5, 1.0]);
+    assert!(u.send(urcmd::MOVE_J, &[(1, 1)], &d));
+    u.seconds(0.2);
+    assert!(u.send(urcmd::GET_TARGET_WAYPOINT, &[], &[]));
+    let want = ur_rtde_handshake::pose_of(&kin.forward_tcp(&TARGET_Q));
+    assert!(diff(&u.out_doubles(), &want) < 1e-12);
+    assert!(dist(&u.tcp()[..3], &want[..3]) > 0.01, "still on the way");
+    // History: the controller's buffer, kept across program restarts.
+    u.seconds(2.0);
+    let _ = u.send(urcmd::STOP_SCRIPT, &[], &[]);
+    u.c.upload_script("def rtde_control():\n  textmsg(\"x\")\nend\n")
+        .unwrap();
+    u.ticks(2);
+    assert!(u.send(urcmd::GET_JOINT_POSITIONS_HISTORY, &[(1, 400)], &[]));
+    u.ticks(1);
+    assert!(u.running(), "{}", u.messages());
+    assert!(diff(&u.out_doubles(), &TARGET_Q) < 1e-12);
+    // Beyond the buffer: a runtime error, as UR documents.
+    assert!(u.send(urcmd::GET_JOINT_POSITIONS_HISTORY, &[(1, 600)], &[]));
+    u.ticks(1);
+    assert!(!u.running());
+    assert!(u.messages().contains("outside the 500 kept cycles"));
+}
+
+#[test]
+fn issue43_item3_currents_moments_and_joint_mode_of_an_arm_holding_a_pose() {
+    use robots::virtual_ur::dynamics::ArmDynamics;
+    use robots::virtual_ur::registers::Payload;
+    let mut u = UrRtde::start();
+    assert!(u.move_j(TARGET_Q));
+    let s = u.c.snapshot();
+    let d = ArmDynamics::ur5e();
+    let torques = d.gravity_torques(&UrKinematics::ur5e().dh, &TARGET_Q, &Payload::default());
+    assert!(torques[1].abs() > 10.0, "{torques:?}");
+    assert!(diff(&s.target_moment, &torques) < 1e-12);
+    assert!(diff(&s.actual_current, &d.currents(&torques)) < 1e-12);
+    assert!(diff(&s.target_current, &s.actual_current) < 1e-12);
+    // setPayload: 2 kg at the flange adds its moment.
+    assert!(u.send(urcmd::SET_PAYLOAD, &[], &[2.0, 0.0, 0.0, 0.05]));
+    u.ticks(1);
+    let payload = Payload {
+        mass: 2.0,
+        cog: [0.0, 0.0, 0.05],
+        ..Payload::default()
+    };
+    let loaded = d.gravity_torques(&UrKinematics::ur5e().dh, &TARGET_Q, &payload);
+    assert!(diff(&u.c.snapshot().target_moment, &loaded) < 1e-12);
+    assert!((loaded[1] - torques[1]).abs() > 5.0);
+    // joint_mode: 253 (running), at rest and moving.
+    use robots::rtde::server::Controller;
+    let field = u.c.resolve_output("joint_mode").unwrap();
+    let mode = |u: &UrRtde| u.c.output_value(&u.c.snapshot(), field.key);
+    assert_eq!(mode(&u), Value::Vector6Int32([253; 6]));
+    assert!(u.send(
+        urcmd::SPEED_J,
+        &[],
+        &[0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+    ));
+    u.seconds(0.1);
+    assert!(u.qd()[0] > 0.05);
+    assert_eq!(mode(&u), Value::Vector6Int32([253; 6]));
 }

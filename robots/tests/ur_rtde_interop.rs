@@ -4,8 +4,11 @@
 //! ports, so this runs on the default ports 30004/29999/30003 of 127.0.0.1: it is the only test
 //! in this binary, so nothing else binds them concurrently from this crate.
 
-use robots::kinematics::{UrKinematics, to_ur_pose};
+use nalgebra::Isometry3;
+use robots::kinematics::{UrKinematics, from_ur_pose, to_ur_pose};
 use robots::rtde::state::RuntimeState;
+use robots::virtual_ur::dynamics::ArmDynamics;
+use robots::virtual_ur::registers::Payload;
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use serde_json::Value as Json;
 use std::path::PathBuf;
@@ -134,8 +137,54 @@ async fn ur_rtde_conformance_suite_passes_with_no_silent_success() {
         serde_json::json!([]),
         "methods neither tested nor listed as unsupported"
     );
-    assert!(summary["cases"].as_u64().unwrap_or(0) >= 60, "{summary}");
+    assert!(summary["cases"].as_u64().unwrap_or(0) >= 66, "{summary}");
     assert!(out.status.success(), "{}", report());
+    // getForwardKinematics(q) is our own forward kinematics at q with the active TCP (the
+    // flange), and with a given 10 cm TCP.
+    let detail = |name: &str| {
+        lines
+            .iter()
+            .find(|l| l["case"].as_str().is_some_and(|c| c.starts_with(name)))
+            .unwrap_or_else(|| panic!("no case {name}"))["detail"]
+            .clone()
+    };
+    let kin = UrKinematics::ur5e();
+    let joints = |v: &Json| -> [f64; 6] { f64s(v).try_into().expect("six joints") };
+    let fk = detail("getForwardKinematics");
+    let q = joints(&fk["q"]);
+    let want = kin.forward_tcp(&q);
+    let got = from_ur_pose(&joints(&fk["fk"]));
+    assert!(
+        (got.translation.vector - want.translation.vector).norm() < 1e-9
+            && got.rotation.angle_to(&want.rotation) < 1e-9,
+        "getForwardKinematics({q:?}) = {:?}, robots::kinematics says {:?}",
+        fk["fk"],
+        to_ur_pose(&want)
+    );
+    let tool = Isometry3::translation(0.0, 0.0, 0.1);
+    let want = kin.forward_flange(&q) * tool;
+    let got = from_ur_pose(&joints(&fk["fk_tcp_10cm"]));
+    assert!((got.translation.vector - want.translation.vector).norm() < 1e-9);
+    // The joint currents and moments are the URDF's gravity torques (checked against the URDF
+    // in virtual_ur_dynamics.rs) through the modelled torque constants.
+    let dynamics = ArmDynamics::ur5e();
+    let currents = detail("joint currents and moments");
+    for pose in ["q1", "home"] {
+        let q = joints(&currents[pose]["q"]);
+        let torques = dynamics.gravity_torques(&kin.dh, &q, &Payload::default());
+        let moment = f64s(&currents[pose]["moment"]);
+        let current = f64s(&currents[pose]["current"]);
+        for j in 0..6 {
+            assert!(
+                (moment[j] - torques[j]).abs() < 1e-9,
+                "{pose}: {moment:?} vs {torques:?}"
+            );
+            assert!(
+                (current[j] * dynamics.torque_constants[j] - torques[j]).abs() < 1e-9,
+                "{pose}: {current:?} A for {torques:?} N m"
+            );
+        }
+    }
     // setInputIntRegister / setInputDoubleRegister reached the controller's registers.
     let regs = vur.controller.snapshot().regs.clone();
     assert_eq!(regs.input_int[18], 4242);

@@ -25,11 +25,14 @@ import rtde_receive
 HOST = sys.argv[1] if len(sys.argv) > 1 else "127.0.0.1"
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
 Q1 = [0.4, -1.3, 1.4, -1.6, -1.5708, 0.2]
+FK_Q = [0.3, -1.4, 1.5, -1.7, -1.5708, 0.2]
 
 # Methods the simulator deliberately does not do, with what ur_rtde observes.
 STOPS = "the program stops with a runtime error; ur_rtde returns False / raises, isProgramRunning() is False"
 REALTIME = ("ur_rtde does not wait for this realtime command and returns at once; the program then "
             "stops with a runtime error, so isProgramRunning() is False and the next call returns False")
+POLYSCOPE_5_23 = (" (a PolyScope 5.23 function: ur_rtde's script guards it with $5.23 and the "
+                  "simulator reports 5.15)")
 UNSUPPORTED = {
     "forceMode": REALTIME,
     "forceModeStop": STOPS,
@@ -40,7 +43,6 @@ UNSUPPORTED = {
     "endTeachMode": STOPS,
     "freedriveMode": STOPS,
     "endFreedriveMode": STOPS,
-    "getFreedriveStatus": STOPS,
     "ftRtdeInputEnable": STOPS,
     "enableExternalFtSensor": STOPS,
     "setExternalForceTorque": "ur_rtde 1.6.5 returns True without sending anything unless ftRtdeInputEnable succeeded, which fails loudly here; a written external_force_torque input stops the program",
@@ -51,14 +53,12 @@ UNSUPPORTED = {
     "readContactDetection": STOPS,
     "movePath": STOPS + " (custom script code is not interpreted)",
     "servoC": "ur_rtde does not wait for it; the program stops with a runtime error (servoc not simulated)",
-    "getJointTorques": REALTIME + " (the returned values are stale registers)",
     "directTorque": REALTIME,
-    "getMassMatrix": REALTIME,
-    "getCoriolisAndCentrifugalTorques": REALTIME,
-    "getTargetJointAccelerations": REALTIME,
-    "getJacobian": REALTIME,
-    "getJacobianTimeDerivative": REALTIME,
-    "getTargetWaypoint": STOPS,
+    "getMassMatrix": REALTIME + POLYSCOPE_5_23,
+    "getCoriolisAndCentrifugalTorques": REALTIME + POLYSCOPE_5_23,
+    "getTargetJointAccelerations": REALTIME + POLYSCOPE_5_23,
+    "getJacobian": REALTIME + POLYSCOPE_5_23,
+    "getJacobianTimeDerivative": REALTIME + POLYSCOPE_5_23,
     "sendCustomScript": "the simulator does not interpret URScript: the uploaded script is refused (not started, logged as an error) and ur_rtde 1.6.5 keeps waiting for it to run; not called by this suite",
     "sendCustomScriptFile": "as sendCustomScript",
     "sendCustomScriptFunction": "as sendCustomScript",
@@ -67,7 +67,7 @@ UNSUPPORTED = {
 UNSUPPORTED = {k: v for k, v in UNSUPPORTED.items() if v is not None}
 # Receive getters of quantities the kinematic model does not simulate: constant plausible values.
 CONSTANT_RECEIVE = [
-    "getActualCurrent", "getTargetCurrent", "getTargetMoment", "getJointControlOutput",
+    "getJointControlOutput",
     "getActualTCPForce", "getFtRawWrench", "getJointTemperatures", "getActualJointVoltage",
     "getActualMainVoltage", "getActualRobotVoltage", "getActualRobotCurrent", "getActualMomentum",
     "getActualExecutionTime", "getActualToolAccelerometer", "getStandardAnalogInput0",
@@ -295,19 +295,24 @@ def main():
         check(math.hypot(p[1] - p0[1], p[2] - p0[2]) < 1e-6, "off the x axis")
 
     # ---------------- control: queries ----------------
-    @case("getForwardKinematics: actual pose, and of given joints and TCP", "getForwardKinematics")
+    @case("getForwardKinematics: actual pose, and of given joints with the active or a given TCP",
+          "getForwardKinematics")
     def fk():
         near(c.getForwardKinematics(), r.getActualTCPPose(), 1e-9)
-        q = list(r.getActualQ())
-        # getForwardKinematics(q) sends q only; the script takes the TCP from input registers
-        # 6-11 as the previous command left them. poseTrans writes them first.
-        c.poseTrans([0] * 6, [0] * 6)
-        near(c.getForwardKinematics(q), r.getActualTCPPose(), 1e-9)
-        c.poseTrans([0] * 6, [0, 0, 0.1, 0, 0, 0])
-        up = c.getForwardKinematics(q)
-        check(abs(dist3(up, r.getActualTCPPose()) - 0.1) < 1e-9, "a 10 cm TCP is 10 cm away")
-        # getForwardKinematics(q, tcp_offset) is not called: ur_rtde 1.6.5 sends its 12 values
-        # under the 6-value recipe, the controller refuses the package and ur_rtde blocks.
+        # moveJ leaves its speed and acceleration in input registers 6-7, which the script reads
+        # as the TCP of get_forward_kin(q, tcp) when getForwardKinematics(q) does not send one.
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        got = c.getForwardKinematics(FK_Q)
+        up = c.getForwardKinematics(FK_Q, [0, 0, 0.1, 0, 0, 0])
+        check(abs(dist3(up, got) - 0.1) < 1e-9, f"a 10 cm TCP is 10 cm away: {up} vs {got}")
+        check(c.moveJ(FK_Q, 1.5, 3.0), "moveJ to the joints")
+        settle()
+        near(got, r.getActualTCPPose(), 1e-9)
+        # getForwardKinematics(q, [0]*6) is not called: ur_rtde 1.6.5 sends a zero tcp_offset's
+        # 12 values under its 6-value recipe, the controller refuses the package and ur_rtde blocks.
+        c.moveJ(Q1, 1.5, 3.0)
+        # The Rust test compares these with robots::kinematics (UrKinematics::ur5e()).
+        return {"q": FK_Q, "fk": got, "fk_tcp_10cm": up}
 
     @case("getInverseKinematics returns joints that reach the pose", "getInverseKinematics")
     def ik():
@@ -383,14 +388,102 @@ def main():
         c.getStepTime()  # realtime: ur_rtde reads the register before the answer arrives
         settle()
         check(abs(c.getStepTime() - 0.002) < 1e-12, "step time")
-        c.moveJ(Q1, 1.5, 3.0)
+        check(c.isProgramRunning(), "the program still runs")
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move still runs")
 
-    @case("getActualJointPositionsHistory returns past joints", "getActualJointPositionsHistory")
+    @case("getActualJointPositionsHistory: the joints 0 and 50 cycles (0.1 s) ago during speedJ",
+          "getActualJointPositionsHistory")
     def history():
         c.getActualJointPositionsHistory(0)
         settle()
         near(c.getActualJointPositionsHistory(0), r.getActualQ(), 1e-9)
-        c.moveJ(Q1, 1.5, 3.0)
+        check(c.speedJ([0.2, 0, 0, 0, 0, 0], 2.0, 0.0), "speedJ")
+        settle(0.4)
+        c.getActualJointPositionsHistory(50)
+        settle()
+        then = c.getActualJointPositionsHistory(50)
+        now = r.getActualQ()
+        check(c.speedStop(5.0), "speedStop")
+        # 0.2 rad/s for 0.1 s; the receive side may be a few cycles apart from the answer.
+        back = now[0] - then[0]
+        check(0.015 < back < 0.025, f"joint 1 moved {back} rad in the last 50 cycles")
+        near(then[1:], now[1:], 1e-9)
+        check(c.isProgramRunning(), "the program still runs")
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move still runs")
+        return {"back_rad": back}
+
+    @case("getTargetWaypoint: the running move's target, else the target TCP pose", "getTargetWaypoint")
+    def target_waypoint():
+        near(c.getTargetWaypoint(), r.getTargetTCPPose(), 1e-9)
+        start = r.getActualTCPPose()
+        far = [start[0], start[1], start[2] - 0.2] + start[3:]
+        check(c.moveL(far, 0.1, 0.5, True), "async moveL")
+        settle(0.3)
+        moving = c.getTargetWaypoint()
+        tcp = r.getTargetTCPPose()
+        c.stopL(2.0)
+        near(moving, far, 1e-9)
+        check(dist3(tcp, far) > 0.05, "the target TCP pose is still on the way")
+        check(at_rest(), "at rest after stopL")
+        near(c.getTargetWaypoint(), r.getTargetTCPPose(), 1e-9)
+        q = list(Q1)
+        q[0] += 0.3
+        check(c.moveJ(q, 0.5, 1.0, True), "async moveJ")
+        settle(0.2)
+        during = c.getTargetWaypoint()
+        c.stopJ(2.0)
+        near(during, c.getForwardKinematics(q), 1e-9)
+        check(c.isProgramRunning(), "the program still runs")
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move still runs")
+
+    @case("getJointTorques: torques beyond the arm's own (gravity, payload): none without contact",
+          "getJointTorques")
+    def joint_torques():
+        readings = []
+        for q in (Q1, HOME):
+            check(c.moveJ(q, 1.5, 3.0), "moveJ")
+            c.getJointTorques()  # realtime: ur_rtde reads the registers before the answer
+            settle()
+            readings.append(c.getJointTorques())
+            near(readings[-1], [0] * 6, 1e-9)
+            check(c.isProgramRunning(), "the program still runs")
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move still runs")
+        return readings
+
+    @case("joint currents and moments hold the arm against gravity; joint mode 253 (running)",
+          "getActualCurrent", "getTargetCurrent", "getTargetMoment", "getJointMode")
+    def currents():
+        check(c.setPayload(0.0, [0, 0, 0]), "no payload")
+        out = {}
+        for name, q in (("q1", Q1), ("home", HOME)):
+            check(c.moveJ(q, 1.5, 3.0), "moveJ")
+            settle()
+            cur, tcur, moment = r.getActualCurrent(), r.getTargetCurrent(), r.getTargetMoment()
+            near(cur, tcur, 1e-9)
+            check(abs(cur[1]) > 0.5 and abs(cur[2]) > 0.5, f"shoulder and elbow hold the arm: {cur} A")
+            check(abs(moment[1]) > 5, f"shoulder moment {moment[1]} N m")
+            check(list(r.getJointMode()) == [253] * 6, f"joint mode at rest {r.getJointMode()}")
+            out[name] = {"q": list(q), "current": cur, "moment": moment}
+        # One torque constant per joint: moment / current is the same in both poses.
+        for j in (1, 2, 3):
+            k1 = out["q1"]["moment"][j] / out["q1"]["current"][j]
+            k2 = out["home"]["moment"][j] / out["home"]["current"][j]
+            check(k1 > 0 and abs(k1 - k2) < 1e-6 * k1, f"joint {j + 1}: {k1} vs {k2} N m/A")
+        # A payload at the flange loads the shoulder more.
+        check(c.setPayload(2.0, [0, 0, 0.05]), "setPayload")
+        settle()
+        loaded = r.getActualCurrent()
+        check(abs(loaded[1]) > abs(out["home"]["current"][1]) + 0.1, f"2 kg: {loaded} A")
+        out["home_2kg"] = {"current": loaded, "moment": r.getTargetMoment()}
+        check(c.setPayload(0.0, [0, 0, 0]), "payload off")
+        check(c.moveJ(Q1, 0.5, 1.0, True), "async moveJ")
+        settle(0.1)
+        mode = list(r.getJointMode())
+        c.stopJ(2.0)
+        check(mode == [253] * 6, f"joint mode while moving {mode}")
+        check(c.moveJ(Q1, 1.5, 3.0), "back to Q1")
+        # The Rust test compares these with the URDF's gravity torques.
+        return out
 
     @case("toolContact: no contact for a model that senses none", "toolContact")
     def tool_contact():
@@ -531,7 +624,6 @@ def main():
     loud("endTeachMode", c.endTeachMode)
     loud("freedriveMode", lambda: c.freedriveMode())
     loud("endFreedriveMode", c.endFreedriveMode)
-    loud("getFreedriveStatus", lambda: c.getFreedriveStatus() if c.getFreedriveStatus() != 0 else True)
     loud("ftRtdeInputEnable", lambda: c.ftRtdeInputEnable(True))
     loud("enableExternalFtSensor", lambda: c.enableExternalFtSensor(True))
     tested.add("setExternalForceTorque")  # client-side: see UNSUPPORTED; nothing reaches the controller
@@ -542,14 +634,12 @@ def main():
     loud("readContactDetection", c.readContactDetection)
     loud("movePath", lambda: c.movePath(_path(), False))
     loud("servoC", lambda: c.servoC(r.getActualTCPPose(), 0.1, 0.5, 0.0))
-    loud("getJointTorques", lambda: True if c.getJointTorques() is not None else False)
     loud("directTorque", lambda: c.directTorque([0] * 6))
     loud("getMassMatrix", lambda: True if c.getMassMatrix() is not None else False)
     loud("getCoriolisAndCentrifugalTorques", lambda: True if c.getCoriolisAndCentrifugalTorques() is not None else False)
     loud("getTargetJointAccelerations", lambda: True if c.getTargetJointAccelerations() is not None else False)
     loud("getJacobian", lambda: True if c.getJacobian() is not None else False)
     loud("getJacobianTimeDerivative", lambda: True if c.getJacobianTimeDerivative() is not None else False)
-    loud("getTargetWaypoint", lambda: c.getTargetWaypoint())
     # Not called: the simulator refuses scripts it does not execute (see UNSUPPORTED), and
     # ur_rtde 1.6.5 then waits for the custom script to run.
     tested.update(["sendCustomScript", "sendCustomScriptFile", "sendCustomScriptFunction",
@@ -584,7 +674,7 @@ def main():
         check(r.getRuntimeState() == 2, "playing")
         check(r.getRobotStatus() & 0b11 == 0b11, "power on, program running")
         check(not r.isProtectiveStopped() and not r.isEmergencyStopped(), "no stop")
-        check(list(r.getJointMode()) == [255] * 6, f"joint mode {r.getJointMode()}")
+        check(list(r.getJointMode()) == [253] * 6, f"joint mode {r.getJointMode()} (253: running)")
         t0 = r.getTimestamp()
         time.sleep(0.2)
         dt = r.getTimestamp() - t0
@@ -622,6 +712,62 @@ def main():
         got = {m: getattr(r, m)(*([0] if m == "getDigitalInState" else [])) for m in CONSTANT_RECEIVE}
         check(got["getActualDigitalInputBits"] == 0 and got["getDigitalInState"] is False, "inputs low")
         return {k: v if not isinstance(v, list) else v[:3] for k, v in got.items()}
+
+    # ---------------- no getter stops a program ----------------
+    @case("every control and receive getter in one program, then a move that must succeed",
+          "getFreedriveStatus")
+    def every_getter():
+        restart()
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        pose, q = r.getActualTCPPose(), r.getActualQ()
+        far = [pose[0] + 2.0] + list(pose[1:])
+        control = {
+            "getForwardKinematics": lambda: (c.getForwardKinematics(), c.getForwardKinematics(q),
+                                             c.getForwardKinematics(q, [0, 0, 0.1, 0, 0, 0])),
+            "getInverseKinematics": lambda: (c.getInverseKinematics(pose),
+                                             c.getInverseKinematics(pose, q, 1e-10, 1e-10)),
+            "getInverseKinematicsHasSolution": lambda: (c.getInverseKinematicsHasSolution(pose),
+                                                        c.getInverseKinematicsHasSolution(far)),
+            "getTCPOffset": c.getTCPOffset,
+            "getActualToolFlangePose": c.getActualToolFlangePose,
+            "getStepTime": c.getStepTime,
+            "getActualJointPositionsHistory": lambda: c.getActualJointPositionsHistory(10),
+            "getTargetWaypoint": c.getTargetWaypoint,
+            "getJointTorques": c.getJointTorques,
+            "getFreedriveStatus": c.getFreedriveStatus,
+            "getRobotStatus": c.getRobotStatus,
+            "getAsyncOperationProgress": c.getAsyncOperationProgress,
+            "getAsyncOperationProgressEx": lambda: c.getAsyncOperationProgressEx().isAsyncOperationRunning(),
+            "isSteady": c.isSteady,
+            "isPoseWithinSafetyLimits": lambda: (c.isPoseWithinSafetyLimits(pose),
+                                                 c.isPoseWithinSafetyLimits(far)),
+            "isJointsWithinSafetyLimits": lambda: c.isJointsWithinSafetyLimits(Q1[:5] + [6.5]),
+            "isProgramRunning": c.isProgramRunning,
+            "isConnected": c.isConnected,
+        }
+        # Getters of features this suite lists as unsupported (see UNSUPPORTED): not called.
+        excluded = {"readContactDetection", "getMassMatrix", "getCoriolisAndCentrifugalTorques",
+                    "getTargetJointAccelerations", "getJacobian", "getJacobianTimeDerivative"}
+        getters = {m for m in dir(rtde_control.RTDEControlInterface) if m.startswith(("get", "is", "read"))}
+        check(getters == set(control) | excluded, f"getters not called: {getters - set(control) - excluded}")
+        answers = {}
+        for name, call in control.items():
+            answers[name] = call()
+            check(c.isProgramRunning(), f"the program stopped after {name}")
+        args = {"getDigitalInState": 0, "getDigitalOutState": 0, "getOutputIntRegister": 18,
+                "getOutputDoubleRegister": 18}
+        for name in dir(rtde_receive.RTDEReceiveInterface):
+            if name.startswith(("get", "is")):
+                getattr(r, name)(*([args[name]] if name in args else []))
+        check(c.isProgramRunning(), "the program runs after every receive getter")
+        settle()
+        check(c.getFreedriveStatus() == 0, "not in freedrive")
+        check(c.isProgramRunning(), "still running")
+        check(c.moveJ(HOME, 1.5, 3.0), "the move after every getter")
+        settle()
+        near(r.getActualQ(), HOME, 1e-6)
+        check(c.moveJ(Q1, 1.5, 3.0), "and back")
+        return sorted(control)
 
     # ---------------- IO ----------------
     @case("io: digital outputs reach the output bits", "setStandardDigitalOut", "setConfigurableDigitalOut",

@@ -1,6 +1,7 @@
 //! The simulated arm behind the virtual controller: a trait so a physics simulator can plug in,
 //! and a kinematic joint-space model with velocity and acceleration limits stepped at 500 Hz.
 
+use super::dynamics::ArmDynamics;
 use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 use thiserror::Error;
@@ -151,6 +152,12 @@ pub trait ArmModel: Send + 'static {
     /// A digital output changed: standard 0–7, configurable 8–15, tool 16–17 (as
     /// `actual_digital_output_bits`). The controller calls it from every path that sets one.
     fn digital_output(&mut self, _pin: u32, _level: bool) {}
+    /// The arm's gravity model (link inertials and torque constants), for the joint torques and
+    /// motor currents the controller reports. By default the built-in model of the arm the
+    /// kinematics describe ([`ArmDynamics::for_dh`]: the UR5e), or none.
+    fn dynamics(&self) -> Option<ArmDynamics> {
+        ArmDynamics::for_dh(&self.kinematics().dh)
+    }
     /// Seconds the device on output `pin` needs to act after a change (a gripper's stroke).
     /// Programs do not wait for it (a real one cannot know it): ours sleeps the wait its client
     /// sends, and the controller warns when that is shorter than this.

@@ -8,6 +8,7 @@ use super::programs::{
 };
 use super::registers::{Payload, Registers, StandardIo};
 use crate::dashboard::{robot_mode_word, safety_status_word};
+use crate::kinematics::Joints;
 use crate::program::{PROGRAM_NAME, UR_RTDE_PROGRAM_NAME, program_name};
 use crate::robot::{RobotMode, SafetyStatus};
 use crate::rtde::ControllerVersion;
@@ -18,7 +19,7 @@ use crate::rtde::state::{
 };
 use crate::rtde::types::{DataType, Slot, Value};
 use crate::rtde::variables::{self, Register};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
@@ -30,6 +31,10 @@ pub const PROGRAM_STOP_DECELERATION: f64 = 3.0;
 
 /// Messages kept by [`VirtualController::messages`].
 pub const MAX_TEXT_LOG: usize = 64;
+
+/// Control cycles of actual joint positions the controller keeps for
+/// `get_actual_joint_positions_history` (1 s at 500 Hz; a modelled buffer size).
+pub const HISTORY_LEN: usize = 500;
 
 /// Why a program upload or a dashboard action was refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -76,6 +81,13 @@ pub struct Snapshot {
     pub payload: Payload,
     /// The active TCP in the flange frame (UR pose vector).
     pub tcp_offset: [f64; 6],
+    /// Joint torques (N·m) the model needs at the target joints to hold the arm and the payload
+    /// against gravity (`target_moment`); zero when the arm model has no inertials.
+    pub target_moment: [f64; 6],
+    /// Motor currents (A) for those torques at the target joints (`target_current`).
+    pub target_current: [f64; 6],
+    /// Motor currents (A) at the actual joints (`actual_current`).
+    pub actual_current: [f64; 6],
 }
 
 impl Snapshot {
@@ -146,6 +158,9 @@ enum Quantity {
     PayloadCog,
     PayloadInertia,
     TcpOffset,
+    TargetMoment,
+    TargetCurrent,
+    ActualCurrent,
 }
 
 const QUANTITIES: &[(&str, Quantity)] = &[
@@ -183,6 +198,9 @@ const QUANTITIES: &[(&str, Quantity)] = &[
     ("payload_cog", Quantity::PayloadCog),
     ("payload_inertia", Quantity::PayloadInertia),
     ("tcp_offset", Quantity::TcpOffset),
+    ("target_moment", Quantity::TargetMoment),
+    ("target_current", Quantity::TargetCurrent),
+    ("actual_current", Quantity::ActualCurrent),
 ];
 
 // Output key kinds (high 16 bits) and input key kinds.
@@ -198,6 +216,23 @@ const K_NAMED_INPUT: u32 = 8;
 
 fn key(kind: u32, index: usize) -> u32 {
     (kind << 16) | (index as u32 & 0xffff)
+}
+
+/// `joint_mode` of every joint in a robot mode (UR's joint mode codes): 253 running (brakes
+/// released, under control), 255 idle (powered, brakes on), 238 backdrive, 247 booting, 239 power
+/// off.
+fn joint_mode(mode: RobotMode) -> i32 {
+    match mode {
+        RobotMode::Running => 253,
+        RobotMode::PowerOn | RobotMode::Idle => 255,
+        RobotMode::Backdrive => 238,
+        RobotMode::Booting => 247,
+        RobotMode::NoController
+        | RobotMode::Disconnected
+        | RobotMode::ConfirmSafety
+        | RobotMode::PowerOff
+        | RobotMode::UpdatingFirmware => 239,
+    }
 }
 
 /// A plausible constant for table variables the model does not simulate.
@@ -293,6 +328,11 @@ pub(crate) struct Core {
     /// The RTDE watchdog the running program armed: minimum period between updates of
     /// `input_int_register_0` (s) and the controller time of the last update.
     pub watchdog: Option<Watchdog>,
+    /// Actual joint positions of the last [`HISTORY_LEN`] control cycles, newest first
+    /// (`get_actual_joint_positions_history`).
+    pub history: VecDeque<Joints>,
+    /// The text of the newest accepted program, for dashboard `play`.
+    pub loaded_script: Option<String>,
 }
 
 /// An armed RTDE watchdog (`rtde_set_watchdog(..., "stop")`).
@@ -350,6 +390,7 @@ impl Core {
             runtime_error: None,
             watchdog: None,
             payload: &mut self.payload,
+            history: &self.history,
         };
         let result = f(program, &mut io);
         Some(ProgramCall {
@@ -397,6 +438,8 @@ impl VirtualController {
             text_log: Vec::new(),
             payload: Payload::default(),
             watchdog: None,
+            history: VecDeque::with_capacity(HISTORY_LEN),
+            loaded_script: None,
         };
         let snapshot = Arc::new(Self::snapshot_of(&core));
         VirtualController {
@@ -414,10 +457,20 @@ impl VirtualController {
     }
 
     fn snapshot_of(core: &Core) -> Snapshot {
+        let arm = core.arm.state();
+        let (target_moment, target_current, actual_current) = match core.arm.dynamics() {
+            Some(d) => {
+                let dh = &core.arm.kinematics().dh;
+                let target = d.gravity_torques(dh, &arm.target_q, &core.payload);
+                let actual = d.gravity_torques(dh, &arm.q, &core.payload);
+                (target, d.currents(&target), d.currents(&actual))
+            }
+            None => ([0.0; 6], [0.0; 6], [0.0; 6]),
+        };
         Snapshot {
             cycle: core.cycle,
             timestamp: core.time,
-            arm: core.arm.state(),
+            arm,
             robot_mode: core.robot_mode,
             safety_mode: core.safety_mode,
             runtime_state: core.runtime_state,
@@ -425,6 +478,9 @@ impl VirtualController {
             io: core.io,
             payload: core.payload,
             tcp_offset: crate::kinematics::to_ur_pose(&core.arm.kinematics().flange_T_tcp),
+            target_moment,
+            target_current,
+            actual_current,
         }
     }
 
@@ -449,6 +505,11 @@ impl VirtualController {
             if let Some(e) = &arm_error {
                 tracing::warn!(error = %e, "virtual arm aborted a motion");
             }
+            if core.history.len() == HISTORY_LEN {
+                core.history.pop_back();
+            }
+            let q = core.arm.state().q;
+            core.history.push_front(q);
             // A collision reported by the arm model stops the arm like a real controller.
             let mut protective_stop = matches!(arm_error, Some(ArmError::ProtectiveStop(_)));
             if core.runtime_state == RuntimeState::Playing
@@ -562,7 +623,13 @@ impl VirtualController {
         }
     }
 
-    fn start_program(core: &mut Core, name: &str) -> Result<(), ControllerError> {
+    /// Starts program `name`; `script` is its text when it came over the script port (ur_rtde's
+    /// control script carries the path its `moveL(path)`/`moveJ(path)` injected).
+    fn start_program(
+        core: &mut Core,
+        name: &str,
+        script: Option<&str>,
+    ) -> Result<(), ControllerError> {
         if core.robot_mode != RobotMode::Running || !core.safety_mode.allows_motion() {
             return Err(ControllerError::NotReady {
                 mode: core.robot_mode,
@@ -571,7 +638,7 @@ impl VirtualController {
         }
         let program: Box<dyn Program> = match name {
             PROGRAM_NAME => Box::new(CellProgram::new()),
-            UR_RTDE_PROGRAM_NAME => Box::new(UrRtdeProgram::new()),
+            UR_RTDE_PROGRAM_NAME => Box::new(UrRtdeProgram::from_script(script.unwrap_or(""))),
             other => return Err(ControllerError::UnknownProgram(other.to_owned())),
         };
         Self::stop_program(core);
@@ -579,6 +646,7 @@ impl VirtualController {
         core.with_program(0.0, None, |p, io| p.start(io));
         core.runtime_state = RuntimeState::Playing;
         core.loaded = Some(name.to_owned());
+        core.loaded_script = script.map(str::to_owned);
         tracing::info!(name, "program started");
         Ok(())
     }
@@ -607,7 +675,7 @@ impl VirtualController {
             return Err(ControllerError::Refused);
         }
         let mut core = self.lock();
-        let result = Self::start_program(&mut core, name);
+        let result = Self::start_program(&mut core, name, Some(script));
         if let Err(e) = &result {
             core.log(e.to_string());
         }
@@ -680,7 +748,8 @@ impl VirtualController {
                 let Some(name) = core.loaded.clone() else {
                     return "Failed to execute: Play".into();
                 };
-                match Self::start_program(&mut core, &name) {
+                let script = core.loaded_script.clone();
+                match Self::start_program(&mut core, &name, script.as_deref()) {
                     Ok(()) => "Starting program".into(),
                     Err(_) => "Failed to execute: Play".into(),
                 }
@@ -725,6 +794,7 @@ impl VirtualController {
                     if name == PROGRAM_NAME || name == UR_RTDE_PROGRAM_NAME {
                         Self::stop_program(&mut core);
                         core.loaded = Some(name.to_owned());
+                        core.loaded_script = None;
                         format!("Loading program: {}", file.trim())
                     } else {
                         format!("File not found: {}", file.trim())
@@ -824,10 +894,7 @@ impl Controller for VirtualController {
                     Quantity::StandardDo => Value::Uint8(s.io.standard_do),
                     Quantity::ToolDo => Value::Uint8(s.io.tool_do),
                     Quantity::ConfigurableDo => Value::Uint8(s.io.configurable_do),
-                    Quantity::JointMode => {
-                        let running = s.robot_mode == RobotMode::Running;
-                        Value::Vector6Int32([if running { 255 } else { 253 }; 6])
-                    }
+                    Quantity::JointMode => Value::Vector6Int32([joint_mode(s.robot_mode); 6]),
                     Quantity::InputBitsLow => Value::Uint32(s.regs.input_bits as u32),
                     Quantity::InputBitsHigh => Value::Uint32((s.regs.input_bits >> 32) as u32),
                     Quantity::OutputBitsLow => Value::Uint32(s.regs.output_bits as u32),
@@ -838,6 +905,9 @@ impl Controller for VirtualController {
                     Quantity::PayloadCog => Value::Vector3d(s.payload.cog),
                     Quantity::PayloadInertia => Value::Vector6d(s.payload.inertia),
                     Quantity::TcpOffset => Value::Vector6d(s.tcp_offset),
+                    Quantity::TargetMoment => Value::Vector6d(s.target_moment),
+                    Quantity::TargetCurrent => Value::Vector6d(s.target_current),
+                    Quantity::ActualCurrent => Value::Vector6d(s.actual_current),
                 }
             }
         }
@@ -870,6 +940,10 @@ impl Controller for VirtualController {
             if let Some(w) = core.watchdog.as_mut() {
                 w.last = now;
             }
+            core.regs.command_doubles = fields
+                .iter()
+                .filter(|f| f.key >> 16 == K_IN_DOUBLE)
+                .fold(0, |bits, f| bits | 1 << (f.key & 0xffff));
         }
         let mut named: [Option<Value>; 16] = [None; 16];
         for (f, v) in fields.iter().zip(values) {

@@ -7,6 +7,7 @@
 
 pub mod arm;
 pub mod controller;
+pub mod dynamics;
 pub mod programs;
 pub mod registers;
 pub mod script_port;

@@ -4,7 +4,9 @@
 
 use super::arm::{ArmCommand, ArmError, ArmModel};
 use super::registers::{Payload, Registers, StandardIo};
+use crate::kinematics::Joints;
 use crate::program::layout as L;
+use std::collections::VecDeque;
 
 pub use super::ur_rtde_program::{UrRtdeProgram, ur_rtde_cmd};
 
@@ -30,6 +32,8 @@ pub struct ProgramIo<'a> {
     pub watchdog: Option<f64>,
     /// The active payload (`set_payload`, `set_target_payload`).
     pub payload: &'a mut Payload,
+    /// Actual joint positions of the last control cycles, newest (this cycle's) first.
+    pub history: &'a VecDeque<Joints>,
 }
 
 impl ProgramIo<'_> {

@@ -17,6 +17,11 @@ pub struct Registers {
     pub output_double: [f64; REGISTER_COUNT],
     /// output bit registers 0..127.
     pub output_bits: u128,
+    /// Which input_double_registers (bit i = register i) the newest input package that wrote
+    /// input_int_register_0 also wrote: the parameters that came with the command. A program
+    /// tells from it whether an optional argument was sent or the register only holds what an
+    /// earlier command left there.
+    pub command_doubles: u64,
 }
 
 impl Default for Registers {
@@ -28,6 +33,7 @@ impl Default for Registers {
             output_int: [0; REGISTER_COUNT],
             output_double: [0.0; REGISTER_COUNT],
             output_bits: 0,
+            command_doubles: 0,
         }
     }
 }

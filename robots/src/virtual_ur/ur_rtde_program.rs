@@ -10,7 +10,6 @@ use super::registers::Registers;
 use crate::kinematics::{Joints, from_ur_pose, to_ur_pose};
 use crate::program::layout as L;
 use nalgebra::{UnitQuaternion, Vector3};
-use std::collections::VecDeque;
 
 /// ur_rtde 1.6.x command ids (`RTDE::RobotCommand::Type`).
 pub mod ur_rtde_cmd {
@@ -54,6 +53,8 @@ pub mod ur_rtde_cmd {
     pub const GET_STEPTIME: i32 = 26;
     /// getActualJointPositionsHistory (realtime).
     pub const GET_JOINT_POSITIONS_HISTORY: i32 = 27;
+    /// getTargetWaypoint.
+    pub const GET_TARGET_WAYPOINT: i32 = 28;
     /// setTcp.
     pub const SET_TCP: i32 = 29;
     /// getInverseKinematics with qnear and tolerances.
@@ -84,10 +85,14 @@ pub mod ur_rtde_cmd {
     pub const GET_FK_DEFAULT: i32 = 43;
     /// getForwardKinematics(q, tcp_offset).
     pub const GET_FK_ARGS: i32 = 44;
+    /// moveJ(path) / moveL(path) / movePath: the path injected into the script.
+    pub const MOVE_PATH: i32 = 45;
     /// getInverseKinematics(x) near the actual joints.
     pub const GET_IK_DEFAULT: i32 = 46;
     /// isSteady.
     pub const IS_STEADY: i32 = 47;
+    /// getFreedriveStatus.
+    pub const GET_FREEDRIVE_STATUS: i32 = 54;
     /// getActualToolFlangePose.
     pub const GET_ACTUAL_TOOL_FLANGE_POSE: i32 = 58;
     /// getInverseKinematicsHasSolution(x).
@@ -111,9 +116,6 @@ pub const REALTIME: [i32; 16] = [24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 6
 /// Largest payload a UR5e accepts (kg).
 pub const MAX_PAYLOAD_KG: f64 = 5.0;
 
-/// Controller cycles of joint positions kept for `get_actual_joint_positions_history`.
-pub const HISTORY_LEN: usize = 500;
-
 /// What a command leaves the handshake in.
 enum Outcome {
     /// Done at once: signal "done".
@@ -136,7 +138,8 @@ pub struct UrRtdeProgram {
     speed_joint: bool,
     /// The jog frame's rotation, fixed when jogging starts.
     jog_frame: Option<UnitQuaternion<f64>>,
-    history: VecDeque<Joints>,
+    /// The target TCP pose of the running movej/movel (`get_target_waypoint`).
+    waypoint: Option<[f64; 6]>,
     /// The command id the register held when the program started: left by a client whose
     /// program ended, it is not run again until the client writes the register.
     stale: Option<i32>,
@@ -160,15 +163,16 @@ fn unsupported(cmd: i32) -> String {
         18 | 19 => "teach mode",
         20 | 21 => "force mode damping and gain",
         SERVO_C => "servoc",
-        28 => "get_target_waypoint",
-        GET_JOINT_TORQUES => "get_joint_torques (the arm model has no dynamics)",
-        45 => "movePath (custom script code)",
+        MOVE_PATH => "movePath (custom script code)",
         51 => "moveUntilContact (the arm model senses no contact)",
-        52..=54 => "freedrive mode",
+        52 | 53 => "freedrive mode",
         56 | 57 => "external force/torque sensor",
         59 => "set_gravity",
         62..=64 => "contact detection",
-        66..=71 => "dynamics (torque command, mass matrix, Jacobians over registers 36-47)",
+        66..=71 => {
+            "dynamics (torque command, mass matrix, Jacobians over registers 36-47: PolyScope \
+             5.23 functions; this controller reports 5.15)"
+        }
         _ => "this command",
     };
     format!("virtual-ur: ur_rtde command {cmd} is not simulated: {what}")
@@ -180,18 +184,29 @@ impl UrRtdeProgram {
         UrRtdeProgram::default()
     }
 
-    /// Mirrors `write_async_progress_register` of the script (output_int_register_2).
-    fn write_async(&mut self, regs: &mut Registers, running: bool, started: bool) {
+    /// The program as uploaded: `script` is the control script's text.
+    pub fn from_script(_script: &str) -> UrRtdeProgram {
+        UrRtdeProgram::default()
+    }
+
+    /// Mirrors `write_async_progress_register(value)` of the script (output_int_register_2):
+    /// 0 starts an operation (new id), a positive value is its progress, −1 ends it.
+    fn write_async_progress(&mut self, regs: &mut Registers, value: i32) {
         self.async_writes = (self.async_writes + 1) % 128;
-        if started {
+        if value == 0 {
             self.async_op = (self.async_op + 1) % 128;
         }
         let mut v = self.async_writes * 65536 + self.async_op * 16_777_216;
-        if running {
-            v += 32768;
+        if value >= 0 {
+            v += value.min(32767) + 32768;
         }
         regs.output_int[2] = v;
-        self.async_running = running;
+        self.async_running = value >= 0;
+    }
+
+    /// `signal_async_operation_started()` (`started`) or `signal_async_operation_finished()`.
+    fn write_async(&mut self, regs: &mut Registers, started: bool) {
+        self.write_async_progress(regs, if started { 0 } else { -1 });
     }
 
     /// Sends a motion to the arm: a protective stop from the model stops the arm, any other
@@ -212,11 +227,16 @@ impl UrRtdeProgram {
     fn start_move(&mut self, io: &mut ProgramIo<'_>, cmd: ArmCommand) -> Result<Outcome, String> {
         let asynchronous = io.regs.input_int[1] == 1;
         Self::command(io, cmd)?;
+        self.waypoint = match cmd {
+            ArmCommand::MoveJ { q, .. } => Some(io.arm.forward(&q)),
+            ArmCommand::MoveL { pose, .. } => Some(pose),
+            _ => None,
+        };
         if io.protective_stop {
             return Ok(Outcome::Done);
         }
         if asynchronous {
-            self.write_async(io.regs, true, true);
+            self.write_async(io.regs, true);
             Ok(Outcome::Done)
         } else {
             Ok(Outcome::Wait)
@@ -284,6 +304,7 @@ impl UrRtdeProgram {
                 } else {
                     L::STOP_DECELERATION
                 };
+                self.waypoint = None;
                 let joint = cmd == STOP_J || (cmd == SPEED_STOP && self.speed_joint);
                 let asynchronous = (cmd == STOP_L || cmd == STOP_J) && regs.input_int[1] == 1;
                 let stop = if joint {
@@ -293,10 +314,10 @@ impl UrRtdeProgram {
                 };
                 Self::command(io, stop)?;
                 if self.async_running {
-                    self.write_async(io.regs, false, false);
+                    self.write_async(io.regs, false);
                 }
                 if asynchronous {
-                    self.write_async(io.regs, true, true);
+                    self.write_async(io.regs, true);
                     Ok(Outcome::Done)
                 } else {
                     Ok(Outcome::Wait)
@@ -386,11 +407,35 @@ impl UrRtdeProgram {
                 Ok(Outcome::Done)
             }
             GET_FK_ARGS => {
-                // As the script: the TCP comes from registers 6-11 (ur_rtde leaves them as the
-                // previous command wrote them when no tcp_offset is given).
-                let flange = io.arm.kinematics().forward_flange(&target);
-                let pose = to_ur_pose(&(flange * from_ur_pose(&second)));
+                // The script computes `get_forward_kin(q, tcp)` with the TCP from registers
+                // 6-11, but ur_rtde 1.6.5 writes them only with a non-zero `tcp_offset` (its
+                // 12-value recipe); `getForwardKinematics(q)` sends q alone (registers 0-5), and
+                // registers 6-11 still hold the previous command's parameters (a moveJ's speed
+                // and acceleration: a TCP metres away). Only registers that came with this
+                // command count; otherwise the active TCP, as ur_rtde documents.
+                let kinematics = io.arm.kinematics();
+                let sent_tcp = (6..12).all(|i| regs.command_doubles >> i & 1 == 1);
+                let flange_t_tcp = if sent_tcp {
+                    from_ur_pose(&second)
+                } else {
+                    kinematics.flange_T_tcp
+                };
+                let pose = to_ur_pose(&(kinematics.forward_flange(&target) * flange_t_tcp));
                 write_vector(io.regs, 0, &pose);
+                Ok(Outcome::Done)
+            }
+            GET_TARGET_WAYPOINT => {
+                // The target of the running movej/movel; the target TCP pose otherwise.
+                let pose = match self.waypoint {
+                    Some(pose) if io.arm.is_moving() => pose,
+                    _ => io.arm.state().target_tcp_pose,
+                };
+                write_vector(io.regs, 0, &pose);
+                Ok(Outcome::Done)
+            }
+            // Freedrive is never entered (freedriveMode is refused): "not in freedrive".
+            GET_FREEDRIVE_STATUS => {
+                io.regs.output_int[1] = 0;
                 Ok(Outcome::Done)
             }
             GET_ACTUAL_TOOL_FLANGE_POSE => {
@@ -418,6 +463,7 @@ impl UrRtdeProgram {
                     },
                 };
                 self.jog_frame = Some(frame);
+                self.waypoint = None;
                 let linear = frame * Vector3::new(target[0], target[1], target[2]);
                 let angular = frame * Vector3::new(target[3], target[4], target[5]);
                 let xd = [
@@ -434,6 +480,7 @@ impl UrRtdeProgram {
             }
             STOP_JOG => {
                 self.jog_frame = None;
+                self.waypoint = None;
                 Self::command(io, ArmCommand::StopL { decel: 1.2 })?;
                 Ok(Outcome::Wait)
             }
@@ -447,6 +494,9 @@ impl UrRtdeProgram {
     fn realtime(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> Result<(), String> {
         let regs = &*io.regs;
         let target = vector(regs, 0);
+        if matches!(cmd, SPEED_J | SPEED_L | SERVO_J | SERVO_L) {
+            self.waypoint = None;
+        }
         match cmd {
             SPEED_J => {
                 self.speed_joint = true;
@@ -477,18 +527,30 @@ impl UrRtdeProgram {
                 Ok(())
             }
             GET_JOINT_POSITIONS_HISTORY => {
+                // The controller's buffer; as on a UR, indexing beyond it is a runtime error.
                 let steps = regs.input_int[1];
                 let q = usize::try_from(steps)
                     .ok()
-                    .and_then(|i| self.history.get(i))
+                    .and_then(|i| io.history.get(i))
+                    .copied()
                     .ok_or_else(|| {
                         format!(
                             "get_actual_joint_positions_history({steps}): outside the {} kept cycles",
-                            self.history.len()
+                            io.history.len()
                         )
                     })?;
-                let q = *q;
                 write_vector(io.regs, 0, &q);
+                Ok(())
+            }
+            // `get_joint_torques()`: the joint torques "corrected by the torque needed to move
+            // the robot itself (gravity, friction, etc.)" (UR's script manual, quoted in
+            // ur_rtde's documentation), i.e. what external forces and a payload the controller
+            // was not told of add. The model has neither (no contact, and the payload it carries
+            // is the one set), so the answer is zero in every pose; the gravity torques the
+            // joints do hold are `target_moment` and, through the torque constants, the
+            // currents.
+            GET_JOINT_TORQUES => {
+                write_vector(io.regs, 0, &[0.0; 6]);
                 Ok(())
             }
             GET_ACTUAL_TOOL_FLANGE_POSE => self.process(io, cmd).map(|_| ()),
@@ -507,15 +569,11 @@ impl Program for UrRtdeProgram {
         self.waiting_for_motion = false;
         self.jog_frame = None;
         self.stale = Some(io.regs.input_int[0]).filter(|c| *c != 0);
-        self.write_async(io.regs, false, false);
+        self.write_async(io.regs, false);
         io.regs.output_int[0] = READY;
     }
 
     fn step(&mut self, io: &mut ProgramIo<'_>) -> ProgramStep {
-        if self.history.len() == HISTORY_LEN {
-            self.history.pop_back();
-        }
-        self.history.push_front(io.arm.state().q);
         if let Some(e) = &io.arm_error
             && !matches!(e, ArmError::ProtectiveStop(_))
         {
@@ -525,7 +583,7 @@ impl Program for UrRtdeProgram {
             return ProgramStep::Exit;
         }
         if self.async_running && !io.arm.is_moving() {
-            self.write_async(io.regs, false, false);
+            self.write_async(io.regs, false);
         }
         if self.waiting_for_motion {
             if io.arm.is_moving() {
@@ -574,7 +632,7 @@ impl Program for UrRtdeProgram {
             io.regs.output_int[0] = DONE;
         }
         if self.async_running {
-            self.write_async(io.regs, false, false);
+            self.write_async(io.regs, false);
         }
     }
 }
