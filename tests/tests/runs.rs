@@ -454,7 +454,7 @@ fn summary_counts_match_the_records() {
     let html = cell::report::render_html(&s, &records, &Default::default())
         .unwrap()
         .html;
-    assert!(html.contains("<th>insertions / inserted episode</th><th>seated after a retry</th>"));
+    assert!(html.contains("<th>insertions per inserted episode</th><th>seated after a retry</th>"));
     for t in &s.steps {
         let cells = format!(
             "<td>{:.2}</td><td>{:.2}</td><td>{}</td><td>{}</td>",
