@@ -1369,3 +1369,181 @@ fn issue43_item3_currents_moments_and_joint_mode_of_an_arm_holding_a_pose() {
     assert!(u.qd()[0] > 0.05);
     assert_eq!(mode(&u), Value::Vector6Int32([253; 6]));
 }
+
+/// ur_rtde's control script with a path injected into `exec_move_path()`, as
+/// `moveL(path)`/`moveJ(path)` upload it: one `(statement, target, speed, accel, blend)` each.
+fn script_with_path(moves: &[(&str, [f64; 6], f64, f64, f64)]) -> String {
+    let mut s = String::from(
+        "def rtde_control():\n    def exec_move_path():\n        textmsg(\"exec_move_path\")\n        # inject move path\n",
+    );
+    for (i, (call, target, v, a, r)) in moves.iter().enumerate() {
+        let list = target.map(|x| x.to_string()).join(",");
+        let p = if *call == "movej" { "" } else { "p" };
+        s += &format!("\tsignal_async_progress({i})\n\t{call}({p}[{list}],a={a},v={v},r={r})\n");
+    }
+    s + "    end\n    textmsg(\"x\")\nend\n"
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+fn to_segment(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
+    let ab: Vec<f64> = (0..3).map(|i| b[i] - a[i]).collect();
+    let ap: Vec<f64> = (0..3).map(|i| p[i] - a[i]).collect();
+    let len2: f64 = ab.iter().map(|v| v * v).sum();
+    let t = (ap.iter().zip(&ab).map(|(x, y)| x * y).sum::<f64>() / len2).clamp(0.0, 1.0);
+    let closest: Vec<f64> = (0..3).map(|i| a[i] + ab[i] * t).collect();
+    dist(p, &closest)
+}
+
+#[test]
+fn issue43_item4_move_l_path_blends_within_the_radius_and_reports_progress() {
+    let r = 0.03;
+    for asynchronous in [false, true] {
+        let mut u = UrRtde::start();
+        assert!(u.move_j(TARGET_Q));
+        let start = u.tcp();
+        let corners = [
+            offset(start, 0.0, 0.0, -0.1),
+            offset(start, 0.1, 0.0, -0.1),
+            offset(start, 0.1, 0.1, -0.1),
+        ];
+        let script = script_with_path(&[
+            ("movel", corners[0], 0.25, 1.2, r),
+            ("movel", corners[1], 0.25, 1.2, r),
+            ("movel", corners[2], 0.25, 1.2, 0.0),
+        ]);
+        u.c.upload_script(&script).unwrap();
+        u.ticks(2);
+        let polyline = [start, corners[0], corners[1], corners[2]];
+        // Sample every cycle from the command on.
+        let mut samples = Vec::new();
+        let mut progress = Vec::new();
+        let flag = i32::from(asynchronous);
+        if asynchronous {
+            assert!(u.send(urcmd::MOVE_PATH, &[(1, flag)], &[]), "async path");
+            for _ in 0..2000 {
+                u.ticks(1);
+                samples.push((u.tcp(), u.c.snapshot().arm.tcp_speed));
+                let reg = u.c.snapshot().regs.output_int[2];
+                let value = if reg & 32768 != 0 { reg & 32767 } else { -1 };
+                if progress.last() != Some(&value) {
+                    progress.push(value);
+                }
+            }
+        } else {
+            assert!(u.send(urcmd::MOVE_PATH, &[(1, flag)], &[]), "sync path");
+            samples.push((u.tcp(), u.c.snapshot().arm.tcp_speed));
+        }
+        assert!(u.running(), "{}", u.messages());
+        assert!(
+            dist(&u.tcp()[..3], &corners[2][..3]) < 1e-9,
+            "ended at {:?}",
+            u.tcp()
+        );
+        assert!(u.qd().iter().all(|v| *v == 0.0));
+        if !asynchronous {
+            continue;
+        }
+        // Running with progress 0, 1, 2 (each segment as it starts), then finished.
+        assert_eq!(progress, [0, 1, 2, -1], "progress register values");
+        for (i, corner) in corners[..2].iter().enumerate() {
+            let nearest = samples
+                .iter()
+                .map(|(p, _)| dist(&p[..3], &corner[..3]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                nearest > 1e-3 && nearest < r,
+                "corner {i}: passed {nearest} m from it (blend radius {r} m)"
+            );
+        }
+        for (p, v) in &samples {
+            let off_path = (0..3)
+                .map(|k| to_segment(&p[..3], &polyline[k][..3], &polyline[k + 1][..3]))
+                .fold(f64::INFINITY, f64::min);
+            let corner = corners[..2]
+                .iter()
+                .map(|c| dist(&p[..3], &c[..3]))
+                .fold(f64::INFINITY, f64::min);
+            if off_path > 1e-6 {
+                // Off the lines only while rounding a corner, and within its radius.
+                assert!(
+                    corner <= r * 1.05,
+                    "{p:?} is {off_path} m off the path, {corner} m from a corner"
+                );
+            }
+            if corner < r * 0.5 {
+                let speed = dist(&v[..3], &[0.0; 3]);
+                assert!(speed > 0.1, "the arm slowed to {speed} m/s in a blend");
+            }
+        }
+    }
+}
+
+#[test]
+fn issue43_item4_move_j_path_blends_and_overlapping_blends_are_skipped_with_a_warning() {
+    // moveJ(path): the arm does not stop at the blended via-point.
+    let mut u = UrRtde::start();
+    assert!(u.move_j(TARGET_Q));
+    let mut via = TARGET_Q;
+    via[0] += 0.3;
+    let mut end = via;
+    end[1] += 0.3;
+    let script = script_with_path(&[
+        ("movej", via, 1.0, 2.0, 0.02),
+        ("movej", end, 1.0, 2.0, 0.0),
+    ]);
+    u.c.upload_script(&script).unwrap();
+    u.ticks(2);
+    assert!(u.send(urcmd::MOVE_PATH, &[(1, 1)], &[]));
+    let mut slowest_near_via = f64::INFINITY;
+    while u.c.snapshot().arm.qd.iter().any(|v| *v != 0.0) || slowest_near_via.is_infinite() {
+        u.ticks(1);
+        let q = u.q();
+        if diff(&q, &via) < 0.05 {
+            slowest_near_via = slowest_near_via.min(dist(&u.qd(), &[0.0; 6]));
+        }
+    }
+    assert!(
+        slowest_near_via > 0.1,
+        "slowed to {slowest_near_via} rad/s at the via-point"
+    );
+    assert!(diff(&u.q(), &end) < 1e-12);
+    // Overlapping blends: 4 cm radii on 5 cm segments; the first is skipped with a warning and
+    // the arm stops on that via-point.
+    let mut u = UrRtde::start();
+    assert!(u.move_j(TARGET_Q));
+    let start = u.tcp();
+    let a = offset(start, 0.0, 0.0, -0.05);
+    let b = offset(start, 0.05, 0.0, -0.05);
+    let c = offset(start, 0.05, 0.05, -0.05);
+    let script = script_with_path(&[
+        ("movel", a, 0.25, 1.2, 0.04),
+        ("movel", b, 0.25, 1.2, 0.04),
+        ("movel", c, 0.25, 1.2, 0.0),
+    ]);
+    u.c.upload_script(&script).unwrap();
+    u.ticks(2);
+    assert!(u.send(urcmd::MOVE_PATH, &[(1, 1)], &[]));
+    let mut nearest_a = f64::INFINITY;
+    for _ in 0..1500 {
+        u.ticks(1);
+        nearest_a = nearest_a.min(dist(&u.tcp()[..3], &a[..3]));
+    }
+    assert!(nearest_a < 1e-9, "reached via-point 0 ({nearest_a} m)");
+    assert!(dist(&u.tcp()[..3], &c[..3]) < 1e-9);
+    assert!(
+        u.messages().contains("Overlapping Blends"),
+        "{}",
+        u.messages()
+    );
+    assert!(u.running());
+    // movep is not simulated: a runtime error, and the arm does not move.
+    let mut u = UrRtde::start();
+    let script = script_with_path(&[("movel", offset(u.tcp(), 0.0, 0.0, -0.05), 0.25, 1.2, 0.0)])
+        .replace("movel(", "movep(");
+    u.c.upload_script(&script).unwrap();
+    u.ticks(2);
+    assert!(!u.send(urcmd::MOVE_PATH, &[(1, 0)], &[]));
+    assert!(!u.running());
+    assert!(u.messages().contains("movep"), "{}", u.messages());
+    assert!(diff(&u.q(), &HOME) < 1e-12);
+}

@@ -137,7 +137,7 @@ async fn ur_rtde_conformance_suite_passes_with_no_silent_success() {
         serde_json::json!([]),
         "methods neither tested nor listed as unsupported"
     );
-    assert!(summary["cases"].as_u64().unwrap_or(0) >= 66, "{summary}");
+    assert!(summary["cases"].as_u64().unwrap_or(0) >= 67, "{summary}");
     assert!(out.status.success(), "{}", report());
     // getForwardKinematics(q) is our own forward kinematics at q with the active TCP (the
     // flange), and with a given 10 cm TCP.

@@ -51,7 +51,6 @@ UNSUPPORTED = {
     "startContactDetection": STOPS,
     "stopContactDetection": STOPS,
     "readContactDetection": STOPS,
-    "movePath": STOPS + " (custom script code is not interpreted)",
     "servoC": "ur_rtde does not wait for it; the program stops with a runtime error (servoc not simulated)",
     "directTorque": REALTIME,
     "getMassMatrix": REALTIME + POLYSCOPE_5_23,
@@ -193,6 +192,113 @@ def main():
         check(c.moveL_FK(q, 0.25, 1.2), "moveL_FK returned False")
         settle()
         near(r.getActualQ(), q, 1e-6)
+
+    def offset(p, dx, dy, dz):
+        return [p[0] + dx, p[1] + dy, p[2] + dz] + list(p[3:])
+
+    def run_async_path(start, corners, within=5.0):
+        """Samples an asynchronous path from the receive side until it has finished: the
+        progress values in order, the nearest approach to each corner, the slowest TCP speed
+        within half a blend radius of a corner, and the end pose."""
+        progress, nearest, slowest = [], [math.inf] * len(corners), math.inf
+        deadline = time.time() + within
+        while time.time() < deadline:
+            value = c.getAsyncOperationProgress()
+            if not progress or progress[-1] != value:
+                progress.append(value)
+            x, v = r.getActualTCPPose(), r.getActualTCPSpeed()
+            speed = math.sqrt(sum(a * a for a in v[:3]))
+            for i, corner in enumerate(corners):
+                d = dist3(x, corner)
+                nearest[i] = min(nearest[i], d)
+                if d < 0.015:
+                    slowest = min(slowest, speed)
+            if value < 0 and len(progress) > 1:
+                break
+            time.sleep(0.002)
+        return progress, nearest, slowest
+
+    @case("moveL(path): sync and async, corners blended within their radius, progress per via-point",
+          "moveL", "getAsyncOperationProgress")
+    def move_l_path():
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        start = r.getActualTCPPose()
+        corners = [offset(start, 0, 0, -0.1), offset(start, 0.1, 0, -0.1), offset(start, 0.1, 0.1, -0.1)]
+        path = [corners[0] + [0.25, 1.2, 0.03], corners[1] + [0.25, 1.2, 0.03], corners[2] + [0.25, 1.2, 0.0]]
+        check(c.moveL(path), "moveL(path)")
+        # ur_rtde writes the path's numbers with 6 significant digits.
+        near(r.getActualTCPPose()[:3], corners[2][:3], 1e-5)
+        check(at_rest(), "at rest after moveL(path)")
+        check(c.moveJ(Q1, 1.5, 3.0), "back to the start")
+        check(c.moveL(path, True), "async moveL(path)")
+        progress, nearest, slowest = run_async_path(start, corners[:2])
+        check(progress[-1] < 0, f"finished: {progress}")
+        running = [p for p in progress if p >= 0]
+        check(running == [0, 1, 2], f"progress per via-point: {progress}")
+        for i, d in enumerate(nearest):
+            check(0.001 < d < 0.03, f"corner {i}: passed {d} m from it with a 0.03 m blend")
+        check(slowest > 0.1, f"slowed to {slowest} m/s in a blend")
+        near(r.getActualTCPPose()[:3], corners[2][:3], 1e-5)
+        check(c.isProgramRunning(), "the program still runs")
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move still runs")
+        return {"progress": progress, "nearest_corner_m": nearest, "slowest_in_blend_m_s": slowest}
+
+    @case("moveJ(path) and movePath blend in joint space; overlapping blends are skipped",
+          "moveJ", "movePath")
+    def move_j_path():
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        via = list(Q1)
+        via[0] += 0.3
+        end = list(via)
+        end[1] += 0.2
+        check(c.moveJ([via + [1.0, 2.0, 0.02], end + [1.0, 2.0, 0.0]], True), "async moveJ(path)")
+        slowest, progress = math.inf, []
+        deadline = time.time() + 5
+        while time.time() < deadline:
+            value = c.getAsyncOperationProgress()
+            if not progress or progress[-1] != value:
+                progress.append(value)
+            q, qd = r.getActualQ(), r.getActualQd()
+            if max(abs(a - b) for a, b in zip(q, via)) < 0.02:
+                slowest = min(slowest, math.sqrt(sum(v * v for v in qd)))
+            if value < 0 and len(progress) > 1:
+                break
+            time.sleep(0.002)
+        check(slowest > 0.1, f"slowed to {slowest} rad/s at the blended via-point")
+        check([p for p in progress if p >= 0] == [0, 1], f"progress {progress}")
+        near(r.getActualQ(), end, 1e-5)
+        # movePath: a MoveJ to joints, then a MoveL to a pose, 4 cm blend on 5 cm segments
+        # both ways: the blend overlaps the next one and is skipped (a warning on the
+        # controller), so the arm stops on the via-point and the path still completes.
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        p = r.getActualTCPPose()
+        a, b = offset(p, 0, 0, -0.05), offset(p, 0.05, 0, -0.05)
+        path = rtde_control.Path()
+        path.addEntry(rtde_control.PathEntry(rtde_control.PathEntry.MoveL,
+                                             rtde_control.PathEntry.PositionTcpPose, a + [0.25, 1.2, 0.04]))
+        path.addEntry(rtde_control.PathEntry(rtde_control.PathEntry.MoveL,
+                                             rtde_control.PathEntry.PositionTcpPose, b + [0.25, 1.2, 0.04]))
+        path.addEntry(rtde_control.PathEntry(rtde_control.PathEntry.MoveJ,
+                                             rtde_control.PathEntry.PositionJoints, Q1 + [1.0, 2.0, 0.0]))
+        check(c.movePath(path, True), "async movePath")
+        nearest_a = math.inf
+        deadline = time.time() + 5
+        while time.time() < deadline:
+            nearest_a = min(nearest_a, dist3(r.getActualTCPPose(), a))
+            if c.getAsyncOperationProgress() < 0:
+                break
+            time.sleep(0.002)
+        check(nearest_a < 1e-4, f"stopped on the via-point with the skipped blend: {nearest_a} m")
+        near(r.getActualQ(), Q1, 1e-5)
+        # A MoveP entry (movep) is not simulated: fails loudly.
+        path = rtde_control.Path()
+        path.addEntry(rtde_control.PathEntry(rtde_control.PathEntry.MoveP,
+                                             rtde_control.PathEntry.PositionTcpPose, a + [0.25, 1.2, 0.0]))
+        check(not c.movePath(path, False), "movePath with movep returned True")
+        near(r.getActualQ(), Q1, 1e-9)
+        restart()
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move runs")
+        return {"slowest_at_via_rad_s": slowest, "progress": progress, "nearest_skipped_m": nearest_a}
 
     @case("async moveJ reports progress, stopJ stops it short", "stopJ", "getAsyncOperationProgress",
           "getAsyncOperationProgressEx")
@@ -632,7 +738,6 @@ def main():
     loud("startContactDetection", lambda: c.startContactDetection())
     loud("stopContactDetection", c.stopContactDetection)
     loud("readContactDetection", c.readContactDetection)
-    loud("movePath", lambda: c.movePath(_path(), False))
     loud("servoC", lambda: c.servoC(r.getActualTCPPose(), 0.1, 0.5, 0.0))
     loud("directTorque", lambda: c.directTorque([0] * 6))
     loud("getMassMatrix", lambda: True if c.getMassMatrix() is not None else False)
@@ -830,13 +935,6 @@ def main():
                       "failed": [x["case"] for x in results if not x["ok"]],
                       "untested": check_all, "unsupported": UNSUPPORTED}), flush=True)
     return 0 if all(x["ok"] for x in results) and not check_all else 1
-
-
-def _path():
-    import rtde_control as rc
-    path = rc.Path()
-    path.addEntry(rc.PathEntry(rc.PathEntry.MoveJ, rc.PathEntry.PositionJoints, Q1 + [0.5, 1.0, 0.0]))
-    return path
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 //! and a kinematic joint-space model with velocity and acceleration limits stepped at 500 Hz.
 
 use super::dynamics::ArmDynamics;
+use super::path::PathMove;
 use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 use thiserror::Error;
@@ -152,6 +153,21 @@ pub trait ArmModel: Send + 'static {
     /// A digital output changed: standard 0–7, configurable 8–15, tool 16–17 (as
     /// `actual_digital_output_bits`). The controller calls it from every path that sets one.
     fn digital_output(&mut self, _pin: u32, _level: bool) {}
+    /// Starts a blended path (replacing the current motion): each segment runs from the previous
+    /// via-point (the arm's pose for the first) with its own speed and acceleration, and within
+    /// a segment's blend radius of its via-point the next segment starts, so the arm rounds the
+    /// corner instead of stopping. Blend radii must already be settled
+    /// ([`super::path::settle_blends`]). Models that cannot blend refuse.
+    fn command_path(&mut self, _path: &[PathMove]) -> Result<(), ArmError> {
+        Err(ArmError::Unsupported(
+            "blended paths (moveJ/moveL with a path, movePath)",
+        ))
+    }
+    /// While a path runs: the index of the newest segment started (URScript returns from a
+    /// blended move's statement when its blend begins, and from an unblended one at its end).
+    fn path_progress(&self) -> Option<usize> {
+        None
+    }
     /// The arm's gravity model (link inertials and torque constants), for the joint torques and
     /// motor currents the controller reports. By default the built-in model of the arm the
     /// kinematics describe ([`ArmDynamics::for_dh`]: the UR5e), or none.
@@ -250,6 +266,12 @@ enum Motion {
     Stopping {
         decel: f64,
     },
+    /// A blended path: segments `first..started` run (two while blending), the rest wait.
+    Path {
+        segments: Vec<PathSegment>,
+        first: usize,
+        started: usize,
+    },
     /// Resolved-rate tool-space motion (speedl, stopl): `reference` is the integrated TCP pose
     /// the arm tracks, `twist` the current TCP twist, ramped towards `target` at `accel`.
     Cartesian {
@@ -258,6 +280,47 @@ enum Motion {
         target: Vector6<f64>,
         accel: f64,
     },
+}
+
+/// One planned segment of a blended path, from the previous via-point to its own.
+#[derive(Debug, Clone)]
+struct PathSegment {
+    shape: SegmentShape,
+    /// Joints at the via-point.
+    end_q: Joints,
+    /// TCP position at the via-point.
+    end_point: Vector3<f64>,
+    profile: Trapezoid,
+    /// Blend radius (m) around the via-point.
+    blend: f64,
+    /// Time since the segment started.
+    t: f64,
+}
+
+#[derive(Debug, Clone)]
+enum SegmentShape {
+    /// Joint-space interpolation.
+    Joint { start: Joints, delta: Joints },
+    /// Straight tool line (position and orientation interpolated together).
+    Linear {
+        start: Isometry3<f64>,
+        end: Isometry3<f64>,
+    },
+}
+
+impl PathSegment {
+    /// Fraction of the segment done at its time `t`.
+    fn fraction(&self) -> f64 {
+        if self.profile.length <= 0.0 {
+            1.0
+        } else {
+            self.profile.at(self.t).0 / self.profile.length
+        }
+    }
+
+    fn done(&self) -> bool {
+        self.t >= self.profile.duration()
+    }
 }
 
 /// Moves `v` towards `target` by at most `step` (vector norm).
@@ -449,6 +512,194 @@ impl KinematicArm {
         Ok(())
     }
 
+    /// Plans a blended path from the arm's present joints.
+    fn plan_path(&self, path: &[PathMove]) -> Result<Vec<PathSegment>, ArmError> {
+        let mut q_prev = self.q;
+        let mut pose_prev = self.kinematics.forward_tcp(&self.q);
+        let mut segments = Vec::with_capacity(path.len());
+        for m in path {
+            let (shape, end_q, end_pose, length, speed, accel, blend) = match *m {
+                PathMove::Joint {
+                    q,
+                    speed,
+                    accel,
+                    blend,
+                } => {
+                    if !finite(&q) {
+                        return Err(ArmError::InvalidParameter("path joint target"));
+                    }
+                    self.check_limits(&q)?;
+                    let speed = positive(speed, "speed")?.min(self.max_joint_speed);
+                    let accel = positive(accel, "acceleration")?.min(self.max_joint_accel);
+                    let delta: Joints = std::array::from_fn(|i| q[i] - q_prev[i]);
+                    let length = delta.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+                    let shape = SegmentShape::Joint {
+                        start: q_prev,
+                        delta,
+                    };
+                    let end_pose = self.kinematics.forward_tcp(&q);
+                    (shape, q, end_pose, length, speed, accel, blend)
+                }
+                PathMove::Linear {
+                    pose,
+                    speed,
+                    accel,
+                    blend,
+                } => {
+                    if !finite(&pose) {
+                        return Err(ArmError::InvalidParameter("path pose target"));
+                    }
+                    let speed = positive(speed, "speed")?.min(self.max_tool_speed);
+                    let accel = positive(accel, "acceleration")?.min(self.max_tool_accel);
+                    let end = from_ur_pose(&pose);
+                    let end_q = self
+                        .kinematics
+                        .inverse_nearest(&end, &q_prev)
+                        .map_err(|e| ArmError::Unreachable(e.to_string()))?
+                        .joints;
+                    let distance = (end.translation.vector - pose_prev.translation.vector).norm();
+                    let angle = pose_prev.rotation.angle_to(&end.rotation);
+                    let shape = SegmentShape::Linear {
+                        start: pose_prev,
+                        end,
+                    };
+                    let length = distance.max(angle * 0.1);
+                    (shape, end_q, end, length, speed, accel, blend)
+                }
+            };
+            let blend = if blend.is_finite() {
+                blend.max(0.0)
+            } else {
+                0.0
+            };
+            segments.push(PathSegment {
+                shape,
+                end_q,
+                end_point: end_pose.translation.vector,
+                profile: Trapezoid::new(length.max(0.0), speed, accel),
+                blend,
+                t: 0.0,
+            });
+            q_prev = end_q;
+            pose_prev = end_pose;
+        }
+        Ok(segments)
+    }
+
+    /// Where one path segment puts the joints at its time (IK near `near` for tool lines).
+    fn segment_joints(&self, seg: &PathSegment, near: &Joints) -> Result<Joints, ArmError> {
+        let f = seg.fraction();
+        match &seg.shape {
+            SegmentShape::Joint { start, delta } => {
+                Ok(std::array::from_fn(|i| start[i] + delta[i] * f))
+            }
+            SegmentShape::Linear { start, end } => {
+                self.tool_joints(&start.lerp_slerp(end, f), near)
+            }
+        }
+    }
+
+    fn tool_joints(&self, pose: &Isometry3<f64>, near: &Joints) -> Result<Joints, ArmError> {
+        self.kinematics
+            .inverse_nearest(pose, near)
+            .map(|s| s.joints)
+            .map_err(|e| ArmError::Unreachable(e.to_string()))
+    }
+
+    /// The joints of the running segments: one alone, or two superposed while blending (the
+    /// tail of the first and the start of the next, less the via-point they share: in tool
+    /// space when both are tool lines, else in joint space). Velocities add, so the arm keeps
+    /// moving through the corner and leaves it on the next segment.
+    fn path_joints(&self, active: &[PathSegment]) -> Result<Joints, ArmError> {
+        match active {
+            [seg] => self.segment_joints(seg, &self.q),
+            [a, b] => {
+                if let (
+                    SegmentShape::Linear { start: sa, end: ea },
+                    SegmentShape::Linear { start: sb, end: eb },
+                ) = (&a.shape, &b.shape)
+                {
+                    let pa = sa.lerp_slerp(ea, a.fraction());
+                    let pb = sb.lerp_slerp(eb, b.fraction());
+                    let translation =
+                        pa.translation.vector + pb.translation.vector - ea.translation.vector;
+                    let rotation = pb.rotation * ea.rotation.inverse() * pa.rotation;
+                    let pose = Isometry3::from_parts(Translation3::from(translation), rotation);
+                    self.tool_joints(&pose, &self.q)
+                } else {
+                    let qa = self.segment_joints(a, &self.q)?;
+                    let qb = self.segment_joints(b, &self.q)?;
+                    Ok(std::array::from_fn(|i| qa[i] + qb[i] - a.end_q[i]))
+                }
+            }
+            _ => Ok(self.q),
+        }
+    }
+
+    /// One control cycle of a blended path.
+    fn path_step(
+        &mut self,
+        (mut segments, mut first, mut started): (Vec<PathSegment>, usize, usize),
+        dt: f64,
+        scaled: f64,
+    ) -> Result<(), ArmError> {
+        for seg in &mut segments[first..started] {
+            seg.t += scaled;
+        }
+        // A segment that ends without having blended hands over at its via-point.
+        if started < segments.len() && segments[started - 1].done() {
+            started += 1;
+        }
+        while first + 1 < started && segments[first].done() {
+            first += 1;
+        }
+        let finished = first + 1 == started && started == segments.len() && segments[first].done();
+        let q = if finished {
+            let last = &segments[first];
+            match &last.shape {
+                SegmentShape::Joint { .. } => last.end_q,
+                SegmentShape::Linear { end, .. } => self.tool_joints(end, &self.q)?,
+            }
+        } else {
+            match self.path_joints(&segments[first..started]) {
+                Ok(q) => q,
+                Err(e) => {
+                    self.halt();
+                    return Err(e);
+                }
+            }
+        };
+        if let Some((joint, speed)) = q
+            .iter()
+            .zip(&self.q)
+            .map(|(a, b)| (a - b).abs() / dt)
+            .enumerate()
+            .find(|(_, v)| *v > self.max_joint_speed * 1.5)
+        {
+            self.halt();
+            return Err(ArmError::Singularity { joint, speed });
+        }
+        self.advance(q, dt)?;
+        if finished {
+            self.halt();
+            return Ok(());
+        }
+        // Within the blend radius of its via-point, the next segment starts.
+        if first + 1 == started && started < segments.len() {
+            let seg = &segments[first];
+            let tcp = self.kinematics.forward_tcp(&self.q).translation.vector;
+            if seg.blend > 0.0 && (tcp - seg.end_point).norm() <= seg.blend {
+                started += 1;
+            }
+        }
+        self.motion = Motion::Path {
+            segments,
+            first,
+            started,
+        };
+        Ok(())
+    }
+
     fn set_q(&mut self, q: Joints, dt: f64) {
         let qd: Joints = std::array::from_fn(|i| (q[i] - self.q[i]) / dt);
         self.qdd = std::array::from_fn(|i| (qd[i] - self.qd[i]) / dt);
@@ -580,6 +831,17 @@ impl ArmModel for KinematicArm {
 
     fn step(&mut self, dt: f64, speed_fraction: f64) -> Result<(), ArmError> {
         let scaled = dt * speed_fraction.clamp(0.0, 1.0);
+        if matches!(self.motion, Motion::Path { .. }) {
+            let Motion::Path {
+                segments,
+                first,
+                started,
+            } = std::mem::replace(&mut self.motion, Motion::Idle)
+            else {
+                unreachable!("matched a path")
+            };
+            return self.path_step((segments, first, started), dt, scaled);
+        }
         if let Motion::Cartesian {
             reference,
             twist,
@@ -678,7 +940,7 @@ impl ArmModel for KinematicArm {
                 let q = std::array::from_fn(|i| self.q[i] + next[i] * dt);
                 self.advance(q, dt)?;
             }
-            Motion::Cartesian { .. } => {}
+            Motion::Cartesian { .. } | Motion::Path { .. } => {}
             Motion::Stopping { decel } => {
                 let peak = self.qd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
                 if peak <= *decel * dt {
@@ -741,6 +1003,27 @@ impl ArmModel for KinematicArm {
 
     fn kinematics(&self) -> &UrKinematics {
         &self.kinematics
+    }
+
+    fn command_path(&mut self, path: &[PathMove]) -> Result<(), ArmError> {
+        let segments = self.plan_path(path)?;
+        self.motion = if segments.is_empty() {
+            Motion::Idle
+        } else {
+            Motion::Path {
+                segments,
+                first: 0,
+                started: 1,
+            }
+        };
+        Ok(())
+    }
+
+    fn path_progress(&self) -> Option<usize> {
+        match &self.motion {
+            Motion::Path { started, .. } => Some(started - 1),
+            _ => None,
+        }
     }
 
     #[allow(non_snake_case)]

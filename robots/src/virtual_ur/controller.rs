@@ -391,13 +391,24 @@ impl Core {
             watchdog: None,
             payload: &mut self.payload,
             history: &self.history,
+            warnings: Vec::new(),
         };
         let result = f(program, &mut io);
+        let (protective_stop, runtime_error, watchdog, warnings) = (
+            io.protective_stop,
+            io.runtime_error,
+            io.watchdog,
+            io.warnings,
+        );
+        for w in warnings {
+            tracing::warn!("{w}");
+            self.log(w);
+        }
         Some(ProgramCall {
             result,
-            protective_stop: io.protective_stop,
-            runtime_error: io.runtime_error,
-            watchdog: io.watchdog,
+            protective_stop,
+            runtime_error,
+            watchdog,
         })
     }
 }

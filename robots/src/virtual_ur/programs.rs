@@ -34,6 +34,8 @@ pub struct ProgramIo<'a> {
     pub payload: &'a mut Payload,
     /// Actual joint positions of the last control cycles, newest (this cycle's) first.
     pub history: &'a VecDeque<Joints>,
+    /// Warnings the program raises (the controller logs them for clients, as a UR's popups).
+    pub warnings: Vec<String>,
 }
 
 impl ProgramIo<'_> {

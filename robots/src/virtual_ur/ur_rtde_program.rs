@@ -5,6 +5,7 @@
 //! without the effect.
 
 use super::arm::{ArmCommand, ArmError};
+use super::path::{PathMove, PathStatement, PathTarget, injected_path, settle_blends};
 use super::programs::{Program, ProgramIo, ProgramStep};
 use super::registers::Registers;
 use crate::kinematics::{Joints, from_ur_pose, to_ur_pose};
@@ -116,6 +117,14 @@ pub const REALTIME: [i32; 16] = [24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 6
 /// Largest payload a UR5e accepts (kg).
 pub const MAX_PAYLOAD_KG: f64 = 5.0;
 
+/// A path in execution: progress reported so far and the via-points' TCP poses.
+#[derive(Debug, Clone)]
+struct PathRun {
+    asynchronous: bool,
+    reported: usize,
+    poses: Vec<[f64; 6]>,
+}
+
 /// What a command leaves the handshake in.
 enum Outcome {
     /// Done at once: signal "done".
@@ -140,6 +149,12 @@ pub struct UrRtdeProgram {
     jog_frame: Option<UnitQuaternion<f64>>,
     /// The target TCP pose of the running movej/movel (`get_target_waypoint`).
     waypoint: Option<[f64; 6]>,
+    /// The path ur_rtde injected into the script (`exec_move_path()`).
+    path: Vec<PathStatement>,
+    /// Why the injected path cannot run (a statement this controller does not execute).
+    path_error: Option<String>,
+    /// The path being executed.
+    path_run: Option<PathRun>,
     /// The command id the register held when the program started: left by a client whose
     /// program ended, it is not run again until the client writes the register.
     stale: Option<i32>,
@@ -184,9 +199,150 @@ impl UrRtdeProgram {
         UrRtdeProgram::default()
     }
 
-    /// The program as uploaded: `script` is the control script's text.
-    pub fn from_script(_script: &str) -> UrRtdeProgram {
-        UrRtdeProgram::default()
+    /// The program as uploaded: `script` is the control script's text, with the path
+    /// `moveJ(path)`/`moveL(path)`/`movePath` injected into it.
+    pub fn from_script(script: &str) -> UrRtdeProgram {
+        let (path, path_error) = match injected_path(script) {
+            Ok(path) => (path, None),
+            Err(e) => (Vec::new(), Some(e)),
+        };
+        UrRtdeProgram {
+            path,
+            path_error,
+            ..UrRtdeProgram::default()
+        }
+    }
+
+    /// The injected path's moves with their targets resolved (`movej(p[…])` through inverse
+    /// kinematics near the previous via-point, `movel([q])` through forward kinematics), and
+    /// each via-point's TCP pose.
+    fn resolve_path(
+        io: &ProgramIo<'_>,
+        statements: &[PathStatement],
+    ) -> Result<(Vec<PathMove>, Vec<[f64; 6]>), String> {
+        let mut near = io.arm.state().q;
+        let mut moves = Vec::with_capacity(statements.len());
+        let mut poses = Vec::with_capacity(statements.len());
+        for s in statements {
+            let (speed, accel, blend) = (s.speed, s.accel, s.blend);
+            let (m, pose, q) = match (s.linear, s.target) {
+                (true, PathTarget::Pose(pose)) => {
+                    let q = Self::inverse(io, &pose, &near)?;
+                    let m = PathMove::Linear {
+                        pose,
+                        speed,
+                        accel,
+                        blend,
+                    };
+                    (m, pose, q)
+                }
+                (true, PathTarget::Joints(q)) => {
+                    let pose = io.arm.forward(&q);
+                    let m = PathMove::Linear {
+                        pose,
+                        speed,
+                        accel,
+                        blend,
+                    };
+                    (m, pose, q)
+                }
+                (false, PathTarget::Joints(q)) => {
+                    let m = PathMove::Joint {
+                        q,
+                        speed,
+                        accel,
+                        blend,
+                    };
+                    (m, io.arm.forward(&q), q)
+                }
+                (false, PathTarget::Pose(pose)) => {
+                    let q = Self::inverse(io, &pose, &near)?;
+                    let m = PathMove::Joint {
+                        q,
+                        speed,
+                        accel,
+                        blend,
+                    };
+                    (m, pose, q)
+                }
+            };
+            moves.push(m);
+            poses.push(pose);
+            near = q;
+        }
+        Ok((moves, poses))
+    }
+
+    /// `exec_move_path()`, synchronously or in the move thread: `signal_async_progress(i)`
+    /// before each via-point's statement, the moves blended as URScript blends them.
+    fn move_path(&mut self, io: &mut ProgramIo<'_>) -> Result<Outcome, String> {
+        let asynchronous = io.regs.input_int[1] == 1;
+        if self.async_running {
+            // stop_async_move(): a running move thread is killed and reported finished.
+            self.write_async(io.regs, false);
+        }
+        if let Some(e) = &self.path_error {
+            return Err(format!("move_path: {e}"));
+        }
+        let statements = self.path.clone();
+        if statements.is_empty() {
+            return Err("move_path: no path was injected into the control script".into());
+        }
+        let (moves, poses) = Self::resolve_path(io, &statements)?;
+        let start = io.arm.state().tcp_pose;
+        let points: Vec<[f64; 3]> = std::iter::once(start)
+            .chain(poses.iter().copied())
+            .map(|p| [p[0], p[1], p[2]])
+            .collect();
+        let (moves, warnings) = settle_blends(&moves, &points);
+        io.warnings.extend(warnings);
+        match io.arm.command_path(&moves) {
+            Ok(()) => {}
+            Err(ArmError::ProtectiveStop(why)) => {
+                tracing::warn!(why, "rtde_control: protective stop");
+                io.protective_stop = true;
+                return Ok(Outcome::Done);
+            }
+            Err(e) => return Err(format!("move_path: {e}")),
+        }
+        self.waypoint = poses.first().copied();
+        if asynchronous {
+            self.write_async(io.regs, true);
+        }
+        self.write_async_progress(io.regs, 0);
+        // A synchronous path writes its progress too but no thread ends it: the register keeps
+        // the last via-point's progress, as the script leaves it.
+        self.async_running &= asynchronous;
+        self.path_run = Some(PathRun {
+            asynchronous,
+            reported: 0,
+            poses,
+        });
+        Ok(if asynchronous {
+            Outcome::Done
+        } else {
+            Outcome::Wait
+        })
+    }
+
+    /// Reports the path's progress as the arm starts its segments; forgets the path when the
+    /// arm is no longer on it.
+    fn follow_path(&mut self, io: &mut ProgramIo<'_>) {
+        let Some(run) = self.path_run.clone() else {
+            return;
+        };
+        match io.arm.path_progress() {
+            Some(i) if i > run.reported => {
+                for k in run.reported + 1..=i {
+                    self.write_async_progress(io.regs, k.min(32767) as i32);
+                    self.async_running &= run.asynchronous;
+                }
+                self.waypoint = run.poses.get(i).copied();
+                self.path_run = Some(PathRun { reported: i, ..run });
+            }
+            Some(_) => {}
+            None => self.path_run = None,
+        }
     }
 
     /// Mirrors `write_async_progress_register(value)` of the script (output_int_register_2):
@@ -424,6 +580,7 @@ impl UrRtdeProgram {
                 write_vector(io.regs, 0, &pose);
                 Ok(Outcome::Done)
             }
+            MOVE_PATH => self.move_path(io),
             GET_TARGET_WAYPOINT => {
                 // The target of the running movej/movel; the target TCP pose otherwise.
                 let pose = match self.waypoint {
@@ -582,6 +739,7 @@ impl Program for UrRtdeProgram {
             io.runtime_error = Some(e.to_string());
             return ProgramStep::Exit;
         }
+        self.follow_path(io);
         if self.async_running && !io.arm.is_moving() {
             self.write_async(io.regs, false);
         }
