@@ -6,7 +6,7 @@ use std::path::Path;
 use indicatif::ProgressBar;
 use nalgebra::Point3;
 use perception::part::{
-    Catalog, MeshRepairs, PartRole, PartSpec, StablePose, farthest_point_sample,
+    Catalog, MeshRepairs, PartRole, PartSpec, StablePose, TriMesh, farthest_point_sample,
     load_mesh_repaired, sample_surface,
 };
 use sim::stable_poses::{DropEngine, DropSettings, StablePoseReport, stable_poses_with};
@@ -79,6 +79,18 @@ pub fn prepare_part_with(
     progress: Option<&ProgressBar>,
 ) -> Result<PreparedPart, PrepareError> {
     let (mesh, repairs) = load_mesh_repaired(&catalog.mesh_path(part), part.unit)?;
+    prepare_loaded(engine, part, mesh, repairs, settings, progress)
+}
+
+/// Prepares one part from its loaded mesh.
+fn prepare_loaded(
+    engine: DropEngine,
+    part: &PartSpec,
+    mesh: TriMesh,
+    repairs: MeshRepairs,
+    settings: &DropSettings,
+    progress: Option<&ProgressBar>,
+) -> Result<PreparedPart, PrepareError> {
     let report = stable_poses_with(
         engine,
         &part.name,
@@ -98,6 +110,9 @@ pub fn prepare_part_with(
 }
 
 /// Prepares every non-fixture part of the catalog at `path` and rewrites the file atomically.
+///
+/// Every mesh of the catalog (fixtures too) is loaded and checked before the first drop, so a
+/// file that cannot be used fails at once, named with the catalog line that refers to it.
 pub fn prepare_catalog(
     path: &Path,
     settings: &DropSettings,
@@ -114,17 +129,21 @@ pub fn prepare_catalog_with(
     progress: Option<&ProgressBar>,
 ) -> Result<Vec<PreparedPart>, PrepareError> {
     let catalog = Catalog::load(path)?;
-    let parts: Vec<&PartSpec> = catalog
-        .parts
-        .iter()
-        .filter(|p| p.role != PartRole::Fixture)
-        .collect();
-    if let Some(p) = progress {
-        p.set_length((parts.len() * settings.drops) as u64);
+    let mut loaded = Vec::new();
+    for part in &catalog.parts {
+        let (mesh, repairs) = catalog.load_mesh_repaired(part)?;
+        if part.role != PartRole::Fixture {
+            loaded.push((part, mesh, repairs));
+        }
     }
-    let prepared = parts
-        .iter()
-        .map(|part| prepare_part_with(engine, &catalog, part, settings, progress))
+    if let Some(p) = progress {
+        p.set_length((loaded.len() * settings.drops) as u64);
+    }
+    let prepared = loaded
+        .into_iter()
+        .map(|(part, mesh, repairs)| {
+            prepare_loaded(engine, part, mesh, repairs, settings, progress)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let text = std::fs::read_to_string(path).map_err(|source| perception::part::PartError::Io {
         path: path.into(),

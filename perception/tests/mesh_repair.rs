@@ -236,7 +236,7 @@ fn several_touching_bodies_with_shared_edges_form_one_closed_solid() {
     let notes = repairs.notes().join("\n");
     assert!(
         notes.contains("18 edges are shared by more than two triangles")
-            && notes.contains("2 separate bodies"),
+            && notes.contains("the file holds 2 bodies, each closed"),
         "{notes}"
     );
 }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{LengthUnit, MeshAt, PartError, StablePose, TriMesh, load_mesh};
+use super::{LengthUnit, MeshAt, MeshRepairs, PartError, StablePose, TriMesh, load_mesh_repaired};
 
 /// A part set: the parts of one product, read from a catalog file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -352,7 +352,12 @@ impl Catalog {
     /// Loads a part's mesh in metres, in the part frame; an error names the catalog file and
     /// the line of the part's `mesh` key, the mesh file and why it failed.
     pub fn load_mesh(&self, part: &PartSpec) -> Result<TriMesh, PartError> {
-        load_mesh(&self.mesh_path(part), part.unit).map_err(|error| {
+        self.load_mesh_repaired(part).map(|(mesh, _)| mesh)
+    }
+
+    /// As [`Catalog::load_mesh`], and says what loading repaired (see [`load_mesh_repaired`]).
+    pub fn load_mesh_repaired(&self, part: &PartSpec) -> Result<(TriMesh, MeshRepairs), PartError> {
+        load_mesh_repaired(&self.mesh_path(part), part.unit).map_err(|error| {
             let index = self.parts.iter().position(|p| p.name == part.name);
             let (line, column) = index
                 .and_then(|i| self.mesh_locations.get(i).copied())

@@ -7,7 +7,7 @@ use std::path::Path;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
-use super::{MeshRepairs, PartError, TriMesh};
+use super::{MAX_FILLED_HOLE_M, MeshRepairs, PartError, TriMesh};
 
 /// The length unit a mesh file's numbers are in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -43,13 +43,17 @@ const PLAUSIBLE_SIZE_M: (f64, f64) = (0.5e-3, 1.5);
 ///
 /// Fails with the file named when it is missing, unparsable, empty, not closed, or when its size
 /// is implausible for the unit (a 9 mm part read as 9 m). Export defects are repaired first
-/// (see [`load_mesh_repaired`]).
+/// (see [`load_mesh_repaired`]). A file of several bodies (OBJ `o`/`g` groups, or pieces
+/// connected through the file's own vertex indices) is one part whose every body is closed;
+/// bodies are never welded to each other.
 pub fn load_mesh(path: &Path, unit: LengthUnit) -> Result<TriMesh, PartError> {
     load_mesh_repaired(path, unit).map(|(mesh, _)| mesh)
 }
 
 /// As [`load_mesh`], and says what [`TriMesh::repair`] fixed (welded vertices, dropped
-/// zero-area triangles, ...) so the caller can warn about it.
+/// zero-area triangles, ...) and which small planar holes (at most [`MAX_FILLED_HOLE_M`]
+/// across) were capped, so the caller can warn about it. Larger or non-planar holes are refused
+/// with their place and size.
 pub fn load_mesh_repaired(
     path: &Path,
     unit: LengthUnit,
@@ -70,7 +74,11 @@ pub fn load_mesh_repaired(
     }
     let mut mesh = raw.scaled(unit.to_metres());
     check_size(path, &mesh, unit)?;
-    let repairs = mesh.repair();
+    let mut repairs = mesh.repair();
+    let filled = mesh.fill_small_holes(MAX_FILLED_HOLE_M);
+    repairs.filled_holes = filled.count;
+    repairs.largest_filled_hole = filled.largest;
+    repairs.hole_bound = MAX_FILLED_HOLE_M;
     mesh.check_closed().map_err(|defect| PartError::NotClosed {
         path: path.into(),
         defect,
@@ -212,9 +220,11 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, PartError> {
 fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
     let bytes = read_bytes(path)?;
     check_obj_text(path, &bytes)?;
+    // Position indices as the file gives them (not split by normal or texture index), so the
+    // file's bodies stay apart and each stays connected.
     let options = tobj::LoadOptions {
         triangulate: true,
-        single_index: true,
+        single_index: false,
         ..Default::default()
     };
     let mut reader = std::io::Cursor::new(bytes);
@@ -242,7 +252,8 @@ fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
         };
         mesh.append(&part);
     }
-    Ok(TriMesh::new(mesh.vertices, mesh.triangles))
+    // Not welded: vertices at one place in two groups or pieces belong to two bodies.
+    Ok(mesh)
 }
 
 fn read_stl(path: &Path) -> Result<TriMesh, PartError> {

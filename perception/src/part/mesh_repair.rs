@@ -7,6 +7,7 @@ use std::collections::{HashMap, HashSet};
 use nalgebra::Point3;
 
 use super::TriMesh;
+use super::mesh_bodies::{OVERLAP_WARN_SHARE, is_closed, overlap_volume, pieces, sub_mesh};
 use super::mesh_topology::{edge_uses, find, union};
 
 /// Vertices closer than this fraction of the bounding-box diagonal are one vertex, and a triangle
@@ -38,8 +39,23 @@ pub struct MeshRepairs {
     /// Edges shared by more than two triangles (bodies touching along an edge or face): kept,
     /// since the solid is still closed when they are used equally often each way.
     pub non_manifold_edges: usize,
-    /// Connected pieces of the surface (several closed bodies in one file are accepted).
+    /// Bodies: closed pieces as the file gives them (connected through its vertex indices),
+    /// each repaired and checked on its own, and the pieces of what was repaired together.
     pub bodies: usize,
+    /// Closed bodies kept exactly as the file gives them because repairing them would have
+    /// opened them.
+    pub kept_as_given: usize,
+    /// Summed volume of the bodies (what the mass is computed from), cubic metres.
+    pub body_volume: f64,
+    /// Volume shared by two bodies, estimated (see the bodies module), cubic metres: counted
+    /// once per body in the mass.
+    pub overlap_volume: f64,
+    /// Small planar holes capped while loading (see [`TriMesh::fill_small_holes`]).
+    pub filled_holes: usize,
+    /// Bounding-box diagonal of the largest capped hole, metres.
+    pub largest_filled_hole: f64,
+    /// The largest hole size capped, metres (the bound the loader used).
+    pub hole_bound: f64,
 }
 
 impl MeshRepairs {
@@ -51,7 +67,27 @@ impl MeshRepairs {
             + self.duplicate_triangles
             + self.split_triangles
             + self.unused_vertices
+            + self.filled_holes
             > 0
+    }
+
+    /// Adds another piece's repair counts to these.
+    fn add(&mut self, o: &MeshRepairs) {
+        self.welded_vertices += o.welded_vertices;
+        self.collapsed_triangles += o.collapsed_triangles;
+        self.zero_area_triangles += o.zero_area_triangles;
+        self.duplicate_triangles += o.duplicate_triangles;
+        self.split_triangles += o.split_triangles;
+        self.unused_vertices += o.unused_vertices;
+    }
+
+    /// Share of the summed body volume that two bodies share (0 for one body).
+    pub fn overlap_share(&self) -> f64 {
+        if self.body_volume > 0.0 {
+            self.overlap_volume / self.body_volume
+        } else {
+            0.0
+        }
     }
 
     /// One line per repair, with its count; empty for a clean mesh.
@@ -99,6 +135,25 @@ impl MeshRepairs {
             self.unused_vertices,
             format!("dropped {} unused vertices", self.unused_vertices),
         );
+        say(
+            self.filled_holes,
+            format!(
+                "capped {} small planar holes (the largest {:.3} mm across; holes up to {:.3} mm \
+                 are capped)",
+                self.filled_holes,
+                self.largest_filled_hole * 1e3,
+                self.hole_bound * 1e3
+            ),
+        );
+        if self.overlap_share() > OVERLAP_WARN_SHARE {
+            out.push(format!(
+                "the bodies overlap by about {:.3} mm³, {:.1} % of their summed volume {:.3} mm³; \
+                 mass and inertia count the overlap once per body, so they are that much too high",
+                self.overlap_volume * 1e9,
+                100.0 * self.overlap_share(),
+                self.body_volume * 1e9
+            ));
+        }
         out
     }
 
@@ -115,8 +170,16 @@ impl MeshRepairs {
         }
         if self.bodies > 1 {
             out.push(format!(
-                "the file holds {} separate bodies, treated as one rigid part",
-                self.bodies
+                "the file holds {} bodies, each closed, treated as one rigid part; mass and inertia \
+                 are summed over the bodies (they share {:.1} % of their volume)",
+                self.bodies,
+                100.0 * self.overlap_share()
+            ));
+        }
+        if self.kept_as_given > 0 {
+            out.push(format!(
+                "{} closed bodies were kept as the file gives them (repairing them would open them)",
+                self.kept_as_given
             ));
         }
         out
@@ -131,10 +194,12 @@ impl TriMesh {
         self.repair_with(WELD_TOLERANCE_REL * (hi - lo).norm())
     }
 
-    /// Welds vertices within `tolerance`, drops collapsed, zero-area and duplicate triangles,
-    /// splits triangles at T-junctions and drops unused vertices, in that order, and counts
-    /// non-manifold edges and bodies. Kept triangles keep their order, so a clean mesh is left
-    /// exactly as it was. A mesh with non-finite coordinates or out-of-range indices is left
+    /// Finds the bodies (pieces connected through the mesh's vertex indices); repairs each closed
+    /// one alone and the open ones together: welds vertices within `tolerance`, drops collapsed,
+    /// duplicate and zero-area triangles, splits triangles at T-junctions and drops unused
+    /// vertices, in that order; counts non-manifold edges and bodies, and measures how much the
+    /// bodies overlap. A mesh that needs no repair is left exactly as it was; a repaired one is
+    /// rebuilt body after body. A mesh with non-finite coordinates or out-of-range indices is left
     /// alone for [`TriMesh::check_closed`] to report.
     pub fn repair_with(&mut self, tolerance: f64) -> MeshRepairs {
         let mut r = MeshRepairs {
@@ -152,25 +217,81 @@ impl TriMesh {
         if !valid {
             return r;
         }
-        r.welded_vertices = self.weld_within(tolerance);
-        let before = self.triangles.len();
-        self.triangles
-            .retain(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
-        r.collapsed_triangles = before - self.triangles.len();
-        r.duplicate_triangles = self.drop_duplicates();
-        let before = self.triangles.len();
-        let vertices = &self.vertices;
-        self.triangles
-            .retain(|t| thickness(vertices, t) >= tolerance);
-        r.zero_area_triangles = before - self.triangles.len();
-        r.split_triangles = self.split_t_junctions(tolerance);
-        r.unused_vertices = self.drop_unused_vertices();
+        let used = {
+            let mut used = vec![false; n];
+            for &i in self.triangles.iter().flatten() {
+                used[i as usize] = true;
+            }
+            used.iter().filter(|&&u| u).count()
+        };
+        r.unused_vertices = n - used;
+        // Bodies as the file gives them: pieces connected through its own vertex indices. A
+        // closed piece is a body, repaired alone so nothing welds or splits it against a body it
+        // touches, and kept as given when its own repair would open it. Open pieces (a body
+        // stored face by face, or with stray vertex copies) are repaired together.
+        let mut bodies = Vec::new();
+        let mut open = Vec::new();
+        for piece in pieces(self) {
+            let body = sub_mesh(self, &piece);
+            if !is_closed(&body.triangles) {
+                open.extend(piece);
+                continue;
+            }
+            let mut repaired = body.clone();
+            let mut counts = MeshRepairs::default();
+            repaired.repair_piece(tolerance, &mut counts);
+            if is_closed(&repaired.triangles) {
+                r.add(&counts);
+                bodies.push(repaired);
+            } else {
+                r.kept_as_given += 1;
+                bodies.push(body);
+            }
+        }
+        if !open.is_empty() {
+            open.sort_unstable();
+            let mut pool = sub_mesh(self, &open);
+            pool.repair_piece(tolerance, &mut r);
+            bodies.extend(pieces(&pool).iter().map(|p| sub_mesh(&pool, p)));
+        }
+        if r.changed() {
+            let mut joined = TriMesh {
+                vertices: Vec::new(),
+                triangles: Vec::new(),
+            };
+            for b in &bodies {
+                joined.append(b);
+            }
+            *self = joined;
+        }
         r.non_manifold_edges = edge_uses(&self.triangles)
             .values()
             .filter(|(f, b)| f + b > 2)
             .count();
-        r.bodies = self.bodies();
+        r.bodies = bodies.len();
+        if bodies.len() > 1 {
+            r.body_volume = bodies.iter().map(|b| b.volume().abs()).sum();
+            r.overlap_volume = overlap_volume(&bodies);
+        }
         r
+    }
+
+    /// Welds vertices within `tolerance`, drops collapsed, duplicate and zero-area triangles,
+    /// splits T-junctions and drops unused vertices, adding the counts to `r`.
+    fn repair_piece(&mut self, tolerance: f64, r: &mut MeshRepairs) {
+        r.welded_vertices += self.weld_within(tolerance);
+        let before = self.triangles.len();
+        self.triangles
+            .retain(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
+        r.collapsed_triangles += before - self.triangles.len();
+        r.duplicate_triangles += self.drop_duplicates();
+        let before = self.triangles.len();
+        let vertices = &self.vertices;
+        self.triangles
+            .retain(|t| thickness(vertices, t) >= tolerance);
+        r.zero_area_triangles += before - self.triangles.len();
+        r.split_triangles += self.split_t_junctions(tolerance);
+        r.unused_vertices += self.drop_unused_vertices();
     }
 
     /// Merges each vertex into the first earlier vertex within `tolerance` (a spatial hash on a
