@@ -1,7 +1,7 @@
 //! Orchestrator throughput in the in-process simulated cell, keypoint-noise perception: whole
 //! assemblies (three steps) per second on the rayon pool (`RAYON_NUM_THREADS=2` for the 2-core
-//! figure), simulated cycle time and success rate over the same episodes, and criterion's time
-//! for one episode on one core.
+//! figure), simulated cycle time, where it goes (the mean per orchestrator state) and success
+//! rate over the same episodes, and criterion's time for one episode on one core.
 
 use std::path::Path;
 use std::time::Instant;
@@ -44,6 +44,10 @@ fn throughput(setup: &SimSetup, episodes: u32) {
         ok.len(),
         100.0 * ok.len() as f64 / episodes as f64,
     );
+    if let Some(line) = cell::run::phases::breakdown_line(&cell::run::phases::phase_means(&records))
+    {
+        println!("orchestrator: {line}");
+    }
 }
 
 fn bench(c: &mut Criterion) {
