@@ -225,45 +225,23 @@ impl UrRtdeProgram {
         let mut poses = Vec::with_capacity(statements.len());
         for s in statements {
             let (speed, accel, blend) = (s.speed, s.accel, s.blend);
-            let (m, pose, q) = match (s.linear, s.target) {
-                (true, PathTarget::Pose(pose)) => {
-                    let q = Self::inverse(io, &pose, &near)?;
-                    let m = PathMove::Linear {
-                        pose,
-                        speed,
-                        accel,
-                        blend,
-                    };
-                    (m, pose, q)
+            let (pose, q) = match s.target {
+                PathTarget::Pose(pose) => (pose, Self::inverse(io, &pose, &near)?),
+                PathTarget::Joints(q) => (io.arm.forward(&q), q),
+            };
+            let m = if s.linear {
+                PathMove::Linear {
+                    pose,
+                    speed,
+                    accel,
+                    blend,
                 }
-                (true, PathTarget::Joints(q)) => {
-                    let pose = io.arm.forward(&q);
-                    let m = PathMove::Linear {
-                        pose,
-                        speed,
-                        accel,
-                        blend,
-                    };
-                    (m, pose, q)
-                }
-                (false, PathTarget::Joints(q)) => {
-                    let m = PathMove::Joint {
-                        q,
-                        speed,
-                        accel,
-                        blend,
-                    };
-                    (m, io.arm.forward(&q), q)
-                }
-                (false, PathTarget::Pose(pose)) => {
-                    let q = Self::inverse(io, &pose, &near)?;
-                    let m = PathMove::Joint {
-                        q,
-                        speed,
-                        accel,
-                        blend,
-                    };
-                    (m, pose, q)
+            } else {
+                PathMove::Joint {
+                    q,
+                    speed,
+                    accel,
+                    blend,
                 }
             };
             moves.push(m);
