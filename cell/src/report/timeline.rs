@@ -8,40 +8,29 @@ use super::plots::{LABEL_PX, LEGEND_PX, Mark, PlotError, legend_beside, legend_r
 use crate::episode::EpisodeRecord;
 use crate::orchestrator::State;
 
-/// Every state a cycle can spend time in, in the order a step passes through them.
-const STATES: [State; 12] = [
-    State::Home,
-    State::Capture,
-    State::Perceive,
-    State::Select,
-    State::PlanPick,
-    State::Pick,
-    State::VerifyGrasp,
-    State::PlanInsert,
-    State::Insert,
-    State::Verify,
-    State::Shake,
-    State::Retract,
+/// Every state a cycle can spend time in, in the order a step passes through them, each with
+/// the colour of its time (tableau-like, one per state).
+const STATE_COLOURS: [(State, RGBColor); 12] = [
+    (State::Home, RGBColor(199, 199, 199)),
+    (State::Capture, RGBColor(23, 190, 207)),
+    (State::Perceive, RGBColor(158, 218, 229)),
+    (State::Select, RGBColor(188, 189, 34)),
+    (State::PlanPick, RGBColor(219, 219, 141)),
+    (State::Pick, RGBColor(31, 119, 180)),
+    (State::VerifyGrasp, RGBColor(174, 199, 232)),
+    (State::PlanInsert, RGBColor(255, 187, 120)),
+    (State::Insert, RGBColor(255, 127, 14)),
+    (State::Verify, RGBColor(44, 160, 44)),
+    (State::Shake, RGBColor(214, 39, 40)),
+    (State::Retract, RGBColor(148, 103, 189)),
 ];
 
-/// The colour of a state's time (tableau-like, one per state).
+/// The colour of a state's time.
 fn colour(state: State) -> RGBColor {
-    const COLOURS: [RGBColor; 12] = [
-        RGBColor(199, 199, 199),
-        RGBColor(23, 190, 207),
-        RGBColor(158, 218, 229),
-        RGBColor(188, 189, 34),
-        RGBColor(219, 219, 141),
-        RGBColor(31, 119, 180),
-        RGBColor(174, 199, 232),
-        RGBColor(255, 187, 120),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-    ];
-    let i = STATES.iter().position(|s| *s == state).unwrap_or(0);
-    COLOURS[i]
+    STATE_COLOURS
+        .iter()
+        .find(|(s, _)| *s == state)
+        .map_or(STATE_COLOURS[0].1, |(_, c)| *c)
 }
 
 /// The timelines of `episodes` (a label and a record each, records with phases), one bar per
@@ -52,8 +41,9 @@ pub fn cycle_timeline(episodes: &[(String, &EpisodeRecord)]) -> Result<String, P
         .map(|(_, r)| r.phases.iter().map(|p| p.duration_s).sum::<f64>())
         .fold(0.0, f64::max)
         .max(1e-3);
-    let present: Vec<State> = STATES
-        .into_iter()
+    let present: Vec<State> = STATE_COLOURS
+        .iter()
+        .map(|(s, _)| *s)
         .filter(|s| {
             episodes
                 .iter()
@@ -118,10 +108,10 @@ mod tests {
 
     #[test]
     fn every_state_has_its_own_colour() {
-        let mut seen: Vec<RGBColor> = STATES.iter().map(|s| colour(*s)).collect();
+        let mut seen: Vec<RGBColor> = STATE_COLOURS.iter().map(|(s, _)| colour(*s)).collect();
         seen.sort_by_key(|c| (c.0, c.1, c.2));
         seen.dedup();
-        assert_eq!(seen.len(), STATES.len());
+        assert_eq!(seen.len(), STATE_COLOURS.len());
     }
 
     #[test]

@@ -72,10 +72,10 @@ pub fn typical_and_slowest<'a>(
 /// One line for people: the mean cycle and its largest parts, e.g.
 /// `mean cycle 9.19 s: insert 3.10 s (34 %), pick 2.50 s (27 %), …`.
 pub fn breakdown_line(means: &[PhaseMean]) -> Option<String> {
-    let total: f64 = means.iter().map(|m| m.mean_s).sum();
     if means.is_empty() {
         return None;
     }
+    let total: f64 = means.iter().map(|m| m.mean_s).sum();
     let mut by_time: Vec<&PhaseMean> = means.iter().filter(|m| m.mean_s > 0.0).collect();
     by_time.sort_by(|a, b| b.mean_s.total_cmp(&a.mean_s));
     let parts: Vec<String> = by_time
