@@ -14,12 +14,9 @@ use std::time::Instant;
 
 use pulldown_cmark::{CodeBlockKind, Event, Parser, Tag, TagEnd};
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the cell crate lies in the repository")
-        .to_path_buf()
-}
+mod support;
+
+use support::root as repo;
 
 /// Every Markdown page of the docs: README, docs/**, and the READMEs beside data and training.
 fn pages() -> Vec<PathBuf> {
