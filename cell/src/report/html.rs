@@ -9,7 +9,8 @@ use super::plots;
 use crate::episode::EpisodeRecord;
 use crate::episode::StepOutcome;
 use crate::run::Summary;
-use crate::run::summary::{Distribution, outcome_name};
+use crate::run::distribution::Distribution;
+use crate::run::outcomes::outcome_name;
 
 /// Escapes text for HTML element content and attribute values.
 pub fn escape(s: &str) -> String {

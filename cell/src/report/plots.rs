@@ -5,7 +5,7 @@ use plotters::style::FontStyle;
 
 use crate::episode::{EpisodeRecord, StepOutcome};
 use crate::run::Summary;
-use crate::run::summary::outcome_name;
+use crate::run::outcomes::outcome_name;
 
 /// A plot that could not be drawn.
 #[derive(Debug, thiserror::Error)]

@@ -7,9 +7,9 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-pub use super::distribution::Distribution;
-pub use super::mechanism::MechanismCount;
-pub use super::outcomes::{OUTCOMES, outcome_index, outcome_name};
+use super::distribution::Distribution;
+use super::mechanism::MechanismCount;
+use super::outcomes::{OUTCOMES, outcome_index, outcome_name};
 
 use super::header::ResultsHeader;
 use super::mechanism::Mechanisms;
