@@ -74,7 +74,7 @@ pub fn parse_timeout(s: &str) -> Result<std::time::Duration, String> {
 /// Draws the report's opening picture (the first episode's first capture with its detections)
 /// and the pictures of the first `limit` failed episodes of a simulated run into
 /// `dir/pictures`, and rewrites the report so it shows them; returns how many failed episodes.
-fn draw_failures(
+fn draw_pictures(
     loaded: &LoadedScenario,
     dir: &std::path::Path,
     episodes: u32,
@@ -170,7 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         &driver,
     )?;
     let drawn = if args.pictures > 0 && matches!(args.robot, RobotTarget::Sim) {
-        draw_failures(&loaded, &done.dir, episodes, args.pictures)?
+        draw_pictures(&loaded, &done.dir, episodes, args.pictures)?
     } else {
         0
     };
