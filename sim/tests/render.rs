@@ -5,6 +5,7 @@
 use std::sync::Arc;
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
+use perception::calibration::{Board, BoardSpec};
 use perception::camera::{Camera, Distortion};
 use perception::part::{Material, TriMesh};
 use sim::render::{
@@ -58,10 +59,13 @@ fn part_scene(mesh: &TriMesh, pose: Isometry3<f64>, board: bool) -> RenderScene 
 #[test]
 fn depth_on_a_plane_is_exact_through_a_distorted_lens() {
     let camera = Camera::basler_seed().scaled(0.05).unwrap();
-    let board = TagBoard {
-        size: 4.0,
-        ..TagBoard::default()
-    };
+    let board = TagBoard::new(
+        Board::new(BoardSpec {
+            plate: [4.0, 4.0],
+            ..BoardSpec::seed()
+        })
+        .unwrap(),
+    );
     let scene = RenderScene::new(vec![], Some(board), None, lights(), [0.1; 3]);
     let h = 1.234;
     let out = render(

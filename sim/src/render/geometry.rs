@@ -439,14 +439,14 @@ fn board_hit(
     d: &Vector3<f64>,
     max_t: f64,
 ) -> Option<(f64, Vector3<f64>)> {
-    let h = board.half_size();
-    let lo = Point3::new(-h, -h, -board.thickness);
-    let hi = Point3::new(h, h, 0.0);
+    let [hx, hy] = board.half_extents();
+    let lo = Point3::new(-hx, -hy, -board.thickness());
+    let hi = Point3::new(hx, hy, 0.0);
     // Exact top-face hit first: the common case, and the one depth must be exact for.
     if d.z < 0.0 && o.z > 0.0 {
         let t = -o.z / d.z;
         let (x, y) = (o.x + t * d.x, o.y + t * d.y);
-        if x.abs() <= h && y.abs() <= h {
+        if x.abs() <= hx && y.abs() <= hy {
             return (t < max_t).then_some((t, Vector3::z()));
         }
     }
@@ -456,13 +456,13 @@ fn board_hit(
     }
     let p = o + t * d;
     let eps = 1e-9;
-    let n = if (p.x - h).abs() < eps {
+    let n = if (p.x - hx).abs() < eps {
         Vector3::x()
-    } else if (p.x + h).abs() < eps {
+    } else if (p.x + hx).abs() < eps {
         -Vector3::x()
-    } else if (p.y - h).abs() < eps {
+    } else if (p.y - hy).abs() < eps {
         Vector3::y()
-    } else if (p.y + h).abs() < eps {
+    } else if (p.y + hy).abs() < eps {
         -Vector3::y()
     } else if p.z.abs() < eps {
         Vector3::z()

@@ -164,7 +164,7 @@ pub fn dress_scene(
     board.texture_seed = rng.random();
     let grey = rand.table_albedo.sample(rng);
     let table = Table {
-        height: -board.thickness,
+        height: -board.thickness(),
         appearance: Appearance {
             base_color: [grey, grey * 0.95, grey * 0.9],
             metallic: 0.0,
@@ -278,7 +278,7 @@ pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene 
         .collect();
     let board = TagBoard::default();
     let table = Table {
-        height: -board.thickness,
+        height: -board.thickness(),
         appearance: Appearance {
             base_color: [0.3, 0.29, 0.27],
             metallic: 0.0,
