@@ -49,3 +49,87 @@ impl BoardError {
         }
     }
 }
+
+/// Why a calibration could not be made, or was refused. Each names the cause and what to do.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationError {
+    /// No tag of the board was found in the image.
+    #[error("no tag of the board ({family}, ids {first}–{last}) in view: is the board in the camera's field and lit?")]
+    NoBoard {
+        /// The board's family.
+        family: String,
+        /// Its first id.
+        first: u32,
+        /// Its last id.
+        last: u32,
+    },
+    /// Too few tags were decoded for a trustworthy pose.
+    #[error("only {found} of the board's {total} tags decoded ({need} needed): the board is partly hidden, out of view or badly lit")]
+    TooFewTags {
+        /// Tags decoded.
+        found: usize,
+        /// Tags needed.
+        need: usize,
+        /// Tags on the board.
+        total: usize,
+    },
+    /// A decoded tag id is not on the board: another board, or the wrong board file.
+    #[error("tag id {ids:?} decoded in the image is not on the board (ids {first}–{last}): a second board in view, or the wrong board file")]
+    ForeignTag {
+        /// The ids not on the board.
+        ids: Vec<u32>,
+        /// The board's first id.
+        first: u32,
+        /// Its last id.
+        last: u32,
+    },
+    /// The board is seen too obliquely for the pose to be trusted.
+    #[error("the board is seen {angle_deg:.1}° off the optical axis (at most {max_deg:.0}°): put the board flatter to the camera")]
+    TooOblique {
+        /// Angle between the board's normal and the line of sight, degrees.
+        angle_deg: f64,
+        /// The allowed maximum.
+        max_deg: f64,
+    },
+    /// The image's size is not the calibrated camera's sensor.
+    #[error("the image is {got_w} × {got_h} px but the camera's calibration is for {want_w} × {want_h} px: wrong camera, binning or ROI")]
+    Resolution {
+        /// Image columns.
+        got_w: u32,
+        /// Image rows.
+        got_h: u32,
+        /// Calibrated columns.
+        want_w: u32,
+        /// Calibrated rows.
+        want_h: u32,
+    },
+    /// Touch points that no rigid transform fits: a point touched in the wrong place.
+    #[error("touch point {worst} ({name}) is {residual_mm:.3} mm from where the others put it (at most {bound_mm:.3} mm): touch it again")]
+    TouchPointsDontFit {
+        /// Index of the worst point (from 1).
+        worst: usize,
+        /// Its mark on the board.
+        name: String,
+        /// Its residual, mm.
+        residual_mm: f64,
+        /// The bound, mm.
+        bound_mm: f64,
+    },
+    /// Too few touch points.
+    #[error("{got} touch points; a rigid fit needs at least {need} marks, not all on one line")]
+    TooFewTouchPoints {
+        /// Points given.
+        got: usize,
+        /// Points needed.
+        need: usize,
+    },
+    /// A hand-eye pose set that does not determine the transform.
+    #[error("the hand-eye poses are degenerate: {missing}; add poses that rotate about it")]
+    DegenerateHandEye {
+        /// The rotation axes the set lacks.
+        missing: String,
+    },
+    /// The pose solve failed.
+    #[error("board pose: {0}")]
+    Pnp(#[from] crate::pnp::PnpError),
+}

@@ -1,0 +1,1 @@
+//! Finding the board in an image: tag detection by the reference AprilTag library and sub-pixel corners.

@@ -1,0 +1,1 @@
+//! Hand-eye calibration: the camera in the robot base from board views at several arm poses (AX = XB).

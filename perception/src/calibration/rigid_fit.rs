@@ -1,0 +1,1 @@
+//! Touch points: the board in the robot base from TCP readings at marked board points.
