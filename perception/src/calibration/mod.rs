@@ -4,6 +4,7 @@
 
 pub mod board;
 pub mod board_pose;
+pub mod covariance;
 pub mod detect;
 mod error;
 pub mod family;
