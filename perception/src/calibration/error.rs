@@ -132,4 +132,12 @@ pub enum CalibrationError {
     /// The pose solve failed.
     #[error("board pose: {0}")]
     Pnp(#[from] crate::pnp::PnpError),
+    /// A touch point with a NaN or infinite coordinate: a bad robot reading or board mark.
+    #[error("touch point {index} ({name}) has a non-finite coordinate: read the robot's TCP again")]
+    NonFiniteTouchPoint {
+        /// Its index (from 1).
+        index: usize,
+        /// Its mark on the board.
+        name: String,
+    },
 }

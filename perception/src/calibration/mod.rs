@@ -10,6 +10,7 @@ mod error;
 pub mod family;
 pub mod hand_eye;
 pub mod rigid_fit;
+pub mod touch_marks;
 
 pub use board::{Board, BoardSpec, BoardTag, RemovedBlock};
 pub use error::{BoardError, CalibrationError};
