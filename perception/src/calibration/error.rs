@@ -132,6 +132,9 @@ pub enum CalibrationError {
     /// The pose solve failed.
     #[error("board pose: {0}")]
     Pnp(#[from] crate::pnp::PnpError),
+    /// The reference detector could not be set up or run on the image.
+    #[error("tag detector: {0}: check the board's family and the image")]
+    Detector(String),
     /// A touch point with a NaN or infinite coordinate: a bad robot reading or board mark.
     #[error("touch point {index} ({name}) has a non-finite coordinate: read the robot's TCP again")]
     NonFiniteTouchPoint {

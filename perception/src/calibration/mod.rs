@@ -6,6 +6,7 @@ pub mod board;
 pub mod board_pose;
 pub mod covariance;
 pub mod detect;
+pub mod edges;
 mod error;
 pub mod family;
 pub mod hand_eye;
@@ -13,5 +14,6 @@ pub mod rigid_fit;
 pub mod touch_marks;
 
 pub use board::{Board, BoardSpec, BoardTag, RemovedBlock};
+pub use detect::{BoardSighting, DetectorSettings, TagSighting, detect_board};
 pub use error::{BoardError, CalibrationError};
 pub use family::{FAMILIES, TagFamily};

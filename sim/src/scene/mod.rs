@@ -3,15 +3,20 @@
 
 #![allow(non_snake_case)]
 
+mod board_view;
 mod compose;
 mod drop;
 mod labels;
 mod model;
 mod randomisation;
 
+pub use board_view::{
+    BoardImage, BoardView, NOMINAL_HEIGHT, board_render_settings, embed_in_full_frame,
+    nominal_table_T_camera, sample_board_view,
+};
 pub use compose::{
     METER_FLOOR, METER_SHARE, METER_TARGET, SampledScene, SceneError, SceneRequest, dress_scene,
-    look_at, nominal_scene, sample_scene,
+    look_at, nominal_scene, nominal_scene_on, sample_scene,
 };
 pub use drop::{DropError, HeldPart, PlacedPart, drop_parts, drop_parts_around};
 pub use labels::{InstanceLabel, keypoint_vectors, label_instance, label_instances};
