@@ -143,4 +143,13 @@ pub enum CalibrationError {
         /// Its mark on the board.
         name: String,
     },
+    /// A hand-eye view that cannot be used: a non-finite reading or a covariance that is not
+    /// positive definite.
+    #[error("hand-eye view {index}: {what}: measure that pose again")]
+    BadHandEyeView {
+        /// Its index (from 1).
+        index: usize,
+        /// What is wrong.
+        what: String,
+    },
 }
