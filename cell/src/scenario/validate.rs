@@ -92,6 +92,9 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
     if let Some(problem) = spec.cell.gripper.actuation_time_problem() {
         issues.push((cell.key("gripper").key("actuation_time"), problem));
     }
+    if let Err(e) = spec.cell.load_board(dir) {
+        issues.push((cell.key("board"), format!("cannot use the board: {e}")));
+    }
     // The cell's numbers have one home, the simulator's feasibility check.
     for (key, message) in check_values(&spec.cell, &spec.assembly, &spec.noise) {
         issues.push((KeyPath::parse(&key), message));

@@ -4,14 +4,15 @@
 
 use image::RgbImage;
 use nalgebra::Isometry3;
+use perception::calibration::Board;
 use rand_chacha::ChaCha8Rng;
 
 use super::error::CellError;
 use super::feeder::FeederPart;
 use super::feeder_window::calibrated_feeder_window;
 use super::model::CellModel;
-use crate::render::{IncrementalRenderer, RenderSettings, SensorModel, Window};
-use crate::scene::{METER_SHARE, METER_TARGET, PlacedPart, nominal_scene};
+use crate::render::{IncrementalRenderer, RenderSettings, SensorModel, TagBoard, Window};
+use crate::scene::{METER_SHARE, METER_TARGET, PlacedPart, nominal_scene_on};
 
 /// A rendered feeder window.
 #[derive(Debug, Clone)]
@@ -52,7 +53,14 @@ pub(crate) fn render_feeder(
             })
         })
         .collect::<Result<Vec<_>, CellError>>()?;
-    let scene = nominal_scene(&model.part_models, &placed);
+    let layout = model.spec.board_layout().ok_or_else(|| {
+        CellError::Camera("the scenario names a board that was never loaded".into())
+    })?;
+    let scene = nominal_scene_on(
+        &model.part_models,
+        &placed,
+        TagBoard::new(Board::clone(&layout)),
+    );
     let settings = RenderSettings {
         full_masks: false,
         ..RenderSettings::default()

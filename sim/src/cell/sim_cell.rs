@@ -161,6 +161,7 @@ impl SimCell {
         let base_T_camera = true_camera_pose(
             &model.geometry.base_T_camera_nominal,
             &model.noise,
+            model.spec.calibration.as_ref(),
             &mut streams.calibration,
         );
         let mut cell = Self {

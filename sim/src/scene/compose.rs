@@ -264,9 +264,20 @@ fn randomised(a: Appearance, rand: &Randomisation, rng: &mut impl Rng) -> Appear
 }
 
 /// The renderer's view of parts at rest in the cell under its fixed, nominal conditions: nominal
-/// materials, the default tag board, a mid-grey table, two point lights (hard shadows) above the
-/// board and a dim ambient. Simulated runs render their captures of this (see [`crate::render::capture`]).
+/// materials, the default (seed's) tag board, a mid-grey table, two point lights (hard shadows)
+/// above the board and a dim ambient (see [`nominal_scene_on`]).
 pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene {
+    nominal_scene_on(models, parts, TagBoard::default())
+}
+
+/// [`nominal_scene`] with `board` on the table (a scenario's `[cell] board`, printed with the
+/// default print): the table sits under that board's thickness. Simulated runs render their
+/// captures of this (see [`crate::render::capture`]).
+pub fn nominal_scene_on(
+    models: &[PartModel],
+    parts: &[PlacedPart],
+    board: TagBoard,
+) -> RenderScene {
     let instances = parts
         .iter()
         .map(|p| Instance {
@@ -276,7 +287,6 @@ pub fn nominal_scene(models: &[PartModel], parts: &[PlacedPart]) -> RenderScene 
             accent: models[p.model].accent_appearance(),
         })
         .collect();
-    let board = TagBoard::default();
     let table = Table {
         height: -board.thickness(),
         appearance: Appearance {
