@@ -214,12 +214,12 @@ pub struct Hit {
     pub accent: bool,
 }
 
-/// Everything the renderer draws, in the table frame (z up, board top at z = 0).
+/// Everything the renderer draws, in the table frame (z up; an unposed board's top at z = 0).
 #[derive(Debug, Clone)]
 pub struct RenderScene {
     /// The parts.
     pub instances: Vec<Instance>,
-    /// The tag board, if any.
+    /// The tag board, if any (on the table, or at its [`TagBoard::pose`]).
     pub board: Option<TagBoard>,
     /// The table plane, if any.
     pub table: Option<Table>,
@@ -432,8 +432,20 @@ fn slab(lo: &Point3<f64>, hi: &Point3<f64>, o: &Point3<f64>, d: &Vector3<f64>) -
     slab_range(lo, hi, o, d).map(|(entry, _)| entry)
 }
 
-/// Hit of a ray with the board box (top face at z = 0, bottom at −thickness).
+/// Hit of a table-frame ray with the board box: distance and table-frame normal. The ray is
+/// carried into the board frame for a posed board (distances are the same in both frames).
 fn board_hit(
+    board: &TagBoard,
+    o: &Point3<f64>,
+    d: &Vector3<f64>,
+    max_t: f64,
+) -> Option<(f64, Vector3<f64>)> {
+    let (o, d) = board.ray_to_board(o, d);
+    board_hit_local(board, &o, &d, max_t).map(|(t, n)| (t, board.normal_to_table(n)))
+}
+
+/// Hit of a board-frame ray with the board box (top face at z = 0, bottom at −thickness).
+fn board_hit_local(
     board: &TagBoard,
     o: &Point3<f64>,
     d: &Vector3<f64>,

@@ -201,7 +201,7 @@ fn lowest_surface(scene: &RenderScene) -> f64 {
         z = z.min(t.height);
     }
     if let Some(b) = &scene.board {
-        z = z.min(-b.thickness());
+        z = z.min(b.lowest_z());
     }
     for i in 0..scene.instances.len() {
         z = z.min(scene.instance_bounds(i).0.z);

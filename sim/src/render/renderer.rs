@@ -349,9 +349,12 @@ fn surface_at(scene: &RenderScene, hit: &Hit, p: &Point3<f64>) -> Surface {
                 Some(tangent),
             )
         }
-        SurfaceKind::Board => match &scene.board {
-            Some(b) if hit.normal.z > 0.5 => {
-                let (appearance, mark) = b.surface_at(p.x, p.y);
+        SurfaceKind::Board => match scene
+            .board
+            .as_ref()
+            .map(|b| (b, b.top_face_at(p, &hit.normal)))
+        {
+            Some((_, Some((appearance, mark)))) => {
                 let class = match mark {
                     BoardMark::White => 2,
                     BoardMark::Black => 3,
@@ -360,7 +363,7 @@ fn surface_at(scene: &RenderScene, hit: &Hit, p: &Point3<f64>) -> Surface {
                 };
                 (appearance, class, None)
             }
-            Some(b) => (b.white, 2, None),
+            Some((b, None)) => (b.white, 2, None),
             None => (
                 Appearance::for_material(perception::part::Material::Aluminium),
                 2,

@@ -3,14 +3,17 @@
 
 use std::sync::Arc;
 
+use nalgebra::{Isometry3, Point3, Vector3};
 use perception::calibration::Board;
 
 use super::Appearance;
 
-/// A tag board lying on the table with its top face at z = 0 in the table frame, centred on the
-/// origin, printed with real AprilTags ([`Board`]: the seed's board by default), so that the
-/// reference detector decodes what we render.
+/// A tag board printed with real AprilTags ([`Board`]: the seed's board by default), so that the
+/// reference detector decodes what we render. By default it lies on the table with its top face
+/// at z = 0 in the table frame, centred on the origin; [`TagBoard::with_pose`] places it anywhere
+/// (a board held by the robot for hand-eye calibration).
 #[derive(Debug, Clone, PartialEq)]
+#[allow(non_snake_case)]
 pub struct TagBoard {
     /// The board's layout and tag family.
     pub layout: Arc<Board>,
@@ -27,6 +30,13 @@ pub struct TagBoard {
     pub scratches: f64,
     /// Seed of the grain, dust and scratch pattern.
     pub texture_seed: u64,
+    /// The board frame (origin at the top face's centre, z out of the print) in the table frame.
+    table_T_board: Isometry3<f64>,
+    /// Its inverse, kept so rays are not inverted per query.
+    board_T_table: Isometry3<f64>,
+    /// Whether the pose is not the identity: an unposed board skips every transform, so it
+    /// renders bit for bit as before poses existed.
+    posed: bool,
 }
 
 /// What the board shows at a point of its top face.
@@ -65,7 +75,80 @@ impl TagBoard {
             dust: 0.0,
             scratches: 0.0,
             texture_seed: 0,
+            table_T_board: Isometry3::identity(),
+            board_T_table: Isometry3::identity(),
+            posed: false,
         }
+    }
+
+    /// The same board placed at `table_T_board` (the identity lays it on the table at the origin).
+    #[allow(non_snake_case)]
+    pub fn with_pose(mut self, table_T_board: Isometry3<f64>) -> Self {
+        self.table_T_board = table_T_board;
+        self.board_T_table = table_T_board.inverse();
+        self.posed = table_T_board != Isometry3::identity();
+        self
+    }
+
+    /// The board's pose in the table frame.
+    #[allow(non_snake_case)]
+    pub fn pose(&self) -> Isometry3<f64> {
+        self.table_T_board
+    }
+
+    /// A table-frame ray in the board frame (unchanged for an unposed board).
+    pub(crate) fn ray_to_board(
+        &self,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+    ) -> (Point3<f64>, Vector3<f64>) {
+        if self.posed {
+            (self.board_T_table * o, self.board_T_table * d)
+        } else {
+            (*o, *d)
+        }
+    }
+
+    /// A board-frame normal in the table frame (unchanged for an unposed board).
+    pub(crate) fn normal_to_table(&self, n: Vector3<f64>) -> Vector3<f64> {
+        if self.posed {
+            self.table_T_board * n
+        } else {
+            n
+        }
+    }
+
+    /// The lowest table-frame height the plate reaches (its bottom face, −thickness, unposed).
+    pub fn lowest_z(&self) -> f64 {
+        if !self.posed {
+            return -self.thickness();
+        }
+        let [hx, hy] = self.half_extents();
+        let mut z = f64::INFINITY;
+        for x in [-hx, hx] {
+            for y in [-hy, hy] {
+                for h in [-self.thickness(), 0.0] {
+                    z = z.min((self.table_T_board * Point3::new(x, y, h)).z);
+                }
+            }
+        }
+        z
+    }
+
+    /// What a hit at table point `p` with table-frame normal `normal` shows: the print, grain,
+    /// dust or scratch of the top face ([`Self::surface_at`]), or `None` on the plate's sides
+    /// and bottom.
+    pub fn top_face_at(
+        &self,
+        p: &Point3<f64>,
+        normal: &Vector3<f64>,
+    ) -> Option<(Appearance, BoardMark)> {
+        let (p, normal) = if self.posed {
+            (self.board_T_table * p, self.board_T_table.rotation * normal)
+        } else {
+            (*p, *normal)
+        };
+        (normal.z > 0.5).then(|| self.surface_at(p.x, p.y))
     }
 
     /// Half the plate's size along x and y, metres.
