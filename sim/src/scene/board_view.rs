@@ -13,8 +13,12 @@ use perception::calibration::Board;
 use perception::camera::Camera;
 use rand::Rng;
 
-use super::{Randomisation, SampledScene, SceneError, SceneRequest, dress_scene};
-use crate::render::{RenderSettings, SensorError, Window, render, window_covering};
+use super::{
+    METER_SHARE, METER_TARGET, Randomisation, SampledScene, SceneError, SceneRequest, dress_scene,
+};
+use crate::render::{
+    RenderOutput, RenderSettings, SensorError, SensorModel, Window, render, window_covering,
+};
 
 /// Height of the nominal camera above the board when none is given, metres (the scenarios' 1.51 m).
 pub const NOMINAL_HEIGHT: f64 = 1.51;
@@ -128,7 +132,7 @@ impl BoardView {
             window,
             settings,
         );
-        let sensor = self.scene.metered_sensor(&out);
+        let sensor = self.metered_sensor(&out);
         let rgb = sensor.capture(&out, rng)?;
         let grey = DynamicImage::ImageRgb8(rgb).into_luma8();
         Ok(BoardImage {
@@ -141,11 +145,37 @@ impl BoardView {
     }
 }
 
+impl BoardView {
+    /// The sensor for a render of this view: highlight-priority metering on the whole window (the
+    /// board's white print stays below [`METER_TARGET`] of full scale in all but [`METER_SHARE`]
+    /// of the pixels, as an integrator sets the exposure for the board), then the randomised
+    /// over-exposure, if drawn.
+    pub fn metered_sensor(&self, out: &RenderOutput) -> SensorModel {
+        let sensor = self.scene.sensor;
+        let mut peaks: Vec<f32> = out
+            .radiance
+            .iter()
+            .map(|c| c[0].max(c[1]).max(c[2]))
+            .collect();
+        let mut s = sensor;
+        if !peaks.is_empty() {
+            let k = (((1.0 - METER_SHARE) * peaks.len() as f64) as usize).min(peaks.len() - 1);
+            let (_, peak, _) = peaks.select_nth_unstable_by(k, f32::total_cmp);
+            let level = f64::from(*peak) * sensor.exposure * sensor.gain;
+            if level > METER_TARGET && level.is_finite() {
+                s.exposure *= METER_TARGET / level;
+            }
+        }
+        s.exposure *= self.scene.overexposure;
+        s
+    }
+}
+
 /// Settings for board renders: 3 × 3 supersampling at edges (the tag borders' sub-pixel
 /// positions are what calibration measures), shadows, no part masks.
 pub fn board_render_settings() -> RenderSettings {
     RenderSettings {
-        supersampling: 3,
+        supersampling: 8,
         shadows: true,
         full_masks: false,
     }
