@@ -3,6 +3,7 @@
 //! (`harness`), runs, reports and the regression gate. The `cell` binary is a thin
 //! command-line layer over it.
 
+pub mod calibrate;
 pub mod camera;
 pub mod episode;
 pub mod eval;

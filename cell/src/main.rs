@@ -45,6 +45,9 @@ enum Command {
     /// The paper's Figure 5: PnP pose error against keypoint noise and distance, raw and after
     /// planar refinement onto stable poses; writes CSVs and plots, prints a table.
     Ablate(commands::ablate::Args),
+    /// The tag board as an SVG to print at exact scale (mm units, a 100 mm scale bar to check
+    /// with a ruler), from its board file.
+    Board(commands::board::Args),
     /// How well the tag board is found and its pose measured: boards rendered under the
     /// randomisation, detected on 20 MP frames, against the simulator's truth and the
     /// Cramér–Rao bound, with time per stage.
@@ -89,6 +92,7 @@ fn main() -> std::process::ExitCode {
         Command::Check(args) => commands::check::run(args),
         Command::Parts(cmd) => commands::parts::run(cmd),
         Command::Ablate(args) => commands::ablate::run(args),
+        Command::Board(args) => commands::board::run(args),
         Command::BoardStudy(args) => commands::board_study::run(args),
         Command::VirtualUr(args) => commands::virtual_ur::run(args),
         Command::Dataset(args) => commands::dataset::run(args),

@@ -2,6 +2,7 @@
 //! library crates.
 
 pub mod ablate;
+pub mod board;
 pub mod board_study;
 pub mod check;
 pub mod dataset;
