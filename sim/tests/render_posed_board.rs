@@ -63,19 +63,9 @@ fn worn(board: Board) -> TagBoard {
     b
 }
 
-/// The window showing the plate at `table_T_board`, with a margin.
+/// The window showing the plate at `table_T_board` from the overhead camera, with a margin.
 fn plate_window(camera: &Camera, table_T_board: &Isometry3<f64>, board: &Board) -> Window {
-    let [px, py] = board.spec().plate;
-    let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
-    let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
-    for sx in [-0.6, 0.6] {
-        for sy in [-0.6, 0.6] {
-            let p = table_T_board * Point3::new(sx * px, sy * py, 0.0);
-            lo = lo.inf(&p);
-            hi = hi.sup(&p);
-        }
-    }
-    window_covering(camera, &overhead(), &lo, &hi).unwrap()
+    plate_window_from(camera, &overhead(), table_T_board, board)
 }
 
 fn luminance(out: &RenderOutput, pixel: Point2<f64>) -> f32 {
@@ -223,4 +213,139 @@ fn a_posed_board_renders_as_the_unposed_board_from_the_moved_camera() {
     // The same image up to floating-point rounding, print edges, dust and scratches included.
     assert!(worst < 1e-5, "{worst}");
     assert!(depth_err < 1e-12, "{depth_err}");
+}
+
+/// Hand-eye from rendered pixels alone: a 2 × 2 flange board held at eight planned poses
+/// 20 cm above the table, each view rendered under the renderer's randomisation (print wear,
+/// lights, blur, noise), detected and posed by the calibration's own detector and PnP, and the
+/// robot's readings with its repeatability. Nothing but those poses and pixels reaches the solver.
+#[test]
+fn hand_eye_from_rendered_views_recovers_the_camera() {
+    use perception::calibration::board_pose::board_pose;
+    use perception::calibration::hand_eye::{HandEyeSettings, HandEyeView, plan_hand_eye_poses};
+    use perception::calibration::{DetectorSettings, detect_board};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+    use sim::scene::{Randomisation, board_render_settings, sample_board_view};
+
+    let mut rng = ChaCha8Rng::seed_from_u64(2026);
+    let camera = Camera::basler_seed();
+    let board = flange_board();
+    let base_T_table = Isometry3::from_parts(
+        Translation3::new(0.42, -0.15, -0.02),
+        UnitQuaternion::from_euler_angles(0.001, -0.002, 0.25),
+    );
+    let flange_T_board = Isometry3::from_parts(
+        Translation3::new(0.002, -0.003, 0.04),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3),
+    );
+    let table_T_board_centre = Isometry3::translation(0.01, -0.02, 0.2);
+    let centre = base_T_table * table_T_board_centre * flange_T_board.inverse();
+    let poses = plan_hand_eye_poses(&centre, 8, 0.35, 0.6);
+    let settings = HandEyeSettings::default();
+    let noise = Normal::new(0.0, settings.robot_translation_sigma).unwrap();
+    let turn = Normal::new(0.0, settings.robot_rotation_sigma).unwrap();
+    let view = sample_board_view(&board, &camera, &Randomisation::default(), &mut rng).unwrap();
+    let base_T_camera = base_T_table * view.scene.table_T_camera;
+    let mut views = Vec::new();
+    for base_T_flange in &poses {
+        let table_T_board = base_T_table.inverse() * base_T_flange * flange_T_board;
+        let mut v = view.clone();
+        let mut held = TagBoard::new(board.clone()).with_pose(table_T_board);
+        if let Some(b) = &v.scene.render.board {
+            (held.white, held.black) = (b.white, b.black);
+            (held.grain, held.dust, held.scratches) = (b.grain, b.dust, b.scratches);
+        }
+        v.scene.render.board = Some(held);
+        let window = plate_window_from(&camera, &v.scene.table_T_camera, &table_T_board, &board);
+        let image = v
+            .render(window, &board_render_settings(), &mut rng)
+            .unwrap()
+            .image;
+        let sighting = detect_board(&image, &board, &DetectorSettings::default()).unwrap();
+        assert_eq!(sighting.tags.len(), 4);
+        let pose = board_pose(&camera, &board, &sighting).unwrap();
+        let read = Isometry3::from_parts(
+            Translation3::from(
+                base_T_flange.translation.vector + Vector3::from_fn(|_, _| noise.sample(&mut rng)),
+            ),
+            UnitQuaternion::from_scaled_axis(Vector3::from_fn(|_, _| turn.sample(&mut rng)))
+                * base_T_flange.rotation,
+        );
+        views.push(HandEyeView {
+            base_T_flange: read,
+            camera_T_board: pose.camera_T_board,
+            covariance: pose.covariance,
+        });
+    }
+    let solution = perception::calibration::hand_eye::solve_hand_eye(&views, &settings).unwrap();
+    // The error where it matters, and what the solution's covariance predicts for it: table
+    // points of the feeder (±10 cm) seen by the camera, mapped into the base.
+    let (mut sum, mut predicted) = (0.0, 0.0);
+    for i in -2..=2 {
+        for j in -2..=2 {
+            let p = base_T_table * Point3::new(i as f64 * 0.05, j as f64 * 0.05, 0.0);
+            let seen = base_T_camera.inverse() * p;
+            sum += (solution.base_T_camera * seen - p).norm_squared();
+            let lever = p.coords - solution.base_T_camera.translation.vector;
+            let mut jac = nalgebra::Matrix3x6::zeros();
+            jac.fixed_view_mut::<3, 3>(0, 0)
+                .copy_from(&nalgebra::Matrix3::identity());
+            jac.fixed_view_mut::<3, 3>(0, 3)
+                .copy_from(&(-lever.cross_matrix()));
+            predicted += (jac * solution.covariance * jac.transpose()).trace();
+        }
+    }
+    let (feeder, predicted) = ((sum / 25.0).sqrt(), (predicted / 25.0).sqrt());
+    let mut delta = nalgebra::Vector6::zeros();
+    delta
+        .fixed_rows_mut::<3>(0)
+        .copy_from(&(base_T_camera.translation.vector - solution.base_T_camera.translation.vector));
+    delta.fixed_rows_mut::<3>(3).copy_from(
+        &(base_T_camera.rotation * solution.base_T_camera.rotation.inverse()).scaled_axis(),
+    );
+    let mahalanobis =
+        (delta.transpose() * solution.covariance.try_inverse().unwrap() * delta)[(0, 0)].sqrt();
+    let chi2: f64 = solution
+        .residuals
+        .iter()
+        .map(|r| r.mahalanobis.powi(2))
+        .sum();
+    let dof = 6 * views.len() - 12;
+    eprintln!(
+        "feeder error {:.1} µm (predicted 1σ {:.1} µm), camera rotation error {:.1} µrad, \
+         Mahalanobis {mahalanobis:.2} (6 dof), residual χ² {chi2:.1} for {dof} dof",
+        feeder * 1e6,
+        predicted * 1e6,
+        (solution.base_T_camera.inverse() * base_T_camera)
+            .rotation
+            .angle()
+            * 1e6,
+    );
+    // The error is what the covariance says it should be: within the 98.6 % region of χ²(6),
+    // the residuals within the central 98 % of χ²(36), and the feeder within 3σ.
+    assert!(mahalanobis < 4.0, "{mahalanobis}");
+    assert!((19.2..58.6).contains(&chi2), "{chi2}");
+    assert!(feeder < 3.0 * predicted, "{feeder} vs {predicted}");
+}
+
+/// The window showing the plate at `table_T_board` from a camera at `table_T_camera`.
+fn plate_window_from(
+    camera: &Camera,
+    table_T_camera: &Isometry3<f64>,
+    table_T_board: &Isometry3<f64>,
+    board: &Board,
+) -> Window {
+    let [px, py] = board.spec().plate;
+    let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
+    let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
+    for sx in [-0.6, 0.6] {
+        for sy in [-0.6, 0.6] {
+            let p = table_T_board * Point3::new(sx * px, sy * py, 0.0);
+            lo = lo.inf(&p);
+            hi = hi.sup(&p);
+        }
+    }
+    window_covering(camera, table_T_camera, &lo, &hi).unwrap()
 }
