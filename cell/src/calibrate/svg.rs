@@ -523,4 +523,54 @@ mod tests {
                 .any(|e| e.text.contains("small <41h12>.toml"))
         );
     }
+
+    /// The print decodes: the SVG's rectangles, read back and rasterised at 8 px/mm (a 30 px
+    /// cell), are found by the reference AprilTag detector as every tag of the board, ids and
+    /// refined corners where the board puts them on the page (measured: 1e-8 px, the print's
+    /// edges lying on pixel boundaries; 0.18 px before refinement).
+    #[test]
+    fn the_print_read_back_decodes_with_the_reference_detector() {
+        use perception::FrameImage;
+        use perception::calibration::detect::{DetectorSettings, detect_board};
+
+        let board = Board::seed();
+        let (_, elements) = parse(&board_svg(&board, "seed.toml"));
+        let [w, h] = page_size(&board);
+        let px = 8.0;
+        let (width, height) = ((w * px) as u32, (h * px) as u32);
+        let mut image = image::GrayImage::from_pixel(width, height, image::Luma([235]));
+        for r in elements
+            .iter()
+            .filter(|e| e.name == "rect" && e.group.is_some())
+        {
+            let (x0, y0) = (r.number("x") * px, r.number("y") * px);
+            let (x1, y1) = (x0 + r.number("width") * px, y0 + r.number("height") * px);
+            for y in y0.round() as u32..y1.round() as u32 {
+                for x in x0.round() as u32..x1.round() as u32 {
+                    image.put_pixel(x, y, image::Luma([20]));
+                }
+            }
+        }
+        let frame = FrameImage::full(image::DynamicImage::ImageLuma8(image));
+        let sighting = detect_board(&frame, &board, &DetectorSettings::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(sighting.foreign.is_empty(), "{:?}", sighting.foreign);
+        let ids: Vec<u32> = sighting.tags.iter().map(|t| t.id).collect();
+        assert_eq!(ids, (0..16).collect::<Vec<_>>());
+        let plate_h = plate_mm(&board)[1];
+        let mut worst: f64 = 0.0;
+        for t in &sighting.tags {
+            let corners = board.corners(t.id).unwrap();
+            for (seen, c) in t.corners.iter().zip(corners) {
+                // Pixel centres at integers: a page point (mm) lies at mm · px − 0.5.
+                let x = (w / 2.0 + c.x * 1e3) * px - 0.5;
+                let y = (MARGIN + plate_h / 2.0 - c.y * 1e3) * px - 0.5;
+                worst = worst.max((seen.x - x).hypot(seen.y - y));
+            }
+        }
+        assert!(
+            worst < 1e-3,
+            "a corner {worst:.2e} px from where the board puts it"
+        );
+    }
 }
