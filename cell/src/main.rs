@@ -39,6 +39,10 @@ struct Cli {
 enum Command {
     /// Validate a scenario file; every error names file:line:column and what was expected.
     Check(commands::check::Args),
+    /// Commission a cell: the camera's pose in the robot base and the table plane from one
+    /// tag-board image and pointer touches at the board's marks, written into the scenario with
+    /// their measured uncertainty (`--robot sim`, `virtual-ur` or `ur://HOST`).
+    Calibrate(commands::calibrate::Args),
     /// Work on a part catalog (keypoints, mass properties, stable poses, CAD).
     #[command(subcommand)]
     Parts(commands::parts::PartsCommand),
@@ -90,6 +94,7 @@ fn main() -> std::process::ExitCode {
         .init();
     let result = match cli.command {
         Command::Check(args) => commands::check::run(args),
+        Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Parts(cmd) => commands::parts::run(cmd),
         Command::Ablate(args) => commands::ablate::run(args),
         Command::Board(args) => commands::board::run(args),

@@ -1,5 +1,13 @@
-//! Commissioning a cell: the printable board ([`svg`]) and the calibration record written into
-//! a scenario ([`record`]).
+//! Commissioning a cell: the printable board ([`svg`]); the camera and the table found in the
+//! robot base from a tag-board image and pointer touches ([`procedure`]), against the
+//! simulated cell ([`sim_world`]) or a real one ([`production`]); the record written into the
+//! scenario ([`record`]); and the production pre-flight's check that the camera has not moved
+//! since ([`preflight`]).
 
+pub mod commission;
+pub mod preflight;
+pub mod procedure;
+pub mod production;
 pub mod record;
+pub mod sim_world;
 pub mod svg;

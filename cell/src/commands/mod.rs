@@ -4,6 +4,7 @@
 pub mod ablate;
 pub mod board;
 pub mod board_study;
+pub mod calibrate;
 pub mod check;
 pub mod dataset;
 pub mod eval;

@@ -10,6 +10,7 @@
 use std::time::{Duration, Instant};
 
 use super::cell_io::{CellIo, CellIoError, InsertionCheck};
+use crate::calibrate::preflight::CameraCheck;
 use crate::camera::{self, CameraError, CameraSource, CameraSpec, Sensor};
 use crate::scenario::{PerceptionMode, Scenario};
 use perception::Frame;
@@ -86,6 +87,10 @@ pub struct ProductionCellIo {
     camera: Box<dyn CameraSource>,
     capture_timeout: Duration,
     start: Instant,
+    /// The camera check still to run on the first capture.
+    camera_check: Option<CameraCheck>,
+    /// Why the camera check refused the run: every later capture fails with it.
+    refused: Option<String>,
 }
 
 impl ProductionCellIo {
@@ -100,7 +105,17 @@ impl ProductionCellIo {
             camera,
             capture_timeout,
             start: Instant::now(),
+            camera_check: None,
+            refused: None,
         }
+    }
+
+    /// Checks the board in the run's first capture ([`CameraCheck`]): a camera that appears
+    /// moved fails that capture and every later one, so the arm never moves on a stale
+    /// calibration.
+    pub fn with_camera_check(mut self, check: CameraCheck) -> Self {
+        self.camera_check = Some(check);
+        self
     }
 }
 
@@ -108,10 +123,27 @@ impl CellIo for ProductionCellIo {
     /// One new image from the camera source; any camera error fails the capture (the engine
     /// then aborts the step before any motion and records why).
     fn capture(&mut self) -> Result<Frame, CellIoError> {
+        if let Some(why) = &self.refused {
+            return Err(CellIoError::Camera(why.clone()));
+        }
         let shot = self.camera.capture(self.capture_timeout).map_err(|e| {
             tracing::warn!(camera = %self.camera.describe(), "capture failed: {e}");
             CellIoError::Camera(e.to_string())
         })?;
+        if let Some(check) = self.camera_check.take() {
+            match check.check(&shot.image) {
+                Ok(shift) => tracing::info!(
+                    "camera check: the board is {:.3} mm from where the calibration put it",
+                    shift * 1e3
+                ),
+                Err(e) => {
+                    let why = e.to_string();
+                    tracing::error!("{why}");
+                    self.refused = Some(why.clone());
+                    return Err(CellIoError::Camera(why));
+                }
+            }
+        }
         tracing::info!(
             camera = %self.camera.describe(),
             path = ?shot.path,

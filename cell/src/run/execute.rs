@@ -11,6 +11,7 @@ use super::{
     LoadedScenario, ResultsStore, RobotTarget, RunError, RunOptions, RunOutcome, Shard, StoreError,
     Summary, results_dir, run_episodes,
 };
+use crate::calibrate::preflight::CameraCheck;
 use crate::camera::CameraSpec;
 use crate::episode::EpisodeRecord;
 use crate::harness::{
@@ -348,10 +349,29 @@ pub fn production(
         host: host.clone(),
         port: *port,
         side: std::sync::Mutex::new(Some((
-            ProductionCellIo::new(scenario.clone(), camera, capture_timeout),
+            camera_checked(
+                ProductionCellIo::new(scenario.clone(), camera, capture_timeout),
+                scenario,
+            ),
             perception,
         ))),
     })))
+}
+
+/// The production side channels with the camera check of the run's first capture, against the
+/// scenario's board and calibrated poses.
+fn camera_checked(io: ProductionCellIo, scenario: &Scenario) -> ProductionCellIo {
+    let cell = &scenario.spec.cell;
+    match cell.board_layout() {
+        Some(board) => io.with_camera_check(CameraCheck::new(
+            board,
+            cell.camera.intrinsics,
+            &cell.camera.base_T_camera.isometry(),
+            &cell.base_T_table.isometry(),
+            crate::calibrate::preflight::DEFAULT_TOLERANCE,
+        )),
+        None => io,
+    }
 }
 
 /// The perception that reads camera images for `scenario`'s mode: the learned pipeline with both

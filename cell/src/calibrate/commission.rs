@@ -1,0 +1,155 @@
+//! One commissioning run against the robot `--robot` names: the simulated cell in process, the
+//! simulated cell behind a virtual UR over loopback RTDE, or a real controller with its camera
+//! source and a person at the pendant.
+
+use std::time::Duration;
+
+use nalgebra::Vector3;
+use perception::calibration::detect::DetectorSettings;
+use perception::calibration::rigid_fit::{DEFAULT_TOUCH_BOUND, UR_REPEATABILITY_SIGMA};
+use robots::virtual_ur::VirtualUrConfig;
+
+use super::procedure::{CalibrateError, Calibration, TouchSettings, calibrate_by_touch};
+use super::production::{CameraImages, PendantOperator};
+use super::sim_world::{MountError, SimWorld, Truth};
+use crate::camera::{CameraSpec, Sensor};
+use crate::harness::{HarnessError, SimSetup, connect_sim_over_rtde};
+use crate::run::RobotTarget;
+use crate::scenario::Scenario;
+
+/// How a commissioning run is made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommissionOptions {
+    /// The pointer's tip in the TCP frame, metres.
+    pub tip: Vector3<f64>,
+    /// The farthest a touch may lie from where the others put it, metres.
+    pub bound: f64,
+    /// The per-axis 1σ of one touch, metres.
+    pub touch_sigma: f64,
+    /// The board detector's settings.
+    pub detector: DetectorSettings,
+    /// Seed of the simulated world (its mount error, lights and sensor); simulation only.
+    pub world_seed: u64,
+    /// How long a real camera's capture may wait.
+    pub capture_timeout: Duration,
+}
+
+impl Default for CommissionOptions {
+    fn default() -> Self {
+        Self {
+            tip: Vector3::new(0.0, 0.0, 0.05),
+            bound: DEFAULT_TOUCH_BOUND,
+            touch_sigma: UR_REPEATABILITY_SIGMA,
+            detector: DetectorSettings::default(),
+            world_seed: 0,
+            capture_timeout: Duration::from_secs(5),
+        }
+    }
+}
+
+impl CommissionOptions {
+    fn touch(&self) -> TouchSettings {
+        TouchSettings {
+            tip: self.tip,
+            bound: self.bound,
+            touch_sigma: self.touch_sigma,
+            detector: self.detector.clone(),
+        }
+    }
+}
+
+/// Why a commissioning run could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum CommissionError {
+    /// The procedure stopped.
+    #[error(transparent)]
+    Calibrate(#[from] CalibrateError),
+    /// The simulated cell could not be built.
+    #[error(transparent)]
+    Harness(#[from] HarnessError),
+    /// The virtual controller could not be started or reached.
+    #[error(transparent)]
+    OverRtde(#[from] crate::harness::OverRtdeError),
+    /// The scenario's board was not loaded.
+    #[error("the scenario's board file was not read (validate the scenario first)")]
+    NoBoard,
+    /// A real controller needs a camera source.
+    #[error(
+        "commissioning a real cell needs --camera SPEC (the camera that sees the board: \
+         folder:/path, cmd:'grab --out {{path}}', files:/path or aravis:[DEVICE])"
+    )]
+    NoCamera,
+    /// The camera source could not be opened.
+    #[error("camera: {0}")]
+    Camera(#[from] crate::camera::CameraError),
+    /// The simulated cell refused its limits.
+    #[error("limits: {0}")]
+    Limits(String),
+}
+
+/// A finished commissioning run; in simulation with the world's truth beside it, to judge it.
+pub struct Commissioned {
+    /// The calibration.
+    pub calibration: Calibration,
+    /// The simulated world's true poses (simulation only).
+    pub truth: Option<Truth>,
+}
+
+/// Commissions `scenario`'s cell on `target` by touch points.
+pub async fn commission(
+    scenario: &Scenario,
+    target: &RobotTarget,
+    camera: Option<&CameraSpec>,
+    options: &CommissionOptions,
+) -> Result<Commissioned, CommissionError> {
+    let cell = &scenario.spec.cell;
+    let board = cell.board_layout().ok_or(CommissionError::NoBoard)?;
+    let intrinsics = cell.camera.intrinsics;
+    let settings = options.touch();
+    match target {
+        RobotTarget::Ur { host, port } => {
+            let spec = camera.ok_or(CommissionError::NoCamera)?;
+            let mut images = CameraImages {
+                source: crate::camera::open(spec, Sensor::of(&intrinsics))?,
+                timeout: options.capture_timeout,
+            };
+            let mut operator = PendantOperator::connect(format!("{host}:{port}")).await?;
+            let calibration =
+                calibrate_by_touch(&intrinsics, &board, &mut images, &mut operator, &settings)
+                    .await?;
+            Ok(Commissioned {
+                calibration,
+                truth: None,
+            })
+        }
+        sim_target => {
+            let world = SimWorld::new(scenario, MountError::default(), options.world_seed);
+            let setup = SimSetup::new(world.scenario.clone())?;
+            let mut images = world.camera(&board, options.world_seed);
+            let calibration = if matches!(sim_target, RobotTarget::VirtualUr) {
+                let over =
+                    connect_sim_over_rtde(&setup, 0, VirtualUrConfig::default().unlock_delay)
+                        .await?;
+                let mut operator = world.operator(over.robot, options.tip, options.world_seed);
+                let result =
+                    calibrate_by_touch(&intrinsics, &board, &mut images, &mut operator, &settings)
+                        .await;
+                drop(operator);
+                drop(over.controller);
+                result?
+            } else {
+                let robot = setup
+                    .model
+                    .limited(setup.sim_cell(0)?)
+                    .map_err(|e| CommissionError::Limits(e.to_string()))?;
+                let mut operator = world.operator(robot, options.tip, options.world_seed);
+                calibrate_by_touch(&intrinsics, &board, &mut images, &mut operator, &settings)
+                    .await?
+            };
+            Ok(Commissioned {
+                calibration,
+                truth: Some(world.truth()),
+            })
+        }
+    }
+}
