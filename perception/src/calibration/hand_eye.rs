@@ -575,7 +575,18 @@ mod tests {
         camera_t_board: &Isometry3<f64>,
         rng: &mut ChaCha8Rng,
     ) -> (Isometry3<f64>, Matrix6<f64>) {
-        let noise = Normal::new(0.0, CORNER_SIGMA).unwrap();
+        observe_with(camera, board, camera_t_board, CORNER_SIGMA, rng)
+    }
+
+    /// [`observe`] with corner noise `sigma`, pixels.
+    fn observe_with(
+        camera: &Camera,
+        board: &Board,
+        camera_t_board: &Isometry3<f64>,
+        sigma: f64,
+        rng: &mut ChaCha8Rng,
+    ) -> (Isometry3<f64>, Matrix6<f64>) {
+        let noise = Normal::new(0.0, sigma).unwrap();
         let model: Vec<Point3<f64>> = board
             .tags()
             .iter()
@@ -588,26 +599,34 @@ mod tests {
                 Point2::new(q.x + noise.sample(rng), q.y + noise.sample(rng))
             })
             .collect();
-        let cov = vec![Matrix2::identity() * CORNER_SIGMA.powi(2); model.len()];
+        let cov = vec![Matrix2::identity() * sigma.powi(2); model.len()];
         let s = solve_pnp(camera, &model, &pixels, Some(&cov)).unwrap();
         (s.camera_T_part, s.covariance)
     }
 
     /// Views of the flange board at `poses`, with the arm's and the image's noise.
     fn views(poses: &[Isometry3<f64>], rng: &mut ChaCha8Rng) -> Vec<HandEyeView> {
+        views_of(&flange_board(), poses, &HandEyeSettings::default(), rng)
+    }
+
+    /// Views of `board` on the flange at `poses`, with the noise of `arm` and the image's.
+    fn views_of(
+        board: &Board,
+        poses: &[Isometry3<f64>],
+        arm: &HandEyeSettings,
+        rng: &mut ChaCha8Rng,
+    ) -> Vec<HandEyeView> {
         let camera = Camera::basler_seed();
-        let board = flange_board();
-        let s = HandEyeSettings::default();
         poses
             .iter()
             .map(|f| {
                 let truth = base_t_camera().inverse() * f * flange_t_board();
-                let (camera_t_board, covariance) = observe(&camera, &board, &truth, rng);
+                let (camera_t_board, covariance) = observe(&camera, board, &truth, rng);
                 let read = Isometry3::from_parts(
                     Translation3::from(
-                        f.translation.vector + sample(rng, s.robot_translation_sigma),
+                        f.translation.vector + sample(rng, arm.robot_translation_sigma),
                     ),
-                    UnitQuaternion::from_scaled_axis(sample(rng, s.robot_rotation_sigma))
+                    UnitQuaternion::from_scaled_axis(sample(rng, arm.robot_rotation_sigma))
                         * f.rotation,
                 );
                 HandEyeView {
@@ -623,6 +642,12 @@ mod tests {
     /// region (±10 cm around the table board, 0–1 cm high), between where the estimate and the
     /// truth put a point the camera sees.
     fn feeder_error(estimate: &Isometry3<f64>) -> f64 {
+        region_error(estimate, 0.0)
+    }
+
+    /// [`feeder_error`] for the region ±10 cm around the table point `x` metres along the
+    /// table board's x axis.
+    fn region_error(estimate: &Isometry3<f64>, x: f64) -> f64 {
         let truth = base_t_camera();
         let table = base_t_table_board();
         let mut sum = 0.0;
@@ -630,7 +655,7 @@ mod tests {
         for i in -2..=2 {
             for j in -2..=2 {
                 for z in [0.0, 0.01] {
-                    let p = table * Point3::new(i as f64 * 0.05, j as f64 * 0.05, z);
+                    let p = table * Point3::new(x + i as f64 * 0.05, j as f64 * 0.05, z);
                     let seen = truth.inverse() * p;
                     sum += (estimate * seen - p).norm_squared();
                     n += 1;
@@ -867,5 +892,120 @@ mod tests {
         spread.sort_by(f64::total_cmp);
         assert!((spread[0] - 0.098).abs() < 0.005, "{spread:?}");
         assert!((spread[2] - 0.37).abs() < 0.01, "{spread:?}");
+    }
+
+    /// The study behind the choice between touch points and hand-eye: the rms error, over 200
+    /// trials, of feeder points (±10 cm around the table board) and of a region 30 cm away
+    /// (where a fixture may stand), mapped from the camera into the base. Print the table with
+    /// `cargo test -p perception --lib calibration::hand_eye::tests::touch_points_against -- --nocapture`:
+    ///
+    /// | method | feeder rms, µm | 30 cm away rms, µm |
+    /// |---|---|---|
+    /// | touch: 8 marks, table board from 1 image | 30.5 | 80.0 |
+    /// | touch: 4 marks, table board from 1 image | 31.5 | 85.8 |
+    /// | touch: 8 marks, table board from 4 images | 16.9 | 42.6 |
+    /// | touch: 8 marks, table board from 16 images | 11.0 | 26.0 |
+    /// | hand-eye: 2 × 2 flange board, 6 poses | 62.3 | 118.3 |
+    /// | hand-eye: 2 × 2 flange board, 12 poses | 44.6 | 85.1 |
+    /// | hand-eye: 2 × 2 flange board, 24 poses | 32.9 | 62.3 |
+    /// | hand-eye: 2 × 2 flange board, arm without noise, 12 poses | 26.8 | 41.4 |
+    /// | hand-eye: seed board (21 cm) held, 12 poses | 22.5 | 29.5 |
+    #[test]
+    fn touch_points_against_hand_eye_near_and_away_from_the_board() {
+        let camera = Camera::basler_seed();
+        let seed = Board::seed();
+        let trials = 200;
+        let arm = HandEyeSettings::default();
+        let still = HandEyeSettings {
+            robot_translation_sigma: 1e-9,
+            robot_rotation_sigma: 1e-9,
+            ..arm
+        };
+        let row = |name: &str, estimate: &mut dyn FnMut(&mut ChaCha8Rng) -> Isometry3<f64>| {
+            let mut rng = ChaCha8Rng::seed_from_u64(77);
+            let (mut near, mut far) = (0.0, 0.0);
+            for _ in 0..trials {
+                let x = estimate(&mut rng);
+                near += region_error(&x, 0.0).powi(2);
+                far += region_error(&x, 0.3).powi(2);
+            }
+            let n = trials as f64;
+            let (near, far) = ((near / n).sqrt(), (far / n).sqrt());
+            eprintln!("| {name} | {:.1} | {:.1} |", near * 1e6, far * 1e6);
+            (near, far)
+        };
+        eprintln!("| method | feeder rms, µm | 30 cm away rms, µm |\n|---|---|---|");
+        let mut touch = Vec::new();
+        for (marks, images) in [(8, 1), (4, 1), (8, 4), (8, 16)] {
+            touch.push(row(
+                &format!("touch: {marks} marks, table board from {images} image(s)"),
+                &mut |rng| {
+                    let truth = base_t_camera().inverse() * base_t_table_board();
+                    // Averaging the corners of k images of the still board is one image with
+                    // corner noise σ/√k.
+                    let sigma = CORNER_SIGMA / (images as f64).sqrt();
+                    let (camera_t_board, _) = observe_with(&camera, &seed, &truth, sigma, rng);
+                    let points: Vec<TouchPoint> = seed
+                        .touch_marks()
+                        .into_iter()
+                        .take(marks)
+                        .map(|m| TouchPoint {
+                            base: base_t_table_board() * m.point
+                                + sample(rng, UR_REPEATABILITY_SIGMA),
+                            name: m.name,
+                            board: m.point,
+                        })
+                        .collect();
+                    let fit =
+                        fit_rigid(&points, DEFAULT_TOUCH_BOUND, UR_REPEATABILITY_SIGMA).unwrap();
+                    fit.base_T_board * camera_t_board.inverse()
+                },
+            ));
+        }
+        let mut hand_eye = Vec::new();
+        for (name, board, n, settings) in [
+            ("2 × 2 flange board", flange_board(), 6, arm),
+            ("2 × 2 flange board", flange_board(), 12, arm),
+            ("2 × 2 flange board", flange_board(), 24, arm),
+            (
+                "2 × 2 flange board, arm without noise",
+                flange_board(),
+                12,
+                still,
+            ),
+            ("seed board (21 cm) held", seed.clone(), 12, arm),
+        ] {
+            let poses = plan_hand_eye_poses(&center_flange(), n, 0.35, 0.6);
+            hand_eye.push(row(&format!("hand-eye: {name}, {n} poses"), &mut |rng| {
+                let v = views_of(&board, &poses, &settings, rng);
+                solve_hand_eye(&v, &settings).unwrap().base_T_camera
+            }));
+        }
+        let measured_touch = [(30.5, 80.0), (31.5, 85.8), (16.9, 42.6), (11.0, 26.0)];
+        let measured_hand_eye = [
+            (62.3, 118.3),
+            (44.6, 85.1),
+            (32.9, 62.3),
+            (26.8, 41.4),
+            (22.5, 29.5),
+        ];
+        for (got, want) in touch
+            .iter()
+            .zip(&measured_touch)
+            .chain(hand_eye.iter().zip(&measured_hand_eye))
+        {
+            assert!(
+                (got.0 * 1e6 / want.0 - 1.0).abs() < 0.03,
+                "{got:?} vs {want:?} µm"
+            );
+            assert!(
+                (got.1 * 1e6 / want.1 - 1.0).abs() < 0.03,
+                "{got:?} vs {want:?} µm"
+            );
+        }
+        // At the feeder, one image and eight touches beat twelve poses of a small flange board;
+        // 30 cm away, a large held board beats one image and touches.
+        assert!(touch[0].0 < hand_eye[1].0);
+        assert!(hand_eye[4].1 < touch[0].1);
     }
 }
