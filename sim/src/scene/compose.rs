@@ -334,3 +334,68 @@ pub fn look_at(
         * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll);
     Isometry3::from_parts(Translation3::from(eye.coords), q)
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
+    use perception::calibration::{Board, BoardSpec};
+    use perception::camera::Camera;
+
+    use super::*;
+    use crate::render::{RenderSettings, render, window_covering};
+
+    /// The simulated cell's capture scene prints the board it is given (a scenario's `[cell]
+    /// board`), not the seed's: rendered from 1.5 m overhead, every data cell of the first tag
+    /// where the two boards' codes differ is dark exactly where the given board prints black.
+    #[test]
+    fn the_capture_scene_prints_the_board_it_is_given() {
+        let other = Board::new(BoardSpec {
+            first_id: 100,
+            thickness: 0.005,
+            ..BoardSpec::seed()
+        })
+        .unwrap();
+        let seed = nominal_scene(&[], &[]);
+        let given = nominal_scene_on(&[], &[], TagBoard::new(other.clone()));
+        assert_eq!(given.table.map(|t| t.height), Some(-0.005));
+        let camera = Camera::basler_seed();
+        let overhead = Isometry3::from_parts(
+            Translation3::new(-0.08, 0.08, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let corners = other.corners(100).unwrap();
+        let window = window_covering(&camera, &overhead, &corners[0], &corners[2]).unwrap();
+        let settings = RenderSettings::default();
+        let renders = [seed, given].map(|s| render(&s, &camera, &overhead, window, &settings));
+        let luminance = |i: usize, p: Point2<f64>| {
+            let out = &renders[i];
+            let k = out.index(p.x.round() as u32, p.y.round() as u32).unwrap();
+            let [r, g, b] = out.radiance[k];
+            0.2126 * r + 0.7152 * g + 0.0722 * b
+        };
+        let seed_board = Board::seed();
+        let cell = 0.03 / 8.0;
+        let mut differing = 0;
+        for cy in 2..8 {
+            for cx in 2..8 {
+                let x = -0.08 - 5.0 * cell + (cx as f64 + 0.5) * cell;
+                let y = 0.08 + 5.0 * cell - (cy as f64 + 0.5) * cell;
+                let (a, b) = (seed_board.is_black(x, y), other.is_black(x, y));
+                if a == b {
+                    continue;
+                }
+                differing += 1;
+                let at = camera
+                    .project(&(overhead.inverse() * Point3::new(x, y, 0.0)))
+                    .unwrap();
+                let (la, lb) = (luminance(0, at), luminance(1, at));
+                assert_eq!(la < lb, a, "cell ({cx}, {cy}): seed {la}, given {lb}");
+                assert!(la.max(lb) > 4.0 * la.min(lb), "black and white apart");
+            }
+        }
+        assert!(
+            differing >= 10,
+            "tags 0 and 100 differ in {differing} cells"
+        );
+    }
+}
