@@ -288,3 +288,48 @@ fn hash3(seed: u64, i: i64, j: i64, tag: u64) -> u64 {
 fn unit(h: u64) -> f64 {
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    use super::*;
+
+    #[test]
+    fn a_posed_board_reads_its_print_and_its_lowest_corner_in_the_table_frame() {
+        let unposed = TagBoard::default();
+        assert_eq!(unposed.lowest_z(), -0.003);
+        let pose = Isometry3::from_parts(
+            Translation3::new(0.1, -0.2, 0.3),
+            UnitQuaternion::from_euler_angles(0.2, 0.0, 0.5),
+        );
+        let posed = TagBoard::default().with_pose(pose);
+        assert_eq!(posed.pose(), pose);
+        // Tipped 0.2 rad about its x axis (then turned about z): the −y edge of the bottom face
+        // is lowest.
+        let want = 0.3 - 0.105 * 0.2f64.sin() - 0.003 * 0.2f64.cos();
+        assert!(
+            (posed.lowest_z() - want).abs() < 1e-15,
+            "{}",
+            posed.lowest_z()
+        );
+        // A black border point of tag 0 and a white quiet-zone point, seen on the posed top face.
+        for (x, y, black) in [(-0.094, 0.094, true), (-0.0955, 0.0955, false)] {
+            let p = pose * Point3::new(x, y, 0.0);
+            let up = pose.rotation * Vector3::z();
+            let (_, mark) = posed.top_face_at(&p, &up).unwrap();
+            assert_eq!(mark == BoardMark::Black, black, "({x}, {y})");
+            // The same table point on the unposed board is elsewhere on the print.
+            assert_eq!(
+                unposed.top_face_at(&p, &Vector3::z()).map(|s| s.1),
+                Some(BoardMark::White)
+            );
+            // A side face shows no print.
+            assert!(
+                posed
+                    .top_face_at(&p, &(pose.rotation * Vector3::x()))
+                    .is_none()
+            );
+        }
+    }
+}
