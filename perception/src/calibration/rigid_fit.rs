@@ -11,14 +11,15 @@ use nalgebra::{
 
 use super::CalibrationError;
 
-/// UR e-Series pose repeatability (±0.03 mm, ISO 9283) as a 1σ per axis, metres: the ISO figure
-/// is the radius holding nearly all touches, about 3σ of the distance, so σ ≈ 0.01 mm per axis.
+/// UR e-Series pose repeatability (±0.03 mm, ISO 9283) as a 1σ per axis, metres. ISO 9283's
+/// figure is the mean distance from the mean position plus three standard deviations of that
+/// distance, ≈ 3.6σ for a 3-D normal of σ per axis, so σ ≈ 0.008 mm; 0.01 mm is a little cautious.
 pub const UR_REPEATABILITY_SIGMA: f64 = 1e-5;
 
-/// The largest distance, metres, a touch may lie from where the other touches put it: ten times
-/// a pointer tip's placement on a printed corner (≈ 0.05 mm) on top of the arm's repeatability,
-/// and a tenth of the 3 mm between neighbouring cell edges of a 3 cm tag36h11 tag, so a touch on
-/// the wrong corner or the wrong cell is refused while an honest one never is.
+/// The largest distance, metres, a touch may lie from where the other touches put it: fifty times
+/// the arm's σ per axis and ten times a careful pointer placement on a printed corner (≈ 0.05 mm),
+/// yet well under the 3.75 mm cell of a 3 cm tag36h11 tag, so a touch on the wrong corner or a
+/// pointer stopped short of the plate is refused while an honest touch never is.
 pub const DEFAULT_TOUCH_BOUND: f64 = 0.5e-3;
 
 /// One touched mark: where it is on the board and where the robot read the pointer tip.
@@ -131,7 +132,10 @@ pub fn fit_rigid(
         (d, r)
     };
 
-    if distances_from_others.iter().any(|d| d.is_nan() || *d > bound) {
+    if distances_from_others
+        .iter()
+        .any(|d| d.is_nan() || *d > bound)
+    {
         let by = |v: &[f64], best_low: bool| {
             (0..n)
                 .min_by(|&a, &b| {
