@@ -540,4 +540,19 @@ mod tests {
             .collect();
         assert!(names.is_empty(), "no temporary left behind: {names:?}");
     }
+
+    #[test]
+    fn a_recorded_covariance_spoiled_by_hand_is_refused_at_its_line_and_column() {
+        let (dir, path) = copied_scenario();
+        write_calibration(&path, &record(dir.path().join("boards/seed.toml"))).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        // Make the camera covariance's first variance negative: no longer positive definite.
+        let at = text.find("camera_covariance = [\n    [8.1e-11").unwrap();
+        let spoiled = text.replacen("[8.1e-11", "[-8.1e-11", 1);
+        let e = Scenario::parse(&spoiled, &path).unwrap_err();
+        let p = &e.0[0];
+        let line = text[..at].matches('\n').count() + 1;
+        assert_eq!((p.line, p.column), (line, 21), "{e}");
+        assert!(p.message.contains("not positive definite"), "{e}");
+    }
 }
