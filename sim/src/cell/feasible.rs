@@ -192,8 +192,12 @@ pub fn check_geometry(
         }
     }
 
-    // Reach: the fixture and the feeder corners, top-down, inside the workspace box.
+    // Reach: the fixture and the feeder corners, top-down, their approach points (where the TCP
+    // goes, `APPROACH` above them) inside the workspace box. The points themselves lie on the
+    // table, which a measured calibration tilts by tens of µrad: a box whose floor is the table
+    // must not refuse a corner a few µm below it.
     let base_T_table = cell.base_T_table.isometry();
+    let above = |p: &Point3<f64>| p.coords + Vector3::z() * APPROACH;
     let kin =
         (arm.kinematics.clone()).with_tcp(Isometry3::translation(0.0, 0.0, g.tcp_offset.max(0.0)));
     let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
@@ -204,7 +208,7 @@ pub fn check_geometry(
             .unwrap_or(false)
     };
     let fixture_origin = base_T_table * cell.fixture.table_T_fixture.isometry() * Point3::origin();
-    if !cell.limits.workspace.contains(&fixture_origin.coords) {
+    if !cell.limits.workspace.contains(&above(&fixture_origin)) {
         out.push((
             "cell.fixture.table_T_fixture".into(),
             format!(
@@ -225,7 +229,7 @@ pub fn check_geometry(
     let feeder_corners = feeder_corners(cell);
     for corner in &feeder_corners {
         let corner = base_T_table * corner;
-        if !cell.limits.workspace.contains(&corner.coords) || !reachable(&corner) {
+        if !cell.limits.workspace.contains(&above(&corner)) || !reachable(&corner) {
             out.push((
                 "cell.feeder".into(),
                 format!(
