@@ -392,6 +392,7 @@ fn every_guide_has_its_commands_test() {
     let tested = [
         "simulate.md",
         "production.md",
+        "commission.md",
         "perception.md",
         "add-part.md",
         "regress.md",
@@ -419,6 +420,11 @@ fn simulate_guide_commands_run() {
 #[test]
 fn production_guide_commands_run() {
     assert!(run_page("docs/guides/production.md") > 0);
+}
+
+#[test]
+fn commission_guide_commands_run() {
+    assert!(run_page("docs/guides/commission.md") > 0);
 }
 
 #[test]
