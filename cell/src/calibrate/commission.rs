@@ -9,6 +9,11 @@ use perception::calibration::detect::DetectorSettings;
 use perception::calibration::rigid_fit::{DEFAULT_TOUCH_BOUND, UR_REPEATABILITY_SIGMA};
 use robots::virtual_ur::VirtualUrConfig;
 
+use perception::calibration::{Board, BoardSpec};
+use robots::ur_robot::{UrRobot, UrRobotConfig};
+use sim::config::CalibrationMethod;
+
+use super::hand_eye::{Guess, HandEyeOptions, calibrate_by_hand_eye};
 use super::procedure::{CalibrateError, Calibration, TouchSettings, calibrate_by_touch};
 use super::production::{CameraImages, PendantOperator};
 use super::sim_world::{MountError, SimWorld, Truth};
@@ -32,6 +37,48 @@ pub struct CommissionOptions {
     pub world_seed: u64,
     /// How long a real camera's capture may wait.
     pub capture_timeout: Duration,
+    /// How the board is found in the robot base.
+    pub method: Method,
+    /// The hand-eye poses and settings (`--method hand-eye`).
+    pub hand_eye: HandEyeOptions,
+    /// The board the arm carries for hand-eye (default `scenarios/boards/flange.toml`'s).
+    pub flange_board: Option<Board>,
+    /// The explicit opt-in that a real arm will move (hand-eye on `ur://`).
+    pub allow_motion: bool,
+}
+
+/// How `cell calibrate` finds the table board in the robot base.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Method {
+    /// A person (or the simulator's stand-in) touches the board's marks with a pointer; the
+    /// arm is only read.
+    #[default]
+    Touch,
+    /// The arm carries a flange board through planned poses (it moves on its own).
+    HandEye,
+}
+
+impl Method {
+    /// The method as the scenario's `[cell.calibration] method` records it.
+    pub fn recorded(self) -> CalibrationMethod {
+        match self {
+            Method::Touch => CalibrationMethod::Touch,
+            Method::HandEye => CalibrationMethod::HandEye,
+        }
+    }
+}
+
+/// The flange board of `scenarios/boards/flange.toml`: 2 × 2 tag36h11 tags from id 16 on an
+/// 8 cm plate.
+pub fn default_flange_board() -> Board {
+    Board::new(BoardSpec {
+        grid: [2, 2],
+        removed: None,
+        first_id: 16,
+        plate: [0.08, 0.08],
+        ..BoardSpec::seed()
+    })
+    .expect("the default flange board is valid")
 }
 
 impl Default for CommissionOptions {
@@ -43,6 +90,10 @@ impl Default for CommissionOptions {
             detector: DetectorSettings::default(),
             world_seed: 0,
             capture_timeout: Duration::from_secs(5),
+            method: Method::Touch,
+            hand_eye: HandEyeOptions::default(),
+            flange_board: None,
+            allow_motion: false,
         }
     }
 }
@@ -85,6 +136,15 @@ pub enum CommissionError {
     /// The simulated cell refused its limits.
     #[error("limits: {0}")]
     Limits(String),
+    /// Hand-eye on a real controller moves the arm: it needs the explicit opt-in.
+    #[error(
+        "hand-eye calibration moves the arm through {poses} poses on its own: pass \
+         --allow-motion (and keep the workspace clear), or use --method touch"
+    )]
+    NotAllowed {
+        /// Poses it would move through.
+        poses: usize,
+    },
 }
 
 /// A finished commissioning run; in simulation with the world's truth beside it, to judge it.
@@ -95,8 +155,21 @@ pub struct Commissioned {
     pub truth: Option<Truth>,
 }
 
-/// Commissions `scenario`'s cell on `target` by touch points.
+/// Commissions `scenario`'s cell on `target` by `options.method`.
 pub async fn commission(
+    scenario: &Scenario,
+    target: &RobotTarget,
+    camera: Option<&CameraSpec>,
+    options: &CommissionOptions,
+) -> Result<Commissioned, CommissionError> {
+    match options.method {
+        Method::Touch => commission_by_touch(scenario, target, camera, options).await,
+        Method::HandEye => commission_by_hand_eye(scenario, target, camera, options).await,
+    }
+}
+
+/// Commissions by touch points.
+async fn commission_by_touch(
     scenario: &Scenario,
     target: &RobotTarget,
     camera: Option<&CameraSpec>,
@@ -145,6 +218,110 @@ pub async fn commission(
                 let mut operator = world.operator(robot, options.tip, options.world_seed);
                 calibrate_by_touch(&intrinsics, &board, &mut images, &mut operator, &settings)
                     .await?
+            };
+            Ok(Commissioned {
+                calibration,
+                truth: Some(world.truth()),
+            })
+        }
+    }
+}
+
+/// Commissions by hand-eye: on a real controller only with `--allow-motion` and `--camera`,
+/// both checked before anything connects.
+async fn commission_by_hand_eye(
+    scenario: &Scenario,
+    target: &RobotTarget,
+    camera: Option<&CameraSpec>,
+    options: &CommissionOptions,
+) -> Result<Commissioned, CommissionError> {
+    let cell = &scenario.spec.cell;
+    let board = cell.board_layout().ok_or(CommissionError::NoBoard)?;
+    let flange = options
+        .flange_board
+        .clone()
+        .unwrap_or_else(default_flange_board);
+    let intrinsics = cell.camera.intrinsics;
+    let guess = Guess {
+        base_T_camera: cell.camera.base_T_camera.isometry(),
+        base_T_table: cell.base_T_table.isometry(),
+    };
+    let he = &options.hand_eye;
+    match target {
+        RobotTarget::Ur { host, port } => {
+            if !options.allow_motion {
+                return Err(CommissionError::NotAllowed { poses: he.poses });
+            }
+            let spec = camera.ok_or(CommissionError::NoCamera)?;
+            let mut images = CameraImages {
+                source: crate::camera::open(spec, Sensor::of(&intrinsics))?,
+                timeout: options.capture_timeout,
+            };
+            // The scenario's arm model (kinematics, limits); nothing simulated reaches the run.
+            let setup = SimSetup::new(scenario.clone())?;
+            let mut config = UrRobotConfig::new(host.clone(), setup.model.kinematics.clone());
+            config.rtde_port = *port;
+            config.limits = cell.limits.clone();
+            config.gripper_actuation_s = cell.gripper.actuation_time;
+            // Connected behind `Limited`: every planned pose is checked against the limits.
+            let mut robot = UrRobot::connect(config)
+                .await
+                .map_err(|e| CommissionError::Calibrate(e.into()))?;
+            let calibration = calibrate_by_hand_eye(
+                &intrinsics,
+                &board,
+                &flange,
+                &guess,
+                &mut images,
+                &mut robot,
+                he,
+            )
+            .await?;
+            Ok(Commissioned {
+                calibration,
+                truth: None,
+            })
+        }
+        sim_target => {
+            let world = SimWorld::new(scenario, MountError::default(), options.world_seed);
+            let setup = SimSetup::new(world.scenario.clone())?;
+            let calibration = if matches!(sim_target, RobotTarget::VirtualUr) {
+                let over =
+                    connect_sim_over_rtde(&setup, 0, VirtualUrConfig::default().unlock_delay)
+                        .await?;
+                // `over.robot` is connected behind `Limited` already.
+                let (mut arm, mut images) =
+                    world.hand_eye_rig(over.robot, &board, &flange, options.world_seed);
+                let result = calibrate_by_hand_eye(
+                    &intrinsics,
+                    &board,
+                    &flange,
+                    &guess,
+                    &mut images,
+                    &mut arm,
+                    he,
+                )
+                .await;
+                drop(arm);
+                drop(over.controller);
+                result?
+            } else {
+                let robot = setup
+                    .model
+                    .limited(setup.sim_cell(0)?)
+                    .map_err(|e| CommissionError::Limits(e.to_string()))?;
+                let (mut arm, mut images) =
+                    world.hand_eye_rig(robot, &board, &flange, options.world_seed);
+                calibrate_by_hand_eye(
+                    &intrinsics,
+                    &board,
+                    &flange,
+                    &guess,
+                    &mut images,
+                    &mut arm,
+                    he,
+                )
+                .await?
             };
             Ok(Commissioned {
                 calibration,

@@ -5,6 +5,7 @@
 //! since ([`preflight`]).
 
 pub mod commission;
+pub mod hand_eye;
 pub mod preflight;
 pub mod procedure;
 pub mod production;

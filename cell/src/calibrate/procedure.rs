@@ -21,6 +21,8 @@ use perception::calibration::{Board, CalibrationError};
 use perception::{Camera, FrameImage};
 use robots::robot::RobotError;
 
+use super::hand_eye::HandEyeEvidence;
+
 /// Why a calibration stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrateError {
@@ -41,6 +43,31 @@ pub enum CalibrateError {
     /// The operator gave up, or their input could not be read.
     #[error("operator: {0}")]
     Operator(String),
+    /// Too few of the planned hand-eye poses were reached with the board seen.
+    #[error(
+        "hand-eye: only {reached} of {planned} planned poses reached with the flange board posed \
+         ({why}); at least {needed} are needed: plan more poses (--poses), or check the \
+         scenario's workspace limits and camera pose"
+    )]
+    TooFewPoses {
+        /// Views usable.
+        reached: usize,
+        /// Poses planned.
+        planned: usize,
+        /// Views needed.
+        needed: usize,
+        /// The poses left out and why.
+        why: String,
+    },
+    /// The flange board and the table board share tag ids, so an image of both is ambiguous.
+    #[error(
+        "the flange board's tag ids {ids:?} are also on the table board: print the flange \
+         board with a first_id past the table board's last id"
+    )]
+    SharedIds {
+        /// The ids on both boards.
+        ids: Vec<u32>,
+    },
 }
 
 /// A boxed future of the procedure's steps (object-safe async).
@@ -103,10 +130,22 @@ pub struct Calibration {
     pub sighting: BoardSighting,
     /// The board's pose in the camera.
     pub board_pose: BoardPose,
-    /// The touches.
-    pub touches: Vec<TouchPoint>,
-    /// The rigid fit of the touches.
-    pub fit: RigidFit,
+    /// How the board was found in the robot base.
+    pub base: BaseEvidence,
+}
+
+/// How a calibration found the table board in the robot base, with its evidence.
+#[derive(Debug, Clone)]
+pub enum BaseEvidence {
+    /// Pointer touches at the board's marks and their rigid fit.
+    Touch {
+        /// The touches.
+        touches: Vec<TouchPoint>,
+        /// The rigid fit of the touches.
+        fit: RigidFit,
+    },
+    /// A flange board carried through planned poses (AX = XB).
+    HandEye(Box<HandEyeEvidence>),
 }
 
 /// The board's pose in the camera: detects the board in one image and solves its pose.
@@ -174,7 +213,6 @@ pub async fn calibrate_by_touch(
         table_covariance: fit.covariance,
         sighting,
         board_pose,
-        touches,
-        fit,
+        base: BaseEvidence::Touch { touches, fit },
     })
 }

@@ -6,14 +6,15 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use cell::calibrate::commission::{CommissionOptions, Commissioned, commission};
-use cell::calibrate::procedure::Calibration;
+use cell::calibrate::commission::{CommissionOptions, Commissioned, Method, commission};
+use cell::calibrate::hand_eye::{HandEyeOptions, MIN_HAND_EYE_VIEWS};
+use cell::calibrate::procedure::{BaseEvidence, Calibration};
 use cell::calibrate::record::{CalibrationRecord, write_calibration};
 use cell::camera::CameraSpec;
 use cell::run::{LoadedScenario, RobotTarget};
 use nalgebra::{Isometry3, Matrix6, Vector3};
+use perception::calibration::Board;
 use perception::calibration::covariance::difference;
-use sim::config::CalibrationMethod;
 
 /// Arguments of `cell calibrate`.
 #[derive(Debug, clap::Args)]
@@ -44,6 +45,22 @@ pub struct Args {
     /// scenario's `noise.robot_repeatability`).
     #[arg(long, value_name = "MM")]
     pub touch_sigma: Option<f64>,
+    /// How the board is found in the robot base: `touch` (pointer touches at its marks, the arm
+    /// only read) or `hand-eye` (the arm carries a flange board through planned poses in view
+    /// of the camera; on a real controller it needs --allow-motion and --camera).
+    #[arg(long, value_enum, default_value_t = Method::Touch)]
+    pub method: Method,
+    /// The board the arm carries for --method hand-eye (a board file, e.g.
+    /// scenarios/boards/flange.toml, whose ids are not on the table board); default: 2 × 2
+    /// tag36h11 tags from id 16 on an 8 cm plate, as scenarios/boards/flange.toml.
+    #[arg(long, value_name = "FILE")]
+    pub flange_board: Option<PathBuf>,
+    /// Poses planned for --method hand-eye.
+    #[arg(long, default_value_t = 12, value_name = "N")]
+    pub poses: usize,
+    /// Allow a real arm to move (--method hand-eye on --robot ur://HOST).
+    #[arg(long)]
+    pub allow_motion: bool,
     /// Seed of the simulated world (its mount error, lights and sensor); simulation only.
     #[arg(long, default_value_t = 1)]
     pub world_seed: u64,
@@ -77,11 +94,39 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         touch_sigma.is_finite() && touch_sigma > 0.0,
         "--touch-sigma {touch_sigma} mm: expected a positive number"
     );
+    anyhow::ensure!(
+        args.method == Method::HandEye || (args.flange_board.is_none() && !args.allow_motion),
+        "--flange-board and --allow-motion are for --method hand-eye; touch points never move \
+         the arm"
+    );
+    anyhow::ensure!(
+        !args.allow_motion || matches!(args.robot, RobotTarget::Ur { .. }),
+        "--allow-motion is for a real controller (--robot ur://HOST); the simulated arms move \
+         without it"
+    );
+    anyhow::ensure!(
+        (MIN_HAND_EYE_VIEWS..=200).contains(&args.poses),
+        "--poses {}: expected {MIN_HAND_EYE_VIEWS} to 200",
+        args.poses
+    );
+    let flange_board = args
+        .flange_board
+        .as_deref()
+        .map(Board::load)
+        .transpose()
+        .context("reading the flange board")?;
     let options = CommissionOptions {
         tip: Vector3::new(0.0, 0.0, args.pointer_length),
         bound: args.touch_bound * 1e-3,
         touch_sigma,
         world_seed: args.world_seed,
+        method: args.method,
+        hand_eye: HandEyeOptions {
+            poses: args.poses,
+            ..HandEyeOptions::default()
+        },
+        flange_board,
+        allow_motion: args.allow_motion,
         ..CommissionOptions::default()
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -139,7 +184,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         base_T_table: calibration.base_T_table,
         camera_covariance: calibration.camera_covariance,
         table_covariance: calibration.table_covariance,
-        method: CalibrationMethod::Touch,
+        method: args.method.recorded(),
         rms_px: calibration.board_pose.rms_px,
         tags: calibration.sighting.tags.len() as u32,
         board,
@@ -182,19 +227,48 @@ fn print_calibration(c: &Calibration) {
         s.timings.total().as_secs_f64() * 1e3,
         c.board_pose.rms_px
     );
-    let worst = c
-        .fit
-        .distances_from_others
-        .iter()
-        .enumerate()
-        .fold((0, 0.0), |a, (i, &d)| if d > a.1 { (i, d) } else { a });
-    println!(
-        "touch points: {}, RMS {:.3} mm; farthest from the others: {} at {:.3} mm",
-        c.touches.len(),
-        c.fit.rms * 1e3,
-        c.touches[worst.0].name,
-        worst.1 * 1e3
-    );
+    match &c.base {
+        BaseEvidence::Touch { touches, fit } => {
+            let worst = fit
+                .distances_from_others
+                .iter()
+                .enumerate()
+                .fold((0, 0.0), |a, (i, &d)| if d > a.1 { (i, d) } else { a });
+            println!(
+                "touch points: {}, RMS {:.3} mm; farthest from the others: {} at {:.3} mm",
+                touches.len(),
+                fit.rms * 1e3,
+                touches[worst.0].name,
+                worst.1 * 1e3
+            );
+        }
+        BaseEvidence::HandEye(e) => {
+            let worst = e
+                .solution
+                .residuals
+                .iter()
+                .map(|r| r.mahalanobis)
+                .fold(0.0, f64::max);
+            let rms =
+                (e.views.iter().map(|v| v.1 * v.1).sum::<f64>() / e.views.len() as f64).sqrt();
+            println!(
+                "hand-eye: {} of {} planned poses used (left out: {}); flange board \
+                 reprojection RMS {:.3} px; worst view residual {:.2} σ",
+                e.views.len(),
+                e.planned,
+                e.left_out.describe(),
+                rms,
+                worst
+            );
+            let b = e.solution.flange_T_board;
+            println!(
+                "  flange board on the TCP: translation [{:.2}, {:.2}, {:.2}] mm",
+                b.translation.x * 1e3,
+                b.translation.y * 1e3,
+                b.translation.z * 1e3
+            );
+        }
+    }
     for (name, pose, cov) in [
         ("base_T_camera", &c.base_T_camera, &c.camera_covariance),
         ("base_T_table", &c.base_T_table, &c.table_covariance),
