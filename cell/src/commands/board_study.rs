@@ -43,6 +43,9 @@ pub struct Args {
     /// Threads of the reference detector.
     #[arg(long)]
     pub threads: Option<u8>,
+    /// Gaussian blur sigma (pixels) before the reference detector's quad segmentation.
+    #[arg(long)]
+    pub sigma: Option<f32>,
     /// Report the reference detector's corners, unrefined.
     #[arg(long)]
     pub no_refine: bool,
@@ -53,6 +56,9 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
+
+/// Grey levels of noise on the table around the board window in a full frame.
+const TABLE_NOISE: u8 = 4;
 
 /// One rendered board and the truth about it.
 struct Render {
@@ -139,6 +145,8 @@ struct Summary {
     decode_rate: f64,
     false_ids: usize,
     poses: usize,
+    /// Images without a pose, and why.
+    refusals: Vec<String>,
     corner_rms_raw_px: f64,
     corner_rms_refined_px: f64,
     /// Measured corner noise per axis (refined corners against the truth), pixels.
@@ -186,6 +194,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         anyhow::ensure!(t >= 1, "--threads must be ≥ 1");
         settings.threads = t;
     }
+    if let Some(s) = args.sigma {
+        anyhow::ensure!(s >= 0.0 && s.is_finite(), "--sigma must be ≥ 0");
+        settings.sigma = s;
+    }
     settings.refine_corners = !args.no_refine;
 
     eprintln!("rendering {} boards …", args.images);
@@ -211,7 +223,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let frame = if args.window_only {
             r.image.clone()
         } else {
-            embed_in_full_frame(&r.image, &camera, border_grey(&r.image))
+            embed_in_full_frame(&r.image, &camera, border_grey(&r.image), TABLE_NOISE)
         };
         results.push(measure(i, r, &frame, &mut detector, &board, &camera));
     }
@@ -396,8 +408,16 @@ fn summarise(
     };
     let corner_rms_raw_px = pooled(&|r| r.corner_rms_raw_px);
     let corner_rms_refined_px = pooled(&|r| r.corner_rms_refined_px);
-    // Per-axis corner noise: the refined corners' pooled error over both axes.
-    let corner_sigma_px = corner_rms_refined_px / 2f64.sqrt();
+    // Per-axis corner noise of the images the bound is for (those with a pose): the refined
+    // corners' pooled error over both axes.
+    let (sq, n) = results
+        .iter()
+        .filter(|r| r.refused.is_none())
+        .flat_map(|r| &r.corner_errors)
+        .fold((0.0, 0.0), |(s, n), e| {
+            (s + e[0] * e[0] + e[1] * e[1], n + 2.0)
+        });
+    let corner_sigma_px = (sq / f64::max(n, 1.0)).sqrt();
     let posed: Vec<&ImageResult> = results.iter().filter(|r| r.refused.is_none()).collect();
     let column =
         |f: &dyn Fn(&ImageResult) -> f64| -> Vec<f64> { posed.iter().map(|r| f(r)).collect() };
@@ -458,6 +478,14 @@ fn summarise(
         decode_rate: decoded as f64 / visible.max(1) as f64,
         false_ids,
         poses: posed.len(),
+        refusals: results
+            .iter()
+            .filter_map(|r| {
+                r.refused
+                    .as_ref()
+                    .map(|why| format!("image {}: {why}", r.index))
+            })
+            .collect(),
         corner_rms_raw_px,
         corner_rms_refined_px,
         corner_sigma_px,
@@ -495,8 +523,11 @@ fn print_summary(s: &Summary) {
         s.false_ids,
         s.poses
     );
+    for r in &s.refusals {
+        println!("  no pose: {r}");
+    }
     println!(
-        "corner error (rms, px): reference detector {:.4}, refined {:.4} (σ per axis {:.4})",
+        "corner error (rms, px): reference detector {:.4}, refined {:.4} (σ per axis where posed {:.4})",
         s.corner_rms_raw_px, s.corner_rms_refined_px, s.corner_sigma_px
     );
     println!("board pose error, 1σ over images (mean) | Cramér–Rao bound | ratio:");

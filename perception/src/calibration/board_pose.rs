@@ -18,6 +18,10 @@ pub const MIN_TAGS: usize = 4;
 /// it the tags' foreshortened edges lose the accuracy the pose needs.
 pub const MAX_VIEW_ANGLE_DEG: f64 = 60.0;
 
+/// Largest share of saturated pixels around the tag borders, percent: a blurred edge whose light
+/// side clips moves by a good part of the blur's width.
+pub const MAX_CLIPPED_PERCENT: f64 = 1.0;
+
 /// The board's pose in the camera with its statistics.
 #[derive(Debug, Clone, PartialEq)]
 #[allow(non_snake_case)]
@@ -66,8 +70,9 @@ impl BoardPose {
 /// Computes the board's pose in `camera` from the decoded corners of `sighting`.
 ///
 /// Refuses an image that does not fit the camera's sensor (`Resolution`), fewer than
-/// [`MIN_TAGS`] tags (`TooFewTags`) and a board seen more than [`MAX_VIEW_ANGLE_DEG`] off its
-/// normal (`TooOblique`).
+/// [`MIN_TAGS`] tags (`TooFewTags`), borders clipped at full scale beyond
+/// [`MAX_CLIPPED_PERCENT`] (`Overexposed`) and a board seen more than [`MAX_VIEW_ANGLE_DEG`] off
+/// its normal (`TooOblique`).
 pub fn board_pose(
     camera: &Camera,
     board: &Board,
@@ -84,6 +89,13 @@ pub fn board_pose(
             found: tags.len(),
             need: MIN_TAGS,
             total: board.tags().len(),
+        });
+    }
+    let clipped = 100.0 * tags.iter().map(|(t, _)| t.clipped).sum::<f64>() / tags.len() as f64;
+    if clipped > MAX_CLIPPED_PERCENT {
+        return Err(CalibrationError::Overexposed {
+            percent: clipped,
+            max_percent: MAX_CLIPPED_PERCENT,
         });
     }
     let model: Vec<Point3<f64>> = tags.iter().flat_map(|(_, c)| *c).collect();
@@ -252,6 +264,7 @@ mod tests {
                     raw_corners: c,
                     margin: 100.0,
                     hamming: 0,
+                    clipped: 0.0,
                 }
             })
             .collect();

@@ -11,7 +11,7 @@ use apriltag::{Detector, Family, Image};
 use image::GrayImage;
 use nalgebra::Point2;
 
-use super::edges::{Transfer, refine_quad};
+use super::edges::{Transfer, clipped_share, refine_quad};
 use super::{Board, CalibrationError};
 use crate::FrameImage;
 
@@ -43,9 +43,9 @@ pub struct DetectorSettings {
 impl Default for DetectorSettings {
     fn default() -> Self {
         Self {
-            decimation: 4.0,
+            decimation: 6.0,
             threads: 2,
-            sigma: 0.0,
+            sigma: 0.8,
             refine_edges: true,
             max_hamming: 1,
             refine_corners: true,
@@ -69,6 +69,8 @@ pub struct TagSighting {
     pub margin: f32,
     /// Code bits the decoder corrected.
     pub hamming: u8,
+    /// Share of the pixels around its border edges at full scale ([`clipped_share`]).
+    pub clipped: f64,
 }
 
 /// Time spent in each stage of a detection.
@@ -192,6 +194,7 @@ impl BoardDetector {
                 raw_corners: window.map(shift),
                 margin: d.decision_margin(),
                 hamming: d.hamming() as u8,
+                clipped: clipped_share(grey, &refined, self.settings.edge_reach_px),
             };
             // A tag decoded twice (it should not be) keeps its surest decode.
             match tags.iter_mut().find(|t| t.id == id) {

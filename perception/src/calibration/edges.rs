@@ -84,6 +84,41 @@ pub fn refine_quad(
     Some(q)
 }
 
+/// The share of pixels at full scale (255) within `reach` pixels either side of a quad's edges:
+/// where the light side of an edge clips, the blurred edge's profile is cut and its centre moves,
+/// so a pose from such corners is biased.
+pub fn clipped_share(grey: &GrayImage, quad: &[Point2<f64>; 4], reach: f64) -> f64 {
+    let (mut clipped, mut total) = (0usize, 0usize);
+    for k in 0..4 {
+        let (a, b) = (quad[k], quad[(k + 1) % 4]);
+        let length = (b - a).norm();
+        if length <= 0.0 {
+            continue;
+        }
+        let d = (b - a) / length;
+        let n = Vector2::new(-d.y, d.x);
+        let mut t = 0.0;
+        while t <= length {
+            let mut s = -reach;
+            while s <= reach {
+                let p = a + d * t + n * s;
+                let (x, y) = (p.x.round(), p.y.round());
+                if x >= 0.0 && y >= 0.0 && (x as u32) < grey.width() && (y as u32) < grey.height() {
+                    total += 1;
+                    clipped += usize::from(grey.get_pixel(x as u32, y as u32).0[0] == u8::MAX);
+                }
+                s += 1.0;
+            }
+            t += ALONG_STEP;
+        }
+    }
+    if total == 0 {
+        0.0
+    } else {
+        clipped as f64 / total as f64
+    }
+}
+
 /// The line of the edge from `a` to `b` of a quad centred at `centre`.
 fn fit_edge(
     grey: &GrayImage,
@@ -249,6 +284,24 @@ mod tests {
         let linear = refine_quad(&img, &start, 4.0, Transfer::Linear).unwrap();
         let shrink = (linear[1] - linear[3]).norm() - (srgb[1] - srgb[3]).norm();
         assert!(shrink < -0.05, "{shrink}");
+    }
+
+    #[test]
+    fn clipping_is_the_share_of_full_scale_pixels_around_the_edges() {
+        let quad = [
+            Point2::new(20.0, 80.0),
+            Point2::new(80.0, 80.0),
+            Point2::new(80.0, 20.0),
+            Point2::new(20.0, 20.0),
+        ];
+        assert_eq!(clipped_share(&square(20.0, 80.0, 100), &quad, 4.0), 0.0);
+        // White at full scale outside, black inside: about half the samples clip.
+        let img = GrayImage::from_fn(100, 100, |x, y| {
+            let inside = (20..80).contains(&x) && (20..80).contains(&y);
+            image::Luma([if inside { 10 } else { 255 }])
+        });
+        let share = clipped_share(&img, &quad, 4.0);
+        assert!((0.45..0.55).contains(&share), "{share}");
     }
 
     #[test]

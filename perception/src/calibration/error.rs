@@ -135,6 +135,17 @@ pub enum CalibrationError {
     /// The reference detector could not be set up or run on the image.
     #[error("tag detector: {0}: check the board's family and the image")]
     Detector(String),
+    /// The board's white print clips at full scale around the tag borders: the edges, and so
+    /// the pose, would be biased.
+    #[error(
+        "{percent:.1} % of the pixels around the tag borders are saturated (at most {max_percent:.1} %): lower the exposure or the light"
+    )]
+    Overexposed {
+        /// Share of saturated pixels around the borders, percent.
+        percent: f64,
+        /// The allowed share, percent.
+        max_percent: f64,
+    },
     /// A touch point with a NaN or infinite coordinate: a bad robot reading or board mark.
     #[error("touch point {index} ({name}) has a non-finite coordinate: read the robot's TCP again")]
     NonFiniteTouchPoint {

@@ -181,11 +181,25 @@ pub fn board_render_settings() -> RenderSettings {
     }
 }
 
-/// The full sensor frame of `camera` with `window` pasted at its origin and the rest `fill`:
-/// what a camera delivers, so detection runs on every pixel of it.
-pub fn embed_in_full_frame(window: &FrameImage, camera: &Camera, fill: u8) -> FrameImage {
+/// The full sensor frame of `camera` with `window` pasted at its origin and the rest grey
+/// `fill` with ±`noise` levels of deterministic sensor-like noise (a flat fill would let the
+/// detector skip most of the frame): what a camera delivers, so detection runs on every pixel.
+pub fn embed_in_full_frame(
+    window: &FrameImage,
+    camera: &Camera,
+    fill: u8,
+    noise: u8,
+) -> FrameImage {
     let grey = window.pixels.to_luma8();
-    let mut full = GrayImage::from_pixel(camera.width, camera.height, image::Luma([fill]));
+    let span = 2 * u32::from(noise) + 1;
+    let mut state = 0x9e37_79b9_u32;
+    let mut full = GrayImage::from_fn(camera.width, camera.height, |_, _| {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        let v = (u32::from(fill) + state % span).saturating_sub(u32::from(noise));
+        image::Luma([v.min(255) as u8])
+    });
     image::imageops::replace(
         &mut full,
         &grey,
@@ -231,7 +245,7 @@ mod tests {
             pixels: DynamicImage::ImageLuma8(GrayImage::from_pixel(3, 2, image::Luma([200]))),
             origin: [10, 20],
         };
-        let full = embed_in_full_frame(&small, &camera, 7);
+        let full = embed_in_full_frame(&small, &camera, 7, 0);
         let g = full.pixels.as_luma8().unwrap();
         assert_eq!((g.width(), g.height()), (camera.width, camera.height));
         assert_eq!(g.get_pixel(12, 21).0[0], 200);
