@@ -104,7 +104,7 @@ impl CommissionOptions {
             tip: self.tip,
             bound: self.bound,
             touch_sigma: self.touch_sigma,
-            detector: self.detector.clone(),
+            detector: self.detector,
         }
     }
 }

@@ -142,7 +142,7 @@ pub enum BaseEvidence {
         /// The touches.
         touches: Vec<TouchPoint>,
         /// The rigid fit of the touches.
-        fit: RigidFit,
+        fit: Box<RigidFit>,
     },
     /// A flange board carried through planned poses (AX = XB).
     HandEye(Box<HandEyeEvidence>),
@@ -213,6 +213,9 @@ pub async fn calibrate_by_touch(
         table_covariance: fit.covariance,
         sighting,
         board_pose,
-        base: BaseEvidence::Touch { touches, fit },
+        base: BaseEvidence::Touch {
+            touches,
+            fit: Box::new(fit),
+        },
     })
 }
