@@ -400,3 +400,32 @@ fn hand_eye_without_tilt_is_refused_as_degenerate() {
     );
     assert!(e.to_string().contains("are missing"), "{e}");
 }
+
+/// `cell calibrate --method hand-eye` writes its result into the scenario as a hand-eye
+/// calibration, and the written scenario loads with it.
+#[test]
+fn the_command_records_a_hand_eye_calibration() {
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&root().join("scenarios"), dir.path());
+    let path = dir.path().join("usbc_learned.toml");
+    let p = path.display().to_string();
+    let o = cell(&[
+        "calibrate",
+        &p,
+        "--method",
+        "hand-eye",
+        "--poses",
+        "6",
+        "--world-seed",
+        "22",
+        "--flange-board",
+        &dir.path().join("boards/flange.toml").display().to_string(),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("hand-eye: 6 of 6 planned poses used"), "{t}");
+    let loaded = LoadedScenario::load(&path).unwrap();
+    let cal = loaded.scenario.spec.cell.calibration.as_ref().unwrap();
+    assert_eq!(cal.method, sim::config::CalibrationMethod::HandEye);
+    assert_eq!(cal.tags, 16);
+}
