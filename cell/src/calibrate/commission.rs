@@ -1,6 +1,7 @@
 //! One commissioning run against the robot `--robot` names: the simulated cell in process, the
 //! simulated cell behind a virtual UR over loopback RTDE, or a real controller with its camera
-//! source and a person at the pendant.
+//! source and a person at the pendant (touch points) or the arm moving on its own behind its
+//! limits (hand-eye, with `--allow-motion`).
 
 use std::time::Duration;
 

@@ -1,5 +1,6 @@
 //! Commissioning a cell: the printable board ([`svg`]); the camera and the table found in the
-//! robot base from a tag-board image and pointer touches ([`procedure`]), against the
+//! robot base from a tag-board image and pointer touches ([`procedure`]) or from a flange board
+//! the arm carries through planned poses ([`hand_eye`]), against the
 //! simulated cell ([`sim_world`]) or a real one ([`production`]); the record written into the
 //! scenario ([`record`]); and the production pre-flight's check that the camera has not moved
 //! since ([`preflight`]).

@@ -1,6 +1,8 @@
 //! The commissioning procedure by touch points, the seed's way: the board's pose in the camera
 //! from one image, the board's pose in the robot base from pointer touches at its marks, and
-//! the camera's pose in the base composed from the two, with its propagated covariance.
+//! the camera's pose in the base composed from the two, with its propagated covariance. The
+//! result ([`Calibration`]) and the errors are shared with the hand-eye procedure
+//! ([`super::hand_eye`]).
 //!
 //! Everything here reads pixels ([`BoardImages`]) and the robot's TCP readings ([`Operator`])
 //! only; who moves the pointer onto a mark is the operator's business (a person at the pendant,

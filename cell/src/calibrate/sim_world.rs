@@ -1,7 +1,9 @@
 //! The simulator's stand-ins for a cell being commissioned: a world whose camera and table sit
 //! where nobody typed them (the scenario's poses are only the integrator's first guess), a
-//! camera that renders the board from the true camera pose, and an operator who jogs the
-//! pointer onto the true marks.
+//! camera that renders the board from the true camera pose, an operator who jogs the
+//! pointer onto the true marks, and for hand-eye an arm carrying a flange board mounted off its
+//! design ([`SimHoldingArm`]) with a camera that renders it beside the table board
+//! ([`SimHandEyeCamera`]).
 //!
 //! Only these stand-ins know the truth. The procedure ([`super::procedure`]) sees their pixels
 //! and the robot's readings, nothing else; [`SimWorld::truth`] is for judging the result.

@@ -1,6 +1,8 @@
 //! `cell calibrate SCENARIO`: commission a cell. The camera's pose in the robot base and the
-//! table plane, measured from one image of the tag board and pointer touches at its marks, are
-//! written into the scenario with their uncertainty (the old values kept in a comment).
+//! table plane, measured from one image of the tag board and pointer touches at its marks
+//! (`--method touch`), or from a flange board the arm carries through planned poses and the
+//! table board in the same images (`--method hand-eye`), are written into the scenario with
+//! their uncertainty (the old values kept in a comment).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,8 +27,9 @@ pub struct Args {
     /// The robot: `sim` (the simulated cell: a world whose camera and table sit a few mm and
     /// mrad from the scenario's poses, found again from rendered pixels and simulated touches),
     /// `virtual-ur` (the same behind a virtual UR on 127.0.0.1, over RTDE) or
-    /// `ur://HOST[:PORT]` (a real controller: you jog the pointer onto each mark at the pendant
-    /// and confirm on this terminal; the TCP is read over RTDE and nothing is commanded).
+    /// `ur://HOST[:PORT]` (a real controller: with --method touch you jog the pointer onto each
+    /// mark at the pendant and confirm on this terminal, the TCP read over RTDE and nothing
+    /// commanded; --method hand-eye moves the arm and needs --allow-motion and --camera).
     #[arg(long, default_value = "sim")]
     pub robot: RobotTarget,
     /// The camera that sees the board (only with --robot ur://HOST): `folder:/path`,
