@@ -235,10 +235,11 @@ fn the_default_flange_board_is_the_flange_board_file() {
 /// board, each image rendered from the world's camera with the board where the arm truly is
 /// (its reading off by the repeatability) and mounted off its nominal place by millimetres.
 /// The calibration finds the world's camera (millimetres from the typed pose), the board's real
-/// mounting, and places a part on the table board as measured over world seeds 21–24 with six
-/// poses (`cell calibrate --method hand-eye --poses 6 --world-seed 21..24 --dry-run`: placement
-/// 26–60 µm, table 20–47 µm, camera 35–145 µm and 36–176 µrad); the bounds are a quarter above
-/// the worst of those seeds.
+/// mounting, and places a part on the table board. Measured with
+/// `cell calibrate scenarios/usbc_learned.toml --method hand-eye --poses 6 --dry-run
+/// --world-seed N`: on seeds 21–24 placement 26–97 µm, table 20–67 µm, camera 70–111 µm and
+/// 45–254 µrad; on seed 21, which this runs, 50 µm, 32 µm, 107 µm and 162 µrad. The bounds are
+/// 30 % above seed 21's figures.
 #[test]
 fn hand_eye_finds_the_world_from_pixels_and_readings() {
     let loaded = learned();
@@ -277,22 +278,22 @@ fn hand_eye_finds_the_world_from_pixels_and_readings() {
         found.fixed_rows::<3>(0).norm() * 1e6,
         found.fixed_rows::<3>(3).norm() * 1e6,
     );
-    assert!(placed < 75e-6, "a part at the {at} placed {placed} m off");
+    assert!(placed < 65e-6, "a part at the {at} placed {placed} m off");
     assert!(
-        table.fixed_rows::<3>(0).norm() < 60e-6,
+        table.fixed_rows::<3>(0).norm() < 42e-6,
         "table off by {table:?}"
     );
     // The world's camera sits millimetres from the typed pose; the calibration followed it.
     let mount = difference(&typed, &truth.base_T_camera);
     assert!(mount.fixed_rows::<3>(0).norm() > 1e-3, "{mount:?}");
-    assert!(off.fixed_rows::<3>(0).norm() < 0.18e-3, "{off:?}");
-    assert!(off.fixed_rows::<3>(3).norm() < 0.22e-3, "{off:?}");
-    // The board's mounting on the tool, found within 50 µm (18 µm measured) though it sits a
+    assert!(off.fixed_rows::<3>(0).norm() < 140e-6, "{off:?}");
+    assert!(off.fixed_rows::<3>(3).norm() < 210e-6, "{off:?}");
+    // The board's mounting on the tool, found within 25 µm (17 µm measured) though it sits a
     // millimetre and 10 mrad (1σ) from the design.
     let nominal = cell::calibrate::hand_eye::nominal_tcp_T_flange_board();
     let designed = difference(&nominal, &truth.tcp_T_flange_board);
     assert!(designed.fixed_rows::<3>(3).norm() > 5e-3, "{designed:?}");
-    assert!(found.fixed_rows::<3>(0).norm() < 50e-6, "{found:?}");
+    assert!(found.fixed_rows::<3>(0).norm() < 25e-6, "{found:?}");
 }
 
 /// Hand-eye on a real controller moves the arm on its own: without --allow-motion, and without

@@ -12,11 +12,15 @@
 
 use std::f64::consts::PI;
 
-use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    Isometry3, Matrix6, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3,
+};
 use perception::Camera;
-use perception::calibration::board_pose::{BoardPose, board_pose, check_full_frame};
+use perception::calibration::board_pose::{board_pose, check_full_frame};
 use perception::calibration::covariance::compose_covariance;
-use perception::calibration::detect::{BoardDetector, BoardSighting, DetectorSettings};
+use perception::calibration::detect::{
+    BoardDetector, BoardSighting, DetectorSettings, TagSighting,
+};
 use perception::calibration::hand_eye::{
     HandEyeSettings, HandEyeSolution, HandEyeView, plan_hand_eye_poses, solve_hand_eye,
 };
@@ -225,7 +229,7 @@ pub async fn calibrate_by_hand_eye<R: Robot>(
     let mut left = LeftOut::default();
     let mut used = Vec::new();
     let mut views = Vec::new();
-    let mut table: Option<(BoardSighting, BoardPose)> = None;
+    let mut table_sightings: Vec<BoardSighting> = Vec::new();
     for (k, pose) in poses.iter().enumerate() {
         let number = k + 1;
         if !in_view(camera, guess, flange_board, &(pose * options.tcp_T_board)) {
@@ -267,15 +271,17 @@ pub async fn calibrate_by_hand_eye<R: Robot>(
             }
             Err(e) => return Err(e.into()),
         }
-        if table.is_none() {
-            let sighting = Detectors::sight(
-                &mut detectors.table,
-                &detectors.table_board,
-                &detectors.flange_board,
-                &image,
-            )?;
-            let pose = board_pose(camera, table_board, &sighting)?;
-            table = Some((sighting, pose));
+        // The table board in the same image: every image is another look at it (fresh sensor
+        // noise), averaged below; an image where it is not found is left out of the average.
+        match Detectors::sight(
+            &mut detectors.table,
+            &detectors.table_board,
+            &detectors.flange_board,
+            &image,
+        ) {
+            Ok(s) => table_sightings.push(s),
+            Err(e @ CalibrationError::ForeignTag { .. }) => return Err(e.into()),
+            Err(_) => {}
         }
     }
     if views.len() < MIN_HAND_EYE_VIEWS {
@@ -286,12 +292,14 @@ pub async fn calibrate_by_hand_eye<R: Robot>(
             why: left.describe(),
         });
     }
-    let (sighting, table_pose) =
-        table.ok_or(CalibrateError::Calibration(CalibrationError::NoBoard {
+    let sighting = mean_sighting(&table_sightings).ok_or(CalibrateError::Calibration(
+        CalibrationError::NoBoard {
             family: table_board.family().name.clone(),
             first: table_board.tags()[0].id,
             last: table_board.tags()[table_board.tags().len() - 1].id,
-        }))?;
+        },
+    ))?;
+    let table_pose = board_pose(camera, table_board, &sighting)?;
     let solution = solve_hand_eye(&views, &options.arm)?;
     let base_T_camera = solution.base_T_camera;
     let camera_T_table = table_pose.camera_T_board;
@@ -325,6 +333,36 @@ pub async fn calibrate_by_hand_eye<R: Robot>(
         board_pose: table_pose,
         base: BaseEvidence::HandEye(Box::new(evidence)),
     })
+}
+
+/// The table board's tags seen in every one of `sightings`, each corner the mean of its
+/// sightings (the board does not move, so the mean of k images has the corner noise of one over
+/// √k); `None` without sightings.
+fn mean_sighting(sightings: &[BoardSighting]) -> Option<BoardSighting> {
+    let first = sightings.first()?;
+    let mut mean = first.clone();
+    mean.tags.retain(|t| {
+        sightings
+            .iter()
+            .all(|s| s.tags.iter().any(|u| u.id == t.id))
+    });
+    let k = sightings.len() as f64;
+    for tag in &mut mean.tags {
+        let seen: Vec<&TagSighting> = sightings
+            .iter()
+            .filter_map(|s| s.tags.iter().find(|u| u.id == tag.id))
+            .collect();
+        for c in 0..4 {
+            let sum = |pick: fn(&TagSighting) -> [Point2<f64>; 4]| {
+                seen.iter()
+                    .fold(Vector2::zeros(), |a, t| a + pick(t)[c].coords)
+                    / k
+            };
+            tag.corners[c] = Point2::from(sum(|t| t.corners));
+            tag.raw_corners[c] = Point2::from(sum(|t| t.raw_corners));
+        }
+    }
+    Some(mean)
 }
 
 impl LeftOut {
