@@ -7,8 +7,9 @@ use std::path::Path;
 use cell::calibrate::commission::{
     CommissionError, CommissionOptions, Method, commission, default_flange_board,
 };
+use cell::calibrate::evidence::BaseEvidence;
 use cell::calibrate::hand_eye::HandEyeOptions;
-use cell::calibrate::procedure::{BaseEvidence, CalibrateError, Operator, StepFuture, touch_half};
+use cell::calibrate::procedure::{CalibrateError, Operator, StepFuture, touch_half};
 use cell::calibrate::sim_world::{MountError, SimWorld};
 use cell::run::{LoadedScenario, RobotTarget};
 use nalgebra::{Isometry3, Translation3, Vector3};

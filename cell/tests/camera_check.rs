@@ -2,6 +2,8 @@
 //! put it passes; a camera bumped by a fraction of a milliradian is refused with the size of
 //! the shift, and the refusal holds for every later capture of the run.
 
+#![allow(non_snake_case)]
+
 use std::sync::Arc;
 
 use cell::calibrate::preflight::{CameraCheck, CameraCheckError, DEFAULT_TOLERANCE};
@@ -26,7 +28,6 @@ fn base_T_table() -> Isometry3<f64> {
 }
 
 /// A full-sensor image of the board from the camera at `table_T_camera`.
-#[allow(non_snake_case)]
 fn shot(table_T_camera: Isometry3<f64>, seed: u64) -> FrameImage {
     let camera = Camera::basler_seed();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -57,7 +58,6 @@ fn check() -> CameraCheck {
 }
 
 #[test]
-#[allow(non_snake_case)]
 fn a_camera_where_the_calibration_put_it_passes_and_a_bumped_one_is_refused() {
     let table_T_camera = base_T_table().inverse() * base_T_camera();
     let shift = check().check(&shot(table_T_camera, 1)).unwrap();
@@ -89,7 +89,6 @@ fn a_capture_without_the_board_is_refused_by_name() {
 /// the shift, and so does every later one, without a new check: nothing moves on that
 /// calibration again.
 #[test]
-#[allow(non_snake_case)]
 fn a_production_run_refuses_every_capture_after_a_bumped_first_one() {
     use cell::camera::{FilesCamera, Sensor};
     use cell::orchestrator::{CellIo, ProductionCellIo};

@@ -14,8 +14,9 @@ use perception::calibration::{Board, BoardSpec};
 use robots::ur_robot::{UrRobot, UrRobotConfig};
 use sim::config::CalibrationMethod;
 
+use super::evidence::Calibration;
 use super::hand_eye::{Guess, HandEyeOptions, calibrate_by_hand_eye};
-use super::procedure::{CalibrateError, Calibration, TouchSettings, calibrate_by_touch};
+use super::procedure::{CalibrateError, TouchSettings, calibrate_by_touch};
 use super::production::{CameraImages, PendantOperator};
 use super::sim_world::{MountError, SimWorld, Truth};
 use crate::camera::{CameraSpec, Sensor};

@@ -22,13 +22,14 @@ use perception::calibration::detect::{
     BoardDetector, BoardSighting, DetectorSettings, TagSighting,
 };
 use perception::calibration::hand_eye::{
-    HandEyeSettings, HandEyeSolution, HandEyeView, plan_hand_eye_poses, solve_hand_eye,
+    HandEyeSettings, HandEyeView, plan_hand_eye_poses, solve_hand_eye,
 };
 use perception::calibration::{Board, CalibrationError};
 use robots::motion::LinearMotion;
 use robots::robot::{Robot, RobotError};
 
-use super::procedure::{BaseEvidence, BoardImages, CalibrateError, Calibration};
+use super::evidence::{BaseEvidence, Calibration, HandEyeEvidence, LeftOut};
+use super::procedure::{BoardImages, CalibrateError};
 
 /// The fewest views [`solve_hand_eye`] accepts (rotations about two axes need three poses).
 pub const MIN_HAND_EYE_VIEWS: usize = 3;
@@ -90,30 +91,6 @@ pub struct Guess {
     pub base_T_camera: Isometry3<f64>,
     /// The typed table in the base.
     pub base_T_table: Isometry3<f64>,
-}
-
-/// What a hand-eye run saw: the solution and the poses it had to leave out.
-#[derive(Debug, Clone)]
-pub struct HandEyeEvidence {
-    /// The AX = XB solution (camera in the base, board on the TCP).
-    pub solution: HandEyeSolution,
-    /// Poses planned.
-    pub planned: usize,
-    /// The planned poses left out, and why.
-    pub left_out: LeftOut,
-    /// Per view used: the planned pose's number (from 1) and the board's reprojection RMS, px.
-    pub views: Vec<(usize, f64)>,
-}
-
-/// The planned poses a hand-eye run left out (numbered from 1), and why.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct LeftOut {
-    /// Left out before moving: the board would not be in the camera's view.
-    pub out_of_view: Vec<usize>,
-    /// Refused by the robot (limits, no joint solution), with the reason.
-    pub refused: Vec<(usize, String)>,
-    /// Reached, but the board could not be posed (tags missed, too oblique, clipped).
-    pub unseen: Vec<(usize, String)>,
 }
 
 /// The table board's and the flange board's tags in one image, each board's tags apart.

@@ -6,6 +6,7 @@
 //! since ([`preflight`]).
 
 pub mod commission;
+pub mod evidence;
 pub mod hand_eye;
 pub mod preflight;
 pub mod procedure;

@@ -13,7 +13,7 @@
 use std::future::Future;
 use std::pin::Pin;
 
-use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use perception::calibration::board_pose::{BoardPose, board_pose, check_full_frame};
 use perception::calibration::covariance::compose_covariance;
 use perception::calibration::detect::{BoardSighting, DetectorSettings, detect_board};
@@ -23,7 +23,7 @@ use perception::calibration::{Board, CalibrationError};
 use perception::{Camera, FrameImage};
 use robots::robot::RobotError;
 
-use super::hand_eye::HandEyeEvidence;
+use super::evidence::{BaseEvidence, Calibration};
 
 /// Why a calibration stopped.
 #[derive(Debug, thiserror::Error)]
@@ -113,41 +113,6 @@ pub struct TouchSettings {
     pub touch_sigma: f64,
     /// The detector's settings.
     pub detector: DetectorSettings,
-}
-
-/// A finished calibration: the two poses the scenario needs, with their covariances and the
-/// evidence behind them.
-#[derive(Debug, Clone)]
-pub struct Calibration {
-    /// The camera in the robot base.
-    pub base_T_camera: Isometry3<f64>,
-    /// The table (the board's top face) in the robot base.
-    pub base_T_table: Isometry3<f64>,
-    /// Covariance of `base_T_camera`, `[δt (m); δω (rad)]` with the true pose
-    /// `(exp(δω)·R̂, t̂ + δt)`, as perception's PnP states its covariances.
-    pub camera_covariance: Matrix6<f64>,
-    /// Covariance of `base_T_table`, in the same convention.
-    pub table_covariance: Matrix6<f64>,
-    /// The board as the camera saw it.
-    pub sighting: BoardSighting,
-    /// The board's pose in the camera.
-    pub board_pose: BoardPose,
-    /// How the board was found in the robot base.
-    pub base: BaseEvidence,
-}
-
-/// How a calibration found the table board in the robot base, with its evidence.
-#[derive(Debug, Clone)]
-pub enum BaseEvidence {
-    /// Pointer touches at the board's marks and their rigid fit.
-    Touch {
-        /// The touches.
-        touches: Vec<TouchPoint>,
-        /// The rigid fit of the touches.
-        fit: Box<RigidFit>,
-    },
-    /// A flange board carried through planned poses (AX = XB).
-    HandEye(Box<HandEyeEvidence>),
 }
 
 /// The board's pose in the camera: detects the board in one image and solves its pose.

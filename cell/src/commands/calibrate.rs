@@ -9,8 +9,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use cell::calibrate::commission::{CommissionOptions, Commissioned, Method, commission};
+use cell::calibrate::evidence::{BaseEvidence, Calibration};
 use cell::calibrate::hand_eye::{HandEyeOptions, MIN_HAND_EYE_VIEWS};
-use cell::calibrate::procedure::{BaseEvidence, Calibration};
 use cell::calibrate::record::{CalibrationRecord, write_calibration};
 use cell::camera::CameraSpec;
 use cell::run::{LoadedScenario, RobotTarget};
