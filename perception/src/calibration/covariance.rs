@@ -84,7 +84,10 @@ mod tests {
         sample /= n as f64;
         for i in 0..6 {
             let (p, s) = (predicted[(i, i)].sqrt(), sample[(i, i)].sqrt());
-            assert!((p - s).abs() < 0.03 * p, "axis {i}: predicted σ {p:e}, sampled {s:e}");
+            assert!(
+                (p - s).abs() < 0.03 * p,
+                "axis {i}: predicted σ {p:e}, sampled {s:e}"
+            );
         }
         // The camera's height error is dominated by the board pose's depth error; its lateral
         // error gains the board tilt's lever over 1.5 m.

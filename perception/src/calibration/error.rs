@@ -54,7 +54,9 @@ impl BoardError {
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrationError {
     /// No tag of the board was found in the image.
-    #[error("no tag of the board ({family}, ids {first}–{last}) in view: is the board in the camera's field and lit?")]
+    #[error(
+        "no tag of the board ({family}, ids {first}–{last}) in view: is the board in the camera's field and lit?"
+    )]
     NoBoard {
         /// The board's family.
         family: String,
@@ -64,7 +66,9 @@ pub enum CalibrationError {
         last: u32,
     },
     /// Too few tags were decoded for a trustworthy pose.
-    #[error("only {found} of the board's {total} tags decoded ({need} needed): the board is partly hidden, out of view or badly lit")]
+    #[error(
+        "only {found} of the board's {total} tags decoded ({need} needed): the board is partly hidden, out of view or badly lit"
+    )]
     TooFewTags {
         /// Tags decoded.
         found: usize,
@@ -74,7 +78,9 @@ pub enum CalibrationError {
         total: usize,
     },
     /// A decoded tag id is not on the board: another board, or the wrong board file.
-    #[error("tag id {ids:?} decoded in the image is not on the board (ids {first}–{last}): a second board in view, or the wrong board file")]
+    #[error(
+        "tag id {ids:?} decoded in the image is not on the board (ids {first}–{last}): a second board in view, or the wrong board file"
+    )]
     ForeignTag {
         /// The ids not on the board.
         ids: Vec<u32>,
@@ -84,7 +90,9 @@ pub enum CalibrationError {
         last: u32,
     },
     /// The board is seen too obliquely for the pose to be trusted.
-    #[error("the board is seen {angle_deg:.1}° off the optical axis (at most {max_deg:.0}°): put the board flatter to the camera")]
+    #[error(
+        "the board is seen {angle_deg:.1}° off the optical axis (at most {max_deg:.0}°): put the board flatter to the camera"
+    )]
     TooOblique {
         /// Angle between the board's normal and the line of sight, degrees.
         angle_deg: f64,
@@ -92,7 +100,9 @@ pub enum CalibrationError {
         max_deg: f64,
     },
     /// The image's size is not the calibrated camera's sensor.
-    #[error("the image is {got_w} × {got_h} px but the camera's calibration is for {want_w} × {want_h} px: wrong camera, binning or ROI")]
+    #[error(
+        "the image is {got_w} × {got_h} px but the camera's calibration is for {want_w} × {want_h} px: wrong camera, binning or ROI"
+    )]
     Resolution {
         /// Image columns.
         got_w: u32,
@@ -104,7 +114,9 @@ pub enum CalibrationError {
         want_h: u32,
     },
     /// Touch points that no rigid transform fits: a point touched in the wrong place.
-    #[error("touch point {worst} ({name}) is {residual_mm:.3} mm from where the others put it (at most {bound_mm:.3} mm): touch it again")]
+    #[error(
+        "touch point {worst} ({name}) is {residual_mm:.3} mm from where the others put it (at most {bound_mm:.3} mm): touch it again"
+    )]
     TouchPointsDontFit {
         /// Index of the worst point (from 1).
         worst: usize,
