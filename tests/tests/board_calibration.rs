@@ -79,7 +79,8 @@ fn rendered_boards_decode_with_sub_pixel_corners_and_an_accurate_pose() {
             }
         }
         let (raw, refined) = (rms(&raw), rms(&refined));
-        // board-study over 100 boards: 0.3 px from the reference detector, 0.05 px refined.
+        // board-study over 100 boards: 0.36 px from the reference detector, 0.044 px refined
+        // (0.031 px per axis) where posed.
         assert!(
             refined < 0.1 && refined < raw / 3.0,
             "seed {seed}: {raw} → {refined}"
@@ -98,9 +99,9 @@ fn rendered_boards_decode_with_sub_pixel_corners_and_an_accurate_pose() {
             e[4] * 1e6,
             e[5] * 1e6
         );
-        // The study's 1σ over images is ~1 µm in plane, ~10 µm in height, ~150 µrad about the
-        // board's in-plane axes and ~8 µrad about its normal: each error within 3.5 of those,
-        // and within 4 of the pose's own 1σ.
+        // The study's 1σ over 97 posed images: 0.88 and 0.68 µm in plane, 9.2 µm in height,
+        // 95 and 84 µrad about the board's in-plane axes, 6.2 µrad about its normal. Each error
+        // within 4 of those, and within 4 of the pose's own 1σ.
         let sigma = [
             s.translation_mm[0] * 1e-3,
             s.translation_mm[1] * 1e-3,
@@ -109,10 +110,10 @@ fn rendered_boards_decode_with_sub_pixel_corners_and_an_accurate_pose() {
             s.rotation_deg[1].to_radians(),
             s.rotation_deg[2].to_radians(),
         ];
-        let study = [1.2e-6, 1.2e-6, 12e-6, 160e-6, 160e-6, 9e-6];
+        let study = [0.88e-6, 0.68e-6, 9.2e-6, 95e-6, 84e-6, 6.2e-6];
         for k in 0..6 {
             assert!(
-                e[k].abs() < 3.5 * study[k],
+                e[k].abs() < 4.0 * study[k],
                 "seed {seed}, component {k}: {}",
                 e[k]
             );
@@ -230,4 +231,20 @@ fn an_image_from_another_sensor_size_is_refused() {
     let full = FrameImage::full(image.image.pixels.clone());
     let e = check_full_frame(&Camera::basler_seed(), [full.width(), full.height()]).unwrap_err();
     assert!(e.to_string().contains("5472 × 3648"), "{e}");
+}
+
+#[test]
+fn an_over_exposed_board_is_refused_before_its_clipped_edges_bias_the_pose() {
+    let board = Board::seed();
+    let camera = Camera::basler_seed();
+    let (mut view, mut rng) = view(&board, 15);
+    // The randomisation's strongest over-exposure: the white print clips.
+    view.scene.overexposure = 3.5;
+    let image = render(&view, &mut rng, None);
+    let sighting = detect_board(&image.image, &board, &DetectorSettings::default()).unwrap();
+    assert_eq!(sighting.tags.len(), 16, "it still decodes");
+    match board_pose(&camera, &board, &sighting).unwrap_err() {
+        CalibrationError::Overexposed { percent, .. } => assert!(percent > 10.0, "{percent}"),
+        other => panic!("{other}"),
+    }
 }

@@ -157,7 +157,7 @@ struct Summary {
     /// 1σ over images (root mean square of the error).
     rms_error_um: [f64; 3],
     rms_error_urad: [f64; 3],
-    /// The Cramér–Rao bound at the measured corner noise (root mean square over images).
+    /// The Cramér–Rao bound at each image's measured corner noise (root mean square over images).
     crb_um: [f64; 3],
     crb_urad: [f64; 3],
     /// Achieved 1σ over the bound, per component.
@@ -399,7 +399,7 @@ fn summarise(
         let (s, n) =
             results
                 .iter()
-                .filter(|r| r.corner_errors.len() > 0)
+                .filter(|r| !r.corner_errors.is_empty())
                 .fold((0.0, 0.0), |(s, n), r| {
                     let k = r.corner_errors.len() as f64;
                     (s + f(r).powi(2) * k, n + k)
@@ -426,12 +426,14 @@ fn summarise(
     let rms = |v: Vec<f64>| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
     let rms_error_um = [0, 1, 2].map(|k| rms(column(&|r| r.error_um[k])));
     let rms_error_urad = [0, 1, 2].map(|k| rms(column(&|r| r.error_urad[k])));
-    // The bound at each image's true pose and tags, at the pooled corner noise.
+    // The bound at each image's true pose and tags, at that image's own corner noise (images
+    // differ in noise, blur and contrast, so one pooled σ would misstate each).
     let mut crb_sq = Vector6::zeros();
     for r in &posed {
+        let sigma = r.corner_rms_refined_px / 2f64.sqrt();
         let c = to_board_frame(
             &r.camera_T_board,
-            &cramer_rao(camera, board, &r.ids, &r.camera_T_board, corner_sigma_px),
+            &cramer_rao(camera, board, &r.ids, &r.camera_T_board, sigma),
         );
         crb_sq += c.diagonal();
     }
