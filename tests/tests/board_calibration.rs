@@ -73,9 +73,9 @@ fn rendered_boards_decode_with_sub_pixel_corners_and_an_accurate_pose() {
         let (mut raw, mut refined) = (Vec::new(), Vec::new());
         for t in &sighting.tags {
             let truth = true_corners(&camera, &board, t.id, &image.camera_T_board);
-            for k in 0..4 {
-                raw.push((t.raw_corners[k], truth[k]));
-                refined.push((t.corners[k], truth[k]));
+            for (k, truth) in truth.iter().enumerate() {
+                raw.push((t.raw_corners[k], *truth));
+                refined.push((t.corners[k], *truth));
             }
         }
         let (raw, refined) = (rms(&raw), rms(&refined));
@@ -111,17 +111,16 @@ fn rendered_boards_decode_with_sub_pixel_corners_and_an_accurate_pose() {
             s.rotation_deg[2].to_radians(),
         ];
         let study = [0.88e-6, 0.68e-6, 9.2e-6, 95e-6, 84e-6, 6.2e-6];
-        for k in 0..6 {
+        for (k, (study, sigma)) in study.iter().zip(&sigma).enumerate() {
             assert!(
-                e[k].abs() < 4.0 * study[k],
+                e[k].abs() < 4.0 * study,
                 "seed {seed}, component {k}: {}",
                 e[k]
             );
             assert!(
-                e[k].abs() < 4.0 * sigma[k],
-                "seed {seed}, component {k}: {} vs 1σ {}",
-                e[k],
-                sigma[k]
+                e[k].abs() < 4.0 * sigma,
+                "seed {seed}, component {k}: {} vs 1σ {sigma}",
+                e[k]
             );
         }
     }

@@ -353,8 +353,8 @@ fn measure(
         let Some(model) = board.corners(t.id) else {
             continue;
         };
-        for k in 0..4 {
-            let truth: Point2<f64> = match camera.project(&(r.camera_T_board * model[k])) {
+        for (k, point) in model.iter().enumerate() {
+            let truth: Point2<f64> = match camera.project(&(r.camera_T_board * point)) {
                 Ok(p) => p,
                 Err(_) => continue,
             };
