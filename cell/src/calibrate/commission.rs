@@ -21,6 +21,7 @@ use super::production::{CameraImages, PendantOperator};
 use super::sim_world::{MountError, SimWorld, Truth};
 use crate::camera::{CameraSpec, Sensor};
 use crate::harness::{HarnessError, SimSetup, connect_sim_over_rtde};
+use crate::orchestrator::CellKnowledge;
 use crate::run::RobotTarget;
 use crate::scenario::Scenario;
 
@@ -138,6 +139,9 @@ pub enum CommissionError {
     /// The simulated cell refused its limits.
     #[error("limits: {0}")]
     Limits(String),
+    /// The scenario's cell cannot be modelled for planning.
+    #[error(transparent)]
+    Knowledge(#[from] crate::orchestrator::KnowledgeError),
     /// Hand-eye on a real controller moves the arm: it needs the explicit opt-in.
     #[error(
         "hand-eye calibration moves the arm through {poses} poses on its own: pass \
@@ -259,9 +263,10 @@ async fn commission_by_hand_eye(
                 source: crate::camera::open(spec, Sensor::of(&intrinsics))?,
                 timeout: options.capture_timeout,
             };
-            // The scenario's arm model (kinematics, limits); nothing simulated reaches the run.
-            let setup = SimSetup::new(scenario.clone())?;
-            let mut config = UrRobotConfig::new(host.clone(), setup.model.kinematics.clone());
+            // The engine's model of the arm (kinematics with the gripper's TCP), as a production
+            // run builds it: no simulated cell exists for a real controller.
+            let knowledge = CellKnowledge::new(scenario)?;
+            let mut config = UrRobotConfig::new(host.clone(), knowledge.kinematics.clone());
             config.rtde_port = *port;
             config.limits = cell.limits.clone();
             config.gripper_actuation_s = cell.gripper.actuation_time;
