@@ -13,4 +13,5 @@ pub mod procedure;
 pub mod production;
 pub mod record;
 pub mod sim_world;
+pub mod study;
 pub mod svg;
