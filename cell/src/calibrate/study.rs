@@ -532,9 +532,7 @@ pub fn summary_text(s: &Summary) -> String {
         "corner error (rms, px): reference detector {:.4}, refined {:.4} (σ per axis where posed {:.4})",
         s.corner_rms_raw_px, s.corner_rms_refined_px, s.corner_sigma_px
     ));
-    line(format!(
-        "board pose error, 1σ over images (mean) | Cramér–Rao bound | ratio:"
-    ));
+    line("board pose error, 1σ over images (mean) | Cramér–Rao bound | ratio:".to_string());
     for (k, name) in ["x (in plane)", "y (in plane)", "z (height)"]
         .iter()
         .enumerate()
@@ -553,7 +551,7 @@ pub fn summary_text(s: &Summary) -> String {
             s.ratio_to_crb[k + 3]
         ));
     }
-    line(format!("time per image, ms (mean / p95 / max):"));
+    line("time per image, ms (mean / p95 / max):".to_string());
     for (name, t) in [
         ("convert", s.convert_ms),
         ("decode", s.decode_ms),
