@@ -140,8 +140,9 @@ pub struct CalibrationSpec {
     pub reprojection_rms_px: f64,
     /// Tags the board pose was estimated from.
     pub tags: u32,
-    /// The board file used, relative to the scenario file.
-    pub board: PathBuf,
+    /// The board file used, relative to the scenario file; absent: the seed's built-in board.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub board: Option<PathBuf>,
 }
 
 /// Deserializes an RFC 3339 UTC time, kept as written.

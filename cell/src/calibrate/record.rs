@@ -31,8 +31,8 @@ pub struct CalibrationRecord {
     /// Tags the board pose used.
     pub tags: u32,
     /// The board file (as the caller names it; written relative to the scenario when it lies
-    /// in or under the scenario's folder).
-    pub board: PathBuf,
+    /// in or under the scenario's folder); `None` for the seed's built-in board.
+    pub board: Option<PathBuf>,
     /// When it was measured.
     pub date: SystemTime,
 }
@@ -184,11 +184,13 @@ pub fn calibrated_text(
     table.insert("table_covariance", matrix_item(&table_covariance));
     table.insert("reprojection_rms_px", toml_edit::value(record.rms_px));
     table.insert("tags", toml_edit::value(i64::from(record.tags)));
-    let board = board_path(&record.board, path);
-    table.insert(
-        "board",
-        toml_edit::value(board.to_string_lossy().into_owned()),
-    );
+    if let Some(board) = &record.board {
+        let board = board_path(board, path);
+        table.insert(
+            "board",
+            toml_edit::value(board.to_string_lossy().into_owned()),
+        );
+    }
     let before = match cell.get("calibration").and_then(Item::as_table) {
         Some(old) => {
             // Keep the table where it was and its leading comments, with its values replaced.
@@ -366,6 +368,7 @@ mod tests {
     }
 
     fn record(board: PathBuf) -> CalibrationRecord {
+        let board = Some(board);
         CalibrationRecord {
             base_T_camera: Isometry3::from_parts(
                 Translation3::new(0.000_123_456_789, -0.450_987_654_321, 1.512_345_678_9),
@@ -412,7 +415,7 @@ mod tests {
         assert_eq!(c.method, CalibrationMethod::Touch);
         assert_eq!(c.date, "2026-11-28T04:00:00Z");
         assert_eq!((c.tags, c.reprojection_rms_px), (16, 0.047));
-        assert_eq!(c.board, Path::new("boards/seed.toml"));
+        assert_eq!(c.board.as_deref(), Some(Path::new("boards/seed.toml")));
         // The covariances read back exactly (as the symmetric matrices they were rounded to).
         let symmetric = |m: Matrix6<f64>| (m + m.transpose()) / 2.0;
         assert_eq!(

@@ -176,12 +176,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         println!("--dry-run: {} left as it was", args.scenario.display());
         return Ok(ExitCode::SUCCESS);
     }
-    let board = scenario
-        .spec
-        .cell
-        .board
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("boards/seed.toml"));
+    // The scenario's board file, as a path from here (the record writes it relative to the
+    // scenario again); none for the seed's built-in board.
+    let board = scenario.spec.cell.board.as_ref().map(|b| {
+        args.scenario
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .join(b)
+    });
     let record = CalibrationRecord {
         base_T_camera: calibration.base_T_camera,
         base_T_table: calibration.base_T_table,

@@ -292,7 +292,7 @@ mod tests {
             table_covariance: measured(),
             reprojection_rms_px: 0.05,
             tags: 16,
-            board: "boards/seed.toml".into(),
+            board: None,
         };
         let mut a = crate::seed::stream_rng(3, 1, CALIBRATION_STREAM);
         let mut b = a.clone();
