@@ -6,9 +6,10 @@
 use std::io::BufRead;
 use std::time::Duration;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::Isometry3;
 use perception::FrameImage;
 use perception::calibration::touch_marks::TouchMark;
+use robots::kinematics::from_ur_pose;
 use robots::rtde::client::{ClientConfig, RtdeClient};
 
 use super::procedure::{BoardImages, CalibrateError, Operator, StepFuture};
@@ -94,10 +95,7 @@ impl Operator for PendantOperator {
             let p = state.vector6d("actual_TCP_pose").ok_or_else(|| {
                 CalibrateError::Operator("the controller sent no actual_TCP_pose".into())
             })?;
-            Ok(Isometry3::from_parts(
-                Translation3::new(p[0], p[1], p[2]),
-                UnitQuaternion::from_scaled_axis(Vector3::new(p[3], p[4], p[5])),
-            ))
+            Ok(from_ur_pose(&p))
         })
     }
 }

@@ -9,6 +9,7 @@
 //! Fᵢ⁻¹ X Cᵢ. A joint Levenberg–Marquardt refinement (the `levenberg-marquardt` crate) then fits X
 //! and Y to every view, each weighted by its board-pose covariance plus the arm's repeatability.
 
+use crate::pnp::left_jacobian;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
     Cholesky, DVector, Dyn, Isometry3, Matrix3, Matrix6, OMatrix, Owned, Rotation3, SMatrix,
@@ -375,22 +376,6 @@ fn view_residual(v: &HandEyeView, x: &Isometry3<f64>, y: &Isometry3<f64>) -> Vec
     r.fixed_rows_mut::<3>(0).copy_from(&t);
     r.fixed_rows_mut::<3>(3).copy_from(&e);
     r
-}
-
-/// The left Jacobian of SO(3) at φ: exp(φ + δ) ≈ exp(J_l(φ) δ) exp(φ).
-fn left_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
-    let theta2 = phi.norm_squared();
-    let k = phi.cross_matrix();
-    let (a, b) = if theta2 < 1e-10 {
-        (0.5 - theta2 / 24.0, 1.0 / 6.0 - theta2 / 120.0)
-    } else {
-        let theta = theta2.sqrt();
-        (
-            (1.0 - theta.cos()) / theta2,
-            (theta - theta.sin()) / (theta2 * theta),
-        )
-    };
-    Matrix3::identity() + k * a + k * k * b
 }
 
 /// The inverse left Jacobian of SO(3) at φ: log(exp(η) exp(φ)) ≈ φ + J_l(φ)⁻¹ η.

@@ -12,6 +12,7 @@ use nalgebra::{Isometry3, Matrix2, Matrix6, Point2, Point3};
 
 pub use error::PnpError;
 pub use initial::{check_geometry, initial_pose};
+pub(crate) use refine::left_jacobian;
 pub use refine::{PixelScale, RefineOutcome, refine_pose, reprojection_rms};
 
 /// A PnP result.

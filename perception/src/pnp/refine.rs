@@ -186,8 +186,8 @@ fn pose_covariance(
     inv * scale
 }
 
-/// sin θ / θ and friends, with series near zero.
-fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
+/// The left Jacobian of SO(3) at w: exp(w + δ) ≈ exp(J_l(w) δ) exp(w) (series near zero).
+pub(crate) fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
     let theta2 = w.norm_squared();
     let k = w.cross_matrix();
     let (a, b) = if theta2 < 1e-10 {
