@@ -44,18 +44,26 @@ struct PartKeys {
     view_symmetries: Option<toml::Spanned<toml::Value>>,
 }
 
-/// The role a part plays in the assembly.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// Whether a catalog entry is assembled or is part of the cell. What each part does in the
+/// product (its order, target and insertion direction) is the scenario's `[[assembly]]` sequence,
+/// never its role.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PartRole {
-    /// The part that goes into the fixture first (the main shell).
-    Main,
-    /// The part inserted into the main part (the insert mold).
-    Inserted,
-    /// The part that closes the assembly from above (the top shell).
-    Top,
+    /// A part that lies in the feeder and is picked and assembled (the default). The names
+    /// `main`, `inserted` and `top` of older catalogs are read as this.
+    #[default]
+    #[serde(alias = "main", alias = "inserted", alias = "top")]
+    Part,
     /// Not assembled: a fixture, board or other cell object.
     Fixture,
+}
+
+impl PartRole {
+    /// True for an assembled part (serde's test for leaving the default out of a file).
+    pub fn is_part(&self) -> bool {
+        *self == PartRole::Part
+    }
 }
 
 /// Surface class, which decides how the part looks to the camera.
@@ -170,7 +178,8 @@ pub struct Grasp {
 pub struct PartSpec {
     /// Unique name, e.g. "main_shell".
     pub name: String,
-    /// Its role in the assembly.
+    /// `fixture` for cell objects (nests, boards); absent or `part` for what is assembled.
+    #[serde(default, skip_serializing_if = "PartRole::is_part")]
     pub role: PartRole,
     /// Mesh file, relative to the catalog file.
     pub mesh: PathBuf,
@@ -401,6 +410,26 @@ mod tests {
             }) => (line, column, message),
             other => panic!("expected a located error, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn a_part_without_a_role_is_assembled_and_older_role_names_read_as_one() {
+        let part = |role: &str| {
+            let text = format!(
+                "name = \"x\"\n[[part]]\nname = \"a\"\n{role}mesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\n"
+            );
+            Catalog::parse(&text, Path::new("c.toml")).map(|c| c.parts[0].role)
+        };
+        assert_eq!(part("").unwrap(), PartRole::Part);
+        for old in ["main", "inserted", "top", "part"] {
+            assert_eq!(
+                part(&format!("role = \"{old}\"\n")).unwrap(),
+                PartRole::Part,
+                "{old}"
+            );
+        }
+        assert_eq!(part("role = \"fixture\"\n").unwrap(), PartRole::Fixture);
+        assert!(part("role = \"lid\"\n").is_err());
     }
 
     #[test]
