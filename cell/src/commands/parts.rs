@@ -14,7 +14,8 @@ pub enum PartsCommand {
     /// Compute keypoints, mass properties and stable poses (physics drops) and write them into
     /// the catalog, keeping its comments.
     Prepare(PrepareArgs),
-    /// Regenerate this project's USB-C part meshes (bit for bit) into a folder.
+    /// Regenerate this project's part meshes (bit for bit) into a folder: the USB-C parts, nest
+    /// and tag board, and the NIST task board's pegs and plate.
     Cad(CadArgs),
 }
 
@@ -55,7 +56,9 @@ pub fn run(cmd: PartsCommand) -> anyhow::Result<ExitCode> {
     match cmd {
         PartsCommand::Prepare(args) => prepare(args),
         PartsCommand::Cad(args) => {
-            for path in sim::cad::write_usbc_meshes(&args.dir)? {
+            let mut written = sim::cad::write_usbc_meshes(&args.dir)?;
+            written.extend(sim::cad::write_nist_meshes(&args.dir)?);
+            for path in written {
                 println!("wrote {}", path.display());
             }
             Ok(ExitCode::SUCCESS)
