@@ -11,8 +11,6 @@ import time
 import numpy as np
 import torch
 
-from nets import PARTS
-
 OPSET = 17
 
 
@@ -34,6 +32,9 @@ def training_args(doc, data, model, limit_what):
     ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
     ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a further training cycle)")
     ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
+    ap.add_argument(
+        "--catalog", default="../scenarios/parts/usbc.toml", help="part catalog: the parts (and keypoints) the net handles"
+    )
     return ap
 
 
@@ -172,12 +173,12 @@ def check_export(path, model, dummy, tolerance, what):
     return chk["latency_ms"]
 
 
-def write_manifest(path, name, onnx_file, inputs, outputs, training):
+def write_manifest(path, name, parts, onnx_file, inputs, outputs, training):
     """Writes a perception::onnx::manifest::ModelManifest TOML next to the model."""
     lines = [
         f"# Trained by training/{training.pop('script')}; rebuild with training/build_models.sh.",
         f'name = "{name}"',
-        "parts = [" + ", ".join(f'"{p}"' for p in PARTS) + "]",
+        "parts = [" + ", ".join(f'"{p}"' for p in parts) + "]",
         f'file = "{os.path.basename(onnx_file)}"',
         f'sha256 = "{sha256(onnx_file)}"',
         f"opset = {OPSET}",

@@ -15,8 +15,6 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from PIL import Image
 
-from nets import PARTS
-
 
 def _png(path):
     with Image.open(path) as im:
@@ -52,13 +50,13 @@ def _parallel(fn, items):
         return list(pool.map(lambda a: fn(*a), items))
 
 
-def load_crops(root, split, limit=None):
-    """All crops of `split` ("train"/"test") under `root`/crops, in PARTS order.
+def load_crops(root, split, parts, limit=None):
+    """All crops of `split` ("train"/"test") under `root`/crops, in the order of `parts`.
 
     Returns dict: rgb uint8 [N,128,128,3], mask bool [N,128,128], keypoints float32 [N,9,2]
     (crop px), part int64 [N]."""
-    items, parts = [], []
-    for p, name in enumerate(PARTS):
+    items, indices = [], []
+    for p, name in enumerate(parts):
         d = os.path.join(root, "crops", name, split)
         if not os.path.isdir(d):
             raise FileNotFoundError(f"{d}: no crops of part {name} (run `cell dataset` first)")
@@ -66,14 +64,15 @@ def load_crops(root, split, limit=None):
         if limit is not None:
             stems = stems[:limit]
         items += [(d, name, stem) for stem in stems]
-        parts += [p] * len(stems)
+        indices += [p] * len(stems)
     rgbs, masks, kps, poses = zip(*_parallel(_crop, items))
     return {
         "poses": list(poses),
         "rgb": np.stack(rgbs),
         "mask": np.stack(masks),
         "keypoints": np.stack(kps),
-        "part": np.asarray(parts, dtype=np.int64),
+        "part": np.asarray(indices, dtype=np.int64),
+        "names": list(parts),
     }
 
 
@@ -155,10 +154,10 @@ def _feeder_frame(sdir, name, im, cam, gt, obj_to_part):
         "name": f"{name}/{im:06d}",
     }
 
-def obj_ids(root):
-    """obj_id -> index in PARTS, from any crop label or the models' order under `root`."""
+def obj_ids(root, parts):
+    """obj_id -> index in `parts`, from any crop label or the models' order under `root`."""
     mapping = {}
-    for p, name in enumerate(PARTS):
+    for p, name in enumerate(parts):
         for split in ("train", "test"):
             d = os.path.join(root, "crops", name, split)
             if os.path.isdir(d):
@@ -167,27 +166,11 @@ def obj_ids(root):
                     with open(os.path.join(d, js[0])) as f:
                         mapping[json.load(f)["obj_id"]] = p
                     break
-    if len(mapping) != len(PARTS):
+    if len(mapping) != len(parts):
         # Without crops: `cell dataset` numbers the parts 1.. in catalog order.
-        mapping = {i + 1: i for i in range(len(PARTS))}
+        mapping = {i + 1: i for i in range(len(parts))}
         print(f"{root}: no crop labels to map obj ids; assuming catalog order", file=sys.stderr)
     return mapping
-
-
-def catalog_keypoints(path):
-    """The 9 keypoints (mm, part frame) of each part in PARTS order, from the catalog TOML."""
-    import tomllib
-
-    with open(path, "rb") as f:
-        cat = tomllib.load(f)
-    by_name = {p["name"]: p for p in cat.get("part", [])}
-    out = []
-    for name in PARTS:
-        kp = np.asarray(by_name[name]["keypoints"], dtype=np.float64) * 1000.0
-        if kp.shape != (9, 3):
-            raise ValueError(f"{path}: part {name} has {kp.shape[0]} keypoints, want 9")
-        out.append(kp)
-    return out
 
 
 def flipped_keypoints(data, kp3d):

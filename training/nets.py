@@ -9,9 +9,6 @@ import torch
 from torch import nn
 import torch.nn.functional as F
 
-PARTS = ["main_shell", "insert_mold", "top_shell"]
-"""Catalog order (scenarios/parts/usbc.toml): one-hot planes and logit channels follow it."""
-
 N_KEYPOINTS = 9
 """8 farthest-point surface keypoints + the box centre (index 8), as the crop labels list them."""
 
@@ -80,10 +77,11 @@ class KeypointNet(nn.Module):
     WIDTHS = (16, 24, 48, 64, 96)
     """Channels at strides 2, 4, 8, 16, 32 of the committed net (the trainer's default)."""
 
-    def __init__(self, w=WIDTHS):
+    def __init__(self, n_parts, w=WIDTHS):
         super().__init__()
-        self.norm = Normalise(len(PARTS))
-        self.s2 = block(6, w[0], 2)  # 64x64
+        self.n_parts = n_parts
+        self.norm = Normalise(n_parts)
+        self.s2 = block(3 + n_parts, w[0], 2)  # 64x64
         self.s4 = nn.Sequential(block(w[0], w[1], 2), block(w[1], w[1]))  # 32x32
         self.s8 = nn.Sequential(block(w[1], w[2], 2), block(w[2], w[2]))  # 16x16
         self.s16 = nn.Sequential(block(w[2], w[3], 2), block(w[3], w[3]))  # 8x8
@@ -120,7 +118,8 @@ class KeypointNet(nn.Module):
 
 class Segmenter(nn.Module):
     """Semantic segmentation + centre offsets for a feeder window: input [N, 3, H, W] (H, W
-    multiples of 16), outputs at stride 4: `logits` [N, 4, H/4, W/4] (background, then PARTS)
+    multiples of 16), outputs at stride 4: `logits` [N, 1 + P, H/4, W/4] (background, then the
+    P parts in catalog order)
     and `offsets` [N, 2, H/4, W/4] (dx, dy in input pixels from the cell centre (4j+1.5,
     4i+1.5) to the centre of the instance the cell belongs to)."""
 
@@ -130,8 +129,9 @@ class Segmenter(nn.Module):
     WIDTHS = (12, 16, 48, 96)
     """Channels at strides 2, 4, 8, 16 of the committed net (the trainer's default)."""
 
-    def __init__(self, w=WIDTHS):
+    def __init__(self, n_parts, w=WIDTHS):
         super().__init__()
+        self.n_parts = n_parts
         self.widths = tuple(w)
         self.norm = Normalise()
         self.s2 = block(3, w[0], 2)
@@ -142,7 +142,7 @@ class Segmenter(nn.Module):
         )
         self.u8 = Up(w[3], w[2], w[2])
         self.u4 = Up(w[2], w[1], w[1])
-        self.head = nn.Conv2d(w[1], 4 + 2, 1)
+        self.head = nn.Conv2d(w[1], 1 + n_parts + 2, 1)
 
     def forward(self, image):
         x = self.norm(image)
@@ -151,7 +151,8 @@ class Segmenter(nn.Module):
         f16 = self.s16(f8)
         y = self.u4(self.u8(f16, f8), f4)
         out = self.head(y)
-        return out[:, :4], out[:, 4:] * self.OFFSET_SCALE
+        classes = 1 + self.n_parts
+        return out[:, :classes], out[:, classes:] * self.OFFSET_SCALE
 
 
 def count_macs(model, *inputs):

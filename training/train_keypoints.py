@@ -1,4 +1,4 @@
-"""Trains the keypoint net (one net for all three parts, part given as one-hot planes) on the
+"""Trains the keypoint net (one net for all the catalog's parts, part given as one-hot planes) on the
 crops of `cell dataset`, evaluates it on the test crops (mask IoU, keypoint error after RANSAC
 voting), exports keypoints.onnx and writes keypoints.toml + keypoints_curve.csv.
 
@@ -15,8 +15,9 @@ import torch.nn.functional as F
 
 from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
                     recorded_train_minutes, setup, training_args, write_manifest)
-from data import catalog_keypoints, flipped_keypoints, load_crops, mask_cells
-from nets import N_KEYPOINTS, PARTS, KeypointNet, count_macs
+import catalog
+from data import flipped_keypoints, load_crops, mask_cells
+from nets import N_KEYPOINTS, KeypointNet, count_macs
 
 GRID = 64  # output cells per side (stride 2 on 128 px)
 
@@ -37,14 +38,14 @@ def vector_targets(kp, cx, cy):
     return v.reshape(kp.shape[0], 2 * N_KEYPOINTS, GRID, GRID)
 
 
-def make_input(rgb_u8, part, device, augment=False, gen=None):
-    """[B, 6, 128, 128] float: RGB / 255 (optionally jittered by `jitter` with `gen`, a generator
-    on `device`) + one-hot planes."""
+def make_input(rgb_u8, part, n_parts, device, augment=False, gen=None):
+    """[B, 3 + n_parts, 128, 128] float: RGB / 255 (optionally jittered by `jitter` with `gen`, a
+    generator on `device`) + one-hot planes of the part indices `part`."""
     x = rgb_u8.to(device).float() / 255.0
     if augment:
         x = jitter(x, gen)
     b = x.shape[0]
-    onehot = F.one_hot(part.to(device), len(PARTS)).float()[:, :, None, None].expand(b, len(PARTS), 128, 128)
+    onehot = F.one_hot(part.to(device), n_parts).float()[:, :, None, None].expand(b, n_parts, 128, 128)
     return torch.cat([x, onehot], dim=1)
 
 
@@ -127,7 +128,7 @@ def predict(model, data, device, batch=64):
     model.eval()
     ms, vs = [], []
     for s in range(0, len(data["part"]), batch):
-        x = make_input(data["rgb_t"][s : s + batch], data["part_t"][s : s + batch], device)
+        x = make_input(data["rgb_t"][s : s + batch], data["part_t"][s : s + batch], model.n_parts, device)
         m, v = model(x)
         ms.append(m[:, 0].cpu().numpy())
         vs.append(v.cpu().numpy())
@@ -166,7 +167,7 @@ def evaluate(model, data, device, voting=False):
             turned = errs_t.mean(1) < errs_f.mean(1)
             metrics["flip_fraction"] = float(turned.mean())
             metrics["keypoint_px_median_up_to_flip"] = float(np.median(np.where(turned[:, None], errs_t, errs_f)))
-        for p, name in enumerate(PARTS):
+        for p, name in enumerate(data["names"]):
             sel_p = data["part"] == p
             metrics[f"keypoint_px_median_{name}"] = float(np.median(errs_f[sel_p]))
             metrics[f"mask_iou_median_{name}"] = float(np.median(ious[sel_p]))
@@ -194,21 +195,21 @@ def main(argv=None):
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop about its centre (augmentation)")
     ap.add_argument("--widths", default=",".join(map(str, KeypointNet.WIDTHS)), help="channels at strides 2, 4, 8, 16, 32")
     ap.add_argument("--eval-every", type=int, default=1, help="epochs between test evaluations")
-    ap.add_argument("--catalog", default="../scenarios/parts/usbc.toml", help="part catalog (3D keypoints)")
     args = ap.parse_args(argv)
 
     device = setup(args.seed, args.threads)
     t0 = time.time()
-    train = prepare(load_crops(args.train, "train", args.limit), device)
-    test = prepare(load_crops(args.test, "test", args.limit), device)
+    parts = catalog.assembled_parts(args.catalog)
+    train = prepare(load_crops(args.train, "train", parts, args.limit), device)
+    test = prepare(load_crops(args.test, "test", parts, args.limit), device)
     print(f"loaded {len(train['part'])} train / {len(test['part'])} test crops in {time.time() - t0:.0f} s", flush=True)
-    test["flipped"], worst = flipped_keypoints(test, catalog_keypoints(args.catalog))
+    test["flipped"], worst = flipped_keypoints(test, catalog.keypoints(args.catalog, parts))
     if worst > 0.05:
         sys.exit(f"{args.catalog}: keypoints reproject {worst:.3f} px off the crop labels")
 
     widths = tuple(int(w) for w in args.widths.split(","))
-    model = KeypointNet(widths).to(device)
-    macs = count_macs(model, torch.zeros(1, 6, 128, 128, device=device))
+    model = KeypointNet(len(parts), widths).to(device)
+    macs = count_macs(model, torch.zeros(1, 3 + len(parts), 128, 128, device=device))
     print(f"keypoint net: {macs / 1e6:.1f} MMAC per crop, {sum(p.numel() for p in model.parameters())} parameters")
     opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
     n = len(train["part"])
@@ -241,7 +242,7 @@ def main(argv=None):
         for s in range(steps_per_epoch):
             lr, progress = progress_lr(opt, args.lr, step, total, time.time() - t_train, 60 * args.max_minutes)
             idx = perm[s * args.batch : (s + 1) * args.batch].to(device)
-            x = make_input(train["rgb_t"][idx], train["part_t"][idx], device, augment=True, gen=gen_dev)
+            x = make_input(train["rgb_t"][idx], train["part_t"][idx], len(parts), device, augment=True, gen=gen_dev)
             mask, kp = train["mask_t"][idx], train["kp_t"][idx]
             if args.rotate:
                 x, mask, kp = rotate(x, mask, kp, gen)
@@ -290,7 +291,10 @@ def main(argv=None):
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
     # The torch weights travel with the ONNX file: scripts/seed_compare runs them in eager mode.
-    torch.save({"widths": list(widths), "state_dict": model.cpu().state_dict()}, os.path.join(args.out, "keypoints.pt"))
+    torch.save(
+        {"widths": list(widths), "parts": parts, "state_dict": model.cpu().state_dict()},
+        os.path.join(args.out, "keypoints.pt"),
+    )
     model.to(device)
 
     met = evaluate(model, test, device, voting=True)
@@ -301,7 +305,7 @@ def main(argv=None):
         print(f"  {k_} = {v_:.4g}")
 
     onnx_path = os.path.join(args.out, "keypoints.onnx")
-    dummy = make_input(test["rgb_t"][:2], test["part_t"][:2], "cpu")
+    dummy = make_input(test["rgb_t"][:2], test["part_t"][:2], len(parts), "cpu")
     # The graph gives raw directions; the Rust voter normalises them (see KeypointNet).
     model.unit_vectors = False
     export_onnx(
@@ -312,15 +316,16 @@ def main(argv=None):
         ["mask", "vectors"],
         {"crop": {0: "n"}, "mask": {0: "n"}, "vectors": {0: "n"}},
     )
-    ms = check_export(onnx_path, model, make_input(test["rgb_t"][:12], test["part_t"][:12], "cpu"), 5e-3, "for 12 crops")
+    ms = check_export(onnx_path, model, make_input(test["rgb_t"][:12], test["part_t"][:12], len(parts), "cpu"), 5e-3, "for 12 crops")
     model.unit_vectors = True
     if ms is not None:
         met["ort_ms_12_crops"] = ms
     write_manifest(
         os.path.join(args.out, "keypoints.toml"),
-        "usbc-keypoints",
+        f"{catalog.family(args.catalog)}-keypoints",
+        parts,
         onnx_path,
-        [("crop", [-1, 6, 128, 128])],
+        [("crop", [-1, 3 + len(parts), 128, 128])],
         [("mask", [-1, 1, 64, 64]), ("vectors", [-1, 18, 64, 64])],
         {
             "script": "train_keypoints.py",

@@ -16,8 +16,9 @@ import torch.nn.functional as F
 
 from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
                     recorded_train_minutes, setup, training_args, write_manifest)
+import catalog
 from data import load_feeder, obj_ids
-from nets import PARTS, Segmenter, count_macs
+from nets import Segmenter, count_macs
 
 IGNORE = -100
 MIN_GT_CELLS = 16
@@ -121,7 +122,7 @@ def group(cls_pred, offsets, probs, radius=20.0, cross_radius=10.0, contested_mi
     bx = np.clip(np.floor(vx / 4).astype(int), 0, w - 1)
     by = np.clip(np.floor(vy / 4).astype(int), 0, h - 1)
     peaks = []  # (votes, class, centre)
-    for c in range(1, len(PARTS) + 1):
+    for c in range(1, probs.shape[0]):
         sel = cc == c
         hist = np.zeros((h + 2, w + 2))
         np.add.at(hist, (by[sel] + 1, bx[sel] + 1), 1)
@@ -163,11 +164,11 @@ def group(cls_pred, offsets, probs, radius=20.0, cross_radius=10.0, contested_mi
 
 
 @torch.no_grad()
-def evaluate(model, frames, device, max_frames=None):
+def evaluate(model, frames, parts, device, max_frames=None):
     """Per-class cell accuracy (recall of each class's cells), overall cell accuracy, and
     instance precision/recall at IoU >= 0.5 with the class required to match."""
     model.eval()
-    n_cls = len(PARTS) + 1
+    n_cls = len(parts) + 1
     conf = np.zeros((n_cls, n_cls), dtype=np.int64)
     tp = n_pred = n_gt = 0
     for f in frames[:max_frames]:
@@ -197,7 +198,7 @@ def evaluate(model, frames, device, max_frames=None):
                 used.add(best)
                 tp += 1
     m = {"cell_accuracy": float(np.trace(conf) / max(conf.sum(), 1))}
-    for c, name in enumerate(["background"] + PARTS):
+    for c, name in enumerate(["background"] + parts):
         m[f"cell_accuracy_{name}"] = float(conf[c, c] / max(conf[c].sum(), 1))
     m["instance_precision"] = tp / max(n_pred, 1)
     m["instance_recall"] = tp / max(n_gt, 1)
@@ -220,12 +221,13 @@ def main(argv=None):
 
     device = setup(args.seed, args.threads)
     t0 = time.time()
-    mapping = obj_ids(args.train)
+    parts = catalog.assembled_parts(args.catalog)
+    mapping = obj_ids(args.train, parts)
     train = load_feeder(args.train, "train_feeder", mapping, args.limit)
     test = load_feeder(args.test, "test_feeder", mapping, args.limit)
     print(f"loaded {len(train)} train / {len(test)} test feeder frames in {time.time() - t0:.0f} s", flush=True)
 
-    model = Segmenter(tuple(int(w) for w in args.widths.split(","))).to(device)
+    model = Segmenter(len(parts), tuple(int(w) for w in args.widths.split(","))).to(device)
     macs = count_macs(model, torch.zeros(1, 3, 448, 576, device=device))
     print(f"segmenter: {macs / 1e6:.0f} MMAC per 576x448 window, {sum(p.numel() for p in model.parameters())} parameters")
     opt = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=1e-5)
@@ -267,7 +269,7 @@ def main(argv=None):
         k += 1
         out_of_time = (time.time() - t_train) / 60 >= args.max_minutes
         if step % args.eval_every == 0 or step == args.steps or out_of_time:
-            met = evaluate(model, test, device, max_frames=20)
+            met = evaluate(model, test, parts, device, max_frames=20)
             acc = acc.cpu().numpy()
             curve.row(
                 step=step,
@@ -297,10 +299,13 @@ def main(argv=None):
     if args.checkpoint:
         torch.save(model.state_dict(), args.checkpoint)
     # The torch weights travel with the ONNX file: scripts/seed_compare runs them in eager mode.
-    torch.save({"widths": list(model.widths), "state_dict": model.cpu().state_dict()}, os.path.join(args.out, "segmenter.pt"))
+    torch.save(
+        {"widths": list(model.widths), "parts": parts, "state_dict": model.cpu().state_dict()},
+        os.path.join(args.out, "segmenter.pt"),
+    )
     model.to(device)
 
-    met = evaluate(model, test, device)
+    met = evaluate(model, test, parts, device)
     if train_minutes is not None:
         met["train_minutes"] = train_minutes
     met["mmac_576x448"] = macs / 1e6
@@ -321,10 +326,11 @@ def main(argv=None):
         met["ort_ms_576x448"] = ms
     write_manifest(
         os.path.join(args.out, "segmenter.toml"),
-        "usbc-segmenter",
+        f"{catalog.family(args.catalog)}-segmenter",
+        parts,
         onnx_path,
         [("image", [-1, 3, -1, -1])],
-        [("logits", [-1, 4, -1, -1]), ("offsets", [-1, 2, -1, -1])],
+        [("logits", [-1, 1 + len(parts), -1, -1]), ("offsets", [-1, 2, -1, -1])],
         {
             "script": "train_segmenter.py",
             "dataset_seed": args.dataset_seed,

@@ -43,7 +43,10 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from nets import N_KEYPOINTS, PARTS, KeypointNet, Segmenter  # noqa: E402
+from nets import N_KEYPOINTS, KeypointNet, Segmenter  # noqa: E402
+
+PARTS = ["main_shell", "insert_mold", "top_shell"]
+"""The seed's three parts, in the order of the USB-C catalog and of its models' channels."""
 from train_keypoints import vote  # noqa: E402
 from train_segmenter import group, pad16  # noqa: E402
 
@@ -88,7 +91,7 @@ def load_net(models, name):
 
     manifest = load_manifest(os.path.join(models, f"{name}.toml"))
     if list(manifest.get("parts", [])) != PARTS:
-        raise InputError(f"{models}/{name}.toml: parts {manifest.get('parts')} differ from {PARTS} (training/nets.py)")
+        raise InputError(f"{models}/{name}.toml: parts {manifest.get('parts')} differ from the seed's {PARTS}")
     pt = os.path.join(models, f"{name}.pt")
     onnx_path = os.path.join(models, manifest.get("file", f"{name}.onnx"))
     for p in (pt, onnx_path):
@@ -97,7 +100,7 @@ def load_net(models, name):
     try:
         ckpt = torch.load(pt, map_location="cpu", weights_only=True)
         widths = tuple(int(w) for w in ckpt["widths"])
-        net = (Segmenter if name == "segmenter" else KeypointNet)(widths)
+        net = (Segmenter if name == "segmenter" else KeypointNet)(len(PARTS), widths)
         net.load_state_dict(ckpt["state_dict"])
     except (KeyError, TypeError, RuntimeError, ValueError) as e:
         raise InputError(f"{pt}: not a {{'widths', 'state_dict'}} checkpoint of the {name} net: {e}")
