@@ -18,6 +18,12 @@ const APPROACH: f64 = 0.03;
 /// the 9 mm main shell over about 64 pixels.
 pub const MIN_PART_PIXELS: f64 = 24.0;
 
+/// Largest angle between a step's insertion direction and straight down (base frame), and
+/// between the up direction of the stable pose a part is grasped in and straight up at its
+/// target, radians: the planner picks every part from above with a vertical tool and inserts
+/// along the tool, so a step must insert downward with the part the way up it was picked.
+pub const MAX_INSERTION_TILT: f64 = 1.0 * std::f64::consts::PI / 180.0;
+
 /// A found problem: (key path, message).
 pub type Finding = (String, String);
 
@@ -97,6 +103,26 @@ pub fn check_values(cell: &CellSpec, steps: &[AssemblyStep], noise: &NoiseSpec) 
                 format!("assembly[{i}].target"),
                 "pose has a non-finite number".into(),
             ));
+        }
+        if let Some(base_T_target) = nominal_targets(cell, steps)[i]
+            && axis.iter().all(|v| v.is_finite())
+            && axis.norm() > 1e-9
+        {
+            let base_axis = base_T_target.rotation * s.target.isometry().rotation.inverse() * axis;
+            let off = base_axis.angle(&-Vector3::z());
+            if off > MAX_INSERTION_TILT {
+                out.push((
+                    format!("assembly[{i}].insertion_axis"),
+                    format!(
+                        "points {:.1}° from straight down in the robot's base frame ({:?} there); \
+                         the cell picks parts from above and inserts along its vertical tool, so \
+                         a step must insert downward (within {:.0}°)",
+                        off.to_degrees(),
+                        [base_axis.x, base_axis.y, base_axis.z].map(|v| (v * 1e4).round() / 1e4),
+                        MAX_INSERTION_TILT.to_degrees()
+                    ),
+                ));
+            }
         }
         if let Destination::Part(p) = &s.into
             && !placed.contains(&p.as_str())
@@ -226,6 +252,16 @@ pub fn check_geometry(
             ),
         ));
     }
+    let in_reach = |p: &Point3<f64>| {
+        if !cell.limits.workspace.contains(&above(p)) {
+            Err("is outside the limits' workspace box".to_string())
+        } else if !reachable(p) {
+            Err(format!("is out of the {}'s reach top-down", arm.name))
+        } else {
+            Ok(())
+        }
+    };
+    out.extend(check_targets(cell, steps, catalog, &in_reach));
     let feeder_corners = feeder_corners(cell);
     for corner in &feeder_corners {
         let corner = base_T_table * corner;
@@ -291,6 +327,93 @@ pub fn check_geometry(
         fixture_mesh.as_ref(),
         smallest_part,
     ));
+    out
+}
+
+/// Each step's nominal seated pose in the base frame, with every earlier part seated exactly at
+/// its own target; `None` for a step whose destination is no earlier step's part.
+#[allow(non_snake_case)]
+pub fn nominal_targets(cell: &CellSpec, steps: &[AssemblyStep]) -> Vec<Option<Isometry3<f64>>> {
+    let base_T_fixture = cell.base_T_table.isometry() * cell.fixture.table_T_fixture.isometry();
+    let mut out: Vec<Option<Isometry3<f64>>> = Vec::with_capacity(steps.len());
+    for (i, s) in steps.iter().enumerate() {
+        let dest = match &s.into {
+            Destination::Fixture => Some(base_T_fixture),
+            Destination::Part(name) => steps[..i]
+                .iter()
+                .rposition(|e| &e.part == name)
+                .and_then(|j| out[j]),
+        };
+        out.push(dest.map(|d| d * s.target.isometry()));
+    }
+    out
+}
+
+/// Each step's target within the workspace and reach top-down, and its part grasped the way
+/// up the target holds it.
+fn check_targets(
+    cell: &CellSpec,
+    steps: &[AssemblyStep],
+    catalog: &Catalog,
+    in_reach: &dyn Fn(&Point3<f64>) -> Result<(), String>,
+) -> Vec<Finding> {
+    let mut out = Vec::new();
+    for (i, (s, target)) in steps.iter().zip(nominal_targets(cell, steps)).enumerate() {
+        let Some(base_T_target) = target else {
+            continue;
+        };
+        let origin = base_T_target * Point3::origin();
+        if let Err(why) = in_reach(&origin) {
+            out.push((
+                format!("assembly[{i}].target"),
+                format!(
+                    "the target of \"{}\" at {:?} m (base) {why}",
+                    s.part,
+                    origin
+                        .coords
+                        .iter()
+                        .map(|v| (v * 1e4).round() / 1e4)
+                        .collect::<Vec<_>>()
+                ),
+            ));
+            continue;
+        }
+        let Some(spec) = catalog.part(&s.part) else {
+            continue;
+        };
+        let ups: Vec<(String, f64)> = spec
+            .grasps
+            .iter()
+            .filter_map(|g| spec.stable_pose(&g.stable_pose))
+            .map(|pose| {
+                let up = Vector3::from(pose.up_in_part);
+                let angle = if up.norm() > 0.0 {
+                    (base_T_target.rotation * up.normalize()).angle(&Vector3::z())
+                } else {
+                    std::f64::consts::PI
+                };
+                (pose.name.clone(), angle)
+            })
+            .collect();
+        if !ups.is_empty() && ups.iter().all(|(_, a)| *a > MAX_INSERTION_TILT) {
+            let list = ups
+                .iter()
+                .map(|(n, a)| format!("\"{n}\" {:.1}°", a.to_degrees()))
+                .collect::<Vec<_>>()
+                .join(", ");
+            out.push((
+                format!("assembly[{i}].target"),
+                format!(
+                    "turns \"{}\" so that none of the stable poses it is grasped in stays up \
+                     (their up directions lie {list} from vertical there); the gripper picks \
+                     from above and cannot turn a part over, so the target must keep a grasped \
+                     pose up (within {:.0}°)",
+                    s.part,
+                    MAX_INSERTION_TILT.to_degrees()
+                ),
+            ));
+        }
+    }
     out
 }
 

@@ -79,6 +79,10 @@ impl super::InsertionScorer for Rapier {
         "contact"
     }
 
+    fn check_part(&self, part: &PartGeometry) -> Result<(), super::ScorerError> {
+        super::check_pieces(part, "contact")
+    }
+
     fn score(&self, case: &super::InsertionCase<'_>) -> Result<super::Scored, super::ScorerError> {
         let run = simulate(
             case.mating,

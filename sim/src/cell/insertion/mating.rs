@@ -43,6 +43,10 @@ pub struct Mating {
     pub destination_T_insertion: Isometry3<f64>,
     /// Friction between the parts.
     pub friction: f64,
+    /// True when the held part's engaged cross-section turns freely in the fit: it lies within
+    /// a circle that still fits the hole at any turn (a round peg), so a yaw error neither
+    /// swings its corners nor jams it.
+    pub turns_freely: bool,
 }
 
 impl Mating {
@@ -76,6 +80,14 @@ impl Mating {
                 })
         };
         let held_fp = footprint(&mut seated.iter().copied());
+        let turns_freely = turns_freely(
+            &seated
+                .iter()
+                .filter(|p| band(p.z))
+                .map(|p| Vector2::new(p.x, p.y))
+                .collect::<Vec<_>>(),
+            step.clearance,
+        );
         let half_width = match receivers.first() {
             Some(r) => {
                 let t = ins_T_d * r.destination_T_part;
@@ -95,6 +107,7 @@ impl Mating {
             ins_R_seat,
             destination_T_insertion: d_T_ins,
             friction: PART_FRICTION,
+            turns_freely,
         }
     }
 
@@ -106,6 +119,9 @@ impl Mating {
     /// How far the leading face reaches laterally on its worst axis, the yaw's corner swing
     /// included.
     pub fn capture_reach(&self, e: &PoseError) -> f64 {
+        if self.turns_freely {
+            return e.lateral.x.abs().max(e.lateral.y.abs());
+        }
         let s = e.yaw.sin().abs();
         (e.lateral.x.abs() + s * self.half_width.y).max(e.lateral.y.abs() + s * self.half_width.x)
     }
@@ -129,6 +145,9 @@ impl Mating {
 
     /// Largest yaw about the insertion axis whose footprint still fits the clearance.
     pub fn yaw_limit(&self) -> f64 {
+        if self.turns_freely {
+            return std::f64::consts::PI;
+        }
         let (a, b, h) = (self.half_width.x, self.half_width.y, self.clearance / 2.0);
         let f = |t: f64| (a * t.cos() + b * t.sin() - a - h).max(b * t.cos() + a * t.sin() - b - h);
         bisect(f, 0.0, 0.7)
@@ -177,6 +196,65 @@ impl Mating {
     }
 }
 
+/// Whether a cross-section (points about the insertion axis, seated) turns freely in a fit of
+/// total clearance `clearance`: its farthest point from the axis lies within the circle that its
+/// convex outline contains (its nearest edge's distance from the axis) grown by half the
+/// clearance. A hole is the part's outline grown by half the clearance, so it contains that
+/// grown circle, and the part turned by any angle stays within it. Holds for a fine polygon
+/// standing for a circle; never for a rectangle (its corners lie far outside its inscribed
+/// circle).
+fn turns_freely(points: &[Vector2<f64>], clearance: f64) -> bool {
+    if points.len() < 3 {
+        return false;
+    }
+    let outer = points.iter().map(|p| p.norm()).fold(0.0, f64::max);
+    let hull = convex_outline(points);
+    if hull.len() < 3 {
+        return false;
+    }
+    let inner = (0..hull.len())
+        .map(|i| {
+            let (a, b) = (hull[i], hull[(i + 1) % hull.len()]);
+            let edge = b - a;
+            // Distance of the axis (the origin) from the edge's line.
+            (edge.x * a.y - edge.y * a.x).abs() / edge.norm()
+        })
+        .fold(f64::INFINITY, f64::min);
+    outer <= inner + clearance / 2.0
+}
+
+/// The convex outline of 2-D points, counter-clockwise (Andrew's monotone chain).
+fn convex_outline(points: &[Vector2<f64>]) -> Vec<Vector2<f64>> {
+    let mut p: Vec<Vector2<f64>> = points.to_vec();
+    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    p.dedup_by(|a, b| (*a - *b).norm() < 1e-12);
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>| {
+        (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x)
+    };
+    let mut hull: Vec<Vector2<f64>> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &Vector2<f64>>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
 /// The first root of `f` on [lo, hi], where `f(lo) ≤ 0`: scanned in steps of 1 mrad, then
 /// bisected; `hi` when `f` never rises above zero there.
 fn bisect(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
@@ -202,4 +280,99 @@ fn bisect(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
         a = b;
     }
     hi
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Isometry3;
+
+    use super::*;
+    use crate::cad::nist::{HOLE_DEPTH_MM, PEGS, PegShape, fixture_plate};
+    use crate::cell::insertion::analytic;
+    use crate::config::{Destination, PoseSpec, Tolerances};
+
+    fn geometry(name: &str, mesh: perception::part::TriMesh) -> PartGeometry {
+        PartGeometry::from_mesh(name, mesh, 1e-3, vec![], vec![]).unwrap()
+    }
+
+    fn step(peg: &crate::cad::nist::Peg) -> AssemblyStep {
+        let t = peg.seated().translation.vector;
+        AssemblyStep {
+            part: peg.name.into(),
+            into: Destination::Fixture,
+            target: PoseSpec {
+                translation: [t.x, t.y, t.z],
+                rotation: [0.0; 3],
+            },
+            insertion_axis: [0.0, 0.0, -1.0],
+            clearance: peg.clearance_mm() * 1e-3,
+            lead_in: 0.0005,
+            tolerances: Tolerances {
+                lateral: 1e-4,
+                depth: 1e-4,
+                tilt: 0.01,
+            },
+        }
+    }
+
+    #[test]
+    fn a_round_peg_turns_freely_in_its_hole_and_a_square_one_does_not() {
+        let plate = geometry("nist_plate", fixture_plate());
+        for peg in &PEGS {
+            let held = geometry(peg.name, peg.mesh());
+            let receivers = [ReceiverPart {
+                geometry: &plate,
+                destination_T_part: Isometry3::identity(),
+            }];
+            let m = Mating::new(&step(peg), &held, &receivers);
+            let round = peg.shape == PegShape::Round;
+            assert_eq!(m.turns_freely, round, "{}", peg.name);
+            // The whole hole depth engages; the fit is the peg's own width.
+            assert!(
+                (m.engagement - HOLE_DEPTH_MM * 1e-3).abs() < 1e-12,
+                "{}",
+                peg.name
+            );
+            let half = peg.peg_size_mm() / 2.0 * 1e-3;
+            assert!((m.half_width.x - half).abs() < 1e-12, "{}", peg.name);
+            // Three degrees of yaw: the round peg is seated, the square one jams on its corners
+            // (its yaw limit is about half a degree).
+            let start = m.pose_with_error(
+                Vector2::new(1e-4, 0.0),
+                m.engagement + 1e-3,
+                3f64.to_radians(),
+                0.0,
+                Vector2::zeros(),
+            );
+            let r = analytic::score(&m, &start);
+            if round {
+                assert_eq!(m.yaw_limit(), std::f64::consts::PI);
+                assert_eq!(r.verdict, super::super::Verdict::Seated, "{}", peg.name);
+            } else {
+                assert!(m.yaw_limit() < 1f64.to_radians(), "{}", m.yaw_limit());
+                assert_eq!(r.verdict, super::super::Verdict::Jammed, "{}", peg.name);
+            }
+        }
+    }
+
+    #[test]
+    fn only_a_fine_polygon_within_its_clearance_turns_freely() {
+        let ring = |n: usize, r: f64| -> Vec<Vector2<f64>> {
+            (0..n)
+                .map(|k| {
+                    let a = std::f64::consts::TAU * k as f64 / n as f64;
+                    Vector2::new(r * a.cos(), r * a.sin())
+                })
+                .collect()
+        };
+        // A 4 mm 48-gon's flats are 8.6 µm inside its corners: free in a 0.02 mm fit, not in 0.01.
+        assert!(turns_freely(&ring(48, 0.004), 2e-5));
+        assert!(!turns_freely(&ring(48, 0.004), 1e-5));
+        // An octagon's flats are 7.6 % inside: never free in a fit of tens of microns.
+        assert!(!turns_freely(&ring(8, 0.004), 1e-4));
+        // A rectangle, the USB-C parts' cross-sections.
+        let rect = [(-4.2, -4.27), (4.2, -4.27), (4.2, 4.27), (-4.2, 4.27)]
+            .map(|(x, y)| Vector2::new(x * 1e-3, y * 1e-3));
+        assert!(!turns_freely(&rect, 9e-5));
+    }
 }

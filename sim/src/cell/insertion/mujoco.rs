@@ -154,6 +154,7 @@ impl InsertionScorer for Mujoco {
     }
 
     fn check_part(&self, part: &crate::cell::geometry::PartGeometry) -> Result<(), ScorerError> {
+        super::check_pieces(part, "mujoco")?;
         check_part(part, &self.settings).map_err(|e| to_scorer_error(e, "mujoco"))
     }
 
