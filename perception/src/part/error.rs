@@ -14,7 +14,7 @@ pub enum PartError {
         source: std::io::Error,
     },
     /// The file's extension names no mesh format we read.
-    #[error("{path}: unknown mesh format (expected .obj, .stl or .ply)")]
+    #[error("{path}: unknown mesh format (expected .obj, .stl, .ply, .step or .stp)")]
     UnknownFormat {
         /// The file.
         path: PathBuf,
@@ -28,6 +28,25 @@ pub enum PartError {
         format: &'static str,
         /// What the parser said.
         message: String,
+    },
+    /// The STEP file gives no solids: not a STEP file, a syntax error, no solids, a face that
+    /// does not tessellate.
+    #[error("{path}: {message}")]
+    Step {
+        /// The STEP file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The STEP kernel (OpenCASCADE in a provisioned venv) could not be provisioned or run.
+    #[error("{path}: cannot import STEP: {reason}; {hint}")]
+    StepKernel {
+        /// The STEP file being imported.
+        path: PathBuf,
+        /// What failed.
+        reason: String,
+        /// What to do about it.
+        hint: String,
     },
     /// The mesh has no triangles.
     #[error("{path}: the mesh is empty (no triangles); export the part as a solid")]

@@ -1,4 +1,4 @@
-//! Loading meshes from OBJ, STL and PLY files, with a plausibility check of the declared unit.
+//! Loading meshes from OBJ, STL, PLY and STEP files, with a plausibility check of the declared unit.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -39,7 +39,10 @@ impl LengthUnit {
 /// Smallest and largest plausible object size in metres: parts, fixtures and boards in a cell.
 const PLAUSIBLE_SIZE_M: (f64, f64) = (0.5e-3, 1.5);
 
-/// Loads a closed mesh from an `.obj`, `.stl` or `.ply` file, converting `unit` to metres.
+/// Loads a closed mesh from an `.obj`, `.stl`, `.ply`, `.step` or `.stp` file, converting `unit`
+/// to metres. A STEP file's solids are tessellated by OpenCASCADE to
+/// [`CHORDAL_TOLERANCE_MM`](super::CHORDAL_TOLERANCE_MM), each solid one body, in the unit the
+/// file declares (`unit` is not used for it).
 ///
 /// Fails with the file named when it is missing, unparsable, empty, not closed, or when its size
 /// is implausible for the unit (a 9 mm part read as 9 m). Export defects are repaired first
@@ -67,13 +70,20 @@ pub fn load_mesh_repaired(
         "obj" => read_obj(path)?,
         "stl" => read_stl(path)?,
         "ply" => read_ply(path)?,
+        "step" | "stp" => super::step_io::read_step(path)?,
         _ => return Err(PartError::UnknownFormat { path: path.into() }),
     };
     if raw.triangles.is_empty() {
         return Err(PartError::Empty { path: path.into() });
     }
-    let mut mesh = raw.scaled(unit.to_metres());
-    check_size(path, &mesh, unit)?;
+    let step = matches!(ext.as_str(), "step" | "stp");
+    // A STEP tessellation is in metres already, from the unit the file declares.
+    let mut mesh = raw.scaled(if step { 1.0 } else { unit.to_metres() });
+    if step {
+        check_step_size(path, &mesh)?;
+    } else {
+        check_size(path, &mesh, unit)?;
+    }
     let mut repairs = mesh.repair();
     let filled = mesh.fill_small_holes(MAX_FILLED_HOLE_M);
     repairs.filled_holes = filled.count;
@@ -104,6 +114,24 @@ fn check_size(path: &Path, mesh: &TriMesh, unit: LengthUnit) -> Result<(), PartE
         size_m: size,
         unit: unit.name().into(),
         hint,
+    })
+}
+
+/// As [`check_size`] for a STEP file, whose unit is the file's own.
+fn check_step_size(path: &Path, mesh: &TriMesh) -> Result<(), PartError> {
+    let size = mesh.extents().max();
+    let (lo, hi) = PLAUSIBLE_SIZE_M;
+    if (lo..=hi).contains(&size) {
+        return Ok(());
+    }
+    Err(PartError::ImplausibleSize {
+        path: path.into(),
+        size_m: size,
+        unit: "declared by the STEP file".into(),
+        hint: format!(
+            "expected an object between {lo} and {hi} m: check the length unit the STEP file \
+             declares (its SI_UNIT or CONVERSION_BASED_UNIT) and the export scale"
+        ),
     })
 }
 
@@ -217,7 +245,7 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, PartError> {
     })
 }
 
-fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
+pub(super) fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
     let bytes = read_bytes(path)?;
     check_obj_text(path, &bytes)?;
     // Position indices as the file gives them (not split by normal or texture index), so the

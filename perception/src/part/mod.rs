@@ -11,6 +11,8 @@ mod mesh_repair;
 mod mesh_topology;
 mod pieces;
 mod stable_pose;
+mod step_io;
+mod step_kernel;
 
 pub use catalog::{
     Catalog, Grasp, HoleWeight, Material, PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
@@ -23,3 +25,5 @@ pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};
 pub use mesh_repair::{MeshRepairs, WELD_TOLERANCE_REL};
 pub use pieces::{ConvexPieces, convex_pieces};
 pub use stable_pose::{StablePose, footprints_mm2};
+pub use step_io::{ANGULAR_TOLERANCE_RAD, CHORDAL_TOLERANCE_MM, tessellate_step};
+pub use step_kernel::{OCP_VERSION, StepKernel};
