@@ -6,6 +6,8 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use sha2::{Digest, Sha256};
 
@@ -19,6 +21,21 @@ const REQUIREMENTS: &str = include_str!("../../../scripts/step_import/requiremen
 pub(super) const TESSELLATE_PY: &str = include_str!("../../../scripts/step_import/tessellate.py");
 /// Written into the venv once pip and the import check succeeded.
 const READY_MARK: &str = "cell-ready";
+
+/// One provisioning at a time in this process (threads of one test binary load STEP parts at
+/// once); other processes are kept apart by the scratch folder's name and the final rename.
+static PROVISIONING: Mutex<()> = Mutex::new(());
+/// Makes temporary names unique between the threads of this process.
+static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// A name unique to this process and call, for scratch files and folders.
+fn unique_suffix() -> String {
+    format!(
+        "{}-{}",
+        std::process::id(),
+        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
 
 /// Where the kernel comes from and where its results are cached.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -82,6 +99,10 @@ impl StepKernel {
         if venv.join(READY_MARK).is_file() && python.exists() {
             return Ok(python);
         }
+        let _one_at_a_time = PROVISIONING.lock().unwrap_or_else(|e| e.into_inner());
+        if venv.join(READY_MARK).is_file() && python.exists() {
+            return Ok(python);
+        }
         self.provision(step)?;
         Ok(python)
     }
@@ -113,9 +134,9 @@ impl StepKernel {
                 format!("cannot create {}: {e}", self.cache_dir.display()),
             )
         })?;
-        let scratch =
-            self.cache_dir
-                .join(format!(".step-ocp-{}-{}", OCP_VERSION, std::process::id()));
+        let scratch = self
+            .cache_dir
+            .join(format!(".step-ocp-{OCP_VERSION}-{}", unique_suffix()));
         let _ = std::fs::remove_dir_all(&scratch);
         let result = self.install(step, &scratch);
         let result = result.and_then(|()| match std::fs::rename(&scratch, &venv) {
@@ -224,7 +245,7 @@ pub(super) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let name = path.file_name().unwrap_or_default().to_string_lossy();
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let tmp = dir.join(format!(".{name}.{}.tmp", unique_suffix()));
     let written = std::fs::File::create(&tmp)
         .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()))
         .and_then(|()| std::fs::rename(&tmp, path));
