@@ -235,8 +235,10 @@ impl Planner<'_> {
         Ok(())
     }
 
-    /// Checks a joint move from `from` to `to` at `samples` points: arm above the table, gripper
-    /// and held part clear of the table, the fixture and the placed parts.
+    /// Checks a joint move from `from` to `to`: its TCP path inside the workspace box (exactly
+    /// as [`robots::limited::Limited`] will check it before the move), and at `samples` points
+    /// the arm above the table, gripper and held part clear of the table, the fixture and the
+    /// placed parts.
     #[allow(non_snake_case)]
     fn check_transit(
         &self,
@@ -247,6 +249,21 @@ impl Planner<'_> {
         placed: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<(), PlanError> {
         let k = self.knowledge;
+        // A joint move's TCP swings off the straight line: between two targets inside the box
+        // it can leave it (a wide feeder-to-fixture move), and the limits would stop the arm.
+        k.spec
+            .limits
+            .check_move_j(
+                &k.kinematics,
+                from,
+                to,
+                &self.speeds.joint,
+                robots::limited::JOINT_PATH_SAMPLES,
+            )
+            .map_err(|e| PlanError::Limits {
+                waypoint,
+                reason: e.to_string(),
+            })?;
         let n = self.config.samples.max(1);
         for i in 1..=n {
             let s = i as f64 / n as f64;
