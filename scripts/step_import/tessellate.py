@@ -164,6 +164,7 @@ def write_obj(bodies, out, header):
             f.write("\n".join(lines) + "\n")
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)
         os.replace(tmp, out)
     except BaseException:
         os.unlink(tmp)
