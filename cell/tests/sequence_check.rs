@@ -71,15 +71,30 @@ fn the_nist_peg_scenario_is_valid() {
 fn a_step_naming_an_unknown_part_or_destination_is_refused_at_its_line() {
     let text = pegs_text().replacen("part = \"round_12\"", "part = \"round_13\"", 1);
     let (p, text) = problem_at("part", &text, "assembly[4].part");
-    assert!(p.message.contains("no part \"round_13\" in the catalog"), "{p:?}");
-    assert!(p.message.contains("round_12"), "the known parts are listed: {p:?}");
+    assert!(
+        p.message.contains("no part \"round_13\" in the catalog"),
+        "{p:?}"
+    );
+    assert!(
+        p.message.contains("round_12"),
+        "the known parts are listed: {p:?}"
+    );
     assert_eq!(p.line, line_of(&text, "part = \"round_13\""));
     assert_eq!(p.column, "part = ".len() + 1);
 
     // Into a part no earlier step placed (here one that does not exist at all).
-    let text = replace_nth(&pegs_text(), "into = \"fixture\"", "into = { part = \"lid\" }", 2);
+    let text = replace_nth(
+        &pegs_text(),
+        "into = \"fixture\"",
+        "into = { part = \"lid\" }",
+        2,
+    );
     let (p, text) = problem_at("into", &text, "assembly[2].into");
-    assert!(p.message.contains("\"lid\" is not placed by an earlier step"), "{p:?}");
+    assert!(
+        p.message
+            .contains("\"lid\" is not placed by an earlier step"),
+        "{p:?}"
+    );
     assert_eq!(p.line, line_of(&text, "{ part = \"lid\" }"));
 
     // A fixture (the frame every first step goes into) that is not in the catalog.
@@ -96,7 +111,10 @@ fn a_target_outside_the_workspace_or_out_of_reach_is_refused_at_its_line() {
         "translation = [0.4, 0.018, 0.005]",
     );
     let (p, text) = problem_at("workspace", &text, "assembly[5].target");
-    assert!(p.message.contains("outside the limits' workspace box"), "{p:?}");
+    assert!(
+        p.message.contains("outside the limits' workspace box"),
+        "{p:?}"
+    );
     assert!(p.message.contains("round_16"), "{p:?}");
     assert_eq!(p.line, line_of(&text, "[0.4, 0.018, 0.005]"));
     assert_eq!(p.column, "target = ".len() + 1);
@@ -112,7 +130,10 @@ fn a_target_outside_the_workspace_or_out_of_reach_is_refused_at_its_line() {
             "translation = [1.2, -0.018, 0.005]",
         );
     let (p, text) = problem_at("reach", &text, "assembly[0].target");
-    assert!(p.message.contains("out of the ur5e's reach top-down"), "{p:?}");
+    assert!(
+        p.message.contains("out of the ur5e's reach top-down"),
+        "{p:?}"
+    );
     assert_eq!(p.line, line_of(&text, "[1.2, -0.018, 0.005]"));
 }
 
@@ -127,7 +148,10 @@ fn an_insertion_direction_the_top_down_gripper_cannot_follow_is_refused() {
     );
     let (p, text) = problem_at("sideways", &text, "assembly[4].insertion_axis");
     assert!(p.message.contains("90.0° from straight down"), "{p:?}");
-    assert!(p.message.contains("inserts along its vertical tool"), "{p:?}");
+    assert!(
+        p.message.contains("inserts along its vertical tool"),
+        "{p:?}"
+    );
     assert_eq!(p.line, line_of(&text, "insertion_axis = [1.0, 0.0, 0.0]"));
     assert_eq!(p.column, "insertion_axis = ".len() + 1);
 
@@ -163,7 +187,10 @@ fn a_target_that_turns_the_part_over_is_refused() {
     let (p, text) = problem_at("over", &text, "assembly[0].target");
     assert!(p.message.contains("turns \"square_8\""), "{p:?}");
     assert!(p.message.contains("\"+z\" 180.0°"), "{p:?}");
-    assert_eq!(p.line, line_of(&text, "[-0.036, -0.018, 0.005], rotation = [3.14"));
+    assert_eq!(
+        p.line,
+        line_of(&text, "[-0.036, -0.018, 0.005], rotation = [3.14")
+    );
 }
 
 #[test]
