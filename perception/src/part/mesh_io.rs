@@ -7,7 +7,10 @@ use std::path::Path;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
-use super::{MAX_FILLED_HOLE_M, MeshRepairs, PartError, TriMesh};
+use super::{
+    CHORDAL_TOLERANCE_MM, MAX_FILLED_HOLE_M, MeshRepairs, PartError, StepKernel, TriMesh,
+    tessellate_step,
+};
 
 /// The length unit a mesh file's numbers are in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -70,7 +73,12 @@ pub fn load_mesh_repaired(
         "obj" => read_obj(path)?,
         "stl" => read_stl(path)?,
         "ply" => read_ply(path)?,
-        "step" | "stp" => super::step_io::read_step(path)?,
+        // The solids tessellated at the default tolerances, cached as OBJ in metres.
+        "step" | "stp" => read_obj(&tessellate_step(
+            path,
+            &StepKernel::from_env(),
+            CHORDAL_TOLERANCE_MM,
+        )?)?,
         _ => return Err(PartError::UnknownFormat { path: path.into() }),
     };
     if raw.triangles.is_empty() {
@@ -245,7 +253,7 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, PartError> {
     })
 }
 
-pub(super) fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
+fn read_obj(path: &Path) -> Result<TriMesh, PartError> {
     let bytes = read_bytes(path)?;
     check_obj_text(path, &bytes)?;
     // Position indices as the file gives them (not split by normal or texture index), so the

@@ -9,21 +9,14 @@ use std::process::Command;
 
 use sha2::{Digest, Sha256};
 
+use super::PartError;
 use super::step_kernel::{StepKernel, hex, tail};
-use super::{PartError, TriMesh};
 
 /// Largest distance between the tessellation and the B-rep surface OpenCASCADE aims for, in mm
 /// (BRepMesh's linear deflection; it may exceed it on some B-spline faces, see the STEP import page).
 pub const CHORDAL_TOLERANCE_MM: f64 = 0.01;
 /// Largest angle between neighbouring facets' normals along a curved face, in radians.
 pub const ANGULAR_TOLERANCE_RAD: f64 = 0.5;
-
-/// Reads a STEP file's solids as one mesh in metres, one body per solid, at the default
-/// tolerances, with the kernel from the process environment.
-pub(super) fn read_step(path: &Path) -> Result<TriMesh, PartError> {
-    let obj = tessellate_step(path, &StepKernel::from_env(), CHORDAL_TOLERANCE_MM)?;
-    super::mesh_io::read_obj(&obj)
-}
 
 /// Tessellates a STEP file's solids to `tolerance_mm` (chordal) and returns the cached OBJ
 /// (metres, one `o solid_N` group per solid), tessellating only when no cached copy exists.
