@@ -1,0 +1,90 @@
+//! Stable-pose drops as `cell parts prepare` runs them: 5 000 drops for each of the three USB-C
+//! parts of the committed catalog, on every core rayon has, with the default drop settings.
+//! Prints wall time, CPU time (user + system, Linux) and each part's share of jittering drops.
+//!
+//! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
+//! for the parts of another catalog).
+//! One timed run, not criterion's repeats: a run takes tens of seconds.
+
+#![allow(missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use perception::part::{Catalog, PartRole};
+use sim::stable_poses::{DropSettings, stable_poses};
+
+/// CPU seconds this process has used (user + system), from /proc; `None` elsewhere.
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name's closing parenthesis; utime and stime are the 12th and
+    // 13th of them, in clock ticks (100 per second on Linux).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let drops = args
+        .iter()
+        .find_map(|a| a.parse::<usize>().ok())
+        .unwrap_or(5000);
+    let path = args
+        .iter()
+        .find(|a| a.ends_with(".toml"))
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml")
+        });
+    let catalog = Catalog::load(&path).expect("a part catalog");
+    let parts: Vec<_> = catalog
+        .parts
+        .iter()
+        .filter(|p| p.role != PartRole::Fixture)
+        .map(|p| {
+            let (mesh, _) = catalog.load_mesh_repaired(p).expect("the part's mesh");
+            (p, mesh)
+        })
+        .collect();
+    let settings = DropSettings {
+        drops,
+        ..DropSettings::default()
+    };
+    let (wall, cpu) = (Instant::now(), cpu_seconds());
+    let mut total = 0;
+    for (part, mesh) in &parts {
+        let start = Instant::now();
+        let report = stable_poses(mesh, part.density(), &settings, None);
+        total += report.drops;
+        println!(
+            "{}: {} drops in {:.1} s, {} still jittering at the {} s limit, mean rest {:.3} s",
+            part.name,
+            report.drops,
+            start.elapsed().as_secs_f64(),
+            report.unsettled,
+            settings.max_time,
+            report.mean_rest_time
+        );
+        for class in &report.classes {
+            let committed = part.stable_pose(&class.pose.name).map(|s| s.probability);
+            println!(
+                "  {:12} {:6.2} % (catalog {})",
+                class.pose.name,
+                100.0 * class.pose.probability,
+                committed.map_or("-".into(), |p| format!("{:.2} %", 100.0 * p))
+            );
+        }
+    }
+    let cpu = match (cpu, cpu_seconds()) {
+        (Some(a), Some(b)) => format!("{:.1} CPU-s", b - a),
+        _ => "CPU time n/a".into(),
+    };
+    println!(
+        "stable_poses: {total} drops of {} parts in {:.1} s wall, {cpu}, {} threads",
+        parts.len(),
+        wall.elapsed().as_secs_f64(),
+        rayon::current_num_threads()
+    );
+}
