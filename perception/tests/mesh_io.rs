@@ -121,9 +121,15 @@ fn missing_empty_open_and_unknown_files_are_named() {
         "{msg}"
     );
 
-    let txt = write(dir.path(), "part.step", b"ISO-10303-21;");
-    let err = load_mesh(&txt, LengthUnit::Mm).unwrap_err();
+    // IGES is CAD too, but not read: STEP is (see cell/tests/prepare_step.rs).
+    let iges = write(
+        dir.path(),
+        "part.igs",
+        b"                                        S      1",
+    );
+    let err = load_mesh(&iges, LengthUnit::Mm).unwrap_err();
     assert!(matches!(err, PartError::UnknownFormat { .. }), "{err}");
+    assert!(err.to_string().contains(".step or .stp"), "{err}");
 
     let garbage = write(dir.path(), "g.stl", &[7u8; 40]);
     assert!(load_mesh(&garbage, LengthUnit::Mm).is_err());
