@@ -395,6 +395,7 @@ fn every_guide_has_its_commands_test() {
         "commission.md",
         "perception.md",
         "add-part.md",
+        "assembly-sequence.md",
         "regress.md",
         "scale.md",
     ];
@@ -435,6 +436,11 @@ fn perception_guide_commands_run() {
 #[test]
 fn add_part_guide_commands_run() {
     assert!(run_page("docs/guides/add-part.md") > 0);
+}
+
+#[test]
+fn assembly_sequence_guide_commands_run() {
+    assert!(run_page("docs/guides/assembly-sequence.md") > 0);
 }
 
 #[test]
