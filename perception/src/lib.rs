@@ -12,6 +12,7 @@ pub use detection::{DetectedPart, Perceived, UnposedPart};
 pub use frame::{Frame, FrameContent, FrameImage, TruePart};
 pub use perceive::{PartPerception, PerceptionError};
 pub mod ablation;
+pub mod cache;
 pub mod calibration;
 pub mod contour;
 pub mod detection;

@@ -4,6 +4,7 @@
 //! panic: `ort` is only reached with a library that is present.
 
 use super::OnnxError;
+use crate::cache::CacheLocation;
 use sha2::{Digest, Sha256};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -42,15 +43,11 @@ impl RuntimeConfig {
 
     /// As [`Self::from_env`], with variables looked up by `var` (testable without touching the environment).
     pub fn from_vars(var: impl Fn(&str) -> Option<PathBuf>) -> Self {
-        let set = |k: &str| var(k).filter(|v| !v.as_os_str().is_empty());
-        let cache_dir = set("CELL_CACHE_DIR")
-            .or_else(|| set("XDG_CACHE_HOME").map(|d| d.join("cell")))
-            .or_else(|| set("HOME").map(|d| d.join(".cache/cell")))
-            .unwrap_or_else(|| std::env::temp_dir().join("cell-cache"));
+        let cache = CacheLocation::from_vars(&var);
         Self {
-            dylib_override: set("ORT_DYLIB_PATH"),
-            cache_dir,
-            python: set("CELL_PYTHON").unwrap_or_else(|| "python3".into()),
+            dylib_override: var("ORT_DYLIB_PATH").filter(|v| !v.as_os_str().is_empty()),
+            cache_dir: cache.dir,
+            python: cache.python,
         }
     }
 

@@ -12,6 +12,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use sha2::{Digest, Sha256};
 
 use super::PartError;
+use crate::cache::CacheLocation;
 
 /// The pinned OpenCASCADE wheel's version (`cadquery-ocp-novtk`, OpenCASCADE 8.0.1).
 pub const OCP_VERSION: &str = "8.0.1.1.0";
@@ -57,15 +58,11 @@ impl StepKernel {
 
     /// As [`Self::from_env`], with variables looked up by `var` (testable without touching the environment).
     pub fn from_vars(var: impl Fn(&str) -> Option<PathBuf>) -> Self {
-        let set = |k: &str| var(k).filter(|v| !v.as_os_str().is_empty());
-        let cache_dir = set("CELL_CACHE_DIR")
-            .or_else(|| set("XDG_CACHE_HOME").map(|d| d.join("cell")))
-            .or_else(|| set("HOME").map(|d| d.join(".cache/cell")))
-            .unwrap_or_else(|| std::env::temp_dir().join("cell-cache"));
+        let cache = CacheLocation::from_vars(&var);
         Self {
-            python_override: set("CELL_STEP_PYTHON"),
-            cache_dir,
-            python: set("CELL_PYTHON").unwrap_or_else(|| "python3".into()),
+            python_override: var("CELL_STEP_PYTHON").filter(|v| !v.as_os_str().is_empty()),
+            cache_dir: cache.dir,
+            python: cache.python,
         }
     }
 
