@@ -195,12 +195,14 @@ impl PoseEstimator {
                 .cloned()
                 .collect();
             let group: Vec<UnitQuaternion<f64>> = symmetry_group(&exact);
+            // Of symmetric twins (a peg on either end), report the one the part is grasped in.
             let refiner =
                 PlanarRefiner::new(camera_T_table, &part.stable_poses, &group, config.planar)
                     .map_err(|e| PerceptionError::Part {
                         part: part.name.clone(),
                         reason: e.to_string(),
-                    })?;
+                    })?
+                    .with_preferred(|c| part.grasp_for(&part.stable_poses[c].name).is_some());
             models.insert(
                 part.name.clone(),
                 PartModel {
@@ -284,7 +286,9 @@ impl PoseEstimator {
             weights,
             classes,
         )?;
-        let rms_px = pixel_rms(camera, &planar.camera_T_part, &model, &pixels);
+        // Keypoints are matched by index, so they are compared in the observed frame, not in the
+        // canonical symmetric twin the refiner reports.
+        let rms_px = pixel_rms(camera, &planar.camera_T_observed(), &model, &pixels);
         let gate_px = self.config.max_rms_px;
         let consistency = (-0.5 * (rms_px / gate_px).powi(2)).exp();
         let estimate = PoseEstimate {

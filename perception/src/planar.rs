@@ -127,6 +127,16 @@ pub const RESTING_TILT: f64 = std::f64::consts::PI / 180.0;
 pub const RESTING_LIFT: f64 = 2e-4;
 
 impl PlanarPose {
+    /// The refined pose in the frame the keypoints were observed in: `camera_T_part · g⁻¹`, with
+    /// `g` the [`PlanarPose::symmetry`] of the canonical representative. The same part in the
+    /// same place as `camera_T_part`, but keypoint `i` of the model lands where keypoint `i` was
+    /// seen, so reprojection errors are measured with this pose (the canonical one carries the
+    /// keypoints of a symmetric twin).
+    #[allow(non_snake_case)]
+    pub fn camera_T_observed(&self) -> Isometry3<f64> {
+        self.camera_T_part * self.symmetry.inverse()
+    }
+
     /// Whether `table_T_part`, the pose this one was snapped from, rests on the table in it:
     /// tilted less than [`RESTING_TILT`] and within [`RESTING_LIFT`] of its height. A part
     /// leaning on or lying on another one does not, and no planar estimate of it can be right.
@@ -146,7 +156,44 @@ pub struct PlanarRefiner {
     ups: Vec<Vector3<f64>>,
     log_priors: Vec<f64>,
     group: Vec<UnitQuaternion<f64>>,
+    /// Per class, the classes that are the same resting state under the symmetry group (itself
+    /// included): a round peg standing on either end, or on any of its sides.
+    twins: Vec<Vec<usize>>,
+    /// Classes reported in preference to a twin that explains the estimate equally well.
+    preferred: Vec<bool>,
     config: PlanarConfig,
+}
+
+/// Largest angle between two stable poses' up directions, one turned by a symmetry, for them to
+/// be twins, radians (0.5°: stable-pose tables are rounded to 9 digits).
+const TWIN_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// Largest difference of rest heights for two stable poses to be twins, metres.
+const TWIN_HEIGHT: f64 = 1e-4;
+/// Scores (log-likelihood units) closer than this tie: symmetric twins score alike up to
+/// rounding.
+const SCORE_TIE: f64 = 1e-6;
+
+/// Per class, the classes whose up direction a symmetry of `group` turns onto its own at the
+/// same rest height (each class is its own twin).
+fn twin_classes(
+    stable_poses: &[StablePose],
+    ups: &[Vector3<f64>],
+    group: &[UnitQuaternion<f64>],
+) -> Vec<Vec<usize>> {
+    (0..ups.len())
+        .map(|c| {
+            (0..ups.len())
+                .filter(|&d| {
+                    c == d
+                        || ((stable_poses[c].rest_height - stable_poses[d].rest_height).abs()
+                            < TWIN_HEIGHT
+                            && group
+                                .iter()
+                                .any(|g| (g * ups[d]).angle(&ups[c]) < TWIN_ANGLE))
+                })
+                .collect()
+        })
+        .collect()
 }
 
 impl PlanarRefiner {
@@ -183,15 +230,21 @@ impl PlanarRefiner {
                 return Err(PlanarError::BadStablePose(i, "non-finite rest pose"));
             }
             ups.push(up);
-            log_priors.push(if config.use_prior {
-                s.probability.max(1e-6).ln()
-            } else {
-                0.0
-            });
         }
         let mut group = group.to_vec();
         if group.is_empty() {
             group.push(UnitQuaternion::identity());
+        }
+        let twins = twin_classes(stable_poses, &ups, &group);
+        // A class's prior is its resting state's: the drops' share of it and of its twins (so
+        // twins score alike and the preferred one can be reported).
+        for twin in &twins {
+            let probability: f64 = twin.iter().map(|&d| stable_poses[d].probability).sum();
+            log_priors.push(if config.use_prior {
+                probability.max(1e-6).ln()
+            } else {
+                0.0
+            });
         }
         if !(config.tilt_sigma.is_finite() && config.tilt_sigma > 0.0) {
             return Err(PlanarError::NonFinite("tilt_sigma"));
@@ -202,8 +255,23 @@ impl PlanarRefiner {
             ups,
             log_priors,
             group,
+            twins,
+            preferred: vec![false; stable_poses.len()],
             config,
         })
+    }
+
+    /// The same refiner, reporting one of `preferred` where a symmetric twin class explains the
+    /// estimate as well (a peg standing on either end is reported on the end it is grasped in).
+    pub fn with_preferred(mut self, preferred: impl Fn(usize) -> bool) -> Self {
+        self.preferred = (0..self.stable_poses.len()).map(preferred).collect();
+        self
+    }
+
+    /// The classes that are the same resting state as `class` under the part's symmetries,
+    /// `class` included.
+    pub fn twins(&self, class: usize) -> &[usize] {
+        self.twins.get(class).map_or(&[], Vec::as_slice)
     }
 
     /// The table's pose in the camera frame.
@@ -252,7 +320,8 @@ impl PlanarRefiner {
             return Err(PlanarError::NoAdmittedClass);
         }
         let table_T_est = self.camera_T_table.inverse() * camera_T_part;
-        // Class and symmetry representative: best score, then the smallest |yaw|.
+        // Class and symmetry representative: best score, then a preferred class, then the
+        // smallest |yaw|.
         let mut best: Option<(f64, f64, usize, f64, UnitQuaternion<f64>)> = None;
         let mut scores_of_best = Vec::new();
         for g in &self.group {
@@ -267,8 +336,11 @@ impl PlanarRefiner {
             let yaw = best_yaw(&r, &self.stable_poses[class].rest_rotation());
             let better = match &best {
                 None => true,
-                Some((s, y, ..)) => {
-                    score > s + 1e-9 || ((score - s).abs() <= 1e-9 && yaw.abs() < y.abs() - 1e-9)
+                Some((s, y, c, ..)) => {
+                    let (p, q) = (self.preferred[class], self.preferred[*c]);
+                    score > s + SCORE_TIE
+                        || ((score - s).abs() <= SCORE_TIE
+                            && ((p && !q) || (p == q && yaw.abs() < y.abs() - 1e-9)))
                 }
             };
             if better {
@@ -278,7 +350,7 @@ impl PlanarRefiner {
         }
         let (best_score, yaw, class, tilt, symmetry) = best.expect("the group has the identity");
         let (confidence, margin, runner_up) =
-            class_confidence(&scores_of_best, class, best_score, classes);
+            class_confidence(&scores_of_best, &self.twins[class], best_score, classes);
         let pose = &self.stable_poses[class];
         // The origin's viewing ray meets the plane z = rest_height (table frame).
         let ray = camera_T_part.translation.vector;
@@ -516,28 +588,34 @@ fn normal_equations(
     (jtj, jtr)
 }
 
-/// Softmax posterior of the chosen class among the admitted `classes`, the margin to the
-/// runner-up, and the runner-up: the class ranked next below the chosen one, unless it is ruled
-/// out (then there is none: the keypoints' next choice is no alternative).
+/// Softmax posterior of the chosen class's resting state (the class and its symmetric `twins`)
+/// among the admitted `classes`, the margin to the runner-up, and the
+/// runner-up: the class ranked next below the chosen one that is not a twin of it, unless it is
+/// ruled out (then there is none: the keypoints' next choice is no alternative).
 fn class_confidence(
     scores: &[(f64, f64)],
-    class: usize,
+    twins: &[usize],
     best: f64,
     classes: ClassSet,
 ) -> (f64, f64, Option<usize>) {
-    let total: f64 = (scores.iter().enumerate())
-        .filter(|(c, _)| classes.contains(*c))
-        .map(|(_, (s, _))| (s - best).exp())
-        .sum();
+    let weight = |c: usize| {
+        if classes.contains(c) {
+            (scores[c].0 - best).exp()
+        } else {
+            0.0
+        }
+    };
+    let total: f64 = (0..scores.len()).map(weight).sum();
+    let chosen: f64 = twins.iter().map(|&c| weight(c)).sum();
     let runner_up = scores
         .iter()
         .enumerate()
-        .filter(|(c, (s, _))| *c != class && *s <= best)
+        .filter(|(c, (s, _))| !twins.contains(c) && *s <= best)
         .max_by(|a, b| a.1.0.total_cmp(&b.1.0))
         .map(|(c, _)| c)
         .filter(|c| classes.contains(*c));
     let margin = runner_up.map_or(f64::INFINITY, |c| best - scores[c].0);
-    (1.0 / total, margin, runner_up)
+    (chosen / total, margin, runner_up)
 }
 
 fn isometry_finite(t: &Isometry3<f64>) -> bool {

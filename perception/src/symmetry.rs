@@ -5,8 +5,9 @@ use nalgebra::{Unit, UnitQuaternion, Vector3};
 
 use crate::part::{StablePose, Symmetry};
 
-/// Largest group we generate (the octahedral group has 24 elements).
-const MAX_GROUP: usize = 64;
+/// Largest group we generate: a round peg modelled as a 48-gon, either end up, is the dihedral
+/// group of 96 elements; the cap only stops generators whose axes generate no finite group.
+const MAX_GROUP: usize = 1024;
 
 /// The turns under which a part resting in `stable` looks the same from above, when its view
 /// there repeats with `order` ([`crate::part::ViewSymmetry`]): part-frame rotations about the
@@ -103,6 +104,19 @@ mod tests {
             exact: false,
         };
         assert_eq!(symmetry_group(&[near]).len(), 1);
+    }
+
+    #[test]
+    fn a_round_peg_either_end_up_is_the_whole_dihedral_group() {
+        // A 48-gon prism: 48 turns about its axis times the half turn that swaps its ends.
+        let group = symmetry_group(&[sym([0.0, 0.0, 1.0], 48), sym([1.0, 0.0, 0.0], 2)]);
+        assert_eq!(group.len(), 96);
+        for a in &group {
+            for b in &group {
+                let ab = a * b;
+                assert!(group.iter().any(|g| g.angle_to(&ab) < 1e-9), "not closed");
+            }
+        }
     }
 
     #[test]
