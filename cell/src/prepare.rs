@@ -9,6 +9,7 @@ use perception::part::{
     Catalog, MeshRepairs, PartRole, PartSpec, StablePose, TriMesh, farthest_point_sample,
     load_mesh_repaired, sample_surface,
 };
+use perception::symmetry::symmetry_group;
 use sim::stable_poses::{DropEngine, DropSettings, StablePoseReport, stable_poses_with};
 use toml_edit::{Array, ArrayOfTables, DocumentMut, Item, Table, value};
 
@@ -91,7 +92,7 @@ fn prepare_loaded(
     settings: &DropSettings,
     progress: Option<&ProgressBar>,
 ) -> Result<PreparedPart, PrepareError> {
-    let report = stable_poses_with(
+    let mut report = stable_poses_with(
         engine,
         &part.name,
         &mesh,
@@ -99,6 +100,7 @@ fn prepare_loaded(
         settings,
         progress,
     )?;
+    report.merge_symmetric(&symmetry_group(&part.symmetries));
     Ok(PreparedPart {
         name: part.name.clone(),
         mass: report.mass,

@@ -4,6 +4,7 @@
 mod cluster;
 pub(crate) mod drop;
 mod mujoco;
+mod symmetric;
 
 pub use cluster::{CLASS_ANGLE_RAD, LEAN_HEIGHT, PoseClass, cluster, leaning};
 pub use drop::{
