@@ -39,7 +39,7 @@ impl StablePoseReport {
             }
         }
         // Stable: equal counts keep the order drops gave them.
-        merged.sort_by(|a, b| b.count.cmp(&a.count));
+        merged.sort_by_key(|c| std::cmp::Reverse(c.count));
         self.classes = merged;
     }
 }
