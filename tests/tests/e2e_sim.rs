@@ -264,23 +264,27 @@ fn perception_that_finds_nothing_aborts_with_the_cause() {
 
 #[test]
 fn an_unreachable_target_is_refused_before_moving() {
-    // The nest target moved 1.2 m away (limits widened so only kinematics refuses it).
-    let setup = setup(|doc| {
-        let t = toml_edit::Array::from_iter([1.2, 0.0, 0.0035]);
-        doc["assembly"][0]["target"]["translation"] = toml_edit::value(t);
-        let min = toml_edit::Array::from_iter([-2.0, -2.0, -0.1]);
-        let max = toml_edit::Array::from_iter([2.0, 2.0, 1.0]);
-        doc["cell"]["limits"]["workspace"]["min"] = toml_edit::value(min);
-        doc["cell"]["limits"]["workspace"]["max"] = toml_edit::value(max);
-    });
-    let s = first_step(&setup);
-    assert_eq!(s.outcome, StepOutcome::Aborted);
-    assert_eq!(
-        s.attempts, 0,
-        "no pick was started for an unreachable target"
+    // The nest target moved 1.2 m away (limits widened so only kinematics refuses it): the
+    // scenario check refuses the step at its target's line, before any episode starts.
+    let (_dir, scenario) = e2e_support::load_with(
+        |doc| {
+            let t = toml_edit::Array::from_iter([1.2, 0.0, 0.0035]);
+            doc["assembly"][0]["target"]["translation"] = toml_edit::value(t);
+            let min = toml_edit::Array::from_iter([-2.0, -2.0, -0.1]);
+            let max = toml_edit::Array::from_iter([2.0, 2.0, 1.0]);
+            doc["cell"]["limits"]["workspace"]["min"] = toml_edit::value(min);
+            doc["cell"]["limits"]["workspace"]["max"] = toml_edit::value(max);
+        },
+        |_| {},
     );
-    let cause = s.cause.unwrap();
-    assert!(cause.contains("unreachable"), "{cause}");
+    let message = scenario
+        .expect_err("an unreachable step is refused")
+        .to_string();
+    assert!(
+        message.contains("usbc_nominal.toml:65:10: assembly[0].target")
+            && message.contains("out of the ur5e's reach top-down"),
+        "{message}"
+    );
 }
 
 /// `[simulation] insertion_scorer = "contact"` decides every insertion by the rapier contact

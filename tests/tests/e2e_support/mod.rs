@@ -87,6 +87,19 @@ pub fn scenario_with(
     edit: impl FnOnce(&mut toml_edit::DocumentMut),
     edit_catalog: impl FnOnce(&mut toml_edit::DocumentMut),
 ) -> Setup {
+    let (dir, scenario) = load_with(edit, edit_catalog);
+    let scenario = scenario.unwrap_or_else(|e| panic!("{e}"));
+    let inner = SimSetup::new(scenario).unwrap_or_else(|e| panic!("{e}"));
+    Setup { inner, _dir: dir }
+}
+
+/// The nominal scenario with `edit` applied to the scenario file and `edit_catalog` to the part
+/// catalog, as `Scenario::load` reads it (its refusals included), and the scratch folder that
+/// holds it.
+pub fn load_with(
+    edit: impl FnOnce(&mut toml_edit::DocumentMut),
+    edit_catalog: impl FnOnce(&mut toml_edit::DocumentMut),
+) -> (TempDir, Result<Scenario, cell::scenario::ScenarioError>) {
     let dir = tempfile::tempdir().unwrap();
     copy_dir(&prepared_scenarios(), dir.path());
     let path = dir.path().join("usbc_nominal.toml");
@@ -98,9 +111,8 @@ pub fn scenario_with(
         std::fs::read_to_string(&catalog).unwrap().parse().unwrap();
     edit_catalog(&mut cat);
     std::fs::write(&catalog, cat.to_string()).unwrap();
-    let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    let inner = SimSetup::new(scenario).unwrap_or_else(|e| panic!("{e}"));
-    Setup { inner, _dir: dir }
+    let scenario = Scenario::load(&path);
+    (dir, scenario)
 }
 
 /// The nominal scenario with `edit` applied.
