@@ -4,8 +4,6 @@
 
 mod e2e_support;
 
-use std::path::Path;
-
 use cell::episode::StepOutcome;
 use cell::harness::{SimSetup, run_sim_episode_blocking};
 use cell::scenario::Scenario;
@@ -19,7 +17,7 @@ const EPISODES: u32 = 6;
 /// loads the result.
 fn sequence(file: &str, keep: &[usize]) -> (tempfile::TempDir, SimSetup) {
     let dir = tempfile::tempdir().unwrap();
-    copy_dir(&e2e_support::prepared_scenarios(), dir.path());
+    e2e_support::copy_dir(&e2e_support::prepared_scenarios(), dir.path());
     let path = dir.path().join(file);
     let mut doc: DocumentMut = std::fs::read_to_string(&path).unwrap().parse().unwrap();
     let steps = doc["assembly"].as_array_of_tables().unwrap().clone();
@@ -41,19 +39,6 @@ fn sequence(file: &str, keep: &[usize]) -> (tempfile::TempDir, SimSetup) {
     let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
     let setup = SimSetup::new(scenario).unwrap_or_else(|e| panic!("{e}"));
     (dir, setup)
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), &target).unwrap();
-        }
-    }
 }
 
 /// Runs `EPISODES` episodes and asserts each placed exactly `parts`, in order, every one seated.
