@@ -8,6 +8,7 @@
 pub mod arm;
 pub mod controller;
 pub mod dynamics;
+pub mod force;
 pub mod path;
 pub mod programs;
 pub mod registers;

@@ -50,6 +50,7 @@ pub mod insertion;
 pub mod model;
 pub mod motion;
 pub mod noise;
+pub mod wrench;
 mod sim_cell;
 
 pub use capture::FeederImage;

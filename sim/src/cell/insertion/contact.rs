@@ -22,6 +22,7 @@ use rapier3d_f64::prelude::{
     PhysicsWorld, RigidBodyBuilder, Vector,
 };
 
+pub use super::wrist::WristWrench;
 use super::{InsertionResult, Mating, ReceiverPart, Wrist};
 use crate::cell::geometry::PartGeometry;
 use crate::convert::{isometry_from_pose, pose_from_isometry, vec_from_point};
@@ -108,7 +109,14 @@ pub struct ContactRun {
     pub simulated_time: f64,
     /// Physics steps taken.
     pub steps: usize,
+    /// The wrist's load through the insertion ([`Wrist::spring_wrench`]), every
+    /// [`WRENCH_SAMPLE_PERIOD`] and at the end.
+    pub wrench: Vec<WristWrench>,
 }
+
+/// How often the engines record the wrist's load, s: the UR controller's 500 Hz, the rate at which
+/// a real arm's sensor reading reaches a program.
+pub const WRENCH_SAMPLE_PERIOD: f64 = 0.002;
 
 /// Simulates an insertion that starts with the held part at `ins_T_part` (insertion frame,
 /// lateral and angular error as given; it is lifted to just clear of the receivers).
@@ -217,12 +225,25 @@ pub fn simulate(
     let mut t = 0.0;
     let mut still = 0.0;
     let mut steps = 0;
+    let every = ((WRENCH_SAMPLE_PERIOD / dt).round() as usize).max(1);
+    let mut wrench = Vec::new();
+    let load = |world: &PhysicsWorld, t: f64| {
+        w.spring_wrench(
+            t,
+            &w.pose_at(&start_pose, t),
+            &isometry_from_pose(world.bodies[part].position()),
+            &mating.lead_point,
+        )
+    };
     while t < w.max_time {
         t += dt;
         steps += 1;
         world.bodies[wrist]
             .set_next_kinematic_position(pose_from_isometry(&w.pose_at(&start_pose, t)));
         world.step();
+        if steps % every == 0 {
+            wrench.push(load(&world, t));
+        }
         let rb = &world.bodies[part];
         let at_rest = w.is_still(mating, rb.linvel().length(), rb.angvel().length());
         still = if w.bottomed(&start_pose, t) && at_rest {
@@ -234,10 +255,14 @@ pub fn simulate(
             break;
         }
     }
+    if steps % every != 0 {
+        wrench.push(load(&world, t));
+    }
     let end_pose = isometry_from_pose(world.bodies[part].position());
     ContactRun {
         result: InsertionResult::ended_at(mating, start, end_pose),
         simulated_time: t,
         steps,
+        wrench,
     }
 }

@@ -32,6 +32,7 @@
 //! (`multiccd`); friction is the parts' Coulomb friction with an elliptic cone (sliding only,
 //! like rapier).
 
+use super::wrist::WristWrench;
 use super::{InsertionCase, InsertionScorer, Scored, ScorerError, Wrist};
 use crate::mujoco::MujocoError;
 use crate::mujoco::mjcf::Options;
@@ -159,7 +160,21 @@ impl InsertionScorer for Mujoco {
     }
 
     fn score(&self, case: &InsertionCase<'_>) -> Result<Scored, ScorerError> {
-        self.simulate(case)
+        self.simulate(case, false)
+            .map(|(scored, _)| scored)
+            .map_err(|e| to_scorer_error(e, "mujoco"))
+    }
+}
+
+impl Mujoco {
+    /// Scores one insertion and records the wrist's load through it
+    /// ([`Wrist::spring_wrench`], every [`super::contact::WRENCH_SAMPLE_PERIOD`] and at the end),
+    /// as the rapier simulation's [`super::contact::ContactRun::wrench`].
+    pub fn score_with_wrench(
+        &self,
+        case: &InsertionCase<'_>,
+    ) -> Result<(Scored, Vec<WristWrench>), ScorerError> {
+        self.simulate(case, true)
             .map_err(|e| to_scorer_error(e, "mujoco"))
     }
 }
@@ -174,7 +189,11 @@ fn check_part(
 
 #[cfg(not(feature = "mujoco"))]
 impl Mujoco {
-    fn simulate(&self, _case: &InsertionCase<'_>) -> Result<Scored, MujocoError> {
+    fn simulate(
+        &self,
+        _case: &InsertionCase<'_>,
+        _record: bool,
+    ) -> Result<(Scored, Vec<WristWrench>), MujocoError> {
         Err(crate::mujoco::ensure_available()
             .err()
             .unwrap_or_else(|| MujocoError::Unavailable("no MuJoCo in this build".into())))
@@ -227,7 +246,11 @@ impl Mujoco {
     }
 
     #[allow(non_snake_case)]
-    fn simulate(&self, case: &InsertionCase<'_>) -> Result<Scored, MujocoError> {
+    fn simulate(
+        &self,
+        case: &InsertionCase<'_>,
+        record: bool,
+    ) -> Result<(Scored, Vec<WristWrench>), MujocoError> {
         use mujoco_rs::prelude::{MjData, MjtObjBase};
 
         use super::InsertionResult;
@@ -326,11 +349,24 @@ impl Mujoco {
         let mut t = 0.0;
         let mut still = 0.0;
         let mut steps = 0;
+        let every = ((super::contact::WRENCH_SAMPLE_PERIOD / dt).round() as usize).max(1);
+        let mut wrench = Vec::new();
+        let load = |data: &MjData<&mujoco_rs::prelude::MjModel>, t: f64| {
+            w.spring_wrench(
+                t,
+                &w.pose_at(&start_pose, t),
+                &pose_from(&data.xpos()[part], &data.xquat()[part]),
+                &mating.lead_point,
+            )
+        };
         while t < w.max_time {
             t += dt;
             steps += 1;
             data.step();
             set_wrist(&mut data, t);
+            if record && steps % every == 0 {
+                wrench.push(load(&data, t));
+            }
             let v = data.object_velocity(MjtObjBase::mjOBJ_BODY, part, false);
             let angular = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             let linear = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
@@ -348,11 +384,15 @@ impl Mujoco {
                 break;
             }
         }
+        if record && steps % every != 0 {
+            wrench.push(load(&data, t));
+        }
         let end_pose = pose_from(&data.xpos()[part], &data.xquat()[part]);
-        Ok(Scored {
+        let scored = Scored {
             result: InsertionResult::ended_at(mating, start, end_pose),
             simulated_time: t,
             steps,
-        })
+        };
+        Ok((scored, wrench))
     }
 }

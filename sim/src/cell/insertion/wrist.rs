@@ -95,3 +95,48 @@ impl Wrist {
         linear <= self.still_speed && angular * mating.half_width.max() <= self.still_speed
     }
 }
+
+/// The wrench the held part exerts on the wrist through the compliance device, in the insertion
+/// frame at the compliance centre: force (N), then moment (N·m). It is what the flange's
+/// force/torque sensor sees of the insertion: a part jammed above its seat pushes back with the
+/// axial spring's force, up to [`Wrist::max_push`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WristWrench {
+    /// Simulated time, s.
+    pub t: f64,
+    /// Force on the wrist, insertion frame, N.
+    pub force: Vector3<f64>,
+    /// Moment on the wrist about the compliance centre, insertion frame, N·m.
+    pub moment: Vector3<f64>,
+}
+
+impl Wrist {
+    /// The springs' load on the wrist at `wrist_pose` when the part is at `part_pose` (both
+    /// insertion frame; the two frames coincide when the springs are relaxed), with the
+    /// compliance centre at `centre` in the part frame: lateral and rotational springs linear in
+    /// the deflection, the axial spring's force capped at the push force. Quasi-static: the
+    /// springs' damping is left out (a sensor reading is filtered over many of the engines' steps).
+    pub fn spring_wrench(
+        &self,
+        t: f64,
+        wrist_pose: &Isometry3<f64>,
+        part_pose: &Isometry3<f64>,
+        centre: &nalgebra::Point3<f64>,
+    ) -> WristWrench {
+        // Deflection of the part's anchor from the wrist's, in the wrist frame.
+        let offset = wrist_pose.inverse_transform_point(&(part_pose * centre)) - centre;
+        let turn = (wrist_pose.rotation.inverse() * part_pose.rotation).scaled_axis();
+        let axial = (self.axial_stiffness * offset.z).clamp(-self.max_push, self.max_push);
+        let force = Vector3::new(
+            self.lateral_stiffness * offset.x,
+            self.lateral_stiffness * offset.y,
+            axial,
+        );
+        let moment = turn * self.rotational_stiffness;
+        WristWrench {
+            t,
+            force: wrist_pose.rotation * force,
+            moment: wrist_pose.rotation * moment,
+        }
+    }
+}
