@@ -406,6 +406,10 @@ mod safety {
             self.motions.fetch_add(1, Ordering::SeqCst);
             self.inner.open_gripper()
         }
+        fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+            self.motions.fetch_add(1, Ordering::SeqCst);
+            self.inner.open_gripper_to(width)
+        }
         fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
             self.motions.fetch_add(1, Ordering::SeqCst);
             self.inner.close_gripper()

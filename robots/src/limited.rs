@@ -95,6 +95,10 @@ impl<R: Robot> Robot for Limited<R> {
         self.inner.open_gripper()
     }
 
+    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+        self.inner.open_gripper_to(width)
+    }
+
     fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.inner.close_gripper()
     }

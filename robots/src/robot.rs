@@ -264,8 +264,13 @@ pub trait Robot: Send {
     #[allow(non_snake_case)]
     fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()>;
 
-    /// Opens the gripper and waits until it is open.
+    /// Opens the gripper the full stroke and waits until it is open.
     fn open_gripper(&mut self) -> RobotFuture<'_, ()>;
+
+    /// Opens the fingers to `width` metres apart (at most the stroke) and waits until they
+    /// are there: a grasp opens no wider than its part needs, so close neighbours leave room.
+    /// A gripper without a width set-point opens the full stroke.
+    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()>;
 
     /// Closes the gripper and waits until it stops (on the part or fully closed).
     fn close_gripper(&mut self) -> RobotFuture<'_, ()>;
@@ -304,6 +309,9 @@ macro_rules! forward_robot {
             }
             fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
                 (**self).open_gripper()
+            }
+            fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+                (**self).open_gripper_to(width)
             }
             fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
                 (**self).close_gripper()

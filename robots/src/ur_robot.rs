@@ -536,6 +536,11 @@ impl Robot for UrRobot {
         self.set_gripper(false)
     }
 
+    /// The gripper is one digital output: it opens the full stroke whatever the width.
+    fn open_gripper_to(&mut self, _width: f64) -> RobotFuture<'_, ()> {
+        self.set_gripper(false)
+    }
+
     fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.set_gripper(true)
     }

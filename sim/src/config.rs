@@ -412,12 +412,18 @@ pub struct GripperSpec {
     /// metres; the simulated cell's `flange_T_tcp` (default 0.15 m, a small parallel gripper).
     #[serde(default = "tcp_offset")]
     pub tcp_offset: f64,
-    /// Seconds the fingers take to open or to close (default
-    /// [`DEFAULT_GRIPPER_ACTUATION_TIME`]): added to the simulated clock per actuation, and the
-    /// wait our controller program sleeps after setting the gripper output. Finite, from 0 to
+    /// Seconds the fingers take to travel the full stroke, open to closed (default
+    /// [`DEFAULT_GRIPPER_ACTUATION_TIME`]): a shorter travel takes less
+    /// ([`GripperSpec::travel_time`]) on the simulated clock; our controller program sleeps the
+    /// full time after setting the gripper output. Finite, from 0 to
     /// [`robots::ur_robot::MAX_GRIPPER_ACTUATION_S`].
     #[serde(default = "actuation_time")]
     pub actuation_time: f64,
+    /// Room left between each finger and the part when the fingers open for a grasp, metres:
+    /// they open to the part's width across the jaws plus twice this, so neighbours that close
+    /// leave room. Absent: the fingers always open the full stroke.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opening_margin: Option<f64>,
 }
 
 /// Default gripper actuation time, s (a small electric parallel gripper).
@@ -432,7 +438,32 @@ impl GripperSpec {
         (!(t.is_finite() && (0.0..=max).contains(&t)))
             .then(|| format!("actuation_time must be a finite time from 0 to {max} s, got {t}"))
     }
+
+    /// How far apart the fingers open to grasp a part `width` across the jaws: the width plus
+    /// both margins, at most the stroke; the full stroke without an `opening_margin`.
+    pub fn opening_for(&self, width: f64) -> f64 {
+        match self.opening_margin {
+            Some(m) => (width + 2.0 * m).min(self.stroke),
+            None => self.stroke,
+        }
+    }
+
+    /// Seconds the fingers take to travel `travel` metres: [`GRIPPER_SETTLE_TIME`] (capped by
+    /// `actuation_time`) to start and to settle, plus the rest of `actuation_time` in proportion
+    /// to the stroke travelled (an electric gripper's fingers move at a set speed).
+    pub fn travel_time(&self, travel: f64) -> f64 {
+        let settle = GRIPPER_SETTLE_TIME.min(self.actuation_time);
+        let fraction = if self.stroke > 0.0 {
+            (travel.abs() / self.stroke).min(1.0)
+        } else {
+            1.0
+        };
+        settle + (self.actuation_time - settle) * fraction
+    }
 }
+
+/// Seconds an electric gripper takes to start and to settle on a move however short, s.
+pub const GRIPPER_SETTLE_TIME: f64 = 0.05;
 
 fn tcp_offset() -> f64 {
     0.15
@@ -520,6 +551,40 @@ impl Default for NoiseSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn gripper(margin: Option<f64>) -> GripperSpec {
+        GripperSpec {
+            stroke: 0.014,
+            finger_width: 0.004,
+            finger_thickness: 0.002,
+            finger_length: 0.02,
+            friction: 0.3,
+            tcp_offset: 0.15,
+            actuation_time: 0.25,
+            opening_margin: margin,
+        }
+    }
+
+    #[test]
+    fn fingers_open_to_the_part_plus_the_margins_and_travel_in_proportion() {
+        let g = gripper(Some(0.001));
+        assert!((g.opening_for(0.009) - 0.011).abs() < 1e-15);
+        // Never wider than the stroke.
+        assert_eq!(g.opening_for(0.0135), 0.014);
+        assert_eq!(gripper(None).opening_for(0.009), 0.014);
+        // The full stroke takes the full time, none only the settle time, half a stroke half
+        // of the rest; the direction does not matter.
+        assert!((g.travel_time(0.014) - 0.25).abs() < 1e-15);
+        assert!((g.travel_time(0.0) - GRIPPER_SETTLE_TIME).abs() < 1e-15);
+        let half = GRIPPER_SETTLE_TIME + 0.5 * (0.25 - GRIPPER_SETTLE_TIME);
+        assert!((g.travel_time(-0.007) - half).abs() < 1e-15);
+        // A gripper faster than the settle time takes its own time.
+        let quick = GripperSpec {
+            actuation_time: 0.02,
+            ..g
+        };
+        assert!((quick.travel_time(0.001) - 0.02).abs() < 1e-15);
+    }
 
     /// A `[cell.calibration]` body with these two covariances written in.
     fn calibration(camera: &str, table: &str, date: &str) -> String {

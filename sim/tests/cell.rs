@@ -415,12 +415,13 @@ fn shaking_replaces_and_refill_restores_the_feeder() {
     assert!(cell.feeder_parts().iter().any(|p| p.instance > 12));
 }
 
-/// `cell.gripper.actuation_time` is the gripper's one actuation time: at 0.5 s instead of the
+/// `cell.gripper.actuation_time` is the gripper's full-stroke time: at 0.5 s instead of the
 /// default 0.25 s, the same seed gives the same outcomes and the episode takes exactly 0.25 s
-/// longer per gripper open or close on the simulated clock; the arm model behind the virtual
-/// controller reports the same time for the gripper pin.
+/// longer per stroke the fingers travelled on the simulated clock (an open or close of part of
+/// the stroke takes part of the time); the arm model behind the virtual controller reports the
+/// full time for the gripper pin (our program sleeps it).
 #[test]
-fn the_gripper_actuation_time_is_the_scenarios_and_adds_per_actuation() {
+fn the_gripper_actuation_time_is_the_scenarios_and_scales_with_the_finger_travel() {
     let s = scenario();
     assert_eq!(
         s.cell.gripper.actuation_time,
@@ -441,22 +442,31 @@ fn the_gripper_actuation_time_is_the_scenarios_and_adds_per_actuation() {
         assert_eq!(arm.actuation_time(pin + 1), 0.0);
         let mut cell = SimCell::new(m, 11, episode).unwrap();
         let summary = script::run_episode(&mut cell).unwrap();
-        (summary, cell.clock(), cell.gripper_actuations())
+        (
+            summary,
+            cell.clock(),
+            (cell.gripper_actuations(), cell.gripper_travel()),
+        )
     };
     let mut seated = 0;
     for episode in 0..3 {
-        let (base, base_clock, n) = run(0.25, episode);
-        let (slow, slow_clock, n_slow) = run(0.5, episode);
+        let (base, base_clock, (n, travel)) = run(0.25, episode);
+        let (slow, slow_clock, (n_slow, travel_slow)) = run(0.5, episode);
         // Same outcomes: steps, grasp attempts, verdicts and causes.
         assert_eq!(base.steps, slow.steps, "episode {episode}");
         assert_eq!(base.success, slow.success);
         assert_eq!(n, n_slow);
+        assert_eq!(travel, travel_slow);
         // A pick and a release at least per step tried.
         assert!(n as usize >= 2 * base.steps.len(), "{n} actuations");
-        let extra = f64::from(n) * 0.25;
+        // Each actuation takes the settle time plus the rest of the full-stroke time in
+        // proportion to the travel: twice the full-stroke time adds 0.25 s per stroke travelled.
+        let stroke = s.cell.gripper.stroke;
+        assert!(travel > stroke, "{travel} m travelled");
+        let extra = 0.25 * travel / stroke;
         assert!(
             (slow_clock - base_clock - extra).abs() < 1e-9,
-            "episode {episode}: {slow_clock} − {base_clock} ≠ {n} × 0.25 s"
+            "episode {episode}: {slow_clock} − {base_clock} ≠ 0.25 s × {travel} m / {stroke} m"
         );
         assert!((slow.cycle_time - base.cycle_time - extra).abs() < 1e-9);
         seated += usize::from(base.success);

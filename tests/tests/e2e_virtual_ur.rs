@@ -70,6 +70,9 @@ impl Robot for CountingRobot<'_> {
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.inner.open_gripper()
     }
+    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+        self.inner.open_gripper_to(width)
+    }
     fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.inner.close_gripper()
     }

@@ -404,6 +404,10 @@ impl<R: Robot> Robot for SimHoldingArm<R> {
         self.robot.open_gripper()
     }
 
+    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+        self.robot.open_gripper_to(width)
+    }
+
     fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.robot.close_gripper()
     }

@@ -71,7 +71,14 @@ impl FingerCheck {
             ) else {
                 continue;
             };
-            let near = nearest_to_fingers(k, &base_T_grasp, d.index, &perceived.parts, &unposed);
+            let opening = k.grasp_opening(&d.part, &Vector3::from(grasp.closing_axis));
+            let near = nearest_to_fingers(
+                k,
+                (&base_T_grasp, opening),
+                d.index,
+                &perceived.parts,
+                &unposed,
+            );
             out[d.index] = near.map(|(distance, _)| distance);
         }
         out

@@ -309,8 +309,12 @@ impl<'a> Engine<'a> {
             n.index != chosen.detection.index
                 && (self.step.excluded.contains(&n.index) || self.step.missed_before(n))
                 && k.part(&n.part).is_some_and(|g| {
-                    k.finger_distance(&chosen.base_T_grasp, g.hull.as_ref(), &n.base_T_part)
-                        < margin
+                    k.finger_distance(
+                        &chosen.base_T_grasp,
+                        chosen.opening,
+                        g.hull.as_ref(),
+                        &n.base_T_part,
+                    ) < margin
                 })
         })
     }
@@ -392,9 +396,13 @@ impl<'a> Engine<'a> {
     /// Open the gripper and back away upwards, then look again.
     async fn retract(&mut self, state: State) -> Result<State, Stop> {
         let clearance = self.ctx.settings.planning.clearance_height;
+        let opening = self.step.selection.as_ref().map(|s| s.opening);
         let robot = self.cell.robot();
         let r = async {
-            robot.open_gripper().await?;
+            match opening {
+                Some(w) => robot.open_gripper_to(w).await?,
+                None => robot.open_gripper().await?,
+            }
             let tcp = robot.tcp_pose().await?;
             let up = Translation3::new(0.0, 0.0, clearance) * tcp;
             let speeds = Speeds::within(robot.limits(), 0.01);
@@ -421,10 +429,13 @@ impl<'a> Engine<'a> {
         let correction = self.step.correction;
         let start = self.joints(state).await?;
         let placed = self.placed_shapes();
-        match self
-            .planner()
-            .insert(self.index, (g, &tcp_T_part), &correction, &start, &placed)
-        {
+        match self.planner().insert(
+            self.index,
+            ((g, &tcp_T_part), sel.opening),
+            &correction,
+            &start,
+            &placed,
+        ) {
             Ok(plan) => {
                 self.step.plan = Some(plan);
                 if self.step.insertions == 0 {
@@ -442,7 +453,7 @@ impl<'a> Engine<'a> {
                     robot
                         .move_l(Translation3::new(0.0, 0.0, 0.001) * sel.base_T_grasp, slow)
                         .await?;
-                    robot.open_gripper().await
+                    robot.open_gripper_to(sel.opening).await
                 }
                 .await;
                 back.map_err(|e| Stop::Robot(state, e))?;
@@ -459,7 +470,7 @@ impl<'a> Engine<'a> {
         let split = plan
             .motions
             .iter()
-            .position(|(_, m)| *m == Motion::Open)
+            .position(|(_, m)| matches!(m, Motion::Open(_)))
             .unwrap_or(plan.motions.len());
         self.step.insertions += 1;
         self.step.pending = plan.motions[split..].to_vec();
@@ -510,7 +521,7 @@ impl<'a> Engine<'a> {
     ) -> Result<State, Stop> {
         let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
             .into_iter()
-            .filter(|(_, m)| *m != Motion::Open)
+            .filter(|(_, m)| !matches!(m, Motion::Open(_)))
             .map(|(_, m)| ("lift clear", m))
             .collect();
         self.execute(state, &lift).await?;
@@ -650,7 +661,7 @@ impl<'a> Engine<'a> {
             let r = match m {
                 Motion::MoveJ(q, s) => robot.move_j(*q, *s).await,
                 Motion::MoveL(p, s) => robot.move_l(*p, *s).await,
-                Motion::Open => robot.open_gripper().await,
+                Motion::Open(width) => robot.open_gripper_to(*width).await,
                 Motion::Close => robot.close_gripper().await,
             };
             let clock = self.clock();

@@ -113,11 +113,23 @@ impl CellKnowledge {
         self.geometry.parts.get(name)
     }
 
-    /// Poses (base frame) of the two open fingers for a TCP pose.
-    #[allow(non_snake_case)]
-    pub fn finger_poses(&self, base_T_tcp: &Isometry3<f64>) -> [Isometry3<f64>; 2] {
+    /// How far apart the fingers open to grasp `part` closing along `closing_axis` (part
+    /// frame): its width across the jaws plus the scenario's opening margins, at most the
+    /// stroke ([`sim::config::GripperSpec::opening_for`]).
+    pub fn grasp_opening(&self, part: &str, closing_axis: &Vector3<f64>) -> f64 {
         let g = &self.spec.gripper;
-        let y = g.stroke / 2.0 + g.finger_thickness / 2.0;
+        let Some(p) = self.part(part) else {
+            return g.stroke;
+        };
+        let axis = closing_axis.try_normalize(0.0).unwrap_or_else(Vector3::y);
+        g.opening_for(sim::cell::gripper::width_across(&p.mesh.vertices, &axis))
+    }
+
+    /// Poses (base frame) of the two fingers `opening` metres apart for a TCP pose.
+    #[allow(non_snake_case)]
+    pub fn finger_poses(&self, base_T_tcp: &Isometry3<f64>, opening: f64) -> [Isometry3<f64>; 2] {
+        let g = &self.spec.gripper;
+        let y = opening.min(g.stroke) / 2.0 + g.finger_thickness / 2.0;
         let z = -g.finger_length / 2.0;
         [
             base_T_tcp * Isometry3::translation(0.0, -y, z),
@@ -125,17 +137,18 @@ impl CellKnowledge {
         ]
     }
 
-    /// Smallest distance from the open fingers at `base_T_tcp` to a shape at `base_T_shape`
-    /// (zero when they touch or overlap).
+    /// Smallest distance from the fingers at `base_T_tcp`, `opening` metres apart, to a shape at
+    /// `base_T_shape` (zero when they touch or overlap).
     #[allow(non_snake_case)]
     pub fn finger_distance(
         &self,
         base_T_tcp: &Isometry3<f64>,
+        opening: f64,
         shape: &dyn Shape,
         base_T_shape: &Isometry3<f64>,
     ) -> f64 {
         let other = pose_from_isometry(base_T_shape);
-        self.finger_poses(base_T_tcp)
+        self.finger_poses(base_T_tcp, opening)
             .iter()
             .map(|f| {
                 distance(&pose_from_isometry(f), self.finger.as_ref(), &other, shape)
@@ -158,7 +171,12 @@ impl CellKnowledge {
         let palm_pose = base_T_tcp
             * Isometry3::translation(0.0, 0.0, -(self.spec.gripper.finger_length + 0.02));
         let mut d = self
-            .finger_distance(base_T_tcp, obstacle, base_T_obstacle)
+            .finger_distance(
+                base_T_tcp,
+                self.spec.gripper.stroke,
+                obstacle,
+                base_T_obstacle,
+            )
             .min(
                 distance(
                     &pose_from_isometry(&palm_pose),

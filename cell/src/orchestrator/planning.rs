@@ -79,8 +79,8 @@ pub enum Motion {
     MoveJ(Joints, JointMotion),
     /// Straight-line TCP move.
     MoveL(Isometry3<f64>, LinearMotion),
-    /// Open the gripper.
-    Open,
+    /// Open the fingers to this far apart, metres.
+    Open(f64),
     /// Close the gripper.
     Close,
 }
@@ -292,13 +292,14 @@ impl Planner<'_> {
         Ok(())
     }
 
-    /// Checks that the open fingers keep `transit_margin` from every part lying in the feeder
-    /// (`feeder`: estimated poses, the part to pick included) along a joint move.
+    /// Checks that the fingers, `opening` metres apart, keep `transit_margin` from every part
+    /// lying in the feeder (`feeder`: estimated poses, the part to pick included) along a joint
+    /// move.
     fn check_fingers(
         &self,
         waypoint: &'static str,
-        from: &Joints,
-        to: &Joints,
+        (from, to): (&Joints, &Joints),
+        opening: f64,
         feeder: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<(), PlanError> {
         let k = self.knowledge;
@@ -308,7 +309,7 @@ impl Planner<'_> {
             let q: Joints = std::array::from_fn(|j| from[j] + s * (to[j] - from[j]));
             let tcp = k.kinematics.forward_tcp(&q);
             for (g, base_T_part) in feeder {
-                let d = k.finger_distance(&tcp, g.hull.as_ref(), base_T_part);
+                let d = k.finger_distance(&tcp, opening, g.hull.as_ref(), base_T_part);
                 if d < self.config.transit_margin {
                     return Err(PlanError::Collision {
                         waypoint,
@@ -370,8 +371,8 @@ impl Planner<'_> {
         Err(first_error.expect("ik_solutions is never empty"))
     }
 
-    /// The pick of `selection` starting from joints `start`: one joint move to just above the
-    /// grasp when that path is checked clear of the table, the placed parts and every part in
+    /// The pick of `selection` starting from joints `start`: the fingers opened to the part,
+    /// one joint move to just above the grasp when that path is checked clear of the table, the placed parts and every part in
     /// the `feeder` (estimated poses, the one to pick included); otherwise a joint move to the
     /// approach pose and fast straight down. Then slow to the grasp, close, lift.
     pub fn pick(
@@ -396,8 +397,10 @@ impl Planner<'_> {
             &approach,
             pre,
             (None, placed),
-            |q_pre| self.check_fingers("pre-grasp", start, q_pre, feeder),
+            |q_pre| self.check_fingers("pre-grasp", (start, q_pre), selection.opening, feeder),
         )?;
+        // The fingers open to the part (no wider) before the arm leaves.
+        motions.insert(0, ("open fingers", Motion::Open(selection.opening)));
         let q_grasp = self.ik("grasp", &grasp, &q_pre)?;
         self.check_arm("grasp", &q_grasp)?;
         motions.extend([
@@ -411,15 +414,15 @@ impl Planner<'_> {
         })
     }
 
-    /// The insertion of a held part (estimated `tcp_T_part`) into step `step`'s nominal target
-    /// moved by `correction` (in the insertion frame: identity for a first attempt), from joints
+    /// The insertion of a held part (estimated `tcp_T_part`, released by opening the fingers
+    /// `opening` apart) into step `step`'s nominal target moved by `correction` (in the insertion frame: identity for a first attempt), from joints
     /// `start` (the lift pose): joint move to the transfer pose, fast down to the pre-insert
     /// pose, slow insertion, release, retreat.
     #[allow(non_snake_case)]
     pub fn insert(
         &self,
         step: usize,
-        held: (&PartGeometry, &Isometry3<f64>),
+        (held, opening): ((&PartGeometry, &Isometry3<f64>), f64),
         correction: &Isometry3<f64>,
         start: &Joints,
         placed: &[(&PartGeometry, Isometry3<f64>)],
@@ -457,7 +460,7 @@ impl Planner<'_> {
         self.check_arm("insert", &q_insert)?;
         motions.extend([
             ("insert", Motion::MoveL(insert, s.slow)),
-            ("release", Motion::Open),
+            ("release", Motion::Open(opening)),
             ("retreat", Motion::MoveL(transfer, s.fast)),
         ]);
         Ok(Plan {

@@ -128,6 +128,8 @@ pub struct Selection {
     pub base_T_grasp: Isometry3<f64>,
     /// The part in the TCP frame as estimated at the grasp.
     pub tcp_T_part: Isometry3<f64>,
+    /// How far apart the fingers open for it, metres ([`CellKnowledge::grasp_opening`]).
+    pub opening: f64,
     /// Largest joint travel from the arm's joints → grasp plus grasp → insertion, radians (the
     /// tie-breaker).
     pub travel: f64,
@@ -180,13 +182,14 @@ pub enum Neighbour {
     Unposed(String),
 }
 
-/// How near the open fingers of a TCP at `base_T_grasp` come to anything else on the table, and
-/// to what: every detection but the one with index `own` (its convex hull at its pose), and
-/// every part found but not posed; `None` when there is nothing else.
+/// How near the fingers of a TCP at `base_T_grasp`, open `opening` metres apart, come to
+/// anything else on the table, and to what: every detection but the one with index `own` (its
+/// convex hull at its pose), and every part found but not posed; `None` when there is nothing
+/// else.
 #[allow(non_snake_case)]
 pub fn nearest_to_fingers(
     knowledge: &CellKnowledge,
-    base_T_grasp: &Isometry3<f64>,
+    (base_T_grasp, opening): (&Isometry3<f64>, f64),
     own: usize,
     detections: &[DetectedPart],
     unposed: &[UnposedObstacle],
@@ -196,12 +199,12 @@ pub fn nearest_to_fingers(
         .filter(|n| n.index != own)
         .filter_map(|n| {
             let hull = knowledge.part(&n.part)?.hull.as_ref();
-            let distance = knowledge.finger_distance(base_T_grasp, hull, &n.base_T_part);
+            let distance = knowledge.finger_distance(base_T_grasp, opening, hull, &n.base_T_part);
             Some((distance, Neighbour::Posed(n.index)))
         });
     let base = Isometry3::identity();
     let found = unposed.iter().map(|u| {
-        let distance = knowledge.finger_distance(base_T_grasp, u.hull.as_ref(), &base);
+        let distance = knowledge.finger_distance(base_T_grasp, opening, u.hull.as_ref(), &base);
         (distance, Neighbour::Unposed(u.part.clone()))
     });
     posed.chain(found).min_by(|a, b| a.0.total_cmp(&b.0))
@@ -308,7 +311,14 @@ pub fn select(
             rejected.push((d.index, Rejection::Unreachable(why)));
             continue;
         }
-        let near = nearest_to_fingers(knowledge, &base_T_grasp, d.index, detections, unposed);
+        let opening = knowledge.grasp_opening(&d.part, &Vector3::from(grasp.closing_axis));
+        let near = nearest_to_fingers(
+            knowledge,
+            (&base_T_grasp, opening),
+            d.index,
+            detections,
+            unposed,
+        );
         if let Some((distance, neighbour)) = near
             && distance < config.finger_margin
         {
@@ -326,6 +336,7 @@ pub fn select(
             detection: d.clone(),
             base_T_grasp,
             tcp_T_part,
+            opening,
             travel,
         });
     }
@@ -410,7 +421,13 @@ mod tests {
                 0.0,
             )
             .unwrap();
-        let alone = nearest_to_fingers(k, &base_T_grasp, 0, std::slice::from_ref(&shell), &[]);
+        let alone = nearest_to_fingers(
+            k,
+            (&base_T_grasp, k.gripper().stroke),
+            0,
+            std::slice::from_ref(&shell),
+            &[],
+        );
         assert_eq!(alone, None, "the grasped part itself is not a neighbour");
         // 2 cm boxes, 9 mm tall (beside the fingers, which reach down to the grip height),
         // 5 cm out along the closing axis and 3 cm out across it.
@@ -427,11 +444,19 @@ mod tests {
             }
             UnposedObstacle::new(&turned, base_T_table).unwrap()
         };
-        let along = nearest_to_fingers(k, &base_T_grasp, 0, &[], &[box_at(0.05, 0.0)]).unwrap();
+        let along = nearest_to_fingers(
+            k,
+            (&base_T_grasp, k.gripper().stroke),
+            0,
+            &[],
+            &[box_at(0.05, 0.0)],
+        )
+        .unwrap();
         let outer_face = g.stroke / 2.0 + g.finger_thickness;
         assert!((along.0 - (0.04 - outer_face)).abs() < 1e-9, "{along:?}");
         let both = [box_at(0.05, 0.0), box_at(0.0, 0.03)];
-        let (distance, what) = nearest_to_fingers(k, &base_T_grasp, 0, &[], &both).unwrap();
+        let (distance, what) =
+            nearest_to_fingers(k, (&base_T_grasp, k.gripper().stroke), 0, &[], &both).unwrap();
         assert!(
             (distance - (0.02 - g.finger_width / 2.0)).abs() < 1e-9,
             "{distance}"
@@ -443,8 +468,14 @@ mod tests {
         let offset = Vector3::new(-0.012 * yaw.sin(), 0.012 * yaw.cos(), 0.0);
         near.table_T_part.translation.vector += offset;
         near.base_T_part = base_T_table * near.table_T_part;
-        let (d, what) =
-            nearest_to_fingers(k, &base_T_grasp, 0, &[shell.clone(), near], &both).unwrap();
+        let (d, what) = nearest_to_fingers(
+            k,
+            (&base_T_grasp, k.gripper().stroke),
+            0,
+            &[shell.clone(), near],
+            &both,
+        )
+        .unwrap();
         assert_eq!(what, Neighbour::Posed(1));
         assert!(d < 0.02 - g.finger_width / 2.0, "{d}");
     }

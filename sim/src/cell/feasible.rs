@@ -69,6 +69,9 @@ pub fn check_values(cell: &CellSpec, steps: &[AssemblyStep], noise: &NoiseSpec) 
         positive(&mut out, format!("cell.gripper.{k}"), v);
     }
     non_negative(&mut out, "cell.gripper.friction".into(), g.friction);
+    if let Some(m) = g.opening_margin {
+        non_negative(&mut out, "cell.gripper.opening_margin".into(), m);
+    }
     let f = &cell.feeder;
     for i in 0..2 {
         positive(&mut out, format!("cell.feeder.size[{i}]"), f.size[i]);
@@ -195,22 +198,32 @@ pub fn check_geometry(
             if axis.norm() == 0.0 {
                 continue;
             }
-            let axis = axis.normalize();
-            let (lo, hi) = mesh
-                .vertices
-                .iter()
-                .map(|p| p.coords.dot(&axis))
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), d| {
-                    (l.min(d), h.max(d))
-                });
-            if hi - lo > g.stroke {
+            let width = super::gripper::width_across(&mesh.vertices, &axis);
+            if width > g.stroke {
                 out.push((
                     key.clone(),
                     format!(
                         "part \"{name}\" is {:.2} mm wide across its grasp ({}) but the gripper \
                          opens only {:.2} mm",
-                        (hi - lo) * 1e3,
+                        width * 1e3,
                         grasp.stable_pose,
+                        g.stroke * 1e3
+                    ),
+                ));
+            } else if let Some(m) = g.opening_margin
+                && m >= 0.0
+                && width + 2.0 * m > g.stroke
+            {
+                out.push((
+                    "cell.gripper.opening_margin".into(),
+                    format!(
+                        "part \"{name}\" is {:.2} mm wide across its grasp ({}): with {:.2} mm \
+                         of room each side the fingers would open {:.2} mm, more than the {:.2} \
+                         mm stroke",
+                        width * 1e3,
+                        grasp.stable_pose,
+                        m * 1e3,
+                        (width + 2.0 * m) * 1e3,
                         g.stroke * 1e3
                     ),
                 ));

@@ -123,6 +123,9 @@ pub struct GraspCandidate<'a> {
 pub struct Grasp {
     /// The grasped instance.
     pub instance: u32,
+    /// The part's width between the closed jaws, metres.
+    #[serde(default)]
+    pub width: f64,
     /// True pose of the part in the TCP frame after closing.
     pub tcp_T_part: Isometry3<f64>,
     /// Offset of the part from the TCP across the closing axis before closing (TCP x), metres:
@@ -138,7 +141,19 @@ pub struct Grasp {
     pub residual_rotation: Vector3<f64>,
 }
 
-/// Closes the fingers at the true TCP pose `base_T_tcp` among `parts`.
+/// The width of a part (its `vertices` in the part frame) across the jaws closing along the
+/// unit `axis` (part frame), metres: what the fingers must open to at least.
+pub fn width_across(vertices: &[Point3<f64>], axis: &Vector3<f64>) -> f64 {
+    let (lo, hi) = vertices
+        .iter()
+        .map(|p| p.coords.dot(axis))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), d| {
+            (l.min(d), h.max(d))
+        });
+    (hi - lo).max(0.0)
+}
+
+/// Closes the fingers, open the full stroke, at the true TCP pose `base_T_tcp` among `parts`.
 #[allow(non_snake_case)]
 pub fn close(
     spec: &GripperSpec,
@@ -147,8 +162,21 @@ pub fn close(
     parts: &[GraspCandidate<'_>],
     rng: &mut impl Rng,
 ) -> Result<Grasp, GraspFailure> {
+    close_from(spec, spec.stroke, noise, base_T_tcp, parts, rng)
+}
+
+/// Closes the fingers, `opening` metres apart, at the true TCP pose `base_T_tcp` among `parts`.
+#[allow(non_snake_case)]
+pub fn close_from(
+    spec: &GripperSpec,
+    opening: f64,
+    noise: &NoiseSpec,
+    base_T_tcp: &Isometry3<f64>,
+    parts: &[GraspCandidate<'_>],
+    rng: &mut impl Rng,
+) -> Result<Grasp, GraspFailure> {
     let tcp_T_base = base_T_tcp.inverse();
-    let half_open = spec.stroke / 2.0;
+    let half_open = opening.min(spec.stroke) / 2.0;
     let half_w = spec.finger_width / 2.0;
     // The part between the fingers: material above the tips inside the opening.
     let mut best: Option<(f64, usize, [f64; 4])> = None;
@@ -347,6 +375,7 @@ pub fn close(
     );
     Ok(Grasp {
         instance,
+        width,
         tcp_T_part,
         uncorrected_offset: centre_x,
         yaw_before: yaw,

@@ -131,6 +131,8 @@ pub struct SimCell {
     /// Repeatability offset of the true TCP from the commanded one (base frame).
     tcp_error: Vector3<f64>,
     gripper_open: bool,
+    /// How far apart the fingers are now, metres.
+    opening: f64,
     feeder: Vec<FeederPart>,
     held: Option<Held>,
     placed: Vec<PlacedPart>,
@@ -142,6 +144,8 @@ pub struct SimCell {
     shakes: u32,
     /// Gripper opens and closes so far (each takes `cell.gripper.actuation_time`).
     gripper_actuations: u32,
+    /// Metres the fingers travelled so far this episode.
+    gripper_travel: f64,
     /// Clock time at which the parts of the last shake are at rest again.
     feeder_rest_at: f64,
     /// Whether captures are rendered images (learned perception) or the true scene.
@@ -164,6 +168,7 @@ impl SimCell {
             model.spec.calibration.as_ref(),
             &mut streams.calibration,
         );
+        let stroke = model.spec.gripper.stroke;
         let mut cell = Self {
             q: model.home,
             model,
@@ -173,6 +178,7 @@ impl SimCell {
             base_T_camera,
             tcp_error: Vector3::zeros(),
             gripper_open: true,
+            opening: stroke,
             feeder: Vec::new(),
             held: None,
             placed: Vec::new(),
@@ -183,6 +189,7 @@ impl SimCell {
             last_release: None,
             shakes: 0,
             gripper_actuations: 0,
+            gripper_travel: 0.0,
             feeder_rest_at: 0.0,
             renders_captures: false,
             feeder_renderer: IncrementalRenderer::new(),
@@ -317,10 +324,15 @@ impl SimCell {
         self.shakes
     }
 
-    /// Gripper actuations (opens and closes, each `cell.gripper.actuation_time` on the clock)
-    /// so far this episode.
+    /// Gripper actuations (opens and closes, each timed by the fingers' travel,
+    /// [`crate::config::GripperSpec::travel_time`]) so far this episode.
     pub fn gripper_actuations(&self) -> u32 {
         self.gripper_actuations
+    }
+
+    /// Metres the fingers travelled so far this episode (opening and closing).
+    pub fn gripper_travel(&self) -> f64 {
+        self.gripper_travel
     }
 
     /// The true base-frame pose where step `step`'s part goes, as the world now is: on the
@@ -704,16 +716,40 @@ impl SimCell {
         }
     }
 
-    /// One gripper open or close on the clock.
-    fn actuate_gripper(&mut self) {
-        self.clock += self.model.spec.gripper.actuation_time;
+    /// One gripper open or close on the clock: the fingers travel from the present opening to
+    /// `to` ([`crate::config::GripperSpec::travel_time`]).
+    fn actuate_gripper(&mut self, to: f64) {
+        let g = &self.model.spec.gripper;
+        self.clock += g.travel_time(to - self.opening);
+        self.gripper_travel += (to - self.opening).abs();
+        self.opening = to;
         self.gripper_actuations += 1;
     }
 
-    /// Opens the gripper now (the `Robot::open_gripper` body); a held part is released where it
-    /// is and the release is reported.
+    /// How far apart the fingers are now, metres.
+    pub fn finger_opening(&self) -> f64 {
+        self.opening
+    }
+
+    /// Opens the gripper the full stroke now; see [`Self::open_gripper_to_sync`].
     pub fn open_gripper_sync(&mut self) {
-        self.actuate_gripper();
+        self.open_gripper_to_sync(self.model.spec.gripper.stroke);
+    }
+
+    /// Moves the fingers to `width` apart now (the `Robot::open_gripper_to` body; at most the
+    /// stroke, and with a part between them no closer than they hold it); a held part is
+    /// released where it is and the release is reported.
+    pub fn open_gripper_to_sync(&mut self, width: f64) {
+        let stroke = self.model.spec.gripper.stroke;
+        let mut to = if width.is_finite() {
+            width.clamp(0.0, stroke)
+        } else {
+            stroke
+        };
+        if self.held.is_some() {
+            to = to.max(self.opening);
+        }
+        self.actuate_gripper(to);
         self.gripper_open = true;
         // Released above its target: it falls in, scored from where it was let go.
         if self.held.as_ref().is_some_and(|h| h.inserted.is_none()) {
@@ -755,8 +791,8 @@ impl SimCell {
     /// Closes the gripper now (the `Robot::close_gripper` body); see [`Self::last_grasp`].
     pub fn close_gripper_sync(&mut self) {
         self.wait_for_feeder();
-        self.actuate_gripper();
         if !self.gripper_open {
+            self.actuate_gripper(self.opening);
             return;
         }
         self.gripper_open = false;
@@ -773,8 +809,9 @@ impl SimCell {
                 })
             })
             .collect();
-        let result = gripper::close(
+        let result = gripper::close_from(
             &self.model.spec.gripper,
+            self.opening,
             &self.model.noise,
             &tcp,
             &candidates,
@@ -813,6 +850,9 @@ impl SimCell {
                 inserted: None,
             });
         }
+        // The fingers stop on the part, or close fully on nothing.
+        let closed_to = result.as_ref().map_or(0.0, |g| g.width);
+        self.actuate_gripper(closed_to.min(self.opening));
         self.last_grasp = Some(result);
     }
 
@@ -880,6 +920,18 @@ impl Robot for SimCell {
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
         Box::pin(async move {
             self.open_gripper_sync();
+            Ok(())
+        })
+    }
+
+    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            if !(width.is_finite() && width >= 0.0) {
+                return Err(RobotError::Rejected {
+                    detail: format!("finger opening {width} m is not a width"),
+                });
+            }
+            self.open_gripper_to_sync(width);
             Ok(())
         })
     }
