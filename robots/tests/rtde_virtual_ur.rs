@@ -1547,3 +1547,255 @@ fn issue43_item4_move_j_path_blends_and_overlapping_blends_are_skipped_with_a_wa
     assert!(u.messages().contains("movep"), "{}", u.messages());
     assert!(diff(&u.q(), &HOME) < 1e-12);
 }
+
+/// Issue 43: the wrist's force/torque sensor, force mode, contact detection and hand-guiding
+/// through ur_rtde's control script, against the table plane under the base (z = 0).
+mod issue43 {
+    use super::ur_rtde_handshake::{HOME, UrRtde, max_diff};
+    use super::urcmd;
+    use robots::kinematics::UrKinematics;
+    use robots::virtual_ur::dynamics::ArmDynamics;
+    use robots::virtual_ur::force::{
+        CONTACT_DETECTION_FORCE, UR5E_FORCE_PRECISION, UR5E_TORQUE_PRECISION, contact_torques,
+    };
+    use robots::virtual_ur::registers::Payload;
+
+    /// The TCP (the flange: no TCP set) `height` m above the table, under HOME's pose.
+    fn above_table(u: &mut UrRtde, height: f64) {
+        let mut p = u.tcp();
+        p[2] = height;
+        assert!(u.move_l(p, 0.25), "moveL to {height} m above the table");
+        assert!((u.tcp()[2] - height).abs() < 1e-9);
+    }
+
+    /// The mean `actual_TCP_force` over `n` cycles.
+    fn mean_force(u: &mut UrRtde, n: usize) -> [f64; 6] {
+        let mut mean = [0.0; 6];
+        for _ in 0..n {
+            u.ticks(1);
+            let f = u.c.snapshot().tcp_force;
+            for i in 0..6 {
+                mean[i] += f[i] / n as f64;
+            }
+        }
+        mean
+    }
+
+    /// ur_rtde's forceMode registers: type (int 1), selection (ints 2-7); task frame (doubles
+    /// 0-5), wrench (6-11), limits (12-17).
+    fn force_mode(u: &mut UrRtde, selection: [i32; 6], wrench: [f64; 6], limits: [f64; 6]) -> bool {
+        let mut ints = vec![(1, 2)];
+        ints.extend(selection.iter().enumerate().map(|(i, s)| (2 + i, *s)));
+        let mut d = vec![0.0; 6];
+        d.extend(wrench);
+        d.extend(limits);
+        u.send(urcmd::FORCE_MODE, &ints, &d)
+    }
+
+    #[test]
+    fn free_of_contact_the_sensor_reads_only_its_noise_and_the_joints_no_contact_torque() {
+        let mut u = UrRtde::start();
+        assert!(u.move_j(super::TARGET_Q));
+        let n = 500;
+        let mean = mean_force(&mut u, n);
+        for (i, m) in mean.iter().enumerate() {
+            let precision = if i < 3 {
+                UR5E_FORCE_PRECISION
+            } else {
+                UR5E_TORQUE_PRECISION
+            };
+            // The mean is the sensor's bias: within half the precision.
+            assert!(m.abs() <= precision / 2.0 + 1e-9, "axis {i}: {m}");
+        }
+        assert!(u.send(urcmd::GET_JOINT_TORQUES, &[], &[]));
+        u.ticks(2);
+        assert_eq!(u.out_doubles(), [0.0; 6]);
+        // zeroFtSensor removes the bias: the mean reading is then within 4σ/√n of zero.
+        assert!(u.send(urcmd::ZERO_FT_SENSOR, &[], &[]));
+        let mean = mean_force(&mut u, n);
+        let sigma = UR5E_FORCE_PRECISION / 6.0;
+        assert!(mean[2].abs() < 4.0 * sigma / (n as f64).sqrt(), "{mean:?}");
+    }
+
+    #[test]
+    fn force_mode_pushes_down_on_the_table_and_holds_the_commanded_force() {
+        let mut u = UrRtde::start();
+        above_table(&mut u, 0.01);
+        let start = u.tcp();
+        // Push down with 10 N along base z, compliant in z only, at most 5 cm/s.
+        let limits = [0.1, 0.1, 0.05, 0.17, 0.17, 0.17];
+        assert!(force_mode(
+            &mut u,
+            [0, 0, 1, 0, 0, 0],
+            [0.0, 0.0, -10.0, 0.0, 0.0, 0.0],
+            limits
+        ));
+        // Free space: down at no more than the limit, and only in z.
+        let mut fastest: f64 = 0.0;
+        for _ in 0..50 {
+            u.ticks(1);
+            let v = u.c.snapshot().arm.tcp_speed;
+            fastest = fastest.max(v[2].abs());
+            // (The reported TCP speed is a finite difference through the kinematics: 1e-6 m/s
+            // of rounding.)
+            assert!(v[0].abs() < 1e-5 && v[1].abs() < 1e-5, "{v:?}");
+        }
+        assert!(
+            fastest <= 0.05 + 1e-6,
+            "{fastest} m/s over the 0.05 m/s limit"
+        );
+        u.seconds(1.5);
+        assert!(u.running(), "{}", u.messages());
+        // On the table: the true contact force is the commanded one, the reading within the
+        // sensor's precision (mean of 100 readings: the bias stays), x and y where they were.
+        let truth = u.c.external_wrench();
+        assert!((truth[2] - 10.0).abs() < 0.05, "{truth:?}");
+        let reading = mean_force(&mut u, 100);
+        assert!(
+            (reading[2] - 10.0).abs() < UR5E_FORCE_PRECISION,
+            "{reading:?}"
+        );
+        let tcp = u.tcp();
+        assert!(max_diff(&tcp[..2], &start[..2]) < 1e-9, "{tcp:?}");
+        assert!((tcp[2] + 10.0 / robots::virtual_ur::force::TABLE_STIFFNESS).abs() < 2e-6);
+        // The joints carry the contact: getJointTorques = −Jᵀ·F, and the currents are the
+        // gravity and contact torques over the torque constants.
+        assert!(u.send(urcmd::GET_JOINT_TORQUES, &[], &[]));
+        u.ticks(1);
+        let q = u.q();
+        let kin = UrKinematics::ur5e();
+        let expected = contact_torques(&kin.jacobian(&q), &u.c.external_wrench());
+        assert!(max_diff(&u.out_doubles(), &expected) < 1e-9);
+        assert!(expected.iter().any(|t| t.abs() > 1.0), "{expected:?}");
+        let d = ArmDynamics::ur5e();
+        let g = d.gravity_torques(&kin.dh, &q, &Payload::default());
+        let total: [f64; 6] = std::array::from_fn(|i| g[i] + expected[i]);
+        assert!(max_diff(&u.c.snapshot().actual_current, &d.currents(&total)) < 1e-9);
+        // forceModeStop: the arm stops and stays.
+        assert!(u.send(urcmd::FORCE_MODE_STOP, &[], &[]));
+        let q = u.q();
+        u.seconds(0.5);
+        assert!(max_diff(&u.q(), &q) < 1e-12);
+        assert!(u.move_j(HOME), "a move after forceModeStop");
+    }
+
+    #[test]
+    fn force_mode_gain_and_damping_setters_check_their_range() {
+        let mut u = UrRtde::start();
+        assert!(u.send(urcmd::FORCE_MODE_SET_DAMPING, &[], &[0.5]));
+        assert!(u.send(urcmd::FORCE_MODE_SET_GAIN_SCALING, &[], &[1.5]));
+        assert!(u.running());
+        assert!(!u.send(urcmd::FORCE_MODE_SET_GAIN_SCALING, &[], &[2.5]));
+        assert!(!u.running());
+        assert!(u.messages().contains("gain_scaling"), "{}", u.messages());
+        // A move during force mode is refused loudly (the model does not combine them).
+        let mut u = UrRtde::start();
+        assert!(force_mode(&mut u, [0, 0, 1, 0, 0, 0], [0.0; 6], [0.1; 6]));
+        u.ticks(3);
+        assert!(!u.move_j(super::TARGET_Q));
+        assert!(u.messages().contains("forceModeStop"), "{}", u.messages());
+    }
+
+    #[test]
+    fn move_until_contact_stops_at_the_table() {
+        let mut u = UrRtde::start();
+        above_table(&mut u, 0.02);
+        // moveUntilContact(xd, direction, acceleration): xd doubles 0-5, direction 6-11, acc 12.
+        let mut d = vec![0.0, 0.0, -0.02, 0.0, 0.0, 0.0];
+        d.extend([0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.5]);
+        assert!(
+            u.send(urcmd::MOVE_UNTIL_CONTACT, &[], &d),
+            "{}",
+            u.messages()
+        );
+        assert!(u.running());
+        // Back on the point where the contact began: within 1 mm above the table, at rest,
+        // touching nothing.
+        let z = u.tcp()[2];
+        assert!((0.0..1e-3).contains(&z), "stopped at z = {z} m");
+        assert!(u.qd().iter().all(|v| *v == 0.0));
+        assert!(u.c.external_wrench()[2] < CONTACT_DETECTION_FORCE);
+        // toolContact now: no contact.
+        assert!(u.send(urcmd::TOOL_CONTACT, &[], &[0.0, 0.0, -1.0, 0.0, 0.0, 0.0]));
+        u.ticks(2);
+        assert_eq!(u.out_int1(), 0);
+    }
+
+    #[test]
+    fn tool_contact_counts_the_cycles_since_the_contact_began() {
+        let mut u = UrRtde::start();
+        above_table(&mut u, 0.001);
+        assert!(u.speed_l([0.0, 0.0, -0.01, 0.0, 0.0, 0.0], 1.0));
+        // 1 mm at 1 cm/s, then 0.1 mm more for the 5 N: about 0.11 s.
+        u.seconds(0.2);
+        assert!(u.send(urcmd::TOOL_CONTACT, &[], &[0.0, 0.0, -1.0, 0.0, 0.0, 0.0]));
+        u.ticks(1);
+        let back = u.out_int1();
+        assert!(back > 0, "contact not detected at z = {}", u.tcp()[2]);
+        // The joints that many cycles back put the TCP at (or just above) the table.
+        assert!(u.send(urcmd::GET_JOINT_POSITIONS_HISTORY, &[(1, back)], &[]));
+        u.ticks(1);
+        let q = u.out_doubles();
+        let z = UrKinematics::ur5e().forward_tcp(&q).translation.z;
+        assert!(
+            (-1e-9..5e-5).contains(&z),
+            "history {back} cycles back: z = {z}"
+        );
+        // Contact from above only: a direction up sees none.
+        assert!(u.send(urcmd::TOOL_CONTACT, &[], &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]));
+        u.ticks(1);
+        assert_eq!(u.out_int1(), 0);
+    }
+
+    #[test]
+    fn teach_mode_moves_nothing_on_its_own_and_end_teach_mode_returns_to_normal() {
+        let mut u = UrRtde::start();
+        assert!(u.move_j(super::TARGET_Q));
+        assert!(u.send(urcmd::TEACH_MODE, &[], &[]));
+        let q = u.q();
+        u.seconds(1.0);
+        assert_eq!(u.q(), q);
+        assert!(u.send(urcmd::END_TEACH_MODE, &[], &[]));
+        assert!(u.move_j(HOME), "{}", u.messages());
+        assert!(max_diff(&u.q(), &HOME) < 1e-9);
+        // A move during teach mode fails loudly.
+        assert!(u.send(urcmd::TEACH_MODE, &[], &[]));
+        assert!(!u.move_j(super::TARGET_Q));
+        assert!(u.messages().contains("endTeachMode"), "{}", u.messages());
+        assert!(max_diff(&u.q(), &HOME) < 1e-12);
+    }
+
+    #[test]
+    fn freedrive_reports_its_status_and_moves_nothing() {
+        let mut u = UrRtde::start();
+        let mut ints: Vec<(usize, i32)> = (1..7).map(|i| (i, 1)).collect();
+        assert!(u.send(urcmd::FREEDRIVE_MODE, &ints, &[0.0; 6]));
+        assert!(u.send(urcmd::GET_FREEDRIVE_STATUS, &[], &[]));
+        assert_eq!(u.out_int1(), 1);
+        u.seconds(0.5);
+        assert!(max_diff(&u.q(), &HOME) < 1e-12);
+        assert!(u.send(urcmd::END_FREEDRIVE_MODE, &[], &[]));
+        assert!(u.send(urcmd::GET_FREEDRIVE_STATUS, &[], &[]));
+        assert_eq!(u.out_int1(), 0);
+        // A free-axes entry other than 0 or 1 is refused.
+        ints[0] = (1, 3);
+        assert!(!u.send(urcmd::FREEDRIVE_MODE, &ints, &[0.0; 6]));
+    }
+
+    #[test]
+    fn a_move_through_the_table_protective_stops_at_the_force_limit() {
+        let mut u = UrRtde::start();
+        above_table(&mut u, 0.01);
+        let mut p = u.tcp();
+        p[2] = -0.02;
+        u.move_l(p, 0.05);
+        assert_eq!(
+            u.c.snapshot().safety_mode,
+            robots::robot::SafetyStatus::ProtectiveStop
+        );
+        let z = u.tcp()[2];
+        // 150 N at 50 kN/m: 3 mm deep, and one cycle's travel more at most.
+        assert!(z < -2.9e-3 && z > -3.2e-3, "stopped at {z}");
+        assert!(u.messages().contains("force limit"), "{}", u.messages());
+    }
+}

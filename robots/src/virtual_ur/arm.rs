@@ -174,6 +174,12 @@ pub trait ArmModel: Send + 'static {
     fn dynamics(&self) -> Option<ArmDynamics> {
         ArmDynamics::for_dh(&self.kinematics().dh)
     }
+    /// The external wrench on the tool (base frame, at the TCP: force N, moment N·m) when the
+    /// model simulates its own contacts (a simulated cell's parts); `None` lets the controller's
+    /// contact environment decide (the table plane, or nothing).
+    fn external_wrench(&self) -> Option<[f64; 6]> {
+        None
+    }
     /// Seconds the device on output `pin` needs to act after a change (a gripper's stroke).
     /// Programs do not wait for it (a real one cannot know it): ours sleeps the wait its client
     /// sends, and the controller warns when that is shorter than this.

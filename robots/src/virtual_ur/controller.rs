@@ -2,6 +2,9 @@
 //! loop; and the RTDE variable mapping (it implements [`crate::rtde::server::Controller`]).
 
 use super::arm::{ArmCommand, ArmError, ArmModel, ArmState};
+use super::force::{
+    ContactEnvironment, ContactPlane, FtNoise, FtSensorState, PROTECTIVE_STOP_FORCE,
+};
 use super::programs::{
     CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram, notify_output_changes,
     set_digital_output,
@@ -31,6 +34,10 @@ pub const PROGRAM_STOP_DECELERATION: f64 = 3.0;
 
 /// Messages kept by [`VirtualController::messages`].
 pub const MAX_TEXT_LOG: usize = 64;
+
+/// Seed of the wrist sensor's bias and noise unless [`VirtualController::set_sensor_noise`]
+/// replaces it: every run of the virtual controller reads the same numbers.
+pub const DEFAULT_SENSOR_SEED: u64 = 0x5E45_0E5E;
 
 /// Control cycles of actual joint positions the controller keeps for
 /// `get_actual_joint_positions_history` (1 s at 500 Hz; a modelled buffer size).
@@ -88,6 +95,11 @@ pub struct Snapshot {
     pub target_current: [f64; 6],
     /// Motor currents (A) at the actual joints (`actual_current`).
     pub actual_current: [f64; 6],
+    /// The external wrench as the wrist sensor reads it (`actual_TCP_force`: base frame, at the
+    /// TCP, payload compensated, with the sensor's noise).
+    pub tcp_force: [f64; 6],
+    /// The sensor's raw reading (`ft_raw_wrench`: flange frame, the payload's weight included).
+    pub ft_raw_wrench: [f64; 6],
 }
 
 impl Snapshot {
@@ -161,6 +173,8 @@ enum Quantity {
     TargetMoment,
     TargetCurrent,
     ActualCurrent,
+    ActualTcpForce,
+    FtRawWrench,
 }
 
 const QUANTITIES: &[(&str, Quantity)] = &[
@@ -201,6 +215,8 @@ const QUANTITIES: &[(&str, Quantity)] = &[
     ("target_moment", Quantity::TargetMoment),
     ("target_current", Quantity::TargetCurrent),
     ("actual_current", Quantity::ActualCurrent),
+    ("actual_TCP_force", Quantity::ActualTcpForce),
+    ("ft_raw_wrench", Quantity::FtRawWrench),
 ];
 
 // Output key kinds (high 16 bits) and input key kinds.
@@ -333,6 +349,10 @@ pub(crate) struct Core {
     pub history: VecDeque<Joints>,
     /// The text of the newest accepted program, for dashboard `play`.
     pub loaded_script: Option<String>,
+    /// What the tool touches when the arm model does not say ([`ArmModel::external_wrench`]).
+    pub environment: ContactEnvironment,
+    /// The wrist's force/torque sensor.
+    pub sensor: FtSensorState,
 }
 
 /// An armed RTDE watchdog (`rtde_set_watchdog(..., "stop")`).
@@ -392,6 +412,7 @@ impl Core {
             payload: &mut self.payload,
             history: &self.history,
             warnings: Vec::new(),
+            sensor: &mut self.sensor,
         };
         let result = f(program, &mut io);
         let (protective_stop, runtime_error, watchdog, warnings) = (
@@ -451,6 +472,8 @@ impl VirtualController {
             watchdog: None,
             history: VecDeque::with_capacity(HISTORY_LEN),
             loaded_script: None,
+            environment: ContactEnvironment::Plane(ContactPlane::table()),
+            sensor: FtSensorState::new(FtNoise::ur5e(DEFAULT_SENSOR_SEED)),
         };
         let snapshot = Arc::new(Self::snapshot_of(&core));
         VirtualController {
@@ -469,11 +492,14 @@ impl VirtualController {
 
     fn snapshot_of(core: &Core) -> Snapshot {
         let arm = core.arm.state();
+        // The joints hold gravity and, through the Jacobian's transpose, what the tool touches.
+        let contact = core.sensor.joint_torques;
+        let with_contact = |g: Joints| -> Joints { std::array::from_fn(|i| g[i] + contact[i]) };
         let (target_moment, target_current, actual_current) = match core.arm.dynamics() {
             Some(d) => {
                 let dh = &core.arm.kinematics().dh;
-                let target = d.gravity_torques(dh, &arm.target_q, &core.payload);
-                let actual = d.gravity_torques(dh, &arm.q, &core.payload);
+                let target = with_contact(d.gravity_torques(dh, &arm.target_q, &core.payload));
+                let actual = with_contact(d.gravity_torques(dh, &arm.q, &core.payload));
                 (target, d.currents(&target), d.currents(&actual))
             }
             None => ([0.0; 6], [0.0; 6], [0.0; 6]),
@@ -492,7 +518,49 @@ impl VirtualController {
             target_moment,
             target_current,
             actual_current,
+            tcp_force: core.sensor.tcp_force,
+            ft_raw_wrench: core.sensor.raw,
         }
+    }
+
+    /// Reads the wrist sensor for this cycle: the arm model's contact wrench, or the contact
+    /// environment's at the TCP.
+    fn sense(core: &mut Core) {
+        let q = core.arm.state().q;
+        let kinematics = core.arm.kinematics();
+        let tcp = kinematics.forward_tcp(&q);
+        let flange = kinematics.forward_flange(&q);
+        let jacobian = kinematics.jacobian(&q);
+        let external = core
+            .arm
+            .external_wrench()
+            .unwrap_or_else(|| core.environment.wrench_at(&tcp));
+        core.sensor.update(
+            external,
+            &tcp,
+            &flange,
+            &jacobian,
+            core.payload.mass,
+            &core.payload.cog,
+        );
+    }
+
+    /// Sets what the tool touches when the arm model does not simulate contacts itself.
+    pub fn set_contact_environment(&self, environment: ContactEnvironment) {
+        let mut core = self.lock();
+        core.environment = environment;
+        Self::sense(&mut core);
+    }
+
+    /// Replaces the wrist sensor's reading error (a seeded [`FtNoise`], or [`FtNoise::ideal`]).
+    pub fn set_sensor_noise(&self, noise: FtNoise) {
+        self.lock().sensor = FtSensorState::new(noise);
+    }
+
+    /// The true external wrench on the tool this cycle (base frame, at the TCP), without the
+    /// sensor's error.
+    pub fn external_wrench(&self) -> [f64; 6] {
+        self.lock().sensor.external
     }
 
     /// The newest snapshot.
@@ -521,8 +589,19 @@ impl VirtualController {
             }
             let q = core.arm.state().q;
             core.history.push_front(q);
+            Self::sense(core);
             // A collision reported by the arm model stops the arm like a real controller.
             let mut protective_stop = matches!(arm_error, Some(ArmError::ProtectiveStop(_)));
+            let e = &core.sensor.external;
+            let force = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+            if can_move && force > PROTECTIVE_STOP_FORCE {
+                let why = format!(
+                    "protective stop: the tool pushes with {force:.0} N, over the {PROTECTIVE_STOP_FORCE:.0} N force limit"
+                );
+                tracing::warn!("{why}");
+                core.log(why);
+                protective_stop = true;
+            }
             if core.runtime_state == RuntimeState::Playing
                 && let Some(call) = core.call_program(dt, arm_error, |p, io| (p.step(io), p.name()))
             {
@@ -919,6 +998,8 @@ impl Controller for VirtualController {
                     Quantity::TargetMoment => Value::Vector6d(s.target_moment),
                     Quantity::TargetCurrent => Value::Vector6d(s.target_current),
                     Quantity::ActualCurrent => Value::Vector6d(s.actual_current),
+                    Quantity::ActualTcpForce => Value::Vector6d(s.tcp_force),
+                    Quantity::FtRawWrench => Value::Vector6d(s.ft_raw_wrench),
                 }
             }
         }

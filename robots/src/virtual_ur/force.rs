@@ -265,6 +265,15 @@ impl ForceMode {
         })
     }
 
+    /// Whether `other` is the same `force_mode` call (the script re-sends it every cycle).
+    pub fn same_command(&self, other: &ForceMode) -> bool {
+        self.task_frame == other.task_frame
+            && self.selection == other.selection
+            && self.wrench == other.wrench
+            && self.kind == other.kind
+            && self.limits == other.limits
+    }
+
     /// The task frame's rotation now, for the TCP at `base_T_tcp` moving at `tcp_velocity`
     /// (base frame, m/s).
     #[allow(non_snake_case)]
@@ -378,12 +387,11 @@ mod tests {
                 mean[i] += x[i] / n as f64;
             }
         }
-        for i in 0..6 {
+        for (i, m) in mean.iter().enumerate() {
             let se = 4.0 * a.sigma[i] / (n as f64).sqrt();
             assert!(
-                (mean[i] - a.bias[i]).abs() < se,
-                "axis {i}: mean {} bias {}",
-                mean[i],
+                (m - a.bias[i]).abs() < se,
+                "axis {i}: mean {m} bias {}",
                 a.bias[i]
             );
         }
@@ -464,7 +472,7 @@ mod tests {
     #[test]
     fn contact_torques_are_the_jacobian_transpose() {
         let k = crate::kinematics::UrKinematics::ur5e();
-        let q = [0.3, -1.4, 1.5, -1.7, -1.5708, 0.2];
+        let q = [0.3, -1.4, 1.5, -1.7, -std::f64::consts::FRAC_PI_2, 0.2];
         let j = k.jacobian(&q);
         let t = contact_torques(&j, &[0.0, 0.0, 10.0, 0.0, 0.0, 0.0]);
         // Joint 1's axis is vertical: a vertical force has no moment about it.
@@ -474,5 +482,103 @@ mod tests {
         let v = j * qd;
         let work: f64 = (0..6).map(|i| t[i] * qd[i]).sum();
         assert!((work + 10.0 * v[2]).abs() < 1e-9);
+    }
+}
+
+/// Contact force (N) beyond which the arm protective-stops: UR's default safety force limit.
+pub const PROTECTIVE_STOP_FORCE: f64 = 150.0;
+
+/// The controller's view of the wrist sensor, updated every control cycle.
+#[derive(Debug, Clone)]
+pub struct FtSensorState {
+    /// The sensor's reading error.
+    pub noise: FtNoise,
+    /// What `zero_ftsensor` subtracts from `actual_TCP_force` (the true wrench and the bias when
+    /// it was zeroed).
+    pub zero: [f64; 6],
+    /// The true external wrench on the tool (base frame, at the TCP).
+    pub external: [f64; 6],
+    /// Consecutive control cycles (this one included) in which the tool has been touching
+    /// something; 0 when free.
+    pub contact_cycles: u32,
+    /// The joint torques the contact loads the joints with ([`contact_torques`]).
+    pub joint_torques: Joints,
+    /// `actual_TCP_force`: the external wrench as the sensor reads it, payload compensated.
+    pub tcp_force: [f64; 6],
+    /// `ft_raw_wrench`: the sensor's raw reading in the flange frame about the flange, the
+    /// payload's weight included.
+    pub raw: [f64; 6],
+}
+
+impl FtSensorState {
+    /// A sensor with this reading error, touching nothing.
+    pub fn new(noise: FtNoise) -> FtSensorState {
+        FtSensorState {
+            noise,
+            zero: [0.0; 6],
+            external: [0.0; 6],
+            contact_cycles: 0,
+            joint_torques: [0.0; 6],
+            tcp_force: [0.0; 6],
+            raw: [0.0; 6],
+        }
+    }
+
+    /// `zero_ftsensor()`: later `actual_TCP_force` readings are relative to the present wrench,
+    /// and the bias is gone.
+    pub fn zero(&mut self) {
+        self.zero = std::array::from_fn(|i| self.external[i] + self.noise.bias[i]);
+    }
+
+    /// One control cycle: the tool at `base_T_tcp` (flange at `base_T_flange`) meets
+    /// `external`, the Jacobian at the TCP is `jacobian`, the payload of `payload_mass` kg hangs
+    /// at `payload_cog` (flange frame).
+    #[allow(non_snake_case)]
+    pub fn update(
+        &mut self,
+        external: [f64; 6],
+        base_T_tcp: &Isometry3<f64>,
+        base_T_flange: &Isometry3<f64>,
+        jacobian: &Matrix6<f64>,
+        payload_mass: f64,
+        payload_cog: &[f64; 3],
+    ) {
+        let touching = external.iter().any(|v| *v != 0.0);
+        self.contact_cycles = if touching {
+            self.contact_cycles.saturating_add(1)
+        } else {
+            0
+        };
+        self.external = external;
+        self.joint_torques = contact_torques(jacobian, &external);
+        let e = self.noise.sample();
+        self.tcp_force = std::array::from_fn(|i| external[i] + e[i] - self.zero[i]);
+        // Raw: the contact moved to the flange, plus the payload's weight, in the flange frame.
+        let f = Vector3::new(external[0], external[1], external[2]);
+        let arm = base_T_tcp.translation.vector - base_T_flange.translation.vector;
+        let m = Vector3::new(external[3], external[4], external[5]) + arm.cross(&f);
+        let to_flange = base_T_flange.rotation.inverse();
+        let weight = to_flange * Vector3::new(0.0, 0.0, -super::dynamics::GRAVITY * payload_mass);
+        let cog = Vector3::new(payload_cog[0], payload_cog[1], payload_cog[2]);
+        let (f, m) = (to_flange * f + weight, to_flange * m + cog.cross(&weight));
+        self.raw = [
+            f.x + e[0],
+            f.y + e[1],
+            f.z + e[2],
+            m.x + e[3],
+            m.y + e[4],
+            m.z + e[5],
+        ];
+    }
+
+    /// Whether the tool touches something against `direction` (a TCP direction of motion, base
+    /// frame; all zeros: any direction) with more than [`CONTACT_DETECTION_FORCE`].
+    pub fn touches(&self, direction: &[f64; 3]) -> bool {
+        let f = Vector3::new(self.external[0], self.external[1], self.external[2]);
+        let d = Vector3::new(direction[0], direction[1], direction[2]);
+        match Unit::try_new(d, 1e-12) {
+            Some(d) => -f.dot(&d) > CONTACT_DETECTION_FORCE,
+            None => f.norm() > CONTACT_DETECTION_FORCE,
+        }
     }
 }

@@ -47,6 +47,11 @@ pub struct VirtualUrConfig {
     pub period: Duration,
     /// Time after a protective stop before it can be unlocked.
     pub unlock_delay: Duration,
+    /// What the tool touches when the arm model does not simulate contacts itself: the table
+    /// plane under the base by default.
+    pub contact: force::ContactEnvironment,
+    /// Seed of the wrist force/torque sensor's bias and noise.
+    pub sensor_seed: u64,
 }
 
 impl Default for VirtualUrConfig {
@@ -65,6 +70,8 @@ impl Default for VirtualUrConfig {
             },
             period: Duration::from_millis(2),
             unlock_delay: Duration::from_secs(5),
+            contact: force::ContactEnvironment::Plane(force::ContactPlane::table()),
+            sensor_seed: controller::DEFAULT_SENSOR_SEED,
         }
     }
 }
@@ -132,6 +139,8 @@ impl VirtualUr {
             config.period,
             config.unlock_delay,
         ));
+        controller.set_sensor_noise(force::FtNoise::ur5e(config.sensor_seed));
+        controller.set_contact_environment(config.contact);
         let faults = Arc::new(ServerFaults::default());
         let stop = Arc::new(AtomicBool::new(false));
         let loop_stats = Arc::new(LoopStats::default());

@@ -36,6 +36,8 @@ pub struct ProgramIo<'a> {
     pub history: &'a VecDeque<Joints>,
     /// Warnings the program raises (the controller logs them for clients, as a UR's popups).
     pub warnings: Vec<String>,
+    /// The wrist's force/torque sensor and what the tool touches this cycle.
+    pub sensor: &'a mut super::force::FtSensorState,
 }
 
 impl ProgramIo<'_> {

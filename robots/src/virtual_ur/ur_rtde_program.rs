@@ -5,6 +5,7 @@
 //! without the effect.
 
 use super::arm::{ArmCommand, ArmError};
+use super::force::{ForceMode, ForceTuning, MAX_GAIN_SCALING};
 use super::path::{PathMove, PathStatement, PathTarget, injected_path, settle_blends};
 use super::programs::{Program, ProgramIo, ProgramStep};
 use super::registers::Registers;
@@ -26,6 +27,14 @@ pub mod ur_rtde_cmd {
     pub const FORCE_MODE: i32 = 6;
     /// forceModeStop.
     pub const FORCE_MODE_STOP: i32 = 7;
+    /// teachMode.
+    pub const TEACH_MODE: i32 = 18;
+    /// endTeachMode.
+    pub const END_TEACH_MODE: i32 = 19;
+    /// forceModeSetDamping.
+    pub const FORCE_MODE_SET_DAMPING: i32 = 20;
+    /// forceModeSetGainScaling.
+    pub const FORCE_MODE_SET_GAIN_SCALING: i32 = 21;
     /// zeroFtSensor.
     pub const ZERO_FT_SENSOR: i32 = 8;
     /// speedJ (realtime).
@@ -92,6 +101,12 @@ pub mod ur_rtde_cmd {
     pub const GET_IK_DEFAULT: i32 = 46;
     /// isSteady.
     pub const IS_STEADY: i32 = 47;
+    /// moveUntilContact.
+    pub const MOVE_UNTIL_CONTACT: i32 = 51;
+    /// freedriveMode.
+    pub const FREEDRIVE_MODE: i32 = 52;
+    /// endFreedriveMode.
+    pub const END_FREEDRIVE_MODE: i32 = 53;
     /// getFreedriveStatus.
     pub const GET_FREEDRIVE_STATUS: i32 = 54;
     /// getActualToolFlangePose.
@@ -125,6 +140,42 @@ struct PathRun {
     poses: Vec<[f64; 6]>,
 }
 
+/// `moveUntilContact`'s phases, as the script's loop runs them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum UntilContact {
+    /// `speedl(xd, acc)` every cycle until `tool_contact(direction)` reports a contact.
+    Seeking {
+        xd: [f64; 6],
+        direction: [f64; 3],
+        accel: f64,
+    },
+    /// `stopl(3)`, then `movel` back to the joints of the cycle before the contact began.
+    Stopping { q: Joints },
+    /// The `movel` back to where the contact began.
+    Returning,
+}
+
+/// Speed (m/s) and acceleration (m/s²) of the script's `movel(q)` back to the contact point:
+/// URScript's defaults.
+const CONTACT_RETURN: (f64, f64) = (0.25, 1.2);
+
+/// Deceleration of the script's `stopl` when moveUntilContact meets contact (m/s²).
+const CONTACT_STOP_DECEL: f64 = 3.0;
+
+/// Deceleration of `force_mode_stop`'s `stopl(10)` (m/s²).
+const FORCE_STOP_DECEL: f64 = 10.0;
+
+/// ur_rtde's control script's force-mode tuning at start: `force_mode_set_gain_scaling(0.5)`,
+/// `force_mode_set_damping(0.025)`.
+const SCRIPT_TUNING: ForceTuning = ForceTuning {
+    damping: 0.025,
+    gain_scaling: 0.5,
+};
+
+/// Tool acceleration (m/s²) of force mode's speed commands: the kinematic arm takes each cycle's
+/// twist at once.
+const FORCE_MODE_ACCEL: f64 = 15.0;
+
 /// What a command leaves the handshake in.
 enum Outcome {
     /// Done at once: signal "done".
@@ -133,10 +184,28 @@ enum Outcome {
     Wait,
     /// stopScript: the program ends.
     Exit,
+    /// moveUntilContact: "done" when its loop ends ([`UrRtdeProgram::contact_step`]).
+    Contact,
 }
 
+/// Commands that move the arm (refused while it is hand-guided or in force mode).
+const MOTIONS: [i32; 12] = [
+    MOVE_J,
+    MOVE_J_IK,
+    MOVE_L,
+    MOVE_L_FK,
+    MOVE_PATH,
+    SPEED_J,
+    SPEED_L,
+    SERVO_J,
+    SERVO_L,
+    START_JOG,
+    MOVE_UNTIL_CONTACT,
+    FORCE_MODE,
+];
+
 /// The `rtde_control` program.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct UrRtdeProgram {
     executing: bool,
     waiting_for_motion: bool,
@@ -158,6 +227,50 @@ pub struct UrRtdeProgram {
     /// The command id the register held when the program started: left by a client whose
     /// program ended, it is not run again until the client writes the register.
     stale: Option<i32>,
+    /// The running force mode.
+    force_mode: Option<ForceMode>,
+    /// Force mode's damping and gain scaling.
+    tuning: ForceTuning,
+    /// The tool twist force mode commanded last cycle (base frame).
+    force_twist: [f64; 6],
+    /// Teach mode (`teach_mode`) or freedrive (`freedrive_mode`) is on: the arm is free to be
+    /// moved by hand, and no hand moves it here.
+    free: Option<FreeMode>,
+    /// A running moveUntilContact.
+    until_contact: Option<UntilContact>,
+}
+
+/// Which hand-guiding mode is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FreeMode {
+    /// `teach_mode()`.
+    Teach,
+    /// `freedrive_mode(free_axes, feature)`.
+    Freedrive,
+}
+
+impl Default for UrRtdeProgram {
+    fn default() -> Self {
+        UrRtdeProgram {
+            executing: false,
+            waiting_for_motion: false,
+            async_running: false,
+            async_writes: 0,
+            async_op: 0,
+            speed_joint: false,
+            jog_frame: None,
+            waypoint: None,
+            path: Vec::new(),
+            path_error: None,
+            path_run: None,
+            stale: None,
+            force_mode: None,
+            tuning: SCRIPT_TUNING,
+            force_twist: [0.0; 6],
+            free: None,
+            until_contact: None,
+        }
+    }
 }
 
 const READY: i32 = 1;
@@ -174,13 +287,8 @@ fn write_vector(regs: &mut Registers, first: usize, v: &[f64; 6]) {
 /// A runtime error for a command the model cannot do exactly.
 fn unsupported(cmd: i32) -> String {
     let what = match cmd {
-        FORCE_MODE | FORCE_MODE_STOP => "force mode",
-        18 | 19 => "teach mode",
-        20 | 21 => "force mode damping and gain",
         SERVO_C => "servoc",
         MOVE_PATH => "movePath (custom script code)",
-        51 => "moveUntilContact (the arm model senses no contact)",
-        52 | 53 => "freedrive mode",
         56 | 57 => "external force/torque sensor",
         59 => "set_gravity",
         62..=64 => "contact detection",
@@ -389,6 +497,7 @@ impl UrRtdeProgram {
 
     /// Runs one regular command.
     fn process(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> Result<Outcome, String> {
+        self.check_motion_allowed(cmd)?;
         let regs = &*io.regs;
         let target = vector(regs, 0);
         let second = vector(regs, 6);
@@ -419,8 +528,101 @@ impl UrRtdeProgram {
                 let pose = io.arm.forward(&target);
                 self.start_move(io, ArmCommand::MoveL { pose, speed, accel })
             }
-            // The model's force reading is always zero: zeroing it changes nothing.
-            ZERO_FT_SENSOR => Ok(Outcome::Done),
+            ZERO_FT_SENSOR => {
+                io.sensor.zero();
+                Ok(Outcome::Done)
+            }
+            FORCE_MODE_STOP => {
+                // end_force_mode(), then stopl(10).
+                self.force_mode = None;
+                self.force_twist = [0.0; 6];
+                Self::command(
+                    io,
+                    ArmCommand::StopL {
+                        decel: FORCE_STOP_DECEL,
+                    },
+                )?;
+                Ok(Outcome::Wait)
+            }
+            FORCE_MODE_SET_DAMPING | FORCE_MODE_SET_GAIN_SCALING => {
+                let value = regs.input_double[0];
+                let (name, max) = if cmd == FORCE_MODE_SET_DAMPING {
+                    ("force_mode_set_damping", 1.0)
+                } else {
+                    ("force_mode_set_gain_scaling", MAX_GAIN_SCALING)
+                };
+                if !(0.0..=max).contains(&value) {
+                    return Err(format!("{name}({value}): outside 0..{max}"));
+                }
+                if cmd == FORCE_MODE_SET_DAMPING {
+                    self.tuning.damping = value;
+                } else {
+                    self.tuning.gain_scaling = value;
+                }
+                Ok(Outcome::Done)
+            }
+            TEACH_MODE | FREEDRIVE_MODE => {
+                let mode = if cmd == TEACH_MODE {
+                    FreeMode::Teach
+                } else {
+                    // free_axes from registers 1-6 (0 or 1), the feature from 0-5.
+                    let axes: Vec<i32> = (1..7).map(|i| regs.input_int[i]).collect();
+                    if axes.iter().any(|a| !matches!(a, 0 | 1)) {
+                        return Err(format!("freedrive_mode: free axes {axes:?} are not 0 or 1"));
+                    }
+                    if !target.iter().all(|v| v.is_finite()) {
+                        return Err("freedrive_mode: feature not finite".into());
+                    }
+                    FreeMode::Freedrive
+                };
+                if self.force_mode.is_some() {
+                    return Err(
+                        "teach/freedrive mode during force mode: call forceModeStop first".into(),
+                    );
+                }
+                if io.arm.is_moving() {
+                    return Err("teach/freedrive mode while the arm moves: stop it first".into());
+                }
+                // Nobody pushes the arm here, and the payload it carries is the one set: it
+                // stays where it is until the mode ends.
+                self.free = Some(mode);
+                self.waypoint = None;
+                Ok(Outcome::Done)
+            }
+            END_TEACH_MODE | END_FREEDRIVE_MODE => {
+                let mode = if cmd == END_TEACH_MODE {
+                    FreeMode::Teach
+                } else {
+                    FreeMode::Freedrive
+                };
+                if self.free == Some(mode) {
+                    self.free = None;
+                }
+                Ok(Outcome::Done)
+            }
+            MOVE_UNTIL_CONTACT => {
+                let xd = target;
+                let direction = [second[0], second[1], second[2]];
+                let accel = regs.input_double[12];
+                if !(xd.iter().chain(&direction).all(|v| v.is_finite())
+                    && accel.is_finite()
+                    && accel > 0.0)
+                {
+                    return Err(format!(
+                        "move_until_contact: speed {xd:?}, direction {direction:?} or acceleration {accel} not usable"
+                    ));
+                }
+                if xd.iter().all(|v| *v == 0.0) {
+                    return Err("move_until_contact: zero tool speed never meets a contact".into());
+                }
+                self.waypoint = None;
+                self.until_contact = Some(UntilContact::Seeking {
+                    xd,
+                    direction,
+                    accel,
+                });
+                Ok(Outcome::Contact)
+            }
             SET_STD_DIGITAL_OUT | SET_TOOL_DIGITAL_OUT => {
                 let offset = if cmd == SET_TOOL_DIGITAL_OUT { 16 } else { 0 };
                 let pin = i64::from(regs.input_int[1]) + offset;
@@ -568,9 +770,9 @@ impl UrRtdeProgram {
                 write_vector(io.regs, 0, &pose);
                 Ok(Outcome::Done)
             }
-            // Freedrive is never entered (freedriveMode is refused): "not in freedrive".
+            // get_freedrive_status(): 1 in freedrive, 0 otherwise.
             GET_FREEDRIVE_STATUS => {
-                io.regs.output_int[1] = 0;
+                io.regs.output_int[1] = i32::from(self.free == Some(FreeMode::Freedrive));
                 Ok(Outcome::Done)
             }
             GET_ACTUAL_TOOL_FLANGE_POSE => {
@@ -625,8 +827,124 @@ impl UrRtdeProgram {
         }
     }
 
+    /// Refuses a motion while the arm is hand-guided (teach or freedrive mode) or, for any but
+    /// force mode itself, in force mode: the model moves neither (a UR would combine a motion
+    /// with force mode's compliance; this model does not).
+    fn check_motion_allowed(&self, cmd: i32) -> Result<(), String> {
+        if !MOTIONS.contains(&cmd) {
+            return Ok(());
+        }
+        if let Some(mode) = self.free {
+            let (what, end) = match mode {
+                FreeMode::Teach => ("teach mode", "endTeachMode"),
+                FreeMode::Freedrive => ("freedrive mode", "endFreedriveMode"),
+            };
+            return Err(format!(
+                "virtual-ur: ur_rtde command {cmd} moves the arm during {what}: call {end} first"
+            ));
+        }
+        if self.force_mode.is_some() && cmd != FORCE_MODE {
+            return Err(format!(
+                "virtual-ur: ur_rtde command {cmd} moves the arm during force mode, which this model \
+                 does not combine with force control: call forceModeStop first"
+            ));
+        }
+        Ok(())
+    }
+
+    /// `tool_contact(direction)`: the control cycles back to the one just before the contact
+    /// began (an index into the joint history), or 0 without a contact against `direction`.
+    fn contact_steps(&self, io: &ProgramIo<'_>, direction: &[f64; 3]) -> i32 {
+        if !io.sensor.touches(direction) {
+            return 0;
+        }
+        let newest = io.history.len().saturating_sub(1);
+        (io.sensor.contact_cycles as usize).min(newest).max(1) as i32
+    }
+
+    /// One cycle of force mode: the tool twist towards the commanded wrench along the compliant
+    /// axes, blended from last cycle's by the damping.
+    fn force_step(&mut self, io: &mut ProgramIo<'_>) -> Result<(), String> {
+        let Some(mode) = self.force_mode.as_mut() else {
+            return Ok(());
+        };
+        let state = io.arm.state();
+        let tcp = from_ur_pose(&state.tcp_pose);
+        let velocity = Vector3::new(state.tcp_speed[0], state.tcp_speed[1], state.tcp_speed[2]);
+        let rotation = mode.frame_rotation(&tcp, &velocity);
+        let target = mode.twist(&rotation, &io.sensor.external, self.tuning.gain_scaling);
+        let blend = self.tuning.blend();
+        self.force_twist = std::array::from_fn(|i| {
+            self.force_twist[i] + blend * (target[i] - self.force_twist[i])
+        });
+        // The arm takes the twist within the cycle (force-mode speeds are centimetres a second).
+        Self::command(
+            io,
+            ArmCommand::SpeedL {
+                xd: self.force_twist,
+                accel: FORCE_MODE_ACCEL,
+            },
+        )
+    }
+
+    /// One cycle of moveUntilContact's loop; true when it has ended (at the contact point, or
+    /// stopped by a protective stop).
+    fn contact_step(&mut self, io: &mut ProgramIo<'_>) -> Result<bool, String> {
+        let Some(phase) = self.until_contact else {
+            return Ok(true);
+        };
+        if io.protective_stop {
+            self.until_contact = None;
+            return Ok(true);
+        }
+        let next = match phase {
+            UntilContact::Seeking {
+                xd,
+                direction,
+                accel,
+            } => {
+                let back = self.contact_steps(io, &direction);
+                if back > 0 {
+                    // q = get_actual_joint_positions_history(step_back); stopl(3); movel(q).
+                    let q = io.history[back as usize];
+                    Self::command(
+                        io,
+                        ArmCommand::StopL {
+                            decel: CONTACT_STOP_DECEL,
+                        },
+                    )?;
+                    UntilContact::Stopping { q }
+                } else {
+                    Self::command(io, ArmCommand::SpeedL { xd, accel })?;
+                    phase
+                }
+            }
+            UntilContact::Stopping { q } => {
+                if io.arm.is_moving() {
+                    phase
+                } else {
+                    let pose = io.arm.forward(&q);
+                    let (speed, accel) = CONTACT_RETURN;
+                    Self::command(io, ArmCommand::MoveL { pose, speed, accel })?;
+                    UntilContact::Returning
+                }
+            }
+            UntilContact::Returning => {
+                if io.arm.is_moving() {
+                    phase
+                } else {
+                    self.until_contact = None;
+                    return Ok(true);
+                }
+            }
+        };
+        self.until_contact = Some(next);
+        Ok(io.protective_stop)
+    }
+
     /// Realtime commands (processed every cycle, answered with ready).
     fn realtime(&mut self, io: &mut ProgramIo<'_>, cmd: i32) -> Result<(), String> {
+        self.check_motion_allowed(cmd)?;
         let regs = &*io.regs;
         let target = vector(regs, 0);
         if matches!(cmd, SPEED_J | SPEED_L | SERVO_J | SERVO_L) {
@@ -652,9 +970,29 @@ impl UrRtdeProgram {
                 let q = Self::inverse(io, &target, &io.arm.state().q)?;
                 Self::command(io, ArmCommand::ServoJ { q, time })
             }
-            // The model senses no contact: no step back.
+            // tool_contact(direction): the cycles back to just before the contact began, once
+            // the tool presses against the direction with the detection force; 0 otherwise.
             TOOL_CONTACT => {
-                io.regs.output_int[1] = 0;
+                let direction = [target[0], target[1], target[2]];
+                io.regs.output_int[1] = self.contact_steps(io, &direction);
+                Ok(())
+            }
+            FORCE_MODE => {
+                let selection: [i32; 6] = std::array::from_fn(|i| regs.input_int[2 + i]);
+                let mode = ForceMode::new(
+                    &target,
+                    &selection,
+                    &vector(regs, 6),
+                    regs.input_int[1],
+                    &vector(regs, 12),
+                )?;
+                // Re-sent every cycle while the register holds it: a new one replaces the
+                // parameters, the same one keeps the frame it tracks.
+                match &self.force_mode {
+                    Some(m) if m.same_command(&mode) => {}
+                    _ => self.force_mode = Some(mode),
+                }
+                self.waypoint = None;
                 Ok(())
             }
             GET_STEPTIME => {
@@ -680,12 +1018,13 @@ impl UrRtdeProgram {
             // `get_joint_torques()`: the joint torques "corrected by the torque needed to move
             // the robot itself (gravity, friction, etc.)" (UR's script manual, quoted in
             // ur_rtde's documentation), i.e. what external forces and a payload the controller
-            // was not told of add. The model has neither (no contact, and the payload it carries
-            // is the one set), so the answer is zero in every pose; the gravity torques the
-            // joints do hold are `target_moment` and, through the torque constants, the
-            // currents.
+            // was not told of add. The payload the model carries is the one set, so what remains
+            // is the contact wrench through the Jacobian's transpose (zero in free space); the
+            // gravity torques the joints hold as well are in `target_moment` and, through the
+            // torque constants, the currents.
             GET_JOINT_TORQUES => {
-                write_vector(io.regs, 0, &[0.0; 6]);
+                let torques = io.sensor.joint_torques;
+                write_vector(io.regs, 0, &torques);
                 Ok(())
             }
             GET_ACTUAL_TOOL_FLANGE_POSE => self.process(io, cmd).map(|_| ()),
@@ -703,6 +1042,10 @@ impl Program for UrRtdeProgram {
         self.executing = false;
         self.waiting_for_motion = false;
         self.jog_frame = None;
+        self.force_mode = None;
+        self.force_twist = [0.0; 6];
+        self.until_contact = None;
+        self.free = None;
         self.stale = Some(io.regs.input_int[0]).filter(|c| *c != 0);
         self.write_async(io.regs, false);
         io.regs.output_int[0] = READY;
@@ -718,6 +1061,23 @@ impl Program for UrRtdeProgram {
             return ProgramStep::Exit;
         }
         self.follow_path(io);
+        if let Err(e) = self.force_step(io) {
+            io.runtime_error = Some(e);
+            return ProgramStep::Exit;
+        }
+        if self.until_contact.is_some() {
+            match self.contact_step(io) {
+                Ok(true) => {
+                    self.until_contact = None;
+                    io.regs.output_int[0] = DONE;
+                }
+                Ok(false) => return ProgramStep::Continue,
+                Err(e) => {
+                    io.runtime_error = Some(e);
+                    return ProgramStep::Exit;
+                }
+            }
+        }
         if self.async_running && !io.arm.is_moving() {
             self.write_async(io.regs, false);
         }
@@ -752,6 +1112,7 @@ impl Program for UrRtdeProgram {
             match self.process(io, cmd) {
                 Ok(Outcome::Exit) => return ProgramStep::Exit,
                 Ok(Outcome::Wait) => self.waiting_for_motion = true,
+                Ok(Outcome::Contact) => {}
                 Ok(Outcome::Done) => io.regs.output_int[0] = DONE,
                 Err(e) => {
                     io.runtime_error = Some(e);
@@ -763,6 +1124,12 @@ impl Program for UrRtdeProgram {
     }
 
     fn interrupted(&mut self, io: &mut ProgramIo<'_>) {
+        // A safety stop ends force mode and moveUntilContact's loop with the motion.
+        self.force_mode = None;
+        self.force_twist = [0.0; 6];
+        if self.until_contact.take().is_some() {
+            io.regs.output_int[0] = DONE;
+        }
         if self.waiting_for_motion {
             self.waiting_for_motion = false;
             io.regs.output_int[0] = DONE;
