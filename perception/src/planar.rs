@@ -164,32 +164,23 @@ pub struct PlanarRefiner {
     config: PlanarConfig,
 }
 
-/// Largest angle between two stable poses' up directions, one turned by a symmetry, for them to
-/// be twins, radians (0.5°: stable-pose tables are rounded to 9 digits).
-const TWIN_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
-/// Largest difference of rest heights for two stable poses to be twins, metres.
-const TWIN_HEIGHT: f64 = 1e-4;
 /// Scores (log-likelihood units) closer than this tie: symmetric twins score alike up to
 /// rounding.
 const SCORE_TIE: f64 = 1e-6;
 
-/// Per class, the classes whose up direction a symmetry of `group` turns onto its own at the
-/// same rest height (each class is its own twin).
-fn twin_classes(
-    stable_poses: &[StablePose],
-    ups: &[Vector3<f64>],
-    group: &[UnitQuaternion<f64>],
-) -> Vec<Vec<usize>> {
-    (0..ups.len())
+/// Per class, the classes that a symmetry of `group` makes the same resting state
+/// ([`crate::symmetry::stable_pose_twins`]; each class is its own twin).
+fn twin_classes(stable_poses: &[StablePose], group: &[UnitQuaternion<f64>]) -> Vec<Vec<usize>> {
+    (0..stable_poses.len())
         .map(|c| {
-            (0..ups.len())
+            (0..stable_poses.len())
                 .filter(|&d| {
                     c == d
-                        || ((stable_poses[c].rest_height - stable_poses[d].rest_height).abs()
-                            < TWIN_HEIGHT
-                            && group
-                                .iter()
-                                .any(|g| (g * ups[d]).angle(&ups[c]) < TWIN_ANGLE))
+                        || crate::symmetry::stable_pose_twins(
+                            &stable_poses[c],
+                            &stable_poses[d],
+                            group,
+                        )
                 })
                 .collect()
         })
@@ -235,7 +226,7 @@ impl PlanarRefiner {
         if group.is_empty() {
             group.push(UnitQuaternion::identity());
         }
-        let twins = twin_classes(stable_poses, &ups, &group);
+        let twins = twin_classes(stable_poses, &group);
         // A class's prior is its resting state's: the drops' share of it and of its twins (so
         // twins score alike and the preferred one can be reported).
         for twin in &twins {

@@ -1,11 +1,18 @@
 //! The perception audit of the error budget: each detection the engine picks is checked against
 //! the simulated world (is a part there, of that kind, in that stable pose, and how far off), and
 //! a step that finds nothing counts the parts perception missed. Simulation only.
+//!
+//! A part with exact symmetries is judged against the twin of its true pose nearest the
+//! estimate: a square peg seen a quarter turn off is right with no yaw error, a peg standing on
+//! its top end is right when perceived standing on its bottom end (the symmetry maps one stable
+//! pose onto the other).
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use perception::DetectedPart;
+use perception::symmetry::{nearest_twin, stable_pose_twins, symmetry_group};
 use sim::cell::SimCell;
 use sim::cell::feeder::FeederPart;
+use sim::cell::geometry::PartGeometry;
 
 use crate::episode::PerceptionVerdict;
 use crate::orchestrator::PerceptionAudit;
@@ -48,6 +55,26 @@ fn stable_pose_of(cell: &SimCell, part: &str, table_T_part: &Isometry3<f64>) -> 
         .map(|s| s.name.clone())
 }
 
+/// Whether the stable pose named `seen` is the one named `truth`, or its twin under the part's
+/// exact symmetries (the same resting state: a peg on either end).
+fn same_resting_state(part: Option<&PartGeometry>, truth: &str, seen: &str) -> bool {
+    if truth == seen {
+        return true;
+    }
+    let Some(part) = part else {
+        return false;
+    };
+    let group = symmetry_group(&part.symmetries);
+    if group.len() < 2 {
+        return false;
+    }
+    let named = |name: &str| part.stable_poses.iter().find(|s| s.name == name);
+    match (named(truth), named(seen)) {
+        (Some(a), Some(b)) => stable_pose_twins(a, b, &group),
+        _ => false,
+    }
+}
+
 /// Checks one detection against the world.
 pub fn audit(cell: &SimCell, d: &DetectedPart) -> PerceptionAudit {
     let Some(truth) = matched(cell, d) else {
@@ -56,19 +83,21 @@ pub fn audit(cell: &SimCell, d: &DetectedPart) -> PerceptionAudit {
             table_error: None,
         };
     };
+    let geometry = cell.model().geometry.parts.get(&truth.part);
     let verdict = if truth.part != d.part {
         PerceptionVerdict::WrongPart
-    } else if stable_pose_of(cell, &truth.part, &truth.table_T_part).as_deref()
-        != Some(d.stable_pose.as_str())
+    } else if !stable_pose_of(cell, &truth.part, &truth.table_T_part)
+        .is_some_and(|t| same_resting_state(geometry, &t, &d.stable_pose))
     {
         PerceptionVerdict::WrongStablePose
     } else {
         PerceptionVerdict::Right
     };
+    let group = geometry.map_or_else(Vec::new, |g| symmetry_group(&g.symmetries));
     PerceptionAudit {
         verdict,
         table_error: (verdict != PerceptionVerdict::WrongPart)
-            .then(|| table_error(&truth.table_T_part, &d.table_T_part)),
+            .then(|| twin_table_error(&truth.table_T_part, &d.table_T_part, &group)),
     }
 }
 
@@ -83,6 +112,21 @@ pub fn missed(cell: &SimCell, part: &str, detections: &[DetectedPart]) -> usize 
         .iter()
         .filter(|p| p.part == part && !seen.contains(&p.instance))
         .count()
+}
+
+/// [`table_error`] against the twin of the truth nearest the estimate (`truth · g` for the
+/// symmetry `g` of `group` that brings it closest): with the identity alone, [`table_error`].
+#[allow(non_snake_case)]
+pub fn twin_table_error(
+    truth: &Isometry3<f64>,
+    estimate: &Isometry3<f64>,
+    group: &[UnitQuaternion<f64>],
+) -> [f64; 3] {
+    if group.len() < 2 {
+        return table_error(truth, estimate);
+    }
+    let g = nearest_twin(&estimate.rotation, &truth.rotation, group);
+    table_error(&(truth * g), estimate)
 }
 
 /// Error of an estimate in the table plane: x, y in mm and yaw in degrees.
@@ -105,7 +149,13 @@ mod tests {
     use crate::run::LoadedScenario;
 
     fn cell() -> SimCell {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
+        cell_of("usbc_nominal.toml")
+    }
+
+    fn cell_of(scenario: &str) -> SimCell {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../scenarios")
+            .join(scenario);
         let loaded = LoadedScenario::load(&path).unwrap();
         SimSetup::new(loaded.scenario).unwrap().sim_cell(3).unwrap()
     }
@@ -169,6 +219,91 @@ mod tests {
             audit(&cell, &detection(&truth.part, far, &pose)).verdict,
             PerceptionVerdict::Phantom
         );
+    }
+
+    /// `table_T_part` turned by `angle` about the table's vertical through the part's origin.
+    #[allow(non_snake_case)]
+    fn turned(table_T_part: &Isometry3<f64>, angle: f64) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            table_T_part.translation,
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), angle) * table_T_part.rotation,
+        )
+    }
+
+    #[test]
+    fn a_symmetric_twin_of_the_truth_is_right_and_a_turn_of_an_asymmetric_part_is_not() {
+        use std::f64::consts::{FRAC_PI_2, PI};
+
+        let pegs = cell_of("nist_pegs_nominal.toml");
+        let squares: Vec<FeederPart> = (pegs.feeder_parts().iter())
+            .filter(|p| p.part.starts_with("square_"))
+            .cloned()
+            .collect();
+        assert!(squares.len() >= 3);
+        for truth in &squares {
+            let geometry = &pegs.model().geometry.parts[&truth.part];
+            assert!(!geometry.symmetries.is_empty(), "{}", truth.part);
+            let pose = stable_pose_of(&pegs, &truth.part, &truth.table_T_part).unwrap();
+            // Standing on an end, a quarter turn about the vertical is a symmetry; lying on a
+            // side, only a half turn is (the peg is longer than wide).
+            let up = truth.table_T_part.rotation.inverse() * Vector3::z();
+            let turn = if up.z.abs() > 0.99 { FRAC_PI_2 } else { PI };
+            let mut d = detection(&truth.part, turned(&truth.table_T_part, turn), &pose);
+            d.truth_instance = Some(truth.instance);
+            let a = audit(&pegs, &d);
+            assert_eq!(a.verdict, PerceptionVerdict::Right, "{} {pose}", truth.part);
+            let [dx, dy, yaw] = a.table_error.unwrap();
+            assert!(
+                dx.abs() < 1e-9 && dy.abs() < 1e-9 && yaw.abs() < 1e-6,
+                "{} {pose}: {dx} {dy} {yaw}",
+                truth.part
+            );
+            // The twin stable pose (the other end, the opposite side) is the same resting state;
+            // a side for an end, or an end for a side, is not.
+            let poses = &geometry.stable_poses;
+            let own = poses.iter().find(|s| s.name == pose).unwrap();
+            let group = symmetry_group(&geometry.symmetries);
+            let twin = (poses.iter())
+                .find(|s| s.name != pose && stable_pose_twins(own, s, &group))
+                .unwrap();
+            d.stable_pose = twin.name.clone();
+            assert_eq!(
+                audit(&pegs, &d).verdict,
+                PerceptionVerdict::Right,
+                "{}",
+                twin.name
+            );
+            let other = (poses.iter())
+                .find(|s| !stable_pose_twins(own, s, &group))
+                .unwrap();
+            d.stable_pose = other.name.clone();
+            assert_eq!(
+                audit(&pegs, &d).verdict,
+                PerceptionVerdict::WrongStablePose,
+                "{} {pose} seen as {}",
+                truth.part,
+                other.name
+            );
+        }
+        // A USB-C part declares no exact symmetry (near ones only): a quarter turn off is 90° of
+        // yaw error, and its other stable poses stay wrong.
+        let usbc = cell();
+        let truth = usbc.feeder_parts()[0].clone();
+        let symmetries = &usbc.model().geometry.parts[&truth.part].symmetries;
+        assert_eq!(symmetry_group(symmetries).len(), 1);
+        let pose = stable_pose_of(&usbc, &truth.part, &truth.table_T_part).unwrap();
+        let mut d = detection(&truth.part, turned(&truth.table_T_part, FRAC_PI_2), &pose);
+        d.truth_instance = Some(truth.instance);
+        let a = audit(&usbc, &d);
+        assert_eq!(a.verdict, PerceptionVerdict::Right);
+        let yaw = a.table_error.unwrap()[2];
+        assert!((yaw - 90.0).abs() < 1e-6, "{yaw}");
+        for other in &usbc.model().geometry.parts[&truth.part].stable_poses {
+            if other.name != pose {
+                d.stable_pose = other.name.clone();
+                assert_eq!(audit(&usbc, &d).verdict, PerceptionVerdict::WrongStablePose);
+            }
+        }
     }
 
     #[test]

@@ -5,7 +5,9 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use parry3d_f64::shape::SharedShape;
-use perception::part::{Catalog, ConvexPieces, Grasp, StablePose, TriMesh, convex_pieces};
+use perception::part::{
+    Catalog, ConvexPieces, Grasp, StablePose, Symmetry, TriMesh, convex_pieces,
+};
 
 use super::error::CellError;
 use crate::config::{AssemblyStep, CellSpec, Destination};
@@ -30,6 +32,9 @@ pub struct PartGeometry {
     pub stable_poses: Vec<StablePose>,
     /// Grasps per stable pose.
     pub grasps: Vec<Grasp>,
+    /// Declared rotational symmetries (the catalog's; empty for a bare mesh): the exact ones make
+    /// a turned part seat like the part itself.
+    pub symmetries: Vec<Symmetry>,
 }
 
 impl std::fmt::Debug for PartGeometry {
@@ -56,13 +61,15 @@ impl PartGeometry {
         let mass = spec
             .mass
             .unwrap_or_else(|| mesh.volume().abs() * spec.density());
-        Self::from_mesh(
+        let mut geometry = Self::from_mesh(
             name,
             mesh,
             mass,
             spec.stable_poses.clone(),
             spec.grasps.clone(),
-        )
+        )?;
+        geometry.symmetries = spec.symmetries.clone();
+        Ok(geometry)
     }
 
     /// Builds the shapes of a mesh (metres, part frame).
@@ -87,6 +94,7 @@ impl PartGeometry {
             mass,
             stable_poses,
             grasps,
+            symmetries: Vec::new(),
         })
     }
 

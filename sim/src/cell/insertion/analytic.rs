@@ -9,6 +9,9 @@
 //!     corners wedge, at depth `(c + w (1 − cos θ)) / tan θ` into the fit;
 //!   - jammed when the yaw exceeds what the clearance admits (stuck at the bottom of the chamfer);
 //!   - seated otherwise: pressed flat on its seat, its leading face within clearance/2 laterally.
+//!
+//! Errors are measured on the held part's twin nearest seated ([`Mating::twins`]): a part with
+//! exact symmetries about the insertion axis is judged by its smallest equivalent yaw.
 
 use nalgebra::{Isometry3, Vector2};
 
@@ -18,6 +21,9 @@ use super::{InsertionResult, Mating, classify};
 #[allow(non_snake_case)]
 pub fn score(mating: &Mating, ins_T_part: &Isometry3<f64>) -> InsertionResult {
     let start = mating.pose_error(ins_T_part);
+    // The errors are the nearest twin's, and so is the pose built from them; the part ends in
+    // its own frame.
+    let twin = mating.twin(&ins_T_part.rotation);
     let (c, d) = (mating.clearance, mating.engagement);
     let end_pose = if mating.capture_reach(&start) > mating.capture() {
         mating.pose_with_error(
@@ -42,6 +48,11 @@ pub fn score(mating: &Mating, ins_T_part: &Isometry3<f64>) -> InsertionResult {
         } else {
             mating.pose_with_error(centred, 0.0, start.yaw, 0.0, Vector2::zeros())
         }
+    };
+    let end_pose = if mating.twins.len() < 2 {
+        end_pose
+    } else {
+        end_pose * twin.inverse()
     };
     let end = mating.pose_error(&end_pose);
     let (verdict, cause) = classify(mating, &start, &end);

@@ -1,6 +1,7 @@
 //! The geometry of one assembly step that both scorers use.
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector2, Vector3};
+use perception::symmetry::{keeping_axis, nearest_twin, symmetry_group};
 
 use super::pose_error::{PoseError, tilt_of, twist_about_z};
 use crate::cell::geometry::{PartGeometry, destination_T_insertion};
@@ -47,6 +48,12 @@ pub struct Mating {
     /// a circle that still fits the hole at any turn (a round peg), so a yaw error neither
     /// swings its corners nor jams it.
     pub turns_freely: bool,
+    /// The held part's twins: part-frame rotations `g` of its exact symmetries that keep the
+    /// insertion axis (turns about it, and half turns across it that swap its ends), the
+    /// identity first. The part posed `R` is the same solid as posed `R · g`, so every pose is
+    /// scored as its twin nearest the seated one: a square peg turned a quarter seats like one
+    /// at 0°, a 48-gon turned 7.5° like one at 0°, a peg either end up alike.
+    pub twins: Vec<UnitQuaternion<f64>>,
 }
 
 impl Mating {
@@ -96,6 +103,7 @@ impl Mating {
             }
             None => held_fp,
         };
+        let twins = keeping_axis(&symmetry_group(&held.symmetries), &axis_in_part);
         Self {
             part: step.part.clone(),
             clearance: step.clearance,
@@ -108,7 +116,27 @@ impl Mating {
             destination_T_insertion: d_T_ins,
             friction: PART_FRICTION,
             turns_freely,
+            twins,
         }
+    }
+
+    /// The twin `g` (one of [`Self::twins`]) that turns a part posed `rotation` (insertion
+    /// frame) nearest to its seated rotation; the identity for a part without twins.
+    pub fn twin(&self, rotation: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+        if self.twins.len() < 2 {
+            return UnitQuaternion::identity();
+        }
+        nearest_twin(&self.ins_R_seat, rotation, &self.twins)
+    }
+
+    /// The part's pose `ins_T_part` as its twin nearest seated (`ins_T_part · g`): the same solid
+    /// in the same place. Unchanged for a part without twins.
+    #[allow(non_snake_case)]
+    pub fn nearest_twin(&self, ins_T_part: &Isometry3<f64>) -> Isometry3<f64> {
+        if self.twins.len() < 2 {
+            return *ins_T_part;
+        }
+        ins_T_part * self.twin(&ins_T_part.rotation)
     }
 
     /// Capture half-width: clearance/2 + lead-in.
@@ -153,9 +181,12 @@ impl Mating {
         bisect(f, 0.0, 0.7)
     }
 
-    /// The pose error of a part pose given in the insertion frame.
+    /// The pose error of a part pose given in the insertion frame, measured on its twin nearest
+    /// seated ([`Self::nearest_twin`]).
     #[allow(non_snake_case)]
     pub fn pose_error(&self, ins_T_part: &Isometry3<f64>) -> PoseError {
+        let twin = self.nearest_twin(ins_T_part);
+        let ins_T_part = &twin;
         let r = ins_T_part.rotation * self.ins_R_seat.inverse();
         let (tilt, tilt_direction) = tilt_of(&r);
         let lead = ins_T_part * self.lead_point;
