@@ -101,6 +101,36 @@ pub fn keeping_axis(
     kept
 }
 
+/// Of the part-frame directions `g · axis` for `g` in `group`, the one that `rotation` turns
+/// nearest to the line along `target` (either sense), among those it leaves at the same height
+/// as `axis` (so a part's grasp axis stays horizontal): which of a square peg's two flat pairs,
+/// or of a 48-gon's 48, a pair of jaws closing along `target` meets. `axis` itself when the
+/// group has no other element.
+pub fn twin_axis_nearest(
+    axis: &Vector3<f64>,
+    rotation: &UnitQuaternion<f64>,
+    target: &Vector3<f64>,
+    group: &[UnitQuaternion<f64>],
+) -> Vector3<f64> {
+    if group.len() < 2 {
+        return *axis;
+    }
+    let height = (rotation * axis).z;
+    let mut best = (f64::NEG_INFINITY, *axis);
+    for g in group {
+        let candidate = g * axis;
+        let turned = rotation * candidate;
+        if (turned.z - height).abs() > 1e-9 {
+            continue;
+        }
+        let alignment = turned.dot(target).abs();
+        if alignment > best.0 + 1e-12 {
+            best = (alignment, candidate);
+        }
+    }
+    best.1
+}
+
 /// Largest angle between two stable poses' up directions, one turned by a symmetry, for them to
 /// be twins, radians (0.5°: stable-pose tables are rounded to 9 digits).
 pub const TWIN_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
@@ -224,6 +254,27 @@ mod tests {
         assert_eq!(
             keeping_axis(&[], &Vector3::z()),
             vec![UnitQuaternion::identity()]
+        );
+    }
+
+    #[test]
+    fn the_twin_axis_nearest_the_jaws_is_a_square_pegs_other_flat_pair() {
+        let square = symmetry_group(&[sym([0.0, 0.0, 1.0], 4), sym([1.0, 0.0, 0.0], 2)]);
+        // Standing, turned 80° about the vertical: its x axis lies 10° from jaws closing along
+        // y, and stays the grasp axis; turned 10°, its y axis lies nearest and is taken.
+        let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 80f64.to_radians());
+        let jaws = Vector3::y();
+        let axis = twin_axis_nearest(&Vector3::x(), &r, &jaws, &square);
+        assert!((axis.x.abs() - 1.0).abs() < 1e-12, "{axis:?}");
+        let turned = r * axis;
+        assert!((turned.dot(&jaws).abs() - 80f64.to_radians().sin()).abs() < 1e-12);
+        let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 10f64.to_radians());
+        let axis = twin_axis_nearest(&Vector3::x(), &r, &jaws, &square);
+        assert!((axis.y.abs() - 1.0).abs() < 1e-12, "{axis:?}");
+        // Without symmetry the axis is the axis.
+        assert_eq!(
+            twin_axis_nearest(&Vector3::x(), &r, &jaws, &[]),
+            Vector3::x()
         );
     }
 

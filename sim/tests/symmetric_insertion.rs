@@ -2,7 +2,8 @@
 //! their symmetries that keep the insertion axis, so a square peg turned a quarter seats like one
 //! at 0°, a 48-gon turned by any multiple of 7.5° is at 0°, and a peg held upside down seats on
 //! its other end. Without the symmetries the same starts jam or stay tilted by 180°. The
-//! catalog's declared symmetries map each peg's mesh onto itself.
+//! catalog's declared symmetries map each peg's mesh onto itself, and the fingers square a peg
+//! by whichever of its twin flat pairs they meet.
 
 #![allow(non_snake_case)]
 
@@ -14,9 +15,10 @@ use perception::part::{Catalog, Symmetry};
 use perception::symmetry::symmetry_group;
 use sim::cad::nist::{PEGS, Peg, PegShape, fixture_plate};
 use sim::cell::geometry::PartGeometry;
+use sim::cell::gripper::{self, GraspCandidate};
 use sim::cell::insertion::contact::{self, ContactSettings};
 use sim::cell::insertion::{InsertionCause, Mating, ReceiverPart, Verdict, analytic};
-use sim::config::{AssemblyStep, Destination, PoseSpec, Tolerances};
+use sim::config::{AssemblyStep, Destination, GripperSpec, NoiseSpec, PoseSpec, Tolerances};
 
 /// A peg's exact symmetries: its cross-section's turns about its axis (z), and end over end.
 fn peg_symmetries(peg: &Peg) -> Vec<Symmetry> {
@@ -306,4 +308,58 @@ fn the_catalog_declares_symmetries_that_map_each_peg_onto_itself() {
             }
         }
     }
+}
+
+#[test]
+fn the_fingers_square_a_square_peg_by_the_flats_they_meet() {
+    use rand::SeedableRng;
+
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/nist_pegs.toml");
+    let catalog = Catalog::load(&path).unwrap();
+    let peg = PartGeometry::from_catalog(&catalog, "square_8").unwrap();
+    let mut bare = peg.clone();
+    bare.symmetries.clear();
+    let standing = peg.stable_poses.iter().find(|s| s.name == "+z").unwrap();
+    // The nominal NIST scenario's fingers, without grasp noise.
+    let spec: GripperSpec = toml::from_str(
+        "stroke = 0.02\nfinger_width = 0.004\nfinger_thickness = 0.002\nfinger_length = 0.02\n\
+         friction = 0.3",
+    )
+    .unwrap();
+    let noise = NoiseSpec {
+        grasp_offset: 0.0,
+        grasp_rotation: 0.0,
+        ..NoiseSpec::default()
+    };
+    // The TCP 7.5 mm up, z down, its jaws closing along table y turned 2°: they meet the peg's
+    // y flats, 88° from its x axis (the catalog grasp's closing axis).
+    let jaws = 2f64.to_radians();
+    let tcp = Isometry3::from_parts(
+        nalgebra::Translation3::new(0.0, 0.0, 0.0075),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), PI + jaws)
+            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI),
+    );
+    let closing = tcp.rotation * Vector3::y();
+    assert!((closing.y.abs() - jaws.cos()).abs() < 1e-12);
+    let grasp = |geometry: &PartGeometry| {
+        let parts = [GraspCandidate {
+            instance: 1,
+            geometry,
+            base_T_part: standing.table_T_part(0.0, 0.0, 0.0),
+        }];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        gripper::close(&spec, &noise, &tcp, &parts, &mut rng).unwrap()
+    };
+    // Squared: the flats it meets lie along the jaws.
+    let g = grasp(&peg);
+    assert!(g.squared);
+    assert!((g.yaw_before.abs() - jaws).abs() < 1e-9, "{}", g.yaw_before);
+    let y_in_tcp = g.tcp_T_part.rotation * Vector3::y();
+    assert!((y_in_tcp.y.abs() - 1.0).abs() < 1e-9, "{y_in_tcp:?}");
+    // Without its symmetries the jaws would be 88° off its grasp axis: friction holds it as it
+    // stands, 2° off the jaws.
+    let b = grasp(&bare);
+    assert!(!b.squared);
+    let y_in_tcp = b.tcp_T_part.rotation * Vector3::y();
+    assert!((y_in_tcp.y.abs() - jaws.cos()).abs() < 1e-9, "{y_in_tcp:?}");
 }

@@ -309,6 +309,13 @@ pub fn close_from(
     } else {
         Vector3::x()
     };
+    // A part with exact symmetries is squared by its twin faces nearest the jaws.
+    let closing = perception::symmetry::twin_axis_nearest(
+        &closing,
+        &tcp_T_part.rotation,
+        &Vector3::y(),
+        &perception::symmetry::symmetry_group(&target.geometry.symmetries),
+    );
     let a_tcp = tcp_T_part.rotation * closing;
     let mut yaw = a_tcp.x.atan2(a_tcp.y);
     let half_pi = std::f64::consts::FRAC_PI_2;
