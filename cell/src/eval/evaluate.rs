@@ -8,7 +8,7 @@ use nalgebra::{Isometry3, UnitQuaternion};
 use perception::learned::{InstanceMask, LearnedDetections};
 use perception::metrics::pose_errors;
 use perception::planar::{PlanarConfig, PlanarPose, PlanarRefiner};
-use perception::symmetry::symmetric_angle;
+use perception::symmetry::{stable_pose_twins, symmetric_angle};
 use perception::{Camera, FrameImage};
 use sim::dataset::{BopImage, BopScene, pose_from_bop};
 
@@ -140,6 +140,8 @@ impl<'a> FrameTruth<'a> {
             if refiners.contains_key(&part.obj_id) {
                 continue;
             }
+            // Of symmetric twin stable poses (a peg on either end) the true pose is named as the
+            // estimator names it: the one the part is grasped in.
             let refiner = PlanarRefiner::new(
                 *camera_T_table,
                 &part.stable_poses,
@@ -149,7 +151,8 @@ impl<'a> FrameTruth<'a> {
             .map_err(|e| EvalError::Part {
                 part: part.name.clone(),
                 message: e.to_string(),
-            })?;
+            })?
+            .with_preferred(|c| part.graspable.contains(&part.stable_poses[c].name));
             refiners.insert(part.obj_id, refiner);
         }
         let snapped: Vec<Option<PlanarPose>> = truth_parts
@@ -344,6 +347,18 @@ fn evaluate_image(
             rec.true_stable_pose = snapped[m.truth]
                 .as_ref()
                 .map(|p| part.stable_poses[p.class].name.clone());
+            // An estimate in a twin of the true stable pose found the same resting state: the
+            // truth is named as the estimate names it, in the detection and the truth records.
+            if let (Some(true_pose), Ok(estimate)) = (&rec.true_stable_pose, &det.pose)
+                && det.part == part.name
+                && let Some(twin) = twin_name(part, true_pose, &estimate.stable_pose)
+            {
+                rec.true_stable_pose = Some(twin.clone());
+                let counted = &mut truths[m.truth];
+                if counted.stable_pose.is_some() {
+                    counted.stable_pose = Some(twin);
+                }
+            }
             if let (Err(reason), false) = (&det.pose, truths[m.truth].ignored) {
                 galleries.failed.offer(det.score, || FailedCrop {
                     scene: scene.id,
@@ -554,10 +569,82 @@ fn seen_truth(
         .unwrap_or(*truth)
 }
 
+/// `estimate`'s name when the stable pose it names is a symmetric twin of the one named `truth`
+/// (a distinct class that the part's exact symmetries map onto it: the same resting state).
+fn twin_name(part: &PartData, truth: &str, estimate: &str) -> Option<String> {
+    if truth == estimate || part.group.len() < 2 {
+        return None;
+    }
+    let named = |name: &str| part.stable_poses.iter().find(|s| s.name == name);
+    let (t, e) = (named(truth)?, named(estimate)?);
+    stable_pose_twins(t, e, &part.group).then(|| e.name.clone())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::{Translation3, Vector3};
+    use perception::part::{StablePose, Symmetry};
+    use perception::symmetry::symmetry_group;
+
+    #[test]
+    fn a_twin_stable_pose_is_named_as_the_estimate_only_for_a_symmetric_part() {
+        let pose = |name: &str, up: [f64; 3], h: f64| StablePose {
+            name: name.into(),
+            probability: 0.2,
+            up_in_part: up,
+            rotation: [0.0; 3],
+            rest_height: h,
+        };
+        let poses = vec![
+            pose("+z", [0.0, 0.0, 1.0], 0.006),
+            pose("-z", [0.0, 0.0, -1.0], 0.006),
+            pose("+x", [1.0, 0.0, 0.0], 0.004),
+            pose("+y", [0.0, 1.0, 0.0], 0.004),
+        ];
+        let square_peg = [
+            Symmetry {
+                axis: [0.0, 0.0, 1.0],
+                order: 4,
+                exact: true,
+            },
+            Symmetry {
+                axis: [1.0, 0.0, 0.0],
+                order: 2,
+                exact: true,
+            },
+        ];
+        let part = |symmetries: &[Symmetry]| PartData {
+            name: "square_8".into(),
+            obj_id: 1,
+            keypoints: vec![],
+            points: vec![],
+            group: symmetry_group(symmetries),
+            near_group: symmetry_group(symmetries),
+            stable_poses: poses.clone(),
+            view_turns: vec![],
+            graspable: vec!["+z".into()],
+            diameter_mm: 10.0,
+            outline: perception::contour::PartOutline::new(&sim::cad::nist::PEGS[3].mesh()),
+        };
+        let peg = part(&square_peg);
+        assert_eq!(twin_name(&peg, "-z", "+z").as_deref(), Some("+z"));
+        assert_eq!(twin_name(&peg, "+y", "+x").as_deref(), Some("+x"));
+        assert_eq!(twin_name(&peg, "+z", "+x"), None, "an end is not a side");
+        assert_eq!(
+            twin_name(&peg, "+z", "+z"),
+            None,
+            "the same name needs none"
+        );
+        // Without exact symmetries a flipped part lies in another stable pose.
+        let plain = part(&[]);
+        assert_eq!(twin_name(&plain, "-z", "+z"), None);
+        let near = [Symmetry {
+            exact: false,
+            ..square_peg[0].clone()
+        }];
+        assert_eq!(twin_name(&part(&near), "+y", "+x"), None);
+    }
 
     #[test]
     fn a_truth_is_seen_as_its_turn_nearest_the_estimate() {
