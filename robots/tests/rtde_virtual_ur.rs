@@ -1748,6 +1748,36 @@ mod issue43 {
     }
 
     #[test]
+    fn contact_detection_stops_an_async_move_at_the_table_and_reports_it() {
+        let mut u = UrRtde::start();
+        above_table(&mut u, 0.01);
+        // Detect contacts from above, then move down through the table, asynchronously.
+        assert!(u.send(
+            urcmd::START_CONTACT_DETECTION,
+            &[],
+            &[0.0, 0.0, -1.0, 0.0, 0.0, 0.0]
+        ));
+        assert!(u.send(urcmd::READ_CONTACT_DETECTION, &[], &[]));
+        assert_eq!(u.out_int1(), 0, "no contact yet");
+        let mut p = u.tcp();
+        p[2] = -0.01;
+        let mut d = p.to_vec();
+        d.extend([0.02, 1.2]);
+        assert!(u.send(urcmd::MOVE_L, &[(1, 1)], &d));
+        u.seconds(1.5);
+        assert!(u.running(), "{}", u.messages());
+        // Stopped and moved back to where the contact began: within 1 mm above the table.
+        let z = u.tcp()[2];
+        assert!((-1e-9..1e-3).contains(&z), "z = {z}");
+        assert!(u.qd().iter().all(|v| *v == 0.0));
+        assert!(u.send(urcmd::READ_CONTACT_DETECTION, &[], &[]));
+        assert!(u.out_int1() > 0, "contact detected");
+        assert!(u.send(urcmd::STOP_CONTACT_DETECTION, &[], &[]));
+        assert!(u.out_int1() > 0);
+        assert!(u.move_j(HOME), "{}", u.messages());
+    }
+
+    #[test]
     fn teach_mode_moves_nothing_on_its_own_and_end_teach_mode_returns_to_normal() {
         let mut u = UrRtde::start();
         assert!(u.move_j(super::TARGET_Q));

@@ -107,6 +107,12 @@ pub mod ur_rtde_cmd {
     pub const FREEDRIVE_MODE: i32 = 52;
     /// endFreedriveMode.
     pub const END_FREEDRIVE_MODE: i32 = 53;
+    /// startContactDetection.
+    pub const START_CONTACT_DETECTION: i32 = 62;
+    /// stopContactDetection.
+    pub const STOP_CONTACT_DETECTION: i32 = 63;
+    /// readContactDetection.
+    pub const READ_CONTACT_DETECTION: i32 = 64;
     /// getFreedriveStatus.
     pub const GET_FREEDRIVE_STATUS: i32 = 54;
     /// getActualToolFlangePose.
@@ -236,8 +242,23 @@ pub struct UrRtdeProgram {
     /// Teach mode (`teach_mode`) or freedrive (`freedrive_mode`) is on: the arm is free to be
     /// moved by hand, and no hand moves it here.
     free: Option<FreeMode>,
-    /// A running moveUntilContact.
-    until_contact: Option<UntilContact>,
+    /// A running moveUntilContact, or the retreat to a detected contact; whether its end
+    /// signals "done" (moveUntilContact waits for it, contact detection does not).
+    until_contact: Option<(UntilContact, bool)>,
+    /// Contact detection started by `start_contact_detection`.
+    detection: Option<Detection>,
+}
+
+/// `start_contact_detection(direction)`'s thread: it waits for the tool to be free, then for a
+/// contact; on one the main thread stops the arm and moves it back to where the contact began.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Detection {
+    /// Direction of the contacts to detect (base frame); zero: the TCP's direction of motion.
+    direction: [f64; 3],
+    /// The tool has been free since detection started.
+    armed: bool,
+    /// The cycles back to the contact (`contact_step_back`): 0 until one is detected.
+    step_back: i32,
 }
 
 /// Which hand-guiding mode is on.
@@ -269,6 +290,7 @@ impl Default for UrRtdeProgram {
             force_twist: [0.0; 6],
             free: None,
             until_contact: None,
+            detection: None,
         }
     }
 }
@@ -291,7 +313,6 @@ fn unsupported(cmd: i32) -> String {
         MOVE_PATH => "movePath (custom script code)",
         56 | 57 => "external force/torque sensor",
         59 => "set_gravity",
-        62..=64 => "contact detection",
         66..=71 => {
             "dynamics (torque command, mass matrix, Jacobians over registers 36-47: PolyScope \
              5.23 functions; this controller reports 5.15)"
@@ -600,6 +621,26 @@ impl UrRtdeProgram {
                 }
                 Ok(Outcome::Done)
             }
+            START_CONTACT_DETECTION => {
+                let direction = [target[0], target[1], target[2]];
+                if !direction.iter().all(|v| v.is_finite()) {
+                    return Err("start_contact_detection: direction not finite".into());
+                }
+                self.detection = Some(Detection {
+                    direction,
+                    armed: false,
+                    step_back: 0,
+                });
+                Ok(Outcome::Done)
+            }
+            STOP_CONTACT_DETECTION | READ_CONTACT_DETECTION => {
+                let step_back = self.detection.map_or(0, |d| d.step_back);
+                if cmd == STOP_CONTACT_DETECTION {
+                    self.detection = None;
+                }
+                io.regs.output_int[1] = step_back;
+                Ok(Outcome::Done)
+            }
             MOVE_UNTIL_CONTACT => {
                 let xd = target;
                 let direction = [second[0], second[1], second[2]];
@@ -616,11 +657,14 @@ impl UrRtdeProgram {
                     return Err("move_until_contact: zero tool speed never meets a contact".into());
                 }
                 self.waypoint = None;
-                self.until_contact = Some(UntilContact::Seeking {
-                    xd,
-                    direction,
-                    accel,
-                });
+                self.until_contact = Some((
+                    UntilContact::Seeking {
+                        xd,
+                        direction,
+                        accel,
+                    },
+                    true,
+                ));
                 Ok(Outcome::Contact)
             }
             SET_STD_DIGITAL_OUT | SET_TOOL_DIGITAL_OUT => {
@@ -890,7 +934,7 @@ impl UrRtdeProgram {
     /// One cycle of moveUntilContact's loop; true when it has ended (at the contact point, or
     /// stopped by a protective stop).
     fn contact_step(&mut self, io: &mut ProgramIo<'_>) -> Result<bool, String> {
-        let Some(phase) = self.until_contact else {
+        let Some((phase, signal)) = self.until_contact else {
             return Ok(true);
         };
         if io.protective_stop {
@@ -938,8 +982,48 @@ impl UrRtdeProgram {
                 }
             }
         };
-        self.until_contact = Some(next);
+        self.until_contact = Some((next, signal));
         Ok(io.protective_stop)
+    }
+
+    /// One cycle of contact detection: once the tool, free since detection started, meets a
+    /// contact, stop the arm (`stopl(3)`) and move it back to the joints of the cycle before
+    /// the contact began (`movel(q)`), as the script's command 254 does.
+    fn detection_step(&mut self, io: &mut ProgramIo<'_>) -> Result<(), String> {
+        let Some(mut d) = self.detection else {
+            return Ok(());
+        };
+        if d.step_back > 0 || self.until_contact.is_some() {
+            return Ok(());
+        }
+        let direction = if d.direction.iter().all(|v| *v == 0.0) {
+            // A null direction: the TCP's target speed (`get_target_tcp_speed()`).
+            let v = io.arm.state().tcp_speed;
+            [v[0], v[1], v[2]]
+        } else {
+            d.direction
+        };
+        let back = self.contact_steps(io, &direction);
+        if !d.armed {
+            d.armed = back == 0;
+        } else if back > 0 {
+            d.step_back = back;
+            let q = io.history[back as usize];
+            if self.async_running {
+                self.write_async(io.regs, false);
+            }
+            self.path_run = None;
+            self.waypoint = None;
+            Self::command(
+                io,
+                ArmCommand::StopL {
+                    decel: CONTACT_STOP_DECEL,
+                },
+            )?;
+            self.until_contact = Some((UntilContact::Stopping { q }, false));
+        }
+        self.detection = Some(d);
+        Ok(())
     }
 
     /// Realtime commands (processed every cycle, answered with ready).
@@ -1045,6 +1129,7 @@ impl Program for UrRtdeProgram {
         self.force_mode = None;
         self.force_twist = [0.0; 6];
         self.until_contact = None;
+        self.detection = None;
         self.free = None;
         self.stale = Some(io.regs.input_int[0]).filter(|c| *c != 0);
         self.write_async(io.regs, false);
@@ -1065,12 +1150,20 @@ impl Program for UrRtdeProgram {
             io.runtime_error = Some(e);
             return ProgramStep::Exit;
         }
-        if self.until_contact.is_some() {
+        if let Err(e) = self.detection_step(io) {
+            io.runtime_error = Some(e);
+            return ProgramStep::Exit;
+        }
+        if let Some((_, signal)) = self.until_contact {
             match self.contact_step(io) {
                 Ok(true) => {
                     self.until_contact = None;
-                    io.regs.output_int[0] = DONE;
+                    if signal {
+                        io.regs.output_int[0] = DONE;
+                    }
                 }
+                // moveUntilContact, and the retreat from a detected contact (command 254), keep
+                // the script's main thread: the next command waits.
                 Ok(false) => return ProgramStep::Continue,
                 Err(e) => {
                     io.runtime_error = Some(e);
@@ -1127,7 +1220,7 @@ impl Program for UrRtdeProgram {
         // A safety stop ends force mode and moveUntilContact's loop with the motion.
         self.force_mode = None;
         self.force_twist = [0.0; 6];
-        if self.until_contact.take().is_some() {
+        if let Some((_, true)) = self.until_contact.take() {
             io.regs.output_int[0] = DONE;
         }
         if self.waiting_for_motion {
