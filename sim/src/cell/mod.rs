@@ -50,8 +50,8 @@ pub mod insertion;
 pub mod model;
 pub mod motion;
 pub mod noise;
-pub mod wrench;
 mod sim_cell;
+pub mod wrench;
 
 pub use capture::FeederImage;
 pub use error::CellError;
