@@ -436,6 +436,37 @@ mod tests {
     }
 
     #[test]
+    fn point_and_motion_task_frames_follow_the_tcp() {
+        let tcp = Isometry3::translation(0.4, 0.0, 0.3);
+        // Type 1: y from the TCP towards the frame's origin, z kept as near the frame's as it can.
+        let mut point = ForceMode::new(
+            &[0.4, 0.2, 0.3, 0.0, 0.0, 0.0],
+            &[0, 1, 0, 0, 0, 0],
+            &[0.0, 5.0, 0.0, 0.0, 0.0, 0.0],
+            1,
+            &[0.1; 6],
+        )
+        .expect("valid");
+        let r = point.frame_rotation(&tcp, &Vector3::zeros());
+        assert!((r * Vector3::y() - Vector3::y()).norm() < 1e-12);
+        assert!((r * Vector3::z() - Vector3::z()).norm() < 1e-12);
+        let mut far = point.clone();
+        far.task_frame = Isometry3::translation(0.4, -0.2, 0.3);
+        let r = far.frame_rotation(&tcp, &Vector3::zeros());
+        assert!((r * Vector3::y() + Vector3::y()).norm() < 1e-12);
+        // In free space the tool moves towards the point (y of that frame): −y of the base.
+        let v = far.twist(&r, &[0.0; 6], 1.0);
+        assert!(v[1] < 0.0 && v[0].abs() < 1e-12, "{v:?}");
+        // Type 3: x along the motion projected onto the frame's xy plane; kept when still.
+        let mut motion =
+            ForceMode::new(&[0.0; 6], &[0, 0, 1, 0, 0, 0], &[0.0; 6], 3, &[0.1; 6]).expect("valid");
+        let r = motion.frame_rotation(&tcp, &Vector3::new(0.0, 0.05, 0.01));
+        assert!((r * Vector3::x() - Vector3::y()).norm() < 1e-12);
+        let still = motion.frame_rotation(&tcp, &Vector3::zeros());
+        assert!(still.angle_to(&r) < 1e-12);
+    }
+
+    #[test]
     fn the_admittance_loop_settles_on_the_table_without_oscillating_at_every_gain() {
         let plane = ContactPlane::table();
         for gain in [0.1, 0.5, 1.0, 2.0] {
