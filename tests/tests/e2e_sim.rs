@@ -6,7 +6,7 @@ mod e2e_support;
 
 use cell::episode::StepOutcome;
 use cell::harness::{SimSetup, run_sim_episode_blocking};
-use cell::orchestrator::State;
+use cell::orchestrator::{Activity, State};
 use rayon::prelude::*;
 use sim::cell::CellModel;
 use sim::cell::insertion::{InsertionCase, InsertionScorer, Scored, Scorer, ScorerError};
@@ -88,6 +88,25 @@ fn nominal_scenario_assembles_at_least_95_percent_of_200_episodes() {
                 .iter()
                 .any(|p| p.state == State::Insert && p.step == Some(2))
         );
+        // Each span has an activity, and a whole assembly spends time on every kind of motion.
+        assert!(r.phases.iter().all(|p| p.activity.is_some()));
+        let by_activity = r.time_by_activity();
+        if r.success {
+            for a in [
+                Activity::Transit,
+                Activity::Approach,
+                Activity::Grasp,
+                Activity::Insertion,
+                Activity::Retreat,
+            ] {
+                assert!(
+                    by_activity.get(&a).is_some_and(|s| *s > 0.0),
+                    "episode {}: no time on {}: {by_activity:?}",
+                    r.episode,
+                    a.name()
+                );
+            }
+        }
         if r.success {
             assert_eq!(r.steps.len(), 3);
             for s in &r.steps {
@@ -281,7 +300,7 @@ fn an_unreachable_target_is_refused_before_moving() {
         .expect_err("an unreachable step is refused")
         .to_string();
     assert!(
-        message.contains("usbc_nominal.toml:65:10: assembly[0].target")
+        message.contains("usbc_nominal.toml:68:10: assembly[0].target")
             && message.contains("out of the ur5e's reach top-down"),
         "{message}"
     );

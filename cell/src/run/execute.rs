@@ -165,6 +165,20 @@ enum Runner<'d> {
     Production(&'d Production, Setup, tokio::runtime::Runtime),
 }
 
+/// The scenario as a controller runs it: our program drives the gripper by one digital output,
+/// which opens the full stroke, so selection and planning must leave the fingers room for the
+/// full stroke (`cell.gripper.opening_margin` is set aside, with a warning).
+fn full_stroke(scenario: &Scenario) -> Scenario {
+    let mut s = scenario.clone();
+    if s.spec.cell.gripper.opening_margin.take().is_some() {
+        tracing::warn!(
+            "cell.gripper.opening_margin set aside: the controller's gripper output opens the \
+             full stroke"
+        );
+    }
+    s
+}
+
 impl<'d> Runner<'d> {
     fn new(driver: &'d Driver, scenario: &Scenario) -> Result<Self, ExecuteError> {
         let runtime = || {
@@ -176,10 +190,12 @@ impl<'d> Runner<'d> {
         };
         Ok(match driver {
             Driver::Sim => Runner::Sim(SimSetup::new(scenario.clone())?),
-            Driver::VirtualUr => Runner::VirtualUr(SimSetup::new(scenario.clone())?, runtime()?),
+            Driver::VirtualUr => {
+                Runner::VirtualUr(SimSetup::new(full_stroke(scenario))?, runtime()?)
+            }
             // A real controller gets no simulated cell: only the engine's planning model.
             Driver::Production(p) => {
-                Runner::Production(p, Setup::new(scenario.clone())?, runtime()?)
+                Runner::Production(p, Setup::new(full_stroke(scenario))?, runtime()?)
             }
         })
     }
