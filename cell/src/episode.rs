@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::orchestrator::State;
+use crate::orchestrator::{Activity, State};
 
 /// Format version of episode records; a results file with another version is refused.
 pub const RECORD_VERSION: u32 = 1;
@@ -146,11 +146,15 @@ pub struct EpisodeRecord {
     pub phases: Vec<PhaseSpan>,
 }
 
-/// Simulated time spent in one state of the orchestrator, on the critical path of the cycle.
+/// Simulated time spent in one state of the orchestrator, on the critical path of the cycle, on
+/// one activity (a state's time is split at the end of each of its motions).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PhaseSpan {
     /// The state.
     pub state: State,
+    /// What the time went on (absent in records from before activities were kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub activity: Option<Activity>,
     /// The assembly step it served, when inside one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step: Option<usize>,
@@ -165,6 +169,18 @@ impl EpisodeRecord {
         let mut out = std::collections::BTreeMap::new();
         for p in &self.phases {
             *out.entry(p.state).or_insert(0.0) += p.duration_s;
+        }
+        out
+    }
+
+    /// Simulated seconds spent on each activity over the whole cycle (empty for records from
+    /// before activities were kept).
+    pub fn time_by_activity(&self) -> std::collections::BTreeMap<Activity, f64> {
+        let mut out = std::collections::BTreeMap::new();
+        for p in &self.phases {
+            if let Some(a) = p.activity {
+                *out.entry(a).or_insert(0.0) += p.duration_s;
+            }
         }
         out
     }

@@ -196,6 +196,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if let Some(line) = cell::run::phases::breakdown_line(&done.summary.cycle_phases) {
         println!("  {line}");
     }
+    if let Some(line) = cell::run::phases::activity_line(&done.summary.cycle_activities) {
+        println!("  {line}");
+    }
     let o = &done.outcome;
     println!(
         "ran {} in {:.1} s{} ({} resumed); results {}, report {}",

@@ -665,6 +665,7 @@ impl<'a> Engine<'a> {
                 Motion::Close => robot.close_gripper().await,
             };
             let clock = self.clock();
+            self.log.motion_done(name, clock);
             tracing::debug!(
                 episode = self.ctx.episode,
                 waypoint = name,

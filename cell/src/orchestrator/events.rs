@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use super::activity::Activity;
 use super::state::State;
 use crate::episode::PhaseSpan;
 
@@ -35,6 +36,8 @@ pub struct EventLog {
     episode: u32,
     start: Instant,
     events: Vec<Event>,
+    /// (simulated time, activity) at the end of each motion, in order.
+    motions: Vec<(f64, Activity)>,
 }
 
 impl EventLog {
@@ -44,6 +47,7 @@ impl EventLog {
             episode,
             start: Instant::now(),
             events: Vec::new(),
+            motions: Vec::new(),
         }
     }
 
@@ -69,6 +73,15 @@ impl EventLog {
         });
     }
 
+    /// Records that a motion named `waypoint` ended at `sim_time_s`: the time since the state's
+    /// previous mark is that motion's activity ([`Activity::of_motion`]; names it does not know
+    /// leave the time to their state's).
+    pub fn motion_done(&mut self, waypoint: &str, sim_time_s: f64) {
+        if let Some(a) = Activity::of_motion(waypoint) {
+            self.motions.push((sim_time_s, a));
+        }
+    }
+
     /// Wall-clock seconds since the log was created.
     pub fn wall_time_s(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
@@ -80,22 +93,41 @@ impl EventLog {
     }
 
     /// Where the cycle's simulated time went: each state entered after the cycle started (the
-    /// arm at home), in order, with the simulated seconds spent in it. The spans add up to the
-    /// cycle time.
+    /// arm at home), in order, split at the end of each of its motions, with the simulated
+    /// seconds and the activity of each part. The spans add up to the cycle time.
     pub fn phases(&self) -> Vec<PhaseSpan> {
         let mut spans = Vec::new();
-        // (simulated time, step) at which the state being timed was entered.
-        let mut entered: Option<(f64, Option<usize>)> = None;
+        // (simulated time, step, state before) at which the state being timed was entered.
+        let mut entered: Option<(f64, Option<usize>, Option<State>)> = None;
+        let mut motions = self.motions.iter().peekable();
         for e in &self.events {
-            if let Some((start, step)) = entered {
-                spans.push(PhaseSpan {
+            if let Some((start, step, before)) = entered {
+                let span = |activity, from: f64, to: f64| PhaseSpan {
                     state: e.from,
+                    activity: Some(activity),
                     step,
-                    duration_s: e.sim_time_s - start,
-                });
+                    duration_s: to - from,
+                };
+                let mut at = start;
+                while let Some(&&(t, activity)) = motions.peek() {
+                    if t > e.sim_time_s {
+                        break;
+                    }
+                    motions.next();
+                    if t >= at {
+                        spans.push(span(activity, at, t));
+                        at = t;
+                    }
+                }
+                if e.sim_time_s > at || at == start {
+                    spans.push(span(Activity::of_state(e.from, before), at, e.sim_time_s));
+                }
+            } else {
+                // Motions before the cycle (homing) are not part of it.
+                while motions.next_if(|m| m.0 <= e.sim_time_s).is_some() {}
             }
             if entered.is_some() || (e.from == State::Home && e.to != State::Home) {
-                entered = Some((e.sim_time_s, e.step));
+                entered = Some((e.sim_time_s, e.step, Some(e.from)));
             }
         }
         spans

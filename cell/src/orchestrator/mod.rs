@@ -29,13 +29,15 @@
 //!
 //! # Files
 //! `engine` (the state machine, one method per state), `step` (per-step state), `context`
-//! (setup, policies, the episode's context), `state` (states and their bounds), `events`,
+//! (setup, policies, the episode's context), `state` (states and their bounds), `activity`
+//! (what the time is spent on, finer than states), `events`,
 //! `cell_io` (the cell seams), `perception` (the perception seam), `selection`, `planning`,
 //! `geometry` (the planner's model of the cell), `production` (pre-flight, production side
 //! channels).
 
 #![allow(non_snake_case)]
 
+mod activity;
 mod cell_io;
 mod context;
 mod engine;
@@ -47,6 +49,7 @@ mod selection;
 mod state;
 mod step;
 
+pub use activity::Activity;
 pub use cell_io::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, SplitCell, Workcell};
 pub use context::{EpisodeContext, EpisodeSettings, Setup};
 pub use engine::{FEEDER_EXHAUSTED, FEEDER_SHAKE_BOUND};

@@ -311,6 +311,19 @@ fn cycle_phases(
         );
     }
     h.push_str("</table>\n");
+    if !s.cycle_activities.is_empty() {
+        h.push_str("<p>The same time by activity: each state's time split at the end of its motions.</p>\n<table><tr><th class=l>activity</th><th>mean (s)</th><th>share</th></tr>\n");
+        for m in &s.cycle_activities {
+            let _ = writeln!(
+                h,
+                "<tr><td class=l>{}</td><td>{:.3}</td><td>{}</td></tr>",
+                m.activity.name(),
+                m.mean_s,
+                pct(m.share)
+            );
+        }
+        h.push_str("</table>\n");
+    }
     if let Some((typical, slowest)) = crate::run::phases::typical_and_slowest(recs.iter().copied())
     {
         let mut rows = vec![(

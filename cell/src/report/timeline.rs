@@ -134,6 +134,7 @@ mod tests {
             .into_iter()
             .map(|(state, duration_s)| PhaseSpan {
                 state,
+                activity: None,
                 step: Some(0),
                 duration_s,
             })

@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::episode::EpisodeRecord;
-use crate::orchestrator::State;
+use crate::orchestrator::{Activity, State};
 
 /// Mean simulated seconds one state takes per successful assembly.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -49,6 +49,74 @@ pub fn phase_means<'a>(records: impl IntoIterator<Item = &'a EpisodeRecord>) -> 
             },
         })
         .collect()
+}
+
+/// Mean simulated seconds one activity takes per successful assembly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ActivityMean {
+    /// The activity.
+    pub activity: Activity,
+    /// Mean seconds per successful episode.
+    pub mean_s: f64,
+    /// Share of the mean cycle time.
+    pub share: f64,
+}
+
+/// The mean time of each activity over the successful episodes that kept their activities,
+/// in [`Activity::ALL`]'s order; empty when there are none.
+pub fn activity_means<'a>(
+    records: impl IntoIterator<Item = &'a EpisodeRecord>,
+) -> Vec<ActivityMean> {
+    let mut sums = std::collections::BTreeMap::<Activity, f64>::new();
+    let mut n = 0usize;
+    let mut cycle = 0.0;
+    for r in records.into_iter().filter(|r| r.success) {
+        let by = r.time_by_activity();
+        if by.is_empty() {
+            continue;
+        }
+        n += 1;
+        cycle += r.cycle_time_s;
+        for (a, s) in by {
+            *sums.entry(a).or_insert(0.0) += s;
+        }
+    }
+    if n == 0 {
+        return Vec::new();
+    }
+    let mean_cycle = cycle / n as f64;
+    sums.into_iter()
+        .map(|(activity, s)| ActivityMean {
+            activity,
+            mean_s: s / n as f64,
+            share: if mean_cycle > 0.0 {
+                s / n as f64 / mean_cycle
+            } else {
+                0.0
+            },
+        })
+        .collect()
+}
+
+/// One line for people on activities: `cycle by activity: transit 3.10 s (34 %), …`.
+pub fn activity_line(means: &[ActivityMean]) -> Option<String> {
+    if means.is_empty() {
+        return None;
+    }
+    let mut by_time: Vec<&ActivityMean> = means.iter().filter(|m| m.mean_s > 0.0).collect();
+    by_time.sort_by(|a, b| b.mean_s.total_cmp(&a.mean_s));
+    let parts: Vec<String> = by_time
+        .iter()
+        .map(|m| {
+            format!(
+                "{} {:.2} s ({:.0} %)",
+                m.activity.name(),
+                m.mean_s,
+                100.0 * m.share
+            )
+        })
+        .collect();
+    Some(format!("by activity: {}", parts.join(", ")))
 }
 
 /// A typical successful episode (the one whose cycle time is the median's) and the slowest, each
@@ -112,6 +180,7 @@ mod tests {
                 .iter()
                 .map(|&(state, duration_s)| PhaseSpan {
                     state,
+                    activity: None,
                     step: Some(0),
                     duration_s,
                 })

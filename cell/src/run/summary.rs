@@ -145,6 +145,10 @@ pub struct Summary {
     /// assembly (empty for records from before phases were kept).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub cycle_phases: Vec<super::phases::PhaseMean>,
+    /// The same time by activity (transit, approach, grasp, insertion, retreat, shake,
+    /// waiting; empty for records from before activities were kept).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cycle_activities: Vec<super::phases::ActivityMean>,
 }
 
 impl Summary {
@@ -259,6 +263,7 @@ impl Summary {
             error_budget,
             cycle_time_s: Distribution::of(&cycle),
             cycle_phases: super::phases::phase_means(records.iter().copied()),
+            cycle_activities: super::phases::activity_means(records.iter().copied()),
         }
     }
 }
