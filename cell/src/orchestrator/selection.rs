@@ -525,4 +525,78 @@ mod tests {
         };
         assert!(UnposedObstacle::new(&flat, base_T_table).is_none());
     }
+
+    /// With `cell.gripper.opening_margin` the fingers open to the part plus the margins, and
+    /// the room is checked there: a neighbour 1 mm beyond a finger opened to the part leaves
+    /// room, and the same neighbour is in the way of fingers opened the full stroke.
+    #[test]
+    #[allow(non_snake_case)]
+    fn the_room_for_the_fingers_is_checked_at_the_opening_they_open_to() {
+        let (setup, shell) = shell_at_the_feeder();
+        let (k, catalog) = (&setup.engine.knowledge, &setup.engine.scenario.catalog);
+        let g = k.gripper();
+        let margin = g
+            .opening_margin
+            .expect("the nominal scenario sets a margin");
+        let home = setup.model.home;
+        let config = SelectionConfig::default();
+        let alone = select(
+            k,
+            catalog,
+            0,
+            std::slice::from_ref(&shell),
+            &[],
+            &home,
+            &config,
+        );
+        let chosen = alone.chosen.expect("the shell alone is picked");
+        let spec = catalog.part("main_shell").unwrap();
+        let axis = Vector3::from(spec.grasp_for("+z").unwrap().closing_axis);
+        let mesh = catalog.load_mesh(spec).unwrap();
+        let width = sim::cell::gripper::width_across(&mesh.vertices, &axis.normalize());
+        assert!((chosen.opening - (width + 2.0 * margin)).abs() < 1e-12);
+        assert!(chosen.opening < g.stroke);
+        // A 2 cm box, square to the closing axis, its near face 1 mm beyond the outer face of
+        // a finger opened to the part.
+        let base_T_table = &k.geometry.base_T_table;
+        let [left, right] = k.finger_poses(&chosen.base_T_grasp, chosen.opening);
+        let along = (base_T_table
+            .inverse_transform_vector(&(right.translation.vector - left.translation.vector)))
+        .xy()
+        .normalize();
+        let across = Vector3::new(-along.y, along.x, 0.0).xy();
+        let centre = shell.table_T_part.translation.vector.xy();
+        let face = chosen.opening / 2.0 + g.finger_thickness + 0.001;
+        let table_points = [(0.0, -0.01), (0.0, 0.01), (0.02, -0.01), (0.02, 0.01)]
+            .iter()
+            .flat_map(|&(a, c)| {
+                let p = centre + along * (face + a) + across * c;
+                [0.0, 0.009].map(|z| Point3::new(p.x, p.y, z))
+            })
+            .collect();
+        let beside = UnposedPart {
+            part: "top_shell".into(),
+            table_points,
+        };
+        let obstacle = UnposedObstacle::new(&beside, base_T_table).unwrap();
+        let near = select(
+            k,
+            catalog,
+            0,
+            std::slice::from_ref(&shell),
+            std::slice::from_ref(&obstacle),
+            &home,
+            &config,
+        );
+        assert!(near.chosen.is_some(), "{:?}", near.rejected);
+        // The full stroke puts the finger into the box.
+        assert!(
+            k.finger_distance(
+                &chosen.base_T_grasp,
+                g.stroke,
+                obstacle.hull.as_ref(),
+                &Isometry3::identity()
+            ) < config.finger_margin
+        );
+    }
 }
