@@ -12,6 +12,7 @@ Run through scripts/cycles_render/run.sh, which provisions the venv and writes t
 """
 
 import argparse
+import atexit
 import importlib.metadata
 import json
 import math
@@ -256,6 +257,7 @@ def parse_args():
     p.add_argument("source", help="a `cell dataset` output folder (camera.json, models/, the split)")
     p.add_argument("out", help="output folder (must not exist)")
     p.add_argument("--board-svg", required=True, help="the board's print from `cell board`")
+    p.add_argument("--board", required=True, help="the board file the print was made from (its thickness)")
     p.add_argument("--catalog", required=True, help="the part catalog the set was made from")
     p.add_argument("--split", default="test_feeder")
     p.add_argument("--look", choices=LOOKS, default="soft")
@@ -404,7 +406,8 @@ def main():
         fail("--frames >= 0, --samples >= 1, --scale >= 1 and 0 < --min-iou <= 1")
 
     src = args.source
-    cam_all = read_json(os.path.join(src, "camera.json"))
+    if not os.path.isfile(os.path.join(src, "camera.json")):
+        fail(f"{src}: no camera.json (not a `cell dataset` output folder?)")
     split_dir = os.path.join(src, args.split)
     scenes = sorted(d for d in os.listdir(split_dir) if d.isdigit()) if os.path.isdir(split_dir) else []
     if not scenes:
@@ -419,7 +422,13 @@ def main():
     materials_by_id = {i + 1: p.get("material") for i, p in enumerate(catalog.get("part", []))}
     rects, plate = board_rects(args.board_svg)
     texture = board_texture(rects, plate, 0.0000625)
-    thickness = 0.003
+    try:
+        with open(args.board, "rb") as f:
+            thickness = float(tomllib.load(f).get("thickness", 0.003))  # BoardSpec's default
+    except OSError as e:
+        fail(f"{args.board}: {e.strerror}")
+    except (tomllib.TOMLDecodeError, ValueError, TypeError) as e:
+        fail(f"{args.board}: {e}")
 
     # Materials, as sim::render::appearance gives them (nominal, untinted).
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -446,6 +455,7 @@ def main():
             models[oid] = read_ply(os.path.join(src, "models", name))
 
     tmp_out = tempfile.mkdtemp(prefix="cycles_render_")
+    atexit.register(shutil.rmtree, tmp_out, True)  # also when a later check refuses the set
     out_root = os.path.join(tmp_out, "set")
     os.makedirs(os.path.join(out_root, args.split))
     shutil.copy(os.path.join(src, "camera.json"), out_root)
@@ -487,7 +497,7 @@ def main():
                 fail(f"{sdir}: image {im} has no scene_gt or scene_gt_info entry")
             t0 = time.time()
             rgb, iou = render_frame(bpy, mathutils, args, scene, mats, board_mat, models, materials_by_id,
-                                    plate, thickness, cams[im], gts[im], infos[im], sdir, int(im), cam_all)
+                                    plate, thickness, cams[im], gts[im], infos[im], sdir, int(im))
             dt = time.time() - t0
             t_render += dt
             write_png(os.path.join(odir, "rgb", f"{int(im):06d}.png"), rgb)
@@ -534,7 +544,7 @@ def main():
 
 
 def render_frame(bpy, mathutils, args, scene, mats, board_mat, models, materials_by_id, plate, thickness,
-                 cam, gt, info, sdir, im, cam_all):
+                 cam, gt, info, sdir, im):
     """Builds, renders and resamples one frame; returns the 8-bit image and the IoU per instance
     (None where the set's mask_visib is empty)."""
     for ob in list(scene.collection.objects):

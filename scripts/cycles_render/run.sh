@@ -30,4 +30,4 @@ fi
 src=$1
 out=$2
 shift 2
-exec "$py" "$here/render.py" "$src" "$out" --board-svg "$svg" --catalog "$catalog" "$@"
+exec "$py" "$here/render.py" "$src" "$out" --board-svg "$svg" --board "$board" --catalog "$catalog" "$@"
