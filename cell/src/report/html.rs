@@ -289,6 +289,22 @@ pub fn render_html(
     Ok(Page { html: h, files })
 }
 
+/// A table of (name, mean seconds, share) rows headed `what`.
+fn mean_table<'a>(h: &mut String, what: &str, rows: impl Iterator<Item = (&'a str, f64, f64)>) {
+    let _ = writeln!(
+        h,
+        "<table><tr><th class=l>{what}</th><th>mean (s)</th><th>share</th></tr>"
+    );
+    for (name, mean, share) in rows {
+        let _ = writeln!(
+            h,
+            "<tr><td class=l>{name}</td><td>{mean:.3}</td><td>{}</td></tr>",
+            pct(share)
+        );
+    }
+    h.push_str("</table>\n");
+}
+
 /// Where the cycle time goes: the mean seconds per state, and the timelines of a typical and
 /// of the slowest successful episode.
 fn cycle_phases(
@@ -300,29 +316,23 @@ fn cycle_phases(
     if s.cycle_phases.is_empty() {
         return Ok(());
     }
-    h.push_str("<h3>Where the time goes</h3>\n<p>Mean simulated seconds per successful assembly in each state of the orchestrator, on the cycle's critical path: work overlapped with a move (a shake started during an insertion) counts in the move, and <code>capture</code> includes waiting for the feeder to settle after a shake.</p>\n<table><tr><th class=l>state</th><th>mean (s)</th><th>share</th></tr>\n");
-    for m in &s.cycle_phases {
-        let _ = writeln!(
-            h,
-            "<tr><td class=l>{}</td><td>{:.3}</td><td>{}</td></tr>",
-            m.state.name(),
-            m.mean_s,
-            pct(m.share)
-        );
-    }
-    h.push_str("</table>\n");
+    h.push_str("<h3>Where the time goes</h3>\n<p>Mean simulated seconds per successful assembly in each state of the orchestrator, on the cycle's critical path: work overlapped with a move (a shake started during an insertion) counts in the move, and <code>capture</code> includes waiting for the feeder to settle after a shake.</p>\n");
+    mean_table(
+        h,
+        "state",
+        s.cycle_phases
+            .iter()
+            .map(|m| (m.state.name(), m.mean_s, m.share)),
+    );
     if !s.cycle_activities.is_empty() {
-        h.push_str("<p>The same time by activity: each state's time split at the end of its motions.</p>\n<table><tr><th class=l>activity</th><th>mean (s)</th><th>share</th></tr>\n");
-        for m in &s.cycle_activities {
-            let _ = writeln!(
-                h,
-                "<tr><td class=l>{}</td><td>{:.3}</td><td>{}</td></tr>",
-                m.activity.name(),
-                m.mean_s,
-                pct(m.share)
-            );
-        }
-        h.push_str("</table>\n");
+        h.push_str("<p>The same time by activity: each state's time split at the end of its motions.</p>\n");
+        mean_table(
+            h,
+            "activity",
+            s.cycle_activities
+                .iter()
+                .map(|m| (m.activity.name(), m.mean_s, m.share)),
+        );
     }
     if let Some((typical, slowest)) = crate::run::phases::typical_and_slowest(recs.iter().copied())
     {

@@ -21,17 +21,34 @@ pub struct PhaseMean {
 /// The mean time of each state over the successful episodes that kept their phases, states in
 /// order; empty when there are none.
 pub fn phase_means<'a>(records: impl IntoIterator<Item = &'a EpisodeRecord>) -> Vec<PhaseMean> {
-    let mut sums = std::collections::BTreeMap::<State, f64>::new();
+    mean_shares(records, EpisodeRecord::time_by_state)
+        .into_iter()
+        .map(|(state, mean_s, share)| PhaseMean {
+            state,
+            mean_s,
+            share,
+        })
+        .collect()
+}
+
+/// Per key (a state or an activity), the mean seconds per successful episode whose `times` are
+/// not empty, and that mean's share of their mean cycle time; keys in order.
+fn mean_shares<'a, K: Ord>(
+    records: impl IntoIterator<Item = &'a EpisodeRecord>,
+    times: impl Fn(&EpisodeRecord) -> std::collections::BTreeMap<K, f64>,
+) -> Vec<(K, f64, f64)> {
+    let mut sums = std::collections::BTreeMap::<K, f64>::new();
     let mut n = 0usize;
     let mut cycle = 0.0;
-    for r in records
-        .into_iter()
-        .filter(|r| r.success && !r.phases.is_empty())
-    {
+    for r in records.into_iter().filter(|r| r.success) {
+        let by = times(r);
+        if by.is_empty() {
+            continue;
+        }
         n += 1;
         cycle += r.cycle_time_s;
-        for (state, s) in r.time_by_state() {
-            *sums.entry(state).or_insert(0.0) += s;
+        for (k, s) in by {
+            *sums.entry(k).or_insert(0.0) += s;
         }
     }
     if n == 0 {
@@ -39,14 +56,14 @@ pub fn phase_means<'a>(records: impl IntoIterator<Item = &'a EpisodeRecord>) -> 
     }
     let mean_cycle = cycle / n as f64;
     sums.into_iter()
-        .map(|(state, s)| PhaseMean {
-            state,
-            mean_s: s / n as f64,
-            share: if mean_cycle > 0.0 {
-                s / n as f64 / mean_cycle
+        .map(|(k, s)| {
+            let mean = s / n as f64;
+            let share = if mean_cycle > 0.0 {
+                mean / mean_cycle
             } else {
                 0.0
-            },
+            };
+            (k, mean, share)
         })
         .collect()
 }
@@ -67,33 +84,12 @@ pub struct ActivityMean {
 pub fn activity_means<'a>(
     records: impl IntoIterator<Item = &'a EpisodeRecord>,
 ) -> Vec<ActivityMean> {
-    let mut sums = std::collections::BTreeMap::<Activity, f64>::new();
-    let mut n = 0usize;
-    let mut cycle = 0.0;
-    for r in records.into_iter().filter(|r| r.success) {
-        let by = r.time_by_activity();
-        if by.is_empty() {
-            continue;
-        }
-        n += 1;
-        cycle += r.cycle_time_s;
-        for (a, s) in by {
-            *sums.entry(a).or_insert(0.0) += s;
-        }
-    }
-    if n == 0 {
-        return Vec::new();
-    }
-    let mean_cycle = cycle / n as f64;
-    sums.into_iter()
-        .map(|(activity, s)| ActivityMean {
+    mean_shares(records, EpisodeRecord::time_by_activity)
+        .into_iter()
+        .map(|(activity, mean_s, share)| ActivityMean {
             activity,
-            mean_s: s / n as f64,
-            share: if mean_cycle > 0.0 {
-                s / n as f64 / mean_cycle
-            } else {
-                0.0
-            },
+            mean_s,
+            share,
         })
         .collect()
 }
