@@ -100,7 +100,10 @@ fn prepare_loaded(
         settings,
         progress,
     )?;
-    report.merge_symmetric(&symmetry_group(&part.symmetries));
+    // Twin classes merge into the one a grasp names (a peg's ends into its grasped end).
+    report.merge_symmetric_keeping(&symmetry_group(&part.symmetries), |name| {
+        part.grasp_for(name).is_some()
+    });
     Ok(PreparedPart {
         name: part.name.clone(),
         mass: report.mass,

@@ -102,3 +102,41 @@ fn without_its_symmetries_a_round_peg_lies_in_many_roll_classes() {
         round.report.classes.len()
     );
 }
+
+#[test]
+fn the_two_ends_merge_into_the_end_the_grasp_names() {
+    let dir = tempfile::tempdir().unwrap();
+    write_nist_meshes(dir.path()).unwrap();
+    // Each end takes about half the end drops: whichever the drops favour, the grasp's end names
+    // the merged class, so the grasp still applies after preparing.
+    for end in ["+z", "-z"] {
+        let path = dir.path().join(format!("square{end}.toml"));
+        std::fs::write(
+            &path,
+            format!(
+                "name = \"pegs\"\n[[part]]\nname = \"square_8\"\nmesh = \"nist_square_8.obj\"\n\
+                 unit = \"mm\"\nmaterial = \"aluminium\"\n\
+                 symmetries = [{{ axis = [0.0, 0.0, 1.0], order = 4 }}, \
+                 {{ axis = [1.0, 0.0, 0.0], order = 2 }}]\n\
+                 [[part.grasp]]\nstable_pose = \"{end}\"\nclosing_axis = [1.0, 0.0, 0.0]\n\
+                 grip_height = 0.0075\n"
+            ),
+        )
+        .unwrap();
+        let prepared = prepare_catalog(&path, &settings(), None).unwrap();
+        let square = &prepared[0];
+        let names: Vec<&str> = (square.report.classes.iter())
+            .map(|c| c.pose.name.as_str())
+            .collect();
+        let merged = (square.report.classes.iter())
+            .find(|c| c.pose.up_in_part[2].abs() > 0.5)
+            .expect("an end class");
+        assert_eq!(merged.pose.name, end, "{names:?}");
+        let up = if end == "+z" { 1.0 } else { -1.0 };
+        assert!((merged.pose.up_in_part[2] - up).abs() < 1e-6, "{end}");
+        // Written with the grasp's name, so the catalog reads back pickable in that pose.
+        let catalog = perception::part::Catalog::load(&path).unwrap();
+        let part = catalog.part("square_8").unwrap();
+        assert!(part.stable_pose(end).is_some() && part.grasp_for(end).is_some());
+    }
+}

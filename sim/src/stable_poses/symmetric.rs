@@ -16,6 +16,18 @@ impl StablePoseReport {
     /// class keeps the name, rest rotation and height of its most probable member and adds up the
     /// drops; most probable first, as before. With the identity alone nothing changes.
     pub fn merge_symmetric(&mut self, group: &[UnitQuaternion<f64>]) {
+        self.merge_symmetric_keeping(group, |_| false);
+    }
+
+    /// [`Self::merge_symmetric`], where a merged class whose members include one that `keep`
+    /// accepts (by name: a stable pose the catalog has a grasp for) is named, turned and raised
+    /// as that member: a peg's two ends merge into the end its grasp names, however the drops
+    /// split between them, so the grasp still applies.
+    pub fn merge_symmetric_keeping(
+        &mut self,
+        group: &[UnitQuaternion<f64>],
+        keep: impl Fn(&str) -> bool,
+    ) {
         if group.len() < 2 {
             return;
         }
@@ -29,6 +41,12 @@ impl StablePoseReport {
                     .any(|g| (g * u).angle(&up(m)) < CLASS_ANGLE_RAD)
             }) {
                 Some(into) => {
+                    if keep(&class.pose.name) && !keep(&into.pose.name) {
+                        into.pose.name = class.pose.name.clone();
+                        into.pose.up_in_part = class.pose.up_in_part;
+                        into.pose.rotation = class.pose.rotation;
+                        into.pose.rest_height = class.pose.rest_height;
+                    }
                     into.count += class.count;
                     into.jittering += class.jittering;
                     into.pose.probability += class.pose.probability;
@@ -132,6 +150,33 @@ mod tests {
         ];
         r.merge_symmetric(&symmetry_group(&symmetries));
         assert_eq!(summary(&r), [("+x".into(), 82), ("+z".into(), 18)]);
+    }
+
+    #[test]
+    fn the_merged_ends_keep_the_name_of_the_grasped_one() {
+        let mut r = square_bar();
+        // The drops favour neither end; name "-z" first so it would lead the merge.
+        r.classes.swap(4, 5);
+        assert_eq!(r.classes[4].pose.name, "-z");
+        let symmetries = [
+            Symmetry {
+                axis: [0.0, 0.0, 1.0],
+                order: 4,
+                exact: true,
+            },
+            Symmetry {
+                axis: [1.0, 0.0, 0.0],
+                order: 2,
+                exact: true,
+            },
+        ];
+        let group = symmetry_group(&symmetries);
+        let mut plain = r.clone();
+        plain.merge_symmetric(&group);
+        assert_eq!(summary(&plain), [("+x".into(), 82), ("-z".into(), 18)]);
+        r.merge_symmetric_keeping(&group, |name| name == "+z");
+        assert_eq!(summary(&r), [("+x".into(), 82), ("+z".into(), 18)]);
+        assert_eq!(r.classes[1].pose.up_in_part, [0.0, 0.0, 1.0]);
     }
 
     #[test]
