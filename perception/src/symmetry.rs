@@ -43,7 +43,14 @@ pub fn symmetry_group(symmetries: &[Symmetry]) -> Vec<UnitQuaternion<f64>> {
         frontier += 1;
         for h in &generators {
             let candidate = g * h;
-            if !group.iter().any(|e| e.angle_to(&candidate) < 1e-9) {
+            // The same rotation (either quaternion sign): |⟨e, c⟩| = cos(angle / 2) within
+            // 1e-12 of 1, an angle under 3e-6 rad (products drift by ~1e-15; distinct elements
+            // differ by at least 360° / MAX_GROUP). A dot product, not an arc cosine: the
+            // 96-element group of a round peg is generated on every insertion check.
+            if !group
+                .iter()
+                .any(|e| e.coords.dot(&candidate.coords).abs() > 1.0 - 1e-12)
+            {
                 group.push(candidate);
             }
         }
