@@ -77,11 +77,14 @@ pub fn nearest_twin(
     b: &UnitQuaternion<f64>,
     group: &[UnitQuaternion<f64>],
 ) -> UnitQuaternion<f64> {
-    let mut best = (a.angle_to(b), UnitQuaternion::identity());
+    // The nearest twin has the largest |⟨a, b · g⟩| = cos(angle / 2): dot products, not arc
+    // cosines (this runs on every insertion check of a 96-element group).
+    let closeness = |q: &UnitQuaternion<f64>| a.coords.dot(&q.coords).abs();
+    let mut best = (closeness(b), UnitQuaternion::identity());
     for g in group {
-        let angle = a.angle_to(&(b * g));
-        if angle < best.0 {
-            best = (angle, *g);
+        let c = closeness(&(b * g));
+        if c > best.0 {
+            best = (c, *g);
         }
     }
     best.1
