@@ -13,8 +13,10 @@ fn scenarios() -> PathBuf {
 /// The nominal USB-C scenario with `opening_margin = margin` in its `[cell.gripper]`.
 fn with_margin(margin: &str) -> String {
     let text = std::fs::read_to_string(scenarios().join("usbc_nominal.toml")).unwrap();
-    let at = text.find("[cell.gripper]\n").expect("a gripper table") + "[cell.gripper]\n".len();
-    format!("{}opening_margin = {margin}\n{}", &text[..at], &text[at..])
+    let line = (text.lines())
+        .find(|l| l.starts_with("opening_margin = "))
+        .expect("the nominal scenario sets a margin");
+    text.replacen(line, &format!("opening_margin = {margin}"), 1)
 }
 
 /// Writes `text` beside the scenarios (so relative paths resolve), loads it and removes it.

@@ -267,9 +267,10 @@ pub trait Robot: Send {
     /// Opens the gripper the full stroke and waits until it is open.
     fn open_gripper(&mut self) -> RobotFuture<'_, ()>;
 
-    /// Opens the fingers to `width` metres apart (at most the stroke) and waits until they
-    /// are there: a grasp opens no wider than its part needs, so close neighbours leave room.
-    /// A gripper without a width set-point opens the full stroke.
+    /// Opens the fingers to `width` metres apart (at most the stroke): a grasp opens no wider
+    /// than its part needs, so close neighbours leave room. A release waits until they are
+    /// there; empty fingers may move while the arm goes on, the next motion ending no earlier
+    /// than they arrive. A gripper without a width set-point opens the full stroke.
     fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()>;
 
     /// Closes the gripper and waits until it stops (on the part or fully closed).

@@ -541,3 +541,47 @@ fn the_rendered_feeder_window_shows_every_feeder_part_and_repeats_by_seed() {
     let other = SimCell::new(m, 4, 3).unwrap().render_feeder().unwrap();
     assert_ne!(other.image, shot.image);
 }
+
+/// Empty fingers sent to a width move while the arm does: the clock does not wait for them, a
+/// motion ends no earlier than they arrive, and a close waits for them; with nothing to wait for
+/// they cost nothing.
+#[test]
+fn empty_fingers_move_while_the_arm_does() {
+    let m = model(&zero_noise(), Scorer::Analytic);
+    let g = m.spec.gripper.clone();
+    let mut cell = SimCell::new(m, 3, 0).unwrap();
+    assert_eq!(cell.finger_opening(), g.stroke);
+    let t0 = cell.clock();
+    cell.send_fingers_to(0.010);
+    assert_eq!(
+        cell.clock(),
+        t0,
+        "the clock does not wait for empty fingers"
+    );
+    assert_eq!(cell.finger_opening(), 0.010);
+    // A short move ends when the fingers have arrived, not before.
+    let mut q = cell.joints_now();
+    q[5] += 1e-4;
+    let motion = robots::robot::JointMotion {
+        speed: 1.0,
+        acceleration: 6.0,
+    };
+    cell.move_j_sync(q, motion).unwrap();
+    let travel = g.travel_time(g.stroke - 0.010);
+    assert!(
+        (cell.clock() - (t0 + travel)).abs() < 1e-12,
+        "{} vs {}",
+        cell.clock() - t0,
+        travel
+    );
+    // Sent again, then closed at once: the close starts when they arrive.
+    let t1 = cell.clock();
+    cell.send_fingers_to(0.012);
+    cell.close_gripper_sync();
+    let expected = g.travel_time(0.002) + g.travel_time(0.012);
+    assert!(
+        (cell.clock() - t1 - expected).abs() < 1e-12,
+        "{} vs {expected}",
+        cell.clock() - t1
+    );
+}

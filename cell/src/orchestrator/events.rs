@@ -36,8 +36,9 @@ pub struct EventLog {
     episode: u32,
     start: Instant,
     events: Vec<Event>,
-    /// (simulated time, activity) at the end of each motion, in order.
-    motions: Vec<(f64, Activity)>,
+    /// (index of the event that will close the state it ran in, simulated time, activity) at
+    /// the end of each motion, in order.
+    motions: Vec<(usize, f64, Activity)>,
 }
 
 impl EventLog {
@@ -78,7 +79,7 @@ impl EventLog {
     /// leave the time to their state's).
     pub fn motion_done(&mut self, waypoint: &str, sim_time_s: f64) {
         if let Some(a) = Activity::of_motion(waypoint) {
-            self.motions.push((sim_time_s, a));
+            self.motions.push((self.events.len(), sim_time_s, a));
         }
     }
 
@@ -100,7 +101,12 @@ impl EventLog {
         // (simulated time, step, state before) at which the state being timed was entered.
         let mut entered: Option<(f64, Option<usize>, Option<State>)> = None;
         let mut motions = self.motions.iter().peekable();
-        for e in &self.events {
+        for (i, e) in self.events.iter().enumerate() {
+            // The motions that ran in the state this event leaves.
+            let mut ran = Vec::new();
+            while let Some(&(_, t, activity)) = motions.next_if(|m| m.0 == i) {
+                ran.push((t, activity));
+            }
             if let Some((start, step, before)) = entered {
                 let span = |activity, from: f64, to: f64| PhaseSpan {
                     state: e.from,
@@ -109,11 +115,7 @@ impl EventLog {
                     duration_s: to - from,
                 };
                 let mut at = start;
-                while let Some(&&(t, activity)) = motions.peek() {
-                    if t > e.sim_time_s {
-                        break;
-                    }
-                    motions.next();
+                for (t, activity) in ran {
                     if t >= at {
                         spans.push(span(activity, at, t));
                         at = t;
@@ -122,9 +124,6 @@ impl EventLog {
                 if e.sim_time_s > at || at == start {
                     spans.push(span(Activity::of_state(e.from, before), at, e.sim_time_s));
                 }
-            } else {
-                // Motions before the cycle (homing) are not part of it.
-                while motions.next_if(|m| m.0 <= e.sim_time_s).is_some() {}
             }
             if entered.is_some() || (e.from == State::Home && e.to != State::Home) {
                 entered = Some((e.sim_time_s, e.step, Some(e.from)));

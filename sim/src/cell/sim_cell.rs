@@ -133,6 +133,8 @@ pub struct SimCell {
     gripper_open: bool,
     /// How far apart the fingers are now, metres.
     opening: f64,
+    /// Clock time at which fingers that move while the arm does are where they were sent.
+    fingers_ready_at: f64,
     feeder: Vec<FeederPart>,
     held: Option<Held>,
     placed: Vec<PlacedPart>,
@@ -179,6 +181,7 @@ impl SimCell {
             tcp_error: Vector3::zeros(),
             gripper_open: true,
             opening: stroke,
+            fingers_ready_at: 0.0,
             feeder: Vec::new(),
             held: None,
             placed: Vec::new(),
@@ -707,6 +710,8 @@ impl SimCell {
     }
 
     fn end_motion(&mut self) {
+        // A motion ends with the fingers where they were sent during it.
+        self.clock = self.clock.max(self.fingers_ready_at);
         self.tcp_error = gauss3(
             &mut self.streams.robot,
             self.model.noise.robot_repeatability,
@@ -719,6 +724,7 @@ impl SimCell {
     /// One gripper open or close on the clock: the fingers travel from the present opening to
     /// `to` ([`crate::config::GripperSpec::travel_time`]).
     fn actuate_gripper(&mut self, to: f64) {
+        self.clock = self.clock.max(self.fingers_ready_at);
         let g = &self.model.spec.gripper;
         self.clock += g.travel_time(to - self.opening);
         self.gripper_travel += (to - self.opening).abs();
@@ -734,6 +740,29 @@ impl SimCell {
     /// Opens the gripper the full stroke now; see [`Self::open_gripper_to_sync`].
     pub fn open_gripper_sync(&mut self) {
         self.open_gripper_to_sync(self.model.spec.gripper.stroke);
+    }
+
+    /// Sends empty fingers to `width` apart while the arm goes on: the clock does not wait here,
+    /// the next motion ends no earlier than the fingers arrive, and the next gripper command
+    /// waits for them. With a part between the fingers this is [`Self::open_gripper_to_sync`]
+    /// (a release waits).
+    pub fn send_fingers_to(&mut self, width: f64) {
+        if self.held.is_some() || !self.gripper_open {
+            self.open_gripper_to_sync(width);
+            return;
+        }
+        let stroke = self.model.spec.gripper.stroke;
+        let to = if width.is_finite() {
+            width.clamp(0.0, stroke)
+        } else {
+            stroke
+        };
+        let start = self.clock.max(self.fingers_ready_at);
+        let g = &self.model.spec.gripper;
+        self.fingers_ready_at = start + g.travel_time(to - self.opening);
+        self.gripper_travel += (to - self.opening).abs();
+        self.opening = to;
+        self.gripper_actuations += 1;
     }
 
     /// Moves the fingers to `width` apart now (the `Robot::open_gripper_to` body; at most the
@@ -791,6 +820,7 @@ impl SimCell {
     /// Closes the gripper now (the `Robot::close_gripper` body); see [`Self::last_grasp`].
     pub fn close_gripper_sync(&mut self) {
         self.wait_for_feeder();
+        self.clock = self.clock.max(self.fingers_ready_at);
         if !self.gripper_open {
             self.actuate_gripper(self.opening);
             return;
@@ -931,7 +961,7 @@ impl Robot for SimCell {
                     detail: format!("finger opening {width} m is not a width"),
                 });
             }
-            self.open_gripper_to_sync(width);
+            self.send_fingers_to(width);
             Ok(())
         })
     }
