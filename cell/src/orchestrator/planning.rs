@@ -372,9 +372,10 @@ impl Planner<'_> {
     }
 
     /// The pick of `selection` starting from joints `start`: the fingers opened to the part,
-    /// one joint move to just above the grasp when that path is checked clear of the table, the placed parts and every part in
-    /// the `feeder` (estimated poses, the one to pick included); otherwise a joint move to the
-    /// approach pose and fast straight down. Then slow to the grasp, close, lift.
+    /// one joint move to just above the grasp when that path is checked clear of the table, the
+    /// placed parts and every part in the `feeder` (estimated poses, the one to pick included);
+    /// otherwise a joint move to the approach pose and fast straight down. Then slow to the
+    /// grasp, close, lift.
     pub fn pick(
         &self,
         selection: &Selection,
