@@ -400,8 +400,11 @@ impl Planner<'_> {
             (None, placed),
             |q_pre| self.check_fingers("pre-grasp", (start, q_pre), selection.opening, feeder),
         )?;
-        // The fingers open to the part (no wider) before the arm leaves.
-        motions.insert(0, ("open fingers", Motion::Open(selection.opening)));
+        // The fingers open to the part (no wider) as the arm leaves; without an opening margin
+        // they are open the full stroke already.
+        if selection.opening < self.knowledge.gripper().stroke {
+            motions.insert(0, ("open fingers", Motion::Open(selection.opening)));
+        }
         let q_grasp = self.ik("grasp", &grasp, &q_pre)?;
         self.check_arm("grasp", &q_grasp)?;
         motions.extend([
