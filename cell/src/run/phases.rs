@@ -94,25 +94,25 @@ pub fn activity_means<'a>(
         .collect()
 }
 
-/// One line for people on activities: `cycle by activity: transit 3.10 s (34 %), …`.
+/// One line for people on activities: `by activity: transit 3.10 s (34 %), …`.
 pub fn activity_line(means: &[ActivityMean]) -> Option<String> {
-    if means.is_empty() {
+    let rows = means.iter().map(|m| (m.activity.name(), m.mean_s, m.share));
+    Some(format!("by activity: {}", largest_first(rows)?))
+}
+
+/// `name mean s (share %)` of each row with time, largest first, joined; `None` without rows.
+fn largest_first<'a>(rows: impl Iterator<Item = (&'a str, f64, f64)>) -> Option<String> {
+    let mut rows: Vec<(&str, f64, f64)> = rows.collect();
+    if rows.is_empty() {
         return None;
     }
-    let mut by_time: Vec<&ActivityMean> = means.iter().filter(|m| m.mean_s > 0.0).collect();
-    by_time.sort_by(|a, b| b.mean_s.total_cmp(&a.mean_s));
-    let parts: Vec<String> = by_time
+    rows.retain(|r| r.1 > 0.0);
+    rows.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let parts: Vec<String> = rows
         .iter()
-        .map(|m| {
-            format!(
-                "{} {:.2} s ({:.0} %)",
-                m.activity.name(),
-                m.mean_s,
-                100.0 * m.share
-            )
-        })
+        .map(|(name, mean, share)| format!("{name} {mean:.2} s ({:.0} %)", 100.0 * share))
         .collect();
-    Some(format!("by activity: {}", parts.join(", ")))
+    Some(parts.join(", "))
 }
 
 /// A typical successful episode (the one whose cycle time is the median's) and the slowest, each
@@ -136,24 +136,9 @@ pub fn typical_and_slowest<'a>(
 /// One line for people: the mean cycle and its largest parts, e.g.
 /// `mean cycle 9.19 s: insert 3.10 s (34 %), pick 2.50 s (27 %), …`.
 pub fn breakdown_line(means: &[PhaseMean]) -> Option<String> {
-    if means.is_empty() {
-        return None;
-    }
     let total: f64 = means.iter().map(|m| m.mean_s).sum();
-    let mut by_time: Vec<&PhaseMean> = means.iter().filter(|m| m.mean_s > 0.0).collect();
-    by_time.sort_by(|a, b| b.mean_s.total_cmp(&a.mean_s));
-    let parts: Vec<String> = by_time
-        .iter()
-        .map(|m| {
-            format!(
-                "{} {:.2} s ({:.0} %)",
-                m.state.name(),
-                m.mean_s,
-                100.0 * m.share
-            )
-        })
-        .collect();
-    Some(format!("mean cycle {total:.2} s: {}", parts.join(", ")))
+    let rows = means.iter().map(|m| (m.state.name(), m.mean_s, m.share));
+    Some(format!("mean cycle {total:.2} s: {}", largest_first(rows)?))
 }
 
 #[cfg(test)]

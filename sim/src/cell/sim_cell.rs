@@ -724,12 +724,33 @@ impl SimCell {
     /// One gripper open or close on the clock: the fingers travel from the present opening to
     /// `to` ([`crate::config::GripperSpec::travel_time`]).
     fn actuate_gripper(&mut self, to: f64) {
-        self.clock = self.clock.max(self.fingers_ready_at);
-        let g = &self.model.spec.gripper;
-        self.clock += g.travel_time(to - self.opening);
+        self.move_fingers(to, true);
+    }
+
+    /// The fingers travel to `to` after any earlier travel ends; the clock waits for them when
+    /// `wait`, else the next motion or gripper command does.
+    fn move_fingers(&mut self, to: f64, wait: bool) {
+        let start = self.clock.max(self.fingers_ready_at);
+        let end = start + self.model.spec.gripper.travel_time(to - self.opening);
+        if wait {
+            self.clock = end;
+        } else {
+            self.fingers_ready_at = end;
+        }
         self.gripper_travel += (to - self.opening).abs();
         self.opening = to;
         self.gripper_actuations += 1;
+    }
+
+    /// Where fingers sent to `width` go: within the stroke (the full stroke for a width that
+    /// is not a number).
+    fn finger_target(&self, width: f64) -> f64 {
+        let stroke = self.model.spec.gripper.stroke;
+        if width.is_finite() {
+            width.clamp(0.0, stroke)
+        } else {
+            stroke
+        }
     }
 
     /// How far apart the fingers are now, metres.
@@ -751,30 +772,14 @@ impl SimCell {
             self.open_gripper_to_sync(width);
             return;
         }
-        let stroke = self.model.spec.gripper.stroke;
-        let to = if width.is_finite() {
-            width.clamp(0.0, stroke)
-        } else {
-            stroke
-        };
-        let start = self.clock.max(self.fingers_ready_at);
-        let g = &self.model.spec.gripper;
-        self.fingers_ready_at = start + g.travel_time(to - self.opening);
-        self.gripper_travel += (to - self.opening).abs();
-        self.opening = to;
-        self.gripper_actuations += 1;
+        self.move_fingers(self.finger_target(width), false);
     }
 
     /// Moves the fingers to `width` apart now (the `Robot::open_gripper_to` body; at most the
     /// stroke, and with a part between them no closer than they hold it); a held part is
     /// released where it is and the release is reported.
     pub fn open_gripper_to_sync(&mut self, width: f64) {
-        let stroke = self.model.spec.gripper.stroke;
-        let mut to = if width.is_finite() {
-            width.clamp(0.0, stroke)
-        } else {
-            stroke
-        };
+        let mut to = self.finger_target(width);
         if self.held.is_some() {
             to = to.max(self.opening);
         }
