@@ -18,7 +18,7 @@ use sim::cell::geometry::PartGeometry;
 use sim::cell::gripper::{self, GraspCandidate};
 use sim::cell::insertion::contact::{self, ContactSettings};
 use sim::cell::insertion::{InsertionCause, Mating, ReceiverPart, Verdict, analytic};
-use sim::config::{AssemblyStep, Destination, GripperSpec, NoiseSpec, PoseSpec, Tolerances};
+use sim::config::{GripperSpec, NoiseSpec};
 
 /// A peg's exact symmetries: its cross-section's turns about its axis (z), and end over end.
 fn peg_symmetries(peg: &Peg) -> Vec<Symmetry> {
@@ -40,28 +40,6 @@ fn peg_symmetries(peg: &Peg) -> Vec<Symmetry> {
     ]
 }
 
-/// The step inserting `peg` straight down into its hole in the plate (the plate is the
-/// destination, at its own frame).
-fn step(peg: &Peg) -> AssemblyStep {
-    let t = peg.seated().translation.vector;
-    AssemblyStep {
-        part: peg.name.into(),
-        into: Destination::Fixture,
-        target: PoseSpec {
-            translation: [t.x, t.y, t.z],
-            rotation: [0.0; 3],
-        },
-        insertion_axis: [0.0, 0.0, -1.0],
-        clearance: peg.clearance_mm() * 1e-3,
-        lead_in: 0.0005,
-        tolerances: Tolerances {
-            lateral: 1e-4,
-            depth: 1e-4,
-            tilt: 0.01,
-        },
-    }
-}
-
 /// The peg's shapes with these symmetries, and the plate's.
 fn shapes(peg: &Peg, symmetries: Vec<Symmetry>) -> (PartGeometry, PartGeometry) {
     let mut held = PartGeometry::from_mesh(peg.name, peg.mesh(), 1e-3, vec![], vec![]).unwrap();
@@ -76,7 +54,7 @@ fn mating(peg: &Peg, held: &PartGeometry, plate: &PartGeometry) -> Mating {
         geometry: plate,
         destination_T_part: Isometry3::identity(),
     }];
-    Mating::new(&step(peg), held, &receivers)
+    Mating::new(&peg.insertion_step(), held, &receivers)
 }
 
 /// The peg 0.1 mm off laterally, 1 mm above the hole, turned `yaw` about its axis.

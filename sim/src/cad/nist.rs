@@ -25,6 +25,7 @@ use nalgebra::{Isometry3, Point3};
 use perception::part::TriMesh;
 
 use super::solid::{Rect, Solid};
+use crate::config::{AssemblyStep, Destination, PoseSpec, Tolerances};
 
 /// Sides of the polygons that stand for circles (a multiple of 8, so the polygon has vertices on
 /// both axes and on the diagonals, where the plate's square cells have their corners).
@@ -117,6 +118,29 @@ impl Peg {
         let peg_centre_z = PLATE_BASE_MM + PEG_LENGTH_MM / 2.0;
         let (x, y) = self.hole_xy_mm;
         Isometry3::translation(x * 1e-3, y * 1e-3, (peg_centre_z - plate_centre_z) * 1e-3)
+    }
+
+    /// The assembly step that inserts this peg straight down into its hole in the plate (the
+    /// plate is the destination, at its own frame), with the scenario's 0.5 mm lead-in and
+    /// 0.1 mm / 0.01 rad tolerances.
+    pub fn insertion_step(&self) -> AssemblyStep {
+        let t = self.seated().translation.vector;
+        AssemblyStep {
+            part: self.name.into(),
+            into: Destination::Fixture,
+            target: PoseSpec {
+                translation: [t.x, t.y, t.z],
+                rotation: [0.0; 3],
+            },
+            insertion_axis: [0.0, 0.0, -1.0],
+            clearance: self.clearance_mm() * 1e-3,
+            lead_in: 0.0005,
+            tolerances: Tolerances {
+                lateral: 1e-4,
+                depth: 1e-4,
+                tilt: 0.01,
+            },
+        }
     }
 }
 

@@ -320,30 +320,9 @@ mod tests {
     use super::*;
     use crate::cad::nist::{HOLE_DEPTH_MM, PEGS, PegShape, fixture_plate};
     use crate::cell::insertion::analytic;
-    use crate::config::{Destination, PoseSpec, Tolerances};
 
     fn geometry(name: &str, mesh: perception::part::TriMesh) -> PartGeometry {
         PartGeometry::from_mesh(name, mesh, 1e-3, vec![], vec![]).unwrap()
-    }
-
-    fn step(peg: &crate::cad::nist::Peg) -> AssemblyStep {
-        let t = peg.seated().translation.vector;
-        AssemblyStep {
-            part: peg.name.into(),
-            into: Destination::Fixture,
-            target: PoseSpec {
-                translation: [t.x, t.y, t.z],
-                rotation: [0.0; 3],
-            },
-            insertion_axis: [0.0, 0.0, -1.0],
-            clearance: peg.clearance_mm() * 1e-3,
-            lead_in: 0.0005,
-            tolerances: Tolerances {
-                lateral: 1e-4,
-                depth: 1e-4,
-                tilt: 0.01,
-            },
-        }
     }
 
     #[test]
@@ -355,7 +334,7 @@ mod tests {
                 geometry: &plate,
                 destination_T_part: Isometry3::identity(),
             }];
-            let m = Mating::new(&step(peg), &held, &receivers);
+            let m = Mating::new(&peg.insertion_step(), &held, &receivers);
             let round = peg.shape == PegShape::Round;
             assert_eq!(m.turns_freely, round, "{}", peg.name);
             // The whole hole depth engages; the fit is the peg's own width.
