@@ -133,10 +133,9 @@ mod tests {
         assert_eq!(side.max_height_error, 2e-6);
     }
 
-    #[test]
-    fn a_half_turn_end_over_end_also_makes_the_two_ends_one_pose() {
-        let mut r = square_bar();
-        let symmetries = [
+    /// A square bar's exact symmetries: quarter turns about its axis, a half turn end over end.
+    fn square_bar_symmetries() -> [Symmetry; 2] {
+        [
             Symmetry {
                 axis: [0.0, 0.0, 1.0],
                 order: 4,
@@ -147,8 +146,13 @@ mod tests {
                 order: 2,
                 exact: true,
             },
-        ];
-        r.merge_symmetric(&symmetry_group(&symmetries));
+        ]
+    }
+
+    #[test]
+    fn a_half_turn_end_over_end_also_makes_the_two_ends_one_pose() {
+        let mut r = square_bar();
+        r.merge_symmetric(&symmetry_group(&square_bar_symmetries()));
         assert_eq!(summary(&r), [("+x".into(), 82), ("+z".into(), 18)]);
     }
 
@@ -158,19 +162,7 @@ mod tests {
         // The drops favour neither end; name "-z" first so it would lead the merge.
         r.classes.swap(4, 5);
         assert_eq!(r.classes[4].pose.name, "-z");
-        let symmetries = [
-            Symmetry {
-                axis: [0.0, 0.0, 1.0],
-                order: 4,
-                exact: true,
-            },
-            Symmetry {
-                axis: [1.0, 0.0, 0.0],
-                order: 2,
-                exact: true,
-            },
-        ];
-        let group = symmetry_group(&symmetries);
+        let group = symmetry_group(&square_bar_symmetries());
         let mut plain = r.clone();
         plain.merge_symmetric(&group);
         assert_eq!(summary(&plain), [("+x".into(), 82), ("-z".into(), 18)]);
