@@ -1,10 +1,13 @@
 //! `cell check`: the nominal scenario passes; bad scenarios fail with file:line:column and the
 //! offending key, through the library and through the real binary.
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cell::scenario::Scenario;
+use support::line_of;
 
 fn scenarios() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
@@ -19,13 +22,6 @@ fn variant(name: &str, text: &str) -> PathBuf {
     let path = scenarios().join(format!(".test_{name}_{}.toml", std::process::id()));
     std::fs::write(&path, text).unwrap();
     path
-}
-
-fn line_of(text: &str, needle: &str) -> usize {
-    text.lines()
-        .position(|l| l.contains(needle))
-        .expect("needle in text")
-        + 1
 }
 
 #[test]

@@ -2,44 +2,24 @@
 //! part, or a negative one, is refused at its line and column; a margin that fits is accepted,
 //! and the fingers then open to each part, no wider.
 
-use std::path::{Path, PathBuf};
+mod support;
 
-use cell::scenario::Scenario;
-
-fn scenarios() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
-}
+use support::{line_of, load_variant as load, root};
 
 /// The nominal USB-C scenario with `opening_margin = margin` in its `[cell.gripper]`.
 fn with_margin(margin: &str) -> String {
-    let text = std::fs::read_to_string(scenarios().join("usbc_nominal.toml")).unwrap();
+    let text = std::fs::read_to_string(root().join("scenarios/usbc_nominal.toml")).unwrap();
     let line = (text.lines())
         .find(|l| l.starts_with("opening_margin = "))
         .expect("the nominal scenario sets a margin");
     text.replacen(line, &format!("opening_margin = {margin}"), 1)
 }
 
-/// Writes `text` beside the scenarios (so relative paths resolve), loads it and removes it.
-fn load(name: &str, text: &str) -> Result<Scenario, cell::scenario::ScenarioError> {
-    let path = scenarios().join(format!(".test_grip_{name}_{}.toml", std::process::id()));
-    std::fs::write(&path, text).unwrap();
-    let result = Scenario::load(&path);
-    std::fs::remove_file(&path).ok();
-    result
-}
-
-fn line_of(text: &str, needle: &str) -> usize {
-    text.lines()
-        .position(|l| l.contains(needle))
-        .expect("needle in text")
-        + 1
-}
-
 #[test]
 fn a_margin_the_stroke_cannot_give_is_refused_at_its_line() {
     // The top shell is 11.8 mm across its grasp: 2 mm each side needs 15.8 mm of a 14 mm stroke.
     let text = with_margin("0.002");
-    let Err(err) = load("wide", &text) else {
+    let Err(err) = load("grip_wide", &text) else {
         panic!("accepted")
     };
     let p = (err.0.iter())
@@ -53,7 +33,7 @@ fn a_margin_the_stroke_cannot_give_is_refused_at_its_line() {
     assert_eq!(p.column, "opening_margin = ".len() + 1);
 
     let text = with_margin("-0.001");
-    let Err(err) = load("negative", &text) else {
+    let Err(err) = load("grip_negative", &text) else {
         panic!("accepted")
     };
     assert!(
@@ -67,7 +47,7 @@ fn a_margin_the_stroke_cannot_give_is_refused_at_its_line() {
 
 #[test]
 fn a_margin_that_fits_opens_the_fingers_to_each_part() {
-    let s = load("fits", &with_margin("0.001")).unwrap_or_else(|e| panic!("{e}"));
+    let s = load("grip_fits", &with_margin("0.001")).unwrap_or_else(|e| panic!("{e}"));
     let g = &s.spec.cell.gripper;
     assert_eq!(g.opening_margin, Some(0.001));
     let knowledge = cell::orchestrator::CellKnowledge::new(&s).unwrap_or_else(|e| panic!("{e}"));

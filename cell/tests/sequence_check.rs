@@ -3,10 +3,13 @@
 //! gripper cannot follow and a target that turns the part over are each refused at the step's
 //! line and column, with the reason; the NIST peg scenario itself is valid.
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cell::scenario::Scenario;
+use support::line_of;
 
 fn scenarios() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
@@ -34,13 +37,6 @@ fn problem_at(name: &str, text: &str, key: &str) -> (cell::scenario::Problem, St
         .unwrap_or_else(|| panic!("{name}: nothing at {key}: {err}"))
         .clone();
     (p, text.to_string())
-}
-
-fn line_of(text: &str, needle: &str) -> usize {
-    text.lines()
-        .position(|l| l.contains(needle))
-        .expect("needle in text")
-        + 1
 }
 
 /// The text with the `n`-th (0-based) occurrence of `from` replaced by `to`.

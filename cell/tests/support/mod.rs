@@ -21,6 +21,27 @@ pub fn nominal() -> String {
         .to_string()
 }
 
+/// Writes `text` as a scenario beside the committed ones (so its relative paths resolve), loads
+/// it and removes it; `tag` keeps concurrent tests' files apart.
+pub fn load_variant(
+    tag: &str,
+    text: &str,
+) -> Result<cell::scenario::Scenario, cell::scenario::ScenarioError> {
+    let path = root().join(format!("scenarios/.test_{tag}_{}.toml", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    let result = cell::scenario::Scenario::load(&path);
+    std::fs::remove_file(&path).ok();
+    result
+}
+
+/// The 1-based line of `text` holding `needle`.
+pub fn line_of(text: &str, needle: &str) -> usize {
+    text.lines()
+        .position(|l| l.contains(needle))
+        .expect("needle in text")
+        + 1
+}
+
 /// Runs `cell ARGS...` to completion.
 pub fn cell(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_cell"))
