@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::state::State;
 
-/// One kind of work on the cycle's critical path.
+/// One kind of work on the cycle's critical path (ordered as a step passes through them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Activity {
@@ -31,18 +31,6 @@ pub enum Activity {
 }
 
 impl Activity {
-    /// Every activity, in the order a step passes through them.
-    pub const ALL: [Activity; 8] = [
-        Activity::Waiting,
-        Activity::Perception,
-        Activity::Transit,
-        Activity::Approach,
-        Activity::Grasp,
-        Activity::Insertion,
-        Activity::Retreat,
-        Activity::Shake,
-    ];
-
     /// The name in records and reports.
     pub fn name(self) -> &'static str {
         match self {

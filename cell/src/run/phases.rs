@@ -80,7 +80,7 @@ pub struct ActivityMean {
 }
 
 /// The mean time of each activity over the successful episodes that kept their activities,
-/// in [`Activity::ALL`]'s order; empty when there are none.
+/// in [`Activity`]'s order; empty when there are none.
 pub fn activity_means<'a>(
     records: impl IntoIterator<Item = &'a EpisodeRecord>,
 ) -> Vec<ActivityMean> {
