@@ -1,6 +1,6 @@
 //! A part exported as several closed bodies that touch or overlap (a mold and its pins) loads as
-//! one part: each body is kept closed and repaired alone, the mass is summed over the bodies and
-//! their shared volume measured; a small planar hole is capped with a warning, and a larger or
+//! one part: each body is kept closed and repaired alone, the mass is the union's, their shared
+//! volume measured and counted once; a small planar hole is capped with a warning, and a larger or
 //! bent one is refused with the file, its place and its size.
 
 use std::path::{Path, PathBuf};
@@ -76,7 +76,7 @@ fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 }
 
 #[test]
-fn touching_and_overlapping_bodies_load_as_one_closed_part_with_summed_mass() {
+fn touching_and_overlapping_bodies_load_as_one_closed_part_weighing_as_their_union() {
     let (mesh, repairs) = load_mesh_repaired(&fixture(), LengthUnit::Mm).unwrap();
     mesh.check_closed().unwrap();
     // Nothing welded across bodies: the pin's bottom cap, a copy of the mold's bottom cell, stays.
@@ -90,21 +90,26 @@ fn touching_and_overlapping_bodies_load_as_one_closed_part_with_summed_mass() {
         mesh.volume()
     );
     assert!((repairs.body_volume - sum).abs() < 1e-6 * sum);
-    // The pin shares 0.6 × 0.6 × 2 mm with the mold; the cap only touches it.
+    // The pin shares 0.6 × 0.6 × 2 mm with the mold; the cap only touches it. The union counts
+    // the shared volume once.
     let shared = 0.72e-9;
     assert!(
-        (repairs.overlap_volume - shared).abs() < 0.15 * shared,
+        (repairs.overlap_volume - shared).abs() < 1e-6 * shared,
         "overlap {} mm³",
         repairs.overlap_volume * 1e9
     );
-    let warnings = repairs.warnings().join("\n");
+    let union = mesh.union_moments().union.volume;
     assert!(
-        warnings.contains("the bodies overlap by about") && warnings.contains("% of their summed"),
-        "{warnings}"
+        (union - (sum - shared)).abs() < 1e-6 * sum,
+        "union {} mm³",
+        union * 1e9
     );
+    assert!(repairs.warnings().is_empty(), "{:?}", repairs.warnings());
     let notes = repairs.notes().join("\n");
     assert!(
-        notes.contains("the file holds 3 bodies, each closed"),
+        notes.contains("the file holds 3 bodies, each closed")
+            && notes.contains("the bodies overlap by 0.7200 mm³")
+            && notes.contains("the mass counts the overlap once"),
         "{notes}"
     );
 }

@@ -1,10 +1,9 @@
 //! Several bodies in one mesh file: the pieces a file gives (triangles connected through the
-//! file's own vertex indices), small planar holes capped, and how much the bodies overlap.
+//! file's own vertex indices) and small planar holes capped.
 //!
 //! A part exported as several closed bodies (a mold and its pins) is one rigid part. Its mass
-//! properties are the sum over the bodies, so a volume two bodies share is counted twice; the
-//! loader measures that shared volume and warns when it is more than
-//! [`OVERLAP_WARN_SHARE`] of the bodies' total volume.
+//! properties are the union's, a volume two bodies share counted once (see
+//! [`TriMesh::union_moments`]).
 
 use std::collections::HashMap;
 
@@ -20,13 +19,6 @@ pub const MAX_FILLED_HOLE_M: f64 = 0.5e-3;
 /// A hole's boundary loop is planar when no vertex lies farther from its best plane than this
 /// fraction of the loop's size.
 pub const HOLE_PLANARITY_REL: f64 = 0.01;
-
-/// Share of the bodies' summed volume that bodies may share before loading warns that the mass
-/// (which counts a shared volume once per body) is too high.
-pub const OVERLAP_WARN_SHARE: f64 = 0.01;
-
-/// Sample points per axis in each box where two bodies' bounding boxes overlap.
-const OVERLAP_SAMPLES: usize = 12;
 
 /// Triangle indices of each connected piece (triangles sharing a vertex index), pieces in the
 /// order of their first triangle, triangles in mesh order.
@@ -180,89 +172,4 @@ impl TriMesh {
         }
         out
     }
-}
-
-/// Volume shared by the bodies, estimated pair by pair: in the box where two bodies' bounding
-/// boxes overlap, the share of a grid of [`OVERLAP_SAMPLES`]³ points inside both, times the
-/// box's volume (bodies that only touch share no volume). Points are tested by ray parity.
-pub(crate) fn overlap_volume(bodies: &[TriMesh]) -> f64 {
-    let boxes: Vec<(Point3<f64>, Point3<f64>)> = bodies.iter().map(TriMesh::aabb).collect();
-    let mut total = 0.0;
-    for i in 0..bodies.len() {
-        for j in i + 1..bodies.len() {
-            let lo = boxes[i].0.sup(&boxes[j].0);
-            let hi = boxes[i].1.inf(&boxes[j].1);
-            let d = hi - lo;
-            if d.iter().any(|&x| x <= 0.0) {
-                continue;
-            }
-            let n = OVERLAP_SAMPLES;
-            // Off-centre sample offsets so rays do not graze the edges of grid-aligned CAD.
-            let jitter = Vector3::new(0.5137, 0.4729, 0.5311);
-            let points: Vec<Point3<f64>> = (0..n * n * n)
-                .map(|k| {
-                    let g = Vector3::new((k % n) as f64, ((k / n) % n) as f64, (k / n / n) as f64);
-                    lo + (g + jitter)
-                        .component_div(&Vector3::repeat(n as f64))
-                        .component_mul(&d)
-                })
-                .collect();
-            let near_i = near(&bodies[i], lo, hi);
-            let near_j = near(&bodies[j], lo, hi);
-            let shared = points
-                .iter()
-                .filter(|p| crossings(&near_i, p) % 2 == 1 && crossings(&near_j, p) % 2 == 1)
-                .count();
-            total += d.x * d.y * d.z * shared as f64 / points.len() as f64;
-        }
-    }
-    total
-}
-
-/// The triangles of `body` a ray along +x from inside the box `lo`..`hi` can cross: those
-/// reaching into its y–z range and beyond its low x.
-fn near(body: &TriMesh, lo: Point3<f64>, hi: Point3<f64>) -> Vec<[Point3<f64>; 3]> {
-    body.triangles
-        .iter()
-        .map(|t| t.map(|i| body.vertices[i as usize]))
-        .filter(|[a, b, c]| {
-            let (ylo, yhi) = (a.y.min(b.y).min(c.y), a.y.max(b.y).max(c.y));
-            let (zlo, zhi) = (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z));
-            !(yhi < lo.y || ylo > hi.y || zhi < lo.z || zlo > hi.z || a.x.max(b.x).max(c.x) < lo.x)
-        })
-        .collect()
-}
-
-/// How many of the triangles a ray from `p` along +x crosses.
-fn crossings(triangles: &[[Point3<f64>; 3]], p: &Point3<f64>) -> usize {
-    triangles
-        .iter()
-        .filter(|[a, b, c]| {
-            let (a, b, c) = (*a, *b, *c);
-            if p.y < a.y.min(b.y).min(c.y)
-                || p.y > a.y.max(b.y).max(c.y)
-                || p.z < a.z.min(b.z).min(c.z)
-                || p.z > a.z.max(b.z).max(c.z)
-                || a.x.max(b.x).max(c.x) < p.x
-            {
-                return false;
-            }
-            // Whether p's projection onto y–z is inside the triangle's (signed areas of one
-            // sign), and where the line along x meets the triangle's plane.
-            let side = |u: Point3<f64>, v: Point3<f64>| {
-                (v.y - u.y) * (p.z - u.z) - (v.z - u.z) * (p.y - u.y)
-            };
-            let (s0, s1, s2) = (side(a, b), side(b, c), side(c, a));
-            let same = (s0 > 0.0 && s1 > 0.0 && s2 > 0.0) || (s0 < 0.0 && s1 < 0.0 && s2 < 0.0);
-            if !same {
-                return false;
-            }
-            let n = (b - a).cross(&(c - a));
-            if n.x == 0.0 {
-                return false;
-            }
-            let x = a.x - (n.y * (p.y - a.y) + n.z * (p.z - a.z)) / n.x;
-            x > p.x
-        })
-        .count()
 }

@@ -7,7 +7,7 @@ use std::collections::{HashMap, HashSet};
 use nalgebra::Point3;
 
 use super::TriMesh;
-use super::mesh_bodies::{OVERLAP_WARN_SHARE, is_closed, overlap_volume, pieces, sub_mesh};
+use super::mesh_bodies::{is_closed, pieces, sub_mesh};
 use super::mesh_topology::{edge_uses, find, union};
 
 /// Vertices closer than this fraction of the bounding-box diagonal are one vertex, and a triangle
@@ -45,10 +45,11 @@ pub struct MeshRepairs {
     /// Closed bodies kept exactly as the file gives them because repairing them would have
     /// opened them.
     pub kept_as_given: usize,
-    /// Summed volume of the bodies (what the mass is computed from), cubic metres.
+    /// Summed volume of the bodies, cubic metres.
     pub body_volume: f64,
-    /// Volume shared by two bodies, estimated (see the bodies module), cubic metres: counted
-    /// once per body in the mass.
+    /// Volume the bodies' sum holds beyond their union (a volume inside k bodies counted k − 1
+    /// times), cubic metres: left out of the mass, which is the union's
+    /// ([`TriMesh::union_moments`]).
     pub overlap_volume: f64,
     /// Small planar holes capped while loading (see [`TriMesh::fill_small_holes`]).
     pub filled_holes: usize,
@@ -145,15 +146,6 @@ impl MeshRepairs {
                 self.hole_bound * 1e3
             ),
         );
-        if self.overlap_share() > OVERLAP_WARN_SHARE {
-            out.push(format!(
-                "the bodies overlap by about {:.3} mm³, {:.1} % of their summed volume {:.3} mm³; \
-                 mass and inertia count the overlap once per body, so they are that much too high",
-                self.overlap_volume * 1e9,
-                100.0 * self.overlap_share(),
-                self.body_volume * 1e9
-            ));
-        }
         out
     }
 
@@ -171,9 +163,17 @@ impl MeshRepairs {
         if self.bodies > 1 {
             out.push(format!(
                 "the file holds {} bodies, each closed, treated as one rigid part; mass and inertia \
-                 are summed over the bodies (they share {:.1} % of their volume)",
+                 are the union's",
                 self.bodies,
-                100.0 * self.overlap_share()
+            ));
+        }
+        if self.overlap_volume > 0.0 {
+            out.push(format!(
+                "the bodies overlap by {:.4} mm³, {:.2} % of their summed volume {:.3} mm³; the \
+                 mass counts the overlap once",
+                self.overlap_volume * 1e9,
+                100.0 * self.overlap_share(),
+                self.body_volume * 1e9
             ));
         }
         if self.kept_as_given > 0 {
@@ -198,7 +198,7 @@ impl TriMesh {
     /// one alone and the open ones together: welds vertices within `tolerance`, drops collapsed,
     /// duplicate and zero-area triangles, splits triangles at T-junctions and drops unused
     /// vertices, in that order; counts non-manifold edges and bodies, and measures how much the
-    /// bodies overlap. A mesh that needs no repair is left exactly as it was; a repaired one is
+    /// bodies overlap (the excess of [`TriMesh::union_moments`]). A mesh that needs no repair is left exactly as it was; a repaired one is
     /// rebuilt body after body. A mesh with non-finite coordinates or out-of-range indices is left
     /// alone for [`TriMesh::check_closed`] to report.
     pub fn repair_with(&mut self, tolerance: f64) -> MeshRepairs {
@@ -271,7 +271,7 @@ impl TriMesh {
         r.bodies = bodies.len();
         if bodies.len() > 1 {
             r.body_volume = bodies.iter().map(|b| b.volume().abs()).sum();
-            r.overlap_volume = overlap_volume(&bodies);
+            r.overlap_volume = self.union_moments().excess.volume;
         }
         r
     }

@@ -4,6 +4,7 @@
 mod catalog;
 mod error;
 mod keypoints;
+mod mass;
 mod mesh;
 mod mesh_bodies;
 mod mesh_io;
@@ -19,8 +20,9 @@ pub use catalog::{
 };
 pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
+pub use mass::{UNION_RAYS, UnionMoments, VolumeMoments};
 pub use mesh::{MeshDefect, OpenRegion, TriMesh};
-pub use mesh_bodies::{FilledHoles, HOLE_PLANARITY_REL, MAX_FILLED_HOLE_M, OVERLAP_WARN_SHARE};
+pub use mesh_bodies::{FilledHoles, HOLE_PLANARITY_REL, MAX_FILLED_HOLE_M};
 pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};
 pub use mesh_repair::{MeshRepairs, WELD_TOLERANCE_REL};
 pub use pieces::{ConvexPieces, convex_pieces};
