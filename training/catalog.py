@@ -50,3 +50,17 @@ def keypoints(path, parts):
             )
         out.append(kp)
     return out
+
+
+def symmetries(path, parts):
+    """Each of `parts`' exact symmetries as (axis, order) pairs: the catalog's `symmetries`
+    without the near ones (`exact = false`), which vision must still tell apart."""
+    by_name = {p["name"]: p for p in load(path).get("part", [])}
+    out = []
+    for name in parts:
+        try:
+            declared = by_name[name].get("symmetries", [])
+            out.append([(s["axis"], int(s["order"])) for s in declared if s.get("exact", True)])
+        except (KeyError, TypeError, ValueError) as e:
+            raise SystemExit(f"{path}: part {name}: a symmetry wants `axis` and `order` ({e})")
+    return out

@@ -14,16 +14,16 @@
 #                 cell's density: parts spread over +-35 mm at 1.51 m)
 #   SCENARIO      a scenario of the family for `cell eval`'s finger-room check [none: not checked]
 #   DATA, OUT     dataset folder [training/data/NAME], model folder [scenarios/models/NAME]
-#   CELL          the cell command ["cargo run --release -q -p cell --"]
+#   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
+#   PY            a Python with torch [training/.venv/bin/python, provisioned if missing]
 # Every stage's wall time is printed and appended to OUT/train_family.log. The datasets resume if
 # interrupted; a second run with the same settings reuses them.
 set -euo pipefail
-[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,19p' "$0" >&2; exit 2; }
+[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,20p' "$0" >&2; exit 2; }
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 catalog="$(realpath -e "$1")" || { echo "train_family: no catalog at $1" >&2; exit 2; }
 cd "$root"
-training/provision.sh
-py="$root/training/.venv/bin/python"
+if [[ -n "${PY:-}" ]]; then py="$PY"; else training/provision.sh; py="$root/training/.venv/bin/python"; fi
 name="${2:-$(cd training && "$py" -c 'import catalog, sys; print(catalog.family(sys.argv[1]))' "$catalog")}"
 parts="$(cd training && "$py" -c 'import catalog, sys; print(",".join(catalog.assembled_parts(sys.argv[1])))' "$catalog")"
 DATA="$(realpath -m "${DATA:-training/data/$name}")"
@@ -31,10 +31,10 @@ OUT="$(realpath -m "${OUT:-scenarios/models/$name}")"
 read -r -a cell <<< "${CELL:-cargo run --release -q -p cell --}"
 if "$py" -c 'import torch, sys; sys.exit(0 if torch.cuda.is_available() else 1)'; then
     gpu=1; MINUTES="${MINUTES:-6}"; TRAIN_CROPS="${TRAIN_CROPS:-6000}"; TRAIN_FEEDER="${TRAIN_FEEDER:-3600}"
-    threads=4; kp_batch=128; seg_batch=32
+    threads=4; kp_batch=128; seg_batch=32; seg_workers=8
 else
     gpu=0; MINUTES="${MINUTES:-130}"; TRAIN_CROPS="${TRAIN_CROPS:-4000}"; TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
-    threads=1; kp_batch=32; seg_batch=8
+    threads=1; kp_batch=32; seg_batch=8; seg_workers=0
 fi
 TEST_CROPS="${TEST_CROPS:-300}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
@@ -60,7 +60,7 @@ runs="$DATA/runs"
 mkdir -p "$runs"
 train() { (cd training && "$py" "$@" --train "$DATA/train" --test "$DATA/test" --catalog "$catalog" \
     --dataset-seed 1 --threads "$threads" --max-minutes "$MINUTES" --out "$OUT"); }
-train train_segmenter.py --steps 100000 --batch "$seg_batch" --eval-every 500 \
+train train_segmenter.py --steps 100000 --batch "$seg_batch" --workers "$seg_workers" --eval-every 500 \
     --checkpoint "$runs/segmenter.pt" > "$runs/segmenter.log" 2>&1 &
 seg=$!
 train train_keypoints.py --epochs 1000 --eval-every 5 --batch "$kp_batch" \

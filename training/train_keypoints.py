@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
                     recorded_train_minutes, setup, training_args, write_manifest)
 import catalog
+import symmetry
 from data import flipped_keypoints, load_crops, mask_cells
 from nets import N_KEYPOINTS, KeypointNet, count_macs
 
@@ -49,19 +50,23 @@ def make_input(rgb_u8, part, n_parts, device, augment=False, gen=None):
     return torch.cat([x, onehot], dim=1)
 
 
-def rotate(x, mask, kp, gen, exact_share=0.5):
-    """In-plane rotation about the crop centre (a camera roll), a random angle per crop: images x
-    [B, C, 128, 128] (reflected at the corners), target masks [B, 128, 128] and keypoints
-    [B, 9, 2] in crop px. The data already spans every yaw; turning each crop again gives the
-    net new appearances of the same labels, which is what the small set lacks. A share of the
-    crops turns by exact quarter turns (no resampling blur, as at inference)."""
-    b = x.shape[0]
+def roll_angles(b, gen, exact_share=0.5):
+    """A random camera roll per crop [b], rad: a share of exact quarter turns (no resampling
+    blur, as at inference), the rest uniform."""
     quarter = torch.rand(b, generator=gen) < exact_share
-    angle = torch.where(
+    return torch.where(
         quarter,
         torch.randint(0, 4, (b,), generator=gen).float() * (torch.pi / 2),
         (2 * torch.rand(b, generator=gen) - 1) * torch.pi,
     )
+
+
+def rotate(x, mask, kp, angle):
+    """In-plane rotation about the crop centre (a camera roll) by `angle` [B] rad: images x
+    [B, C, 128, 128] (reflected at the corners), target masks [B, 128, 128] and keypoints
+    [B, 9, 2] in crop px. The data already spans every yaw; turning each crop again gives the
+    net new appearances of the same labels, which is what the small set lacks."""
+    b = x.shape[0]
     c, s = torch.cos(angle), torch.sin(angle)
     # Output pixel p samples the input at centre + R(-angle) (p - centre); normalised coordinates
     # with align_corners=False put the origin at crop pixel 63.5, the rotation centre.
@@ -200,12 +205,23 @@ def main(argv=None):
     device = setup(args.seed, args.threads)
     t0 = time.time()
     parts = catalog.assembled_parts(args.catalog)
-    train = prepare(load_crops(args.train, "train", parts, args.limit), device)
-    test = prepare(load_crops(args.test, "test", parts, args.limit), device)
+    train = load_crops(args.train, "train", parts, args.limit)
+    test = load_crops(args.test, "test", parts, args.limit)
     print(f"loaded {len(train['part'])} train / {len(test['part'])} test crops in {time.time() - t0:.0f} s", flush=True)
-    test["flipped"], worst = flipped_keypoints(test, catalog.keypoints(args.catalog, parts))
+    kp3d = catalog.keypoints(args.catalog, parts)
+    test["flipped"], worst = flipped_keypoints(test, kp3d)
     if worst > 0.05:
         sys.exit(f"{args.catalog}: keypoints reproject {worst:.3f} px off the crop labels")
+    symmetries = catalog.symmetries(args.catalog, parts)
+    if any(symmetries):
+        # Symmetric parts: each crop labelled with its canonical twin pose (symmetry.py).
+        groups = [symmetry.group(s) for s in symmetries]
+        for raw in (train, test):
+            worst = symmetry.canonicalise(raw, kp3d, groups)
+            if worst > 0.05:
+                sys.exit(f"{args.catalog}: keypoints reproject {worst:.3f} px off the crop labels")
+        print("twin poses per part: " + ", ".join(f"{p} {len(g)}" for p, g in zip(parts, groups)), flush=True)
+    train, test = prepare(train, device), prepare(test, device)
 
     widths = tuple(int(w) for w in args.widths.split(","))
     model = KeypointNet(len(parts), widths).to(device)
@@ -219,8 +235,9 @@ def main(argv=None):
     gen = torch.Generator().manual_seed(args.seed)
     gen_dev = torch.Generator(device=device).manual_seed(args.seed)
     # On a GPU the training set lives there: batches are gathered without host copies.
-    for key in ("rgb_t", "part_t", "mask_t", "kp_t"):
-        train[key] = train[key].to(device)
+    for key in ("rgb_t", "part_t", "mask_t", "kp_t", "twin_kp", "twin_coef"):
+        if key in train:
+            train[key] = train[key].to(device)
     os.makedirs(args.out, exist_ok=True)
     curve_name = "keypoints_curve.csv"
     load_start(model, args, device)
@@ -245,7 +262,12 @@ def main(argv=None):
             x = make_input(train["rgb_t"][idx], train["part_t"][idx], len(parts), device, augment=True, gen=gen_dev)
             mask, kp = train["mask_t"][idx], train["kp_t"][idx]
             if args.rotate:
-                x, mask, kp = rotate(x, mask, kp, gen)
+                angle = roll_angles(len(idx), gen)
+                if "twin_kp" in train:
+                    # The twin to label a rolled crop with depends on the roll.
+                    a = angle.to(device)
+                    kp = symmetry.canonical(train["twin_kp"][idx], train["twin_coef"][idx], a)
+                x, mask, kp = rotate(x, mask, kp, angle)
             mask_t = F.avg_pool2d(mask[:, None].float(), 2).ge(0.5).float()
             vec_t = vector_targets(kp, cx, cy)
             m, v = model(x)
