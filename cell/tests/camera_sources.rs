@@ -371,7 +371,9 @@ mod safety {
     use perception::{Frame, FrameContent};
     use robots::kinematics::Joints;
     use robots::limits::Limits;
-    use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
+    use robots::robot::{
+        ContactOutcome, JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus, Wrench,
+    };
 
     /// Counts every command that moves the arm or the fingers.
     struct CountingRobot<'a> {
@@ -419,6 +421,19 @@ mod safety {
         }
         fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
             self.inner.status()
+        }
+        fn move_until_contact(
+            &mut self,
+            base_T_tcp: Isometry3<f64>,
+            motion: LinearMotion,
+            force_limit: f64,
+        ) -> RobotFuture<'_, ContactOutcome> {
+            self.motions.fetch_add(1, Ordering::SeqCst);
+            self.inner
+                .move_until_contact(base_T_tcp, motion, force_limit)
+        }
+        fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+            self.inner.wrench()
         }
     }
 

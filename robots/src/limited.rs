@@ -5,15 +5,43 @@
 //! A joint move is checked for the joint range, the joint speed and acceleration, and the TCP
 //! along its curved joint-space path (sampled from the measured joints to the target) against the
 //! workspace box; a linear move for the target in the box (convex, so the straight line stays
-//! inside) and the TCP speed and acceleration. A refused command fails with
+//! inside) and the TCP speed and acceleration; a guarded move (`move_until_contact`) as a linear
+//! move, and its force limit positive and at most [`MAX_CONTACT_FORCE`]. A refused command fails with
 //! [`RobotError::LimitViolation`] and nothing reaches the robot.
 
 use nalgebra::Isometry3;
 
 use crate::kinematics::{Joints, UrKinematics};
+use crate::limits::LimitViolation;
 use crate::limits::{InvalidLimits, Limits};
 use crate::motion::{JointMotion, LinearMotion};
-use crate::robot::{Robot, RobotFuture, RobotStatus};
+use crate::robot::{ContactOutcome, Robot, RobotFuture, RobotStatus, Wrench};
+
+/// Largest force limit a guarded move may ask for, N: the arm's protective stop force (UR's
+/// default safety limit), which would stop it first.
+pub const MAX_CONTACT_FORCE: f64 = crate::virtual_ur::force::PROTECTIVE_STOP_FORCE;
+
+/// Checks a guarded move's force limit: finite, positive, at most [`MAX_CONTACT_FORCE`].
+pub fn check_contact_force(force_limit: f64) -> Result<(), LimitViolation> {
+    if !force_limit.is_finite() {
+        return Err(LimitViolation::NonFinite {
+            what: "contact force limit",
+        });
+    }
+    if force_limit <= 0.0 {
+        return Err(LimitViolation::NotPositive {
+            what: "contact force limit",
+            value: force_limit,
+        });
+    }
+    if force_limit > MAX_CONTACT_FORCE {
+        return Err(LimitViolation::ContactForce {
+            requested: force_limit,
+            max: MAX_CONTACT_FORCE,
+        });
+    }
+    Ok(())
+}
 
 /// Points along a joint move's path whose TCP is checked against the workspace box.
 pub const JOINT_PATH_SAMPLES: usize = 32;
@@ -109,5 +137,25 @@ impl<R: Robot> Robot for Limited<R> {
 
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
         self.inner.status()
+    }
+
+    #[allow(non_snake_case)]
+    fn move_until_contact(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> RobotFuture<'_, ContactOutcome> {
+        Box::pin(async move {
+            check_contact_force(force_limit)?;
+            self.limits.check_move_l(&base_T_tcp, &motion)?;
+            self.inner
+                .move_until_contact(base_T_tcp, motion, force_limit)
+                .await
+        })
+    }
+
+    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+        self.inner.wrench()
     }
 }

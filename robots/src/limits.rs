@@ -115,6 +115,14 @@ pub enum LimitViolation {
         /// The requested value.
         value: f64,
     },
+    /// A guarded move's force limit over the largest the arm allows.
+    #[error("contact force limit {requested:.1} N exceeds the limit {max:.1} N")]
+    ContactForce {
+        /// Requested (N).
+        requested: f64,
+        /// Limit (N).
+        max: f64,
+    },
     /// Linear TCP speed over the limit.
     #[error("TCP speed {requested:.4} m/s exceeds the limit {max:.4} m/s by {:.4} m/s", requested - max)]
     TcpSpeed {
@@ -187,6 +195,7 @@ impl LimitViolation {
             } => outside(value, min, max),
             Self::NotPositive { value, .. } => value,
             Self::TcpSpeed { requested, max }
+            | Self::ContactForce { requested, max }
             | Self::TcpAcceleration { requested, max }
             | Self::JointSpeed { requested, max }
             | Self::JointAcceleration { requested, max } => requested - max,

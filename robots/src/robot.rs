@@ -243,6 +243,31 @@ pub enum RobotError {
     },
 }
 
+/// A wrench as six numbers: force (N) then moment (N·m).
+pub type Wrench = [f64; 6];
+
+/// How a guarded move ([`Robot::move_until_contact`]) ended.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[allow(non_snake_case)]
+pub struct ContactOutcome {
+    /// Where the TCP stopped, `base_T_tcp` (measured).
+    pub stopped_at: Isometry3<f64>,
+    /// The wrist's reading when it stopped: the external wrench on the tool in the base frame,
+    /// at the TCP (UR's `actual_TCP_force`: pressing down on a surface reads `+Fz`).
+    pub wrench: Wrench,
+    /// True when the move stopped on contact (the force against the motion reached the limit);
+    /// false when it reached its target without.
+    pub contact: bool,
+}
+
+impl ContactOutcome {
+    /// The reading's force component along `direction` (base frame, normalised here).
+    pub fn force_along(&self, direction: &nalgebra::Vector3<f64>) -> f64 {
+        let f = nalgebra::Vector3::new(self.wrench[0], self.wrench[1], self.wrench[2]);
+        f.dot(&direction.normalize())
+    }
+}
+
 /// An arm the orchestrator commands: a UR over RTDE, or the in-process simulated cell.
 ///
 /// Motions complete (or fail) before their future resolves. All poses are in the robot's base
@@ -281,6 +306,23 @@ pub trait Robot: Send {
 
     /// Mode, safety state and whether our program runs.
     fn status(&mut self) -> RobotFuture<'_, RobotStatus>;
+
+    /// A guarded straight-line move towards `base_T_tcp` (UR's `moveUntilContact`): stops as
+    /// soon as the wrist feels more than `force_limit` newtons against the direction of motion,
+    /// or at the target when nothing is met. A robot without a force sensor fails with
+    /// [`RobotError::Rejected`].
+    #[allow(non_snake_case)]
+    fn move_until_contact(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> RobotFuture<'_, ContactOutcome>;
+
+    /// The wrist's present reading: the external wrench on the tool, base frame, at the TCP
+    /// (UR's `actual_TCP_force`). A robot without a force sensor fails with
+    /// [`RobotError::Rejected`].
+    fn wrench(&mut self) -> RobotFuture<'_, Wrench>;
 }
 
 /// Forwards every method to the robot behind a pointer, so a decorator such as
@@ -322,6 +364,18 @@ macro_rules! forward_robot {
             }
             fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
                 (**self).status()
+            }
+            #[allow(non_snake_case)]
+            fn move_until_contact(
+                &mut self,
+                base_T_tcp: Isometry3<f64>,
+                motion: LinearMotion,
+                force_limit: f64,
+            ) -> RobotFuture<'_, ContactOutcome> {
+                (**self).move_until_contact(base_T_tcp, motion, force_limit)
+            }
+            fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+                (**self).wrench()
             }
         }
     };

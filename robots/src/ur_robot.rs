@@ -14,7 +14,8 @@ use crate::limited::Limited;
 use crate::limits::Limits;
 use crate::program::{self, layout as L};
 use crate::robot::{
-    JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode, RobotStatus, SafetyStatus,
+    ContactOutcome, JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode,
+    RobotStatus, SafetyStatus, Wrench,
 };
 use crate::rtde::client::{Backoff, ClientConfig, ClientError, LinkStatus, RtdeClient};
 use crate::rtde::state::{
@@ -119,6 +120,7 @@ fn output_names() -> Vec<String> {
         "timestamp",
         "actual_q",
         "actual_TCP_pose",
+        "actual_TCP_force",
         "robot_mode",
         "safety_mode",
         "safety_status_bits",
@@ -238,7 +240,11 @@ impl UrRobot {
         let mut rtde_config =
             ClientConfig::new(format!("{}:{}", config.host, config.rtde_port), &[]);
         rtde_config.outputs = outputs;
-        rtde_config.inputs = vec![L::command_recipe(), L::heartbeat_recipe()];
+        rtde_config.inputs = vec![
+            L::command_recipe(),
+            L::heartbeat_recipe(),
+            L::force_limit_recipe(),
+        ];
         rtde_config.stall_timeout = config.stall_timeout;
         rtde_config.backoff = Backoff::default();
         let rtde = Arc::new(RtdeClient::connect(rtde_config).await.map_err(link_error)?);
@@ -396,6 +402,16 @@ impl UrRobot {
 
     /// Sends one command and waits until the program reports it done.
     async fn run_command(&mut self, cmd: Command, operation: &str) -> Result<(), RobotError> {
+        self.run_command_state(cmd, operation).await.map(|_| ())
+    }
+
+    /// Sends one command and waits until the program reports it done; returns the state that
+    /// reported it.
+    async fn run_command_state(
+        &mut self,
+        cmd: Command,
+        operation: &str,
+    ) -> Result<Arc<OutputState>, RobotError> {
         let Command {
             kind,
             target,
@@ -442,7 +458,7 @@ impl UrRobot {
             }
             let status = register(&state, L::STATUS_REG);
             if status != L::STATUS_FAILED {
-                return Ok(());
+                return Ok(state);
             }
             let detail = match register(&state, L::ERROR_REG) {
                 L::ERROR_WATCHDOG => "program watchdog stopped the arm (heartbeat lost)",
@@ -450,6 +466,7 @@ impl UrRobot {
                 L::ERROR_STOPPED => "interrupted by a stop",
                 L::ERROR_MOTION => "controller could not execute the motion",
                 L::ERROR_INVALID_WAIT => "program refused the output wait",
+                L::ERROR_INVALID_FORCE => "program refused the contact force limit",
                 _ => "program reported an unknown error",
             };
             return Err(RobotError::Rejected {
@@ -557,6 +574,57 @@ impl Robot for UrRobot {
                 ..Command::default()
             };
             self.run_command(cmd, "stop").await
+        })
+    }
+
+    /// Sent as our program's guarded move: the force limit in its register first, then the
+    /// command; the program stops the arm where `get_tcp_force` exceeds the limit against the
+    /// motion and reports whether it did.
+    #[allow(non_snake_case)]
+    fn move_until_contact(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> RobotFuture<'_, ContactOutcome> {
+        Box::pin(async move {
+            let from = self.joints().await?;
+            self.config.kinematics.inverse_nearest(&base_T_tcp, &from)?;
+            self.rtde
+                .send_inputs(2, &[Value::Double(force_limit)])
+                .await
+                .map_err(link_error)?;
+            let cmd = Command {
+                kind: L::KIND_MOVE_UNTIL_CONTACT,
+                target: to_ur_pose(&base_T_tcp),
+                speed: motion.speed,
+                accel: motion.acceleration,
+                ..Command::default()
+            };
+            let state = self.run_command_state(cmd, "move_until_contact").await?;
+            let missing = |what: &str| RobotError::ConnectionLost {
+                detail: format!("{what} missing"),
+            };
+            Ok(ContactOutcome {
+                stopped_at: state
+                    .vector6d("actual_TCP_pose")
+                    .map(|p| from_ur_pose(&p))
+                    .ok_or_else(|| missing("actual_TCP_pose"))?,
+                wrench: state
+                    .vector6d("actual_TCP_force")
+                    .ok_or_else(|| missing("actual_TCP_force"))?,
+                contact: register(&state, L::CONTACT_REG) == 1,
+            })
+        })
+    }
+
+    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+        Box::pin(async move {
+            self.state()?
+                .vector6d("actual_TCP_force")
+                .ok_or(RobotError::ConnectionLost {
+                    detail: "actual_TCP_force missing".into(),
+                })
         })
     }
 

@@ -16,7 +16,9 @@ use nalgebra::Isometry3;
 use robots::kinematics::Joints;
 use robots::limited::Limited;
 use robots::limits::Limits;
-use robots::robot::{JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus};
+use robots::robot::{
+    ContactOutcome, JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus, Wrench,
+};
 use robots::ur_robot::UrRobot;
 use robots::virtual_ur::VirtualUr;
 use sim::cell::SimCell;
@@ -81,6 +83,19 @@ impl Robot for CountingRobot<'_> {
     }
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
         self.inner.status()
+    }
+    fn move_until_contact(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> RobotFuture<'_, ContactOutcome> {
+        self.moves += 1;
+        self.inner
+            .move_until_contact(base_T_tcp, motion, force_limit)
+    }
+    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+        self.inner.wrench()
     }
 }
 

@@ -24,7 +24,7 @@ use rand_distr::{Distribution, StandardNormal};
 use robots::kinematics::Joints;
 use robots::limits::Limits;
 use robots::motion::{JointMotion, LinearMotion};
-use robots::robot::{Robot, RobotFuture, RobotStatus};
+use robots::robot::{ContactOutcome, Robot, RobotFuture, RobotStatus, Wrench};
 use sim::render::{RenderOutput, RenderSettings, TagBoard, Window, render, window_covering};
 use sim::scene::{BoardView, Randomisation};
 use sim::scene::{board_render_settings, sample_board_view};
@@ -414,6 +414,27 @@ impl<R: Robot> Robot for SimHoldingArm<R> {
 
     fn stop(&mut self) -> RobotFuture<'_, ()> {
         self.robot.stop()
+    }
+
+    #[allow(non_snake_case)]
+    fn move_until_contact(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> RobotFuture<'_, ContactOutcome> {
+        Box::pin(async move {
+            let outcome = self
+                .robot
+                .move_until_contact(base_T_tcp, motion, force_limit)
+                .await?;
+            self.settle(outcome.stopped_at);
+            Ok(outcome)
+        })
+    }
+
+    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+        self.robot.wrench()
     }
 
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {

@@ -78,6 +78,7 @@ impl Setup {
             settings: &self.settings,
             max_shakes: spec.cell.feeder.max_shakes,
             max_insertion_attempts: spec.policy.max_insertion_attempts.max(1),
+            force: spec.force_insertion.as_ref(),
         }
     }
 }
@@ -101,4 +102,6 @@ pub struct EpisodeContext<'a> {
     pub max_shakes: u32,
     /// Insertions allowed per step, at least 1 (`policy.max_insertion_attempts`).
     pub max_insertion_attempts: u32,
+    /// Force-guided insertion, when the scenario enables it (`[force_insertion]`).
+    pub force: Option<&'a crate::scenario::ForceInsertionSpec>,
 }

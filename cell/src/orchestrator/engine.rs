@@ -12,6 +12,7 @@ use super::cell_io::{CellIo, InsertionCheck, Workcell};
 use super::context::EpisodeContext;
 use super::events::EventLog;
 use super::geometry::CellKnowledge;
+use super::insertion;
 use super::planning::{Motion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
@@ -112,6 +113,13 @@ impl<'a> Engine<'a> {
                     let d = match n {
                         State::Shake | State::Retract => self.last_reason.clone(),
                         State::PlanInsert if state == State::Verify => self.last_reason.clone(),
+                        // The force-guided insertion's readings and verdict.
+                        State::Verify if state == State::Insert => self
+                            .step
+                            .force
+                            .as_ref()
+                            .map(|v| v.describe())
+                            .unwrap_or_default(),
                         _ => String::new(),
                     };
                     (n, d)
@@ -474,13 +482,43 @@ impl<'a> Engine<'a> {
             .unwrap_or(plan.motions.len());
         self.step.insertions += 1;
         self.step.pending = plan.motions[split..].to_vec();
-        self.execute(state, &plan.motions[..split]).await?;
+        let Some(spec) = self.ctx.force else {
+            self.execute(state, &plan.motions[..split]).await?;
+            return Ok(State::Verify);
+        };
+        // Force-guided: the planner's moves to the lead-in, then the guarded descent in place
+        // of its position-controlled insert.
+        let (approach, seated) = match plan.motions[..split].split_last() {
+            Some((("insert", Motion::MoveL(pose, _)), before)) => (before, *pose),
+            _ => {
+                self.execute(state, &plan.motions[..split]).await?;
+                return Ok(State::Verify);
+            }
+        };
+        self.execute(state, approach).await?;
+        let k = self.ctx.knowledge;
+        let s = &k.steps[self.index];
+        let geometry = insertion::InsertionGeometry {
+            seated,
+            base_T_ins: k.base_T_insertions[self.index],
+            engagement: plan.engagement,
+            capture: s.clearance / 2.0 + s.lead_in,
+            lead_in: s.lead_in,
+            slow: self.planner().speeds.slow,
+        };
+        let r = insertion::force_insert(self.cell.robot(), &geometry, spec).await;
+        let clock = self.clock();
+        self.log.motion_done("insert", clock);
+        self.step.force = Some(r.map_err(|e| Stop::Robot(state, e))?);
         Ok(State::Verify)
     }
 
     /// Judge the insertion with the part still held when the cell can (retrying a jam or miss
     /// within the bound); otherwise release, retreat and record what the cell says.
     async fn verify(&mut self, state: State) -> Result<State, Stop> {
+        if let Some(v) = self.step.force.take() {
+            return self.verify_force(state, v).await;
+        }
         if let Some(c) = self.io().seating_check()
             && c.outcome != StepOutcome::Seated
             && self.step.insertions < self.ctx.max_insertion_attempts
@@ -506,6 +544,66 @@ impl<'a> Engine<'a> {
             n => format!("{t} (after {n} insertion attempts)"),
         });
         Ok(self.finish_step(c.outcome, cause, c.sources, c.pose_error))
+    }
+
+    /// Judge a force-guided insertion by the cell's own verdict: a confirmed seat is released
+    /// and recorded as the cell then says (the simulated cell's truth; production has only the
+    /// force verdict); an unseated part is retried within the bound, and after the last attempt
+    /// lifted clear in the fingers, never released, and the step fails with the cause.
+    async fn verify_force(
+        &mut self,
+        state: State,
+        v: insertion::ForceVerdict,
+    ) -> Result<State, Stop> {
+        if v.outcome == StepOutcome::Seated {
+            let pending = std::mem::take(&mut self.step.pending);
+            self.execute(state, &pending).await?;
+            let c = self.io().insertion_check().unwrap_or(InsertionCheck {
+                outcome: StepOutcome::Seated,
+                cause: None,
+                sources: vec![],
+                pose_error: None,
+                stop_height: None,
+            });
+            if c.outcome == StepOutcome::Seated {
+                let target = self.ctx.knowledge.base_T_targets[self.index];
+                self.placed.push((self.step_part(), target));
+            }
+            let cause = c.cause.map(|t| {
+                format!(
+                    "{t} (released on a force-confirmed seat: {}; after {} insertion attempts)",
+                    v.cause, self.step.insertions
+                )
+            });
+            return Ok(self.finish_step(c.outcome, cause, c.sources, c.pose_error));
+        }
+        // What the simulated cell knows of the held part (nothing in production), for the
+        // record's error budget.
+        let truth = self.io().seating_check();
+        let check = InsertionCheck {
+            outcome: v.outcome,
+            cause: Some(v.cause.clone()),
+            sources: truth
+                .as_ref()
+                .map(|t| t.sources.clone())
+                .unwrap_or_default(),
+            pose_error: truth.as_ref().and_then(|t| t.pose_error),
+            stop_height: None,
+        };
+        if self.step.insertions < self.ctx.max_insertion_attempts {
+            return self.retry_insertion(state, check).await;
+        }
+        let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
+            .into_iter()
+            .filter(|(_, m)| !matches!(m, Motion::Open(_)))
+            .map(|(_, m)| ("lift clear", m))
+            .collect();
+        self.execute(state, &lift).await?;
+        let cause = format!(
+            "{} after {} insertion attempts; not released: the part stays in the fingers",
+            v.cause, self.step.insertions
+        );
+        Ok(self.finish_step(v.outcome, Some(cause), check.sources, check.pose_error))
     }
 
     /// A jammed or missed insertion with the part still in the fingers: lift it clear along

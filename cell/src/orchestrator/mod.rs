@@ -12,7 +12,9 @@
 //! → Capture (re-perceive), at most [`EpisodeSettings::max_grasp_attempts`] picks; an insertion
 //! found jammed or missed before the fingers open (`CellIo::seating_check`) → lift clear, correct
 //! (the measured slip, a search offset) and insert again, at most `policy.max_insertion_attempts`
-//! insertions, then release with the cause; a robot error (protective stop, e-stop, lost
+//! insertions, then release with the cause (with `[force_insertion]`, the cell's own judgment
+//! from force and depth decides instead, after a spiral search on a miss, and a part not
+//! confirmed seated is never released: it is lifted clear and the step fails); a robot error (protective stop, e-stop, lost
 //! connection, timeout) → stop the arm → SafeStop, and the record says why. A failed step ends
 //! the episode (later steps build on it). Every transition is an [`Event`] (JSON line) with
 //! simulated and wall time.
@@ -32,7 +34,8 @@
 //! (setup, policies, the episode's context), `state` (states and their bounds), `activity`
 //! (what the time is spent on, finer than states), `events`,
 //! `cell_io` (the cell seams), `perception` (the perception seam), `selection`, `planning`,
-//! `geometry` (the planner's model of the cell), `production` (pre-flight, production side
+//! `geometry` (the planner's model of the cell), `insertion` (force-guided insertion, the same
+//! in simulation and production), `production` (pre-flight, production side
 //! channels).
 
 #![allow(non_snake_case)]
@@ -43,6 +46,7 @@ mod context;
 mod engine;
 mod events;
 mod geometry;
+pub mod insertion;
 mod planning;
 mod production;
 mod selection;

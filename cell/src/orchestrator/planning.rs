@@ -101,6 +101,9 @@ pub struct Plan {
     pub motions: Vec<NamedMotion>,
     /// Joints at the end of the plan.
     pub end_joints: Joints,
+    /// An insertion's engagement depth: how far above seated the held part first meets what
+    /// it goes into, metres (0 for a pick).
+    pub engagement: f64,
 }
 
 /// Why no plan was found.
@@ -415,6 +418,7 @@ impl Planner<'_> {
         Ok(Plan {
             motions,
             end_joints: q_approach,
+            engagement: 0.0,
         })
     }
 
@@ -470,6 +474,7 @@ impl Planner<'_> {
         Ok(Plan {
             motions,
             end_joints: q_transfer,
+            engagement,
         })
     }
 }

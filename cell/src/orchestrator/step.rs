@@ -48,6 +48,8 @@ pub(super) struct StepState {
     pub perception_verdict: Option<PerceptionVerdict>,
     /// Perception's confidence in the picked instance.
     pub confidence: Option<f64>,
+    /// What the force-guided insertion in progress found, until judged.
+    pub force: Option<super::insertion::ForceVerdict>,
 }
 
 /// Detections closer than this (table plane) to a missed pick count as the same part, metres.
@@ -82,6 +84,7 @@ impl StepState {
             perception_error: None,
             perception_verdict: None,
             confidence: None,
+            force: None,
         }
     }
 

@@ -37,6 +37,79 @@ pub struct ScenarioSpec {
     /// How the simulated cell decides outcomes.
     #[serde(default)]
     pub simulation: SimulationSpec,
+    /// Force-guided insertion (`[force_insertion]`): present, every insertion descends under a
+    /// force limit, is judged from force and depth before the fingers open and searches after a
+    /// miss; absent, insertions are position-controlled as before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_insertion: Option<ForceInsertionSpec>,
+}
+
+/// Force-guided insertion settings (`[force_insertion]`), the same in simulation and production.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceInsertionSpec {
+    /// Force against the descent at which the guarded move stops, N: above the wrist sensor's
+    /// precision (±4 N on a UR5e) and below the force that makes a held part slip in the fingers.
+    #[serde(default = "default_contact_force")]
+    pub contact_force: f64,
+    /// Speed of the guarded descent, m/s.
+    #[serde(default = "default_contact_speed")]
+    pub contact_speed: f64,
+    /// Axial stiffness of the held part pressed onto what stops it, N/m: the stop is this much
+    /// past first contact per newton, and the depth of first contact is read back with it.
+    #[serde(default = "default_contact_stiffness")]
+    pub contact_stiffness: f64,
+    /// How far below seated the guarded descent goes before it concludes that nothing is under
+    /// the tool, metres.
+    #[serde(default = "default_overtravel")]
+    pub overtravel: f64,
+    /// Largest height above seated at which first contact still counts as seated, metres.
+    #[serde(default = "default_seat_band")]
+    pub seat_band: f64,
+    /// Probes of the spiral search after a miss on the receiver's rim, per insertion attempt
+    /// (0 = no search): lift clear of the rim, step sideways within the capture band, descend.
+    #[serde(default = "default_search_points")]
+    pub search_points: u32,
+}
+
+/// The most spiral probes an insertion attempt may make.
+pub const MAX_SEARCH_POINTS: u32 = 32;
+
+fn default_contact_force() -> f64 {
+    10.0
+}
+
+fn default_contact_speed() -> f64 {
+    0.01
+}
+
+fn default_contact_stiffness() -> f64 {
+    sim::cell::wrench::HELD_CONTACT_STIFFNESS
+}
+
+fn default_overtravel() -> f64 {
+    0.001
+}
+
+fn default_seat_band() -> f64 {
+    0.0002
+}
+
+fn default_search_points() -> u32 {
+    8
+}
+
+impl Default for ForceInsertionSpec {
+    fn default() -> Self {
+        Self {
+            contact_force: default_contact_force(),
+            contact_speed: default_contact_speed(),
+            contact_stiffness: default_contact_stiffness(),
+            overtravel: default_overtravel(),
+            seat_band: default_seat_band(),
+            search_points: default_search_points(),
+        }
+    }
 }
 
 /// Simulation settings (`[simulation]`); a real controller ignores them.

@@ -25,6 +25,58 @@ fn non_negative(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
     }
 }
 
+/// Checks `[force_insertion]`: a contact force the sensor can tell from its noise and the arm
+/// allows, a positive speed within the cell's TCP speed, positive stiffness and distances, a
+/// bounded search.
+fn force_insertion(spec: &ScenarioSpec, f: &super::ForceInsertionSpec, issues: &mut Issues) {
+    use robots::virtual_ur::force::UR5E_FORCE_PRECISION;
+    let key = |k: &str| root().key("force_insertion").key(k);
+    let max_force = robots::limited::MAX_CONTACT_FORCE;
+    if !(f.contact_force.is_finite()
+        && f.contact_force > UR5E_FORCE_PRECISION
+        && f.contact_force <= max_force)
+    {
+        issues.push((
+            key("contact_force"),
+            format!(
+                "contact_force must be above the wrist sensor's precision ({UR5E_FORCE_PRECISION} N) \
+                 and at most {max_force} N, got {}",
+                f.contact_force
+            ),
+        ));
+    }
+    let max_speed = spec.cell.limits.max_tcp_speed;
+    if !(f.contact_speed.is_finite() && f.contact_speed > 0.0 && f.contact_speed <= max_speed) {
+        issues.push((
+            key("contact_speed"),
+            format!(
+                "contact_speed must be positive and at most cell.limits.max_tcp_speed \
+                 ({max_speed} m/s), got {}",
+                f.contact_speed
+            ),
+        ));
+    }
+    for (name, value) in [
+        ("contact_stiffness", f.contact_stiffness),
+        ("overtravel", f.overtravel),
+        ("seat_band", f.seat_band),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            issues.push((key(name), format!("{name} must be positive, got {value}")));
+        }
+    }
+    if f.search_points > super::MAX_SEARCH_POINTS {
+        issues.push((
+            key("search_points"),
+            format!(
+                "search_points must be at most {}, got {}",
+                super::MAX_SEARCH_POINTS,
+                f.search_points
+            ),
+        ));
+    }
+}
+
 /// The arm the scenario's `cell.robot` describes (a UR arm's URDF, relative to `dir`), and its
 /// joint speed limits against the scenario's; `None` (with the problem recorded) when unusable.
 fn load_arm(spec: &ScenarioSpec, dir: &Path, issues: &mut Issues) -> Option<UrArm> {
@@ -107,6 +159,9 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
                 "max_insertion_attempts must be between 1 and {MAX_INSERTION_ATTEMPTS}, got {attempts}"
             ),
         ));
+    }
+    if let Some(f) = &spec.force_insertion {
+        force_insertion(spec, f, &mut issues);
     }
     let bar = spec.policy.min_pick_confidence;
     if !(0.0..=1.0).contains(&bar) {

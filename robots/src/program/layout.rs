@@ -23,6 +23,10 @@ pub const ACCEL_REG: usize = 31;
 /// input_double: seconds the set-output commands sleep after setting the output (a gripper's
 /// stroke), before reporting done; 0 for no wait, at most [`MAX_DO_WAIT_S`].
 pub const DO_WAIT_REG: usize = 32;
+/// input_double: force limit of a guarded move (`KIND_MOVE_UNTIL_CONTACT`), N: the move stops
+/// when the wrist reads more than this against the direction of motion. Its own recipe
+/// ([`force_limit_recipe`]).
+pub const FORCE_LIMIT_REG: usize = 33;
 /// output_int: id of the newest command the program accepted.
 pub const ACCEPTED_ID_REG: usize = 24;
 /// output_int: id of the newest command that finished.
@@ -33,6 +37,9 @@ pub const STATUS_REG: usize = 26;
 pub const ERROR_REG: usize = 27;
 /// output_int: incremented every control cycle while the program runs.
 pub const PROGRAM_BEAT_REG: usize = 28;
+/// output_int: 1 when the newest guarded move stopped on contact, 0 when it reached its target
+/// without (written before `DONE_ID`).
+pub const CONTACT_REG: usize = 29;
 
 /// Command kind: movej to joints.
 pub const KIND_MOVEJ: i32 = 1;
@@ -44,6 +51,8 @@ pub const KIND_STOP: i32 = 3;
 pub const KIND_SET_STANDARD_DO: i32 = 4;
 /// Command kind: set a tool digital output.
 pub const KIND_SET_TOOL_DO: i32 = 5;
+/// Command kind: guarded linear move to a pose, stopping on contact (`FORCE_LIMIT_REG`).
+pub const KIND_MOVE_UNTIL_CONTACT: i32 = 6;
 
 /// Status: idle / the last command succeeded.
 pub const STATUS_IDLE: i32 = 0;
@@ -65,6 +74,9 @@ pub const ERROR_MOTION: i32 = 4;
 /// Error: the output wait (`DO_WAIT_REG`) was negative, not a number or over [`MAX_DO_WAIT_S`];
 /// the output was not changed.
 pub const ERROR_INVALID_WAIT: i32 = 5;
+/// Error: a guarded move's force limit (`FORCE_LIMIT_REG`) was not a positive number up to
+/// [`MAX_CONTACT_FORCE_N`]; the arm did not move.
+pub const ERROR_INVALID_FORCE: i32 = 6;
 
 /// Seconds without a heartbeat change before the watchdog stops the arm.
 pub const WATCHDOG_TIMEOUT_S: f64 = 0.5;
@@ -73,6 +85,10 @@ pub const STOP_DECELERATION: f64 = 3.0;
 /// Longest wait after a set-output command the program accepts (s). The program reads no
 /// command while it sleeps, so a stop waits behind it.
 pub const MAX_DO_WAIT_S: f64 = 5.0;
+
+/// Largest force limit of a guarded move the program accepts, N (UR's default protective-stop
+/// force, which would stop the arm first).
+pub const MAX_CONTACT_FORCE_N: f64 = 150.0;
 
 /// Every constant the script declares in its layout block, as (script name, value).
 pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
@@ -85,16 +101,19 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("SPEED_REG", SPEED_REG as f64),
     ("ACCEL_REG", ACCEL_REG as f64),
     ("DO_WAIT_REG", DO_WAIT_REG as f64),
+    ("FORCE_LIMIT_REG", FORCE_LIMIT_REG as f64),
     ("ACCEPTED_ID_REG", ACCEPTED_ID_REG as f64),
     ("DONE_ID_REG", DONE_ID_REG as f64),
     ("STATUS_REG", STATUS_REG as f64),
     ("ERROR_REG", ERROR_REG as f64),
     ("PROGRAM_BEAT_REG", PROGRAM_BEAT_REG as f64),
+    ("CONTACT_REG", CONTACT_REG as f64),
     ("KIND_MOVEJ", KIND_MOVEJ as f64),
     ("KIND_MOVEL", KIND_MOVEL as f64),
     ("KIND_STOP", KIND_STOP as f64),
     ("KIND_SET_STANDARD_DO", KIND_SET_STANDARD_DO as f64),
     ("KIND_SET_TOOL_DO", KIND_SET_TOOL_DO as f64),
+    ("KIND_MOVE_UNTIL_CONTACT", KIND_MOVE_UNTIL_CONTACT as f64),
     ("STATUS_IDLE", STATUS_IDLE as f64),
     ("STATUS_BUSY", STATUS_BUSY as f64),
     ("STATUS_FAILED", STATUS_FAILED as f64),
@@ -104,9 +123,11 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("ERROR_STOPPED", ERROR_STOPPED as f64),
     ("ERROR_MOTION", ERROR_MOTION as f64),
     ("ERROR_INVALID_WAIT", ERROR_INVALID_WAIT as f64),
+    ("ERROR_INVALID_FORCE", ERROR_INVALID_FORCE as f64),
     ("WATCHDOG_TIMEOUT", WATCHDOG_TIMEOUT_S),
     ("STOP_DECELERATION", STOP_DECELERATION),
     ("MAX_DO_WAIT", MAX_DO_WAIT_S),
+    ("MAX_CONTACT_FORCE", MAX_CONTACT_FORCE_N),
 ];
 
 /// Names of the input registers the client writes for a command, in recipe order.
@@ -125,6 +146,12 @@ pub fn command_recipe() -> Vec<String> {
     names
 }
 
+/// Name of the guarded-move force limit register (its own recipe, sent before the command that
+/// uses it, so clients of the plain command recipe are unaffected).
+pub fn force_limit_recipe() -> Vec<String> {
+    vec![format!("input_double_register_{FORCE_LIMIT_REG}")]
+}
+
 /// Name of the heartbeat input register (its own recipe).
 pub fn heartbeat_recipe() -> Vec<String> {
     vec![format!("input_int_register_{HEARTBEAT_REG}")]
@@ -138,6 +165,7 @@ pub fn output_registers() -> Vec<String> {
         STATUS_REG,
         ERROR_REG,
         PROGRAM_BEAT_REG,
+        CONTACT_REG,
     ]
     .iter()
     .map(|r| format!("output_int_register_{r}"))

@@ -108,6 +108,11 @@ pub struct CellProgram {
     silent: f64,
     watchdog_tripped: bool,
     beat: i32,
+    /// The guarded move running: the unit direction it travels (base frame) and its force
+    /// limit, N.
+    guard: Option<([f64; 3], f64)>,
+    /// The guarded move running met its limit and is coming to rest.
+    contact: bool,
 }
 
 impl CellProgram {
@@ -123,6 +128,8 @@ impl CellProgram {
     }
 
     fn stop_motion(&mut self, io: &mut ProgramIo<'_>, error: i32) {
+        self.guard = None;
+        self.contact = false;
         if let Some(id) = self.active.take() {
             Self::finish(io.regs, id, L::STATUS_FAILED, error);
         }
@@ -185,12 +192,41 @@ impl CellProgram {
                     }
                 };
                 self.stop_motion(io, L::ERROR_STOPPED);
+                self.guard = None;
                 if io.arm.is_moving() {
                     // Like the script: stopj to rest, then start the new move.
                     self.pending = Some((id, cmd));
                     io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
                 } else {
                     self.start_move(io, id, cmd);
+                }
+            }
+            L::KIND_MOVE_UNTIL_CONTACT => {
+                let limit = io.regs.input_double[L::FORCE_LIMIT_REG];
+                // Like the script: a limit out of range (or NaN) fails before the arm moves.
+                if !(limit > 0.0 && limit <= L::MAX_CONTACT_FORCE_N) {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_INVALID_FORCE);
+                    return;
+                }
+                self.stop_motion(io, L::ERROR_STOPPED);
+                let here = io.arm.forward(&io.arm.state().q);
+                let d: [f64; 3] = std::array::from_fn(|i| target[i] - here[i]);
+                let n = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let dir = if n > 0.0 { d.map(|v| v / n) } else { [0.0; 3] };
+                io.regs.output_int[L::CONTACT_REG] = 0;
+                let cmd = ArmCommand::MoveL {
+                    pose: target,
+                    speed,
+                    accel,
+                };
+                if io.arm.is_moving() {
+                    self.pending = Some((id, cmd));
+                    io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
+                } else {
+                    self.start_move(io, id, cmd);
+                }
+                if self.active.is_some() || self.pending.is_some() {
+                    self.guard = Some((dir, limit));
                 }
             }
             L::KIND_STOP => {
@@ -276,12 +312,32 @@ impl Program for CellProgram {
             self.stop_motion(io, L::ERROR_WATCHDOG);
         }
 
+        // A guarded move ends where the wrist reads more than its limit against the motion
+        // (`get_tcp_force`, the sensor's reading): the move is killed there and the command is
+        // done once the arm is at rest.
+        if let (Some(_), Some((dir, limit))) = (self.active, self.guard) {
+            let f = &io.sensor.tcp_force;
+            let against = -(f[0] * dir[0] + f[1] * dir[1] + f[2] * dir[2]);
+            if against > limit {
+                self.guard = None;
+                self.contact = true;
+                // A positive constant deceleration is always accepted.
+                let _ = io.arm.command(ArmCommand::StopL {
+                    decel: L::STOP_DECELERATION,
+                });
+            }
+        }
         if let Some(id) = self.active {
             if io.arm_error.is_some() {
                 self.active = None;
                 Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_MOTION);
             } else if !io.arm.is_moving() {
                 self.active = None;
+                // Only a guarded move reports its contact flag (as the script does).
+                let contact = std::mem::take(&mut self.contact);
+                if self.guard.take().is_some() || contact {
+                    io.regs.output_int[L::CONTACT_REG] = i32::from(contact);
+                }
                 Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
             }
         }
@@ -311,6 +367,8 @@ impl Program for CellProgram {
     }
 
     fn interrupted(&mut self, io: &mut ProgramIo<'_>) {
+        self.guard = None;
+        self.contact = false;
         if let Some(id) = self.active.take() {
             Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
         }

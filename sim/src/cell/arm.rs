@@ -160,6 +160,14 @@ impl ArmModel for SimArm {
         }
     }
 
+    /// The cell's contact model at the arm's present pose ([`SimCell::contact_wrench_at`]): a
+    /// held part pressed into its target, or the tool on the table.
+    fn external_wrench(&self) -> Option<[f64; 6]> {
+        let c = lock(&self.cell);
+        let tcp = c.model().kinematics.forward_tcp(&self.arm.state().q);
+        Some(c.contact_wrench_at(&tcp))
+    }
+
     fn actuation_time(&self, pin: u32) -> f64 {
         if pin == TOOL_OUTPUT_BASE + GRIPPER_TOOL_PIN {
             self.actuation_time

@@ -7,8 +7,10 @@ use nalgebra::{Isometry3, Point2, Point3, Translation3, Vector2, Vector3};
 use robots::kinematics::Joints;
 use robots::limits::Limits;
 use robots::robot::{
-    JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode, RobotStatus, SafetyStatus,
+    ContactOutcome, JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode,
+    RobotStatus, SafetyStatus, Wrench,
 };
+use robots::virtual_ur::force::{FtNoise, TABLE_STIFFNESS};
 use serde::{Deserialize, Serialize};
 
 use super::error::CellError;
@@ -20,11 +22,15 @@ use super::insertion::{
 use super::model::CellModel;
 use super::motion::{move_j_time, move_l_time};
 use super::noise::{EpisodeStreams, ErrorBudget, ErrorSource, gauss3, true_camera_pose};
+use super::wrench::{GRIP_SLIP_FORCE, HELD_CONTACT_STIFFNESS};
 use crate::config::{Destination, Placement};
 use crate::render::IncrementalRenderer;
 
 /// Samples along a motion's path checked for reachability and table clearance.
 const PATH_SAMPLES: usize = 12;
+/// Samples along a guarded move's path searched for the first contact (then refined by
+/// bisection).
+const GUARD_SAMPLES: usize = 400;
 
 /// A move a controller is about to run, for [`SimCell::check_controller_move`].
 #[derive(Debug, Clone, Copy)]
@@ -156,6 +162,8 @@ pub struct SimCell {
     feeder_renderer: IncrementalRenderer,
     /// Why the insertion scorer could not score the last insertion, if it failed.
     scorer_failure: Option<String>,
+    /// The wrist sensor's reading error (UR5e precision, its own seeded stream).
+    ft: FtNoise,
 }
 
 #[allow(non_snake_case)]
@@ -197,6 +205,9 @@ impl SimCell {
             renders_captures: false,
             feeder_renderer: IncrementalRenderer::new(),
             scorer_failure: None,
+            ft: FtNoise::ur5e(
+                seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ episode.wrapping_add(0x5EED_F0CE),
+            ),
         };
         cell.refill()?;
         Ok(cell)
@@ -558,7 +569,12 @@ impl SimCell {
 
     /// After a motion: if the held part came down into its target, score the insertion.
     fn settle_insertion(&mut self, above: f64) {
-        let tcp = self.true_tcp();
+        self.settle_insertion_at(self.true_tcp(), above);
+    }
+
+    /// Scores the insertion of the held part with the true TCP at `tcp`, if it came down into
+    /// its target there.
+    fn settle_insertion_at(&mut self, tcp: Isometry3<f64>, above: f64) {
         let Some((step, base_T_ins, mating)) = self.insertion_at(&tcp, above) else {
             return;
         };
@@ -891,6 +907,131 @@ impl SimCell {
         self.last_grasp = Some(result);
     }
 
+    /// The true external wrench on the tool (base frame, at the TCP: force N, moment N·m) with
+    /// the arm commanded at `base_T_tcp`: a held part coming down into its target meets what
+    /// stops it (the analytic capture model's stop height for its present pose error: the seat,
+    /// the rim, or a jam) and presses on it with [`HELD_CONTACT_STIFFNESS`] up to
+    /// [`GRIP_SLIP_FORCE`], along the insertion frame's z; fingertips or a held part below the
+    /// table press on it with the table's stiffness. Zero otherwise (the fixture's and placed
+    /// parts' other faces are not modelled).
+    #[allow(non_snake_case)]
+    pub fn contact_wrench_at(&self, base_T_tcp: &Isometry3<f64>) -> Wrench {
+        let tcp = Translation3::from(self.tcp_error) * base_T_tcp;
+        if let Some(h) = self.held.as_ref()
+            && !self.gripper_open
+            && let Some((_, base_T_ins, mating)) = self.insertion_at(&tcp, 0.0)
+        {
+            let ins_T_part = base_T_ins.inverse() * tcp * h.part.tcp_T_part;
+            let stop = super::insertion::analytic::score(&mating, &ins_T_part)
+                .end
+                .height;
+            let depth = stop - mating.pose_error(&ins_T_part).height;
+            if depth <= 0.0 {
+                return [0.0; 6];
+            }
+            let f = base_T_ins.rotation
+                * Vector3::z()
+                * (HELD_CONTACT_STIFFNESS * depth).min(GRIP_SLIP_FORCE);
+            return [f.x, f.y, f.z, 0.0, 0.0, 0.0];
+        }
+        let below = -self.lowest_z(&tcp);
+        if below > 0.0 {
+            let f = self.model.geometry.base_T_table.rotation
+                * Vector3::z()
+                * (TABLE_STIFFNESS * below);
+            return [f.x, f.y, f.z, 0.0, 0.0, 0.0];
+        }
+        [0.0; 6]
+    }
+
+    /// One reading of the wrist sensor now (`actual_TCP_force`: the external wrench, base frame,
+    /// at the TCP, payload compensated, with the UR5e's bias and noise).
+    pub fn read_wrench(&mut self) -> Wrench {
+        let truth = self.contact_wrench_at(&self.tcp_pose_now());
+        let e = self.ft.sample();
+        std::array::from_fn(|i| truth[i] + e[i])
+    }
+
+    /// Runs a guarded straight-line move now (the `Robot::move_until_contact` body; limits as
+    /// for [`Self::move_j_sync`]): the arm stops where the true contact force against the motion
+    /// ([`Self::contact_wrench_at`]) first exceeds `force_limit`, or at the target. A held part
+    /// that met its target is scored where the contact began (the press is elastic: the part
+    /// does not slip up the fingers), and the arm's repeatability is not redrawn (it stopped on
+    /// force, not on a position).
+    #[allow(non_snake_case)]
+    pub fn move_until_contact_sync(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> Result<ContactOutcome, RobotError> {
+        self.check_motion_allowed()?;
+        let start = self.model.kinematics.forward_tcp(&self.q);
+        let direction = base_T_tcp.translation.vector - start.translation.vector;
+        let dir = direction
+            .try_normalize(1e-12)
+            .unwrap_or_else(Vector3::zeros);
+        let pose_at = |s: f64| start.lerp_slerp(&base_T_tcp, s);
+        // Path checks and the part's insertion state refer to the start of the move.
+        self.begin_motion();
+        let against = |cell: &Self, s: f64| {
+            let w = cell.contact_wrench_at(&pose_at(s));
+            -(w[0] * dir.x + w[1] * dir.y + w[2] * dir.z)
+        };
+        let first = (1..=GUARD_SAMPLES)
+            .map(|k| k as f64 / GUARD_SAMPLES as f64)
+            .find(|&s| against(self, s) > force_limit);
+        let (stop_s, contact) = match first {
+            None => (1.0, false),
+            Some(hi) => {
+                let (mut lo, mut hi) = (hi - 1.0 / GUARD_SAMPLES as f64, hi);
+                for _ in 0..40 {
+                    let mid = 0.5 * (lo + hi);
+                    if against(self, mid) > force_limit {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                (hi, true)
+            }
+        };
+        // Where the contact began: the last pose with no force against the motion.
+        let touch_s = if contact {
+            let (mut lo, mut hi) = (0.0, stop_s);
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                if against(self, mid) > 0.0 {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            lo
+        } else {
+            stop_s
+        };
+        let stop = pose_at(stop_s);
+        let (_, q) = self.linear_path(&stop)?;
+        let reading = {
+            let truth = self.contact_wrench_at(&stop);
+            let e = self.ft.sample();
+            std::array::from_fn(|i| truth[i] + e[i])
+        };
+        self.clock += move_l_time(&start, &stop, &motion, &self.model.spec.limits);
+        self.q = q;
+        self.clock = self.clock.max(self.fingers_ready_at);
+        if !self.gripper_open {
+            let touch = Translation3::from(self.tcp_error) * pose_at(touch_s);
+            self.settle_insertion_at(touch, 0.0);
+        }
+        Ok(ContactOutcome {
+            stopped_at: self.tcp_pose_now(),
+            wrench: reading,
+            contact,
+        })
+    }
+
     /// Mode, safety and program state.
     pub fn status_now(&self) -> RobotStatus {
         RobotStatus {
@@ -985,5 +1126,20 @@ impl Robot for SimCell {
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
         let s = self.status_now();
         Box::pin(async move { Ok(s) })
+    }
+
+    #[allow(non_snake_case)]
+    fn move_until_contact(
+        &mut self,
+        base_T_tcp: Isometry3<f64>,
+        motion: LinearMotion,
+        force_limit: f64,
+    ) -> RobotFuture<'_, ContactOutcome> {
+        Box::pin(async move { self.move_until_contact_sync(base_T_tcp, motion, force_limit) })
+    }
+
+    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
+        let w = self.read_wrench();
+        Box::pin(async move { Ok(w) })
     }
 }

@@ -44,6 +44,14 @@ pub const GRIPPER_MASS: f64 = 1.0;
 /// (1): the body sits near the flange, the fingers are light. A modelled value.
 pub const GRIPPER_COM_FRACTION: f64 = 0.4;
 
+/// Axial stiffness of a held part pressed onto what stops it (fingers, part and receiver in
+/// series), N/m: a guarded move at 10 N stops 0.1 mm past first contact. A modelled value.
+pub const HELD_CONTACT_STIFFNESS: f64 = 1e5;
+
+/// Axial force at which a held part slips up the fingers, N (grip force times friction on both
+/// fingers): a position-controlled push never loads the wrist beyond it. A modelled value.
+pub const GRIP_SLIP_FORCE: f64 = 30.0;
+
 impl Load {
     /// The gripper of a tool whose TCP is at `flange_T_tcp`: [`GRIPPER_MASS`] at
     /// [`GRIPPER_COM_FRACTION`] of the way from the flange to the TCP.
