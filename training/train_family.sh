@@ -12,6 +12,9 @@
 #   TRAIN_CROPS   keypoint crops per part [4000] [6000]; TEST_CROPS [300]
 #   TRAIN_FEEDER  feeder frames [1600] [3600]; TEST_FEEDER [100]; CELL_FEEDER [100] (at the
 #                 cell's density: parts spread over +-35 mm at 1.51 m)
+#   FEEDER_DROP_HALF  half-size (m) of the square the training and test feeder frames' parts
+#                 drop into [cell dataset's 0.015: a heap of USB-C-sized parts]; larger parts or
+#                 more of them want more room (a pile is slow to drop and unlike a shaken feeder)
 #   SCENARIO      a scenario of the family for `cell eval`'s finger-room check [none: not checked]
 #   DATA, OUT     dataset folder [training/data/NAME], model folder [scenarios/models/NAME]
 #   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
@@ -19,7 +22,7 @@
 # Every stage's wall time is printed and appended to OUT/train_family.log. The datasets resume if
 # interrupted; a second run with the same settings reuses them.
 set -euo pipefail
-[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,20p' "$0" >&2; exit 2; }
+[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,23p' "$0" >&2; exit 2; }
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 catalog="$(realpath -e "$1")" || { echo "train_family: no catalog at $1" >&2; exit 2; }
 cd "$root"
@@ -39,6 +42,8 @@ fi
 TEST_CROPS="${TEST_CROPS:-300}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
 CELL_FEEDER="${CELL_FEEDER:-100}"
+heap=()
+[ -n "${FEEDER_DROP_HALF:-}" ] && heap=(--feeder-drop-half "$FEEDER_DROP_HALF")
 mkdir -p "$DATA" "$OUT"
 log="$OUT/train_family.log"
 t_all=$(date +%s)
@@ -48,9 +53,9 @@ echo "$(date -u +%FT%TZ) $name from $catalog (parts $parts; gpu $gpu; $MINUTES m
 
 stage "datasets of $parts (train seed 1, test seed 2, cell density seed 4)"
 "${cell[@]}" dataset --catalog "$catalog" --out "$DATA/train" --seed 1 --train-crops "$TRAIN_CROPS" \
-    --test-crops 0 --train-overviews 0 --test-overviews 0 --train-feeder "$TRAIN_FEEDER" --quiet
+    --test-crops 0 --train-overviews 0 --test-overviews 0 --train-feeder "$TRAIN_FEEDER" "${heap[@]}" --quiet
 "${cell[@]}" dataset --catalog "$catalog" --out "$DATA/test" --seed 2 --train-crops 0 \
-    --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" --quiet
+    --test-crops "$TEST_CROPS" --train-overviews 0 --test-overviews 0 --test-feeder "$TEST_FEEDER" "${heap[@]}" --quiet
 "${cell[@]}" dataset --catalog "$catalog" --out "$DATA/cell_feeder" --seed 4 --train-crops 0 --test-crops 0 \
     --train-overviews 0 --test-overviews 0 --test-feeder "$CELL_FEEDER" --camera-distance 1.51 --feeder-drop-half 0.035 --quiet
 done_stage datasets
