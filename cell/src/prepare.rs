@@ -7,7 +7,7 @@ use indicatif::ProgressBar;
 use nalgebra::Point3;
 use perception::part::{
     Catalog, MeshRepairs, PartRole, PartSpec, StablePose, TriMesh, farthest_point_sample,
-    load_mesh_repaired, sample_surface,
+    sample_surface,
 };
 use perception::symmetry::symmetry_group;
 use sim::stable_poses::{DropEngine, DropSettings, StablePoseReport, stable_poses_with};
@@ -79,7 +79,7 @@ pub fn prepare_part_with(
     settings: &DropSettings,
     progress: Option<&ProgressBar>,
 ) -> Result<PreparedPart, PrepareError> {
-    let (mesh, repairs) = load_mesh_repaired(&catalog.mesh_path(part), part.unit)?;
+    let (mesh, repairs) = catalog.load_mesh_repaired(part)?;
     prepare_loaded(engine, part, mesh, repairs, settings, progress)
 }
 

@@ -294,3 +294,87 @@ fn a_kernel_that_cannot_be_provisioned_fails_with_what_failed_and_the_fix() {
         "the catalog line is named: {stderr}"
     );
 }
+
+/// A one-part catalog of `mesh` with the extra `keys` lines; the block fixture copied in.
+fn catalog_of(dir: &Path, mesh: &str, keys: &str) -> PathBuf {
+    std::fs::copy(fixture("block_with_hole.step"), dir.join(mesh)).unwrap();
+    let path = dir.join("c.toml");
+    std::fs::write(
+        &path,
+        format!("name = \"step\"\n[[part]]\nname = \"block\"\nmesh = \"{mesh}\"\n{keys}material = \"metal\"\n"),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn a_step_part_needs_no_unit_and_is_tessellated_to_its_own_chordal_tolerance() {
+    let dir = tempfile::tempdir().unwrap();
+    let triangles_and_volume = |keys: &str| {
+        let catalog = Catalog::load(&catalog_of(dir.path(), "block.step", keys)).unwrap();
+        let part = catalog.part("block").unwrap();
+        assert_eq!(part.unit, None);
+        let mesh = catalog.load_mesh(part).unwrap();
+        (
+            mesh.triangles.len(),
+            mesh.volume() * 1e9,
+            part.chordal_tolerance_mm(),
+        )
+    };
+    let (default, default_mm3, t) = triangles_and_volume("");
+    assert_eq!(t, CHORDAL_TOLERANCE_MM);
+    // 0.1 mm: coarser, fewer facets, the volume still within A t of the B-rep's.
+    let (coarse, coarse_mm3, t) = triangles_and_volume("chordal_tolerance = 1e-4\n");
+    assert!((t - 0.1).abs() < 1e-12, "{t} mm");
+    assert!(
+        coarse < default,
+        "{coarse} triangles at 0.1 mm, {default} at 0.01 mm"
+    );
+    for (mm3, t) in [(default_mm3, CHORDAL_TOLERANCE_MM), (coarse_mm3, 0.1)] {
+        assert!(
+            (mm3 - BLOCK_MM3).abs() <= BLOCK_CURVED_MM2 * t,
+            "{mm3} mm^3 at {t} mm against {BLOCK_MM3}"
+        );
+    }
+    // The coarse tessellation is far enough off to tell apart from the default one.
+    assert!((coarse_mm3 - BLOCK_MM3).abs() > (default_mm3 - BLOCK_MM3).abs());
+}
+
+/// The located error a catalog of `mesh` with `keys` is refused with, as text.
+fn catalog_refusal(mesh: &str, keys: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = catalog_of(dir.path(), mesh, keys);
+    Catalog::load(&path).unwrap_err().to_string()
+}
+
+#[test]
+fn bad_units_and_chordal_tolerances_are_refused_at_their_line_and_column() {
+    // Millimetres typed as metres.
+    let err = catalog_refusal("block.step", "chordal_tolerance = 0.02\n");
+    assert!(
+        err.contains("c.toml:5:21: part \"block\": chordal_tolerance 0.02 m is 20 mm, coarser than the 0.5 mm allowed")
+            && err.contains("(0.02 mm would be 2e-5)"),
+        "{err}"
+    );
+    let err = catalog_refusal("block.step", "chordal_tolerance = -1e-5\n");
+    assert!(
+        err.contains("c.toml:5:21: part \"block\": chordal_tolerance -0.00001: expected a positive length in metres"),
+        "{err}"
+    );
+    let err = catalog_refusal("block.step", "chordal_tolerance = 1e-9\n");
+    assert!(
+        err.contains("c.toml:5:21:") && err.contains("finer than the 0.1 µm allowed"),
+        "{err}"
+    );
+    // A tolerance means nothing to a triangle mesh, and a triangle mesh needs its unit.
+    let err = catalog_refusal("block.obj", "unit = \"mm\"\nchordal_tolerance = 1e-5\n");
+    assert!(
+        err.contains("c.toml:6:21: part \"block\": chordal_tolerance applies to STEP meshes only; block.obj is given as triangles"),
+        "{err}"
+    );
+    let err = catalog_refusal("block.stl", "");
+    assert!(
+        err.contains("c.toml:4:8: part \"block\": unit = \"mm\" or \"m\" is required for mesh block.stl; only a STEP file declares its own unit"),
+        "{err}"
+    );
+}

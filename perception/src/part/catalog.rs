@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{LengthUnit, MeshAt, MeshRepairs, PartError, StablePose, TriMesh, load_mesh_repaired};
+use super::mesh_io::load_part_mesh;
+use super::{LengthUnit, MeshAt, MeshRepairs, PartError, StablePose, TriMesh};
 
 /// A part set: the parts of one product, read from a catalog file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -42,7 +43,16 @@ struct PartKeySpans {
 struct PartKeys {
     mesh: Option<toml::Spanned<toml::Value>>,
     view_symmetries: Option<toml::Spanned<toml::Value>>,
+    chordal_tolerance: Option<toml::Spanned<toml::Value>>,
 }
+
+/// Finest chordal tolerance a catalog may ask of a STEP tessellation, metres (0.1 µm): finer
+/// gives millions of triangles on a centimetre part.
+pub const MIN_CHORDAL_TOLERANCE_M: f64 = 1e-7;
+/// Coarsest chordal tolerance a catalog may ask, metres (0.5 mm): coarser turns a small hole or
+/// fillet into a different shape, and a value above it is most likely millimetres typed as
+/// metres.
+pub const MAX_CHORDAL_TOLERANCE_M: f64 = 0.5e-3;
 
 /// Whether a catalog entry is assembled or is part of the cell. What each part does in the
 /// product (its order, target and insertion direction) is the scenario's `[[assembly]]` sequence,
@@ -183,8 +193,15 @@ pub struct PartSpec {
     pub role: PartRole,
     /// Mesh file, relative to the catalog file.
     pub mesh: PathBuf,
-    /// Unit of the mesh file's numbers.
-    pub unit: LengthUnit,
+    /// Unit of the mesh file's numbers; required except for a STEP file, which declares its
+    /// own (and whose own is used whatever this says).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<LengthUnit>,
+    /// Largest distance, in metres like the catalog's other lengths, between a STEP file's
+    /// tessellation and its exact surfaces; absent:
+    /// [`CHORDAL_TOLERANCE_MM`](super::CHORDAL_TOLERANCE_MM). STEP meshes only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chordal_tolerance: Option<f64>,
     /// Surface class.
     pub material: Material,
     /// Density in kg/m³; the material's default when absent.
@@ -248,6 +265,61 @@ impl PartSpec {
     /// The grasp for a stable pose, if the part is pickable in it.
     pub fn grasp_for(&self, stable_pose: &str) -> Option<&Grasp> {
         self.grasps.iter().find(|g| g.stable_pose == stable_pose)
+    }
+
+    /// Whether the mesh is a STEP file (`.step` or `.stp`).
+    pub fn is_step(&self) -> bool {
+        self.mesh
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("step") || e.eq_ignore_ascii_case("stp"))
+    }
+
+    /// What is wrong with the mesh's unit or chordal tolerance, if anything, and whether it is
+    /// the tolerance (else the unit, at the mesh key).
+    fn mesh_key_problem(&self) -> Option<(bool, String)> {
+        let name = &self.name;
+        if !self.is_step() && self.unit.is_none() {
+            return Some((
+                false,
+                format!(
+                    "part \"{name}\": unit = \"mm\" or \"m\" is required for mesh {}; only a STEP \
+                     file declares its own unit",
+                    self.mesh.display()
+                ),
+            ));
+        }
+        let t = self.chordal_tolerance?;
+        let problem = if !self.is_step() {
+            format!(
+                "chordal_tolerance applies to STEP meshes only; {} is given as triangles",
+                self.mesh.display()
+            )
+        } else if !(t.is_finite() && t > 0.0) {
+            format!("chordal_tolerance {t}: expected a positive length in metres")
+        } else if t > MAX_CHORDAL_TOLERANCE_M {
+            format!(
+                "chordal_tolerance {t} m is {} mm, coarser than the {} mm allowed: lengths in the \
+                 catalog are in metres ({t} mm would be {:e})",
+                t * 1e3,
+                MAX_CHORDAL_TOLERANCE_M * 1e3,
+                t * 1e-3
+            )
+        } else if t < MIN_CHORDAL_TOLERANCE_M {
+            format!(
+                "chordal_tolerance {t:e} m is finer than the {:.1} µm allowed",
+                MIN_CHORDAL_TOLERANCE_M * 1e6
+            )
+        } else {
+            return None;
+        };
+        Some((true, format!("part \"{name}\": {problem}")))
+    }
+
+    /// Chordal tolerance of the mesh's STEP tessellation, millimetres.
+    pub fn chordal_tolerance_mm(&self) -> f64 {
+        self.chordal_tolerance
+            .map_or(super::CHORDAL_TOLERANCE_MM, |t| t * 1e3)
     }
 
     /// What is wrong with the view symmetries, if anything: an order below 2, or (once prepared)
@@ -335,6 +407,19 @@ impl Catalog {
             .map(|i| at(i, |p| p.mesh.as_ref()))
             .collect();
         for (i, part) in catalog.parts.iter().enumerate() {
+            if let Some((tolerance, message)) = part.mesh_key_problem() {
+                let (line, column) = if tolerance {
+                    at(i, |p| p.chordal_tolerance.as_ref())
+                } else {
+                    at(i, |p| p.mesh.as_ref())
+                };
+                return Err(PartError::Catalog {
+                    path: path.into(),
+                    line,
+                    column,
+                    message,
+                });
+            }
             if let Some(message) = part.view_symmetry_problem() {
                 let (line, column) = at(i, |p| p.view_symmetries.as_ref());
                 return Err(PartError::Catalog {
@@ -366,7 +451,12 @@ impl Catalog {
 
     /// As [`Catalog::load_mesh`], and says what loading repaired (see [`load_mesh_repaired`]).
     pub fn load_mesh_repaired(&self, part: &PartSpec) -> Result<(TriMesh, MeshRepairs), PartError> {
-        load_mesh_repaired(&self.mesh_path(part), part.unit).map_err(|error| {
+        load_part_mesh(
+            &self.mesh_path(part),
+            part.unit,
+            part.chordal_tolerance_mm(),
+        )
+        .map_err(|error| {
             let index = self.parts.iter().position(|p| p.name == part.name);
             let (line, column) = index
                 .and_then(|i| self.mesh_locations.get(i).copied())

@@ -48,6 +48,14 @@ pub enum PartError {
         /// What to do about it.
         hint: String,
     },
+    /// A triangle mesh (OBJ, STL, PLY) was loaded without a length unit.
+    #[error(
+        "{path}: no length unit given: set unit = \"mm\" or \"m\" (only a STEP file declares its own)"
+    )]
+    NoUnit {
+        /// The file.
+        path: PathBuf,
+    },
     /// The mesh has no triangles.
     #[error("{path}: the mesh is empty (no triangles); export the part as a solid")]
     Empty {

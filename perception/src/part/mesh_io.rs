@@ -64,6 +64,16 @@ pub fn load_mesh_repaired(
     path: &Path,
     unit: LengthUnit,
 ) -> Result<(TriMesh, MeshRepairs), PartError> {
+    load_part_mesh(path, Some(unit), CHORDAL_TOLERANCE_MM)
+}
+
+/// As [`load_mesh_repaired`], a STEP file tessellated to `chordal_tolerance_mm`; `unit` may be
+/// absent only for a STEP file (which declares its own).
+pub(crate) fn load_part_mesh(
+    path: &Path,
+    unit: Option<LengthUnit>,
+    chordal_tolerance_mm: f64,
+) -> Result<(TriMesh, MeshRepairs), PartError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -73,25 +83,30 @@ pub fn load_mesh_repaired(
         "obj" => read_obj(path)?,
         "stl" => read_stl(path)?,
         "ply" => read_ply(path)?,
-        // The solids tessellated at the default tolerances, cached as OBJ in metres.
+        // The solids tessellated, cached as OBJ in metres.
         "step" | "stp" => read_obj(&tessellate_step(
             path,
             &StepKernel::from_env(),
-            CHORDAL_TOLERANCE_MM,
+            chordal_tolerance_mm,
         )?)?,
         _ => return Err(PartError::UnknownFormat { path: path.into() }),
     };
     if raw.triangles.is_empty() {
         return Err(PartError::Empty { path: path.into() });
     }
-    let step = matches!(ext.as_str(), "step" | "stp");
     // A STEP tessellation is in metres already, from the unit the file declares.
-    let mut mesh = raw.scaled(if step { 1.0 } else { unit.to_metres() });
-    if step {
-        check_step_size(path, &mesh)?;
-    } else {
-        check_size(path, &mesh, unit)?;
-    }
+    let mut mesh = match (ext.as_str(), unit) {
+        ("step" | "stp", _) => {
+            check_step_size(path, &raw)?;
+            raw
+        }
+        (_, Some(unit)) => {
+            let mesh = raw.scaled(unit.to_metres());
+            check_size(path, &mesh, unit)?;
+            mesh
+        }
+        (_, None) => return Err(PartError::NoUnit { path: path.into() }),
+    };
     let mut repairs = mesh.repair();
     let filled = mesh.fill_small_holes(MAX_FILLED_HOLE_M);
     repairs.filled_holes = filled.count;

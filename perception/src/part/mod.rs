@@ -16,7 +16,8 @@ mod step_io;
 mod step_kernel;
 
 pub use catalog::{
-    Catalog, Grasp, HoleWeight, Material, PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
+    Catalog, Grasp, HoleWeight, MAX_CHORDAL_TOLERANCE_M, MIN_CHORDAL_TOLERANCE_M, Material,
+    PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
 };
 pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
