@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::camera::Camera;
 
-use super::DatasetError;
+use super::{DatasetError, LookOptions};
 use crate::render::RenderSettings;
 use crate::scene::Randomisation;
 
@@ -91,6 +91,9 @@ pub struct DatasetConfig {
     pub feeder_camera_distance: Option<f64>,
     /// Randomisation ranges.
     pub randomisation: Randomisation,
+    /// The opt-in look (room, area lights, backlit plate), drawn from a stream of its own;
+    /// `None` (the default) renders as without it.
+    pub look: Option<LookOptions>,
     /// Render settings.
     pub render: RenderSettings,
     /// Millimetres per unit of the 16-bit depth PNGs.
@@ -128,6 +131,7 @@ impl DatasetConfig {
             feeder_drop_half: 0.015,
             feeder_camera_distance: None,
             randomisation: Randomisation::default(),
+            look: None,
             render: RenderSettings::default(),
             depth_scale: 0.1,
             images_per_scene: 1000,
@@ -138,6 +142,10 @@ impl DatasetConfig {
     /// Checks sizes and ranges.
     pub fn validate(&self) -> Result<(), DatasetError> {
         self.randomisation.validate()?;
+        if let Some(look) = &self.look {
+            look.validate()
+                .map_err(|e| DatasetError::Config(format!("look: {e}")))?;
+        }
         self.camera
             .validate()
             .map_err(|e| DatasetError::Config(e.to_string()))?;
@@ -209,6 +217,27 @@ impl DatasetConfig {
             )));
         }
         Ok(())
+    }
+}
+
+/// Offset of a work item's look stream tag from its own tag: the look draws from a stream of
+/// its own, so the item's other draws are those of a run without it.
+pub(crate) const LOOK_TAG: u64 = 1 << 40;
+
+/// Dresses `scene` in the configured look, if any, from the look stream of item (tag, index).
+pub(crate) fn apply_look(
+    cfg: &DatasetConfig,
+    scene: &mut crate::scene::SampledScene,
+    tag: u64,
+    index: u64,
+) {
+    if let Some(look) = &cfg.look {
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(item_seed(
+            cfg.seed,
+            tag + LOOK_TAG,
+            index,
+        ));
+        look.apply(scene, &mut rng);
     }
 }
 

@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::bop::{pose_to_bop, row_major};
-use super::config::item_seed;
+use super::config::{apply_look, item_seed};
 use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, Window, instance_mask, render};
@@ -155,13 +155,14 @@ pub(crate) fn write_crop_group(
     };
     for index in indices {
         let mut rng = ChaCha8Rng::seed_from_u64(item_seed(cfg.seed, tag + 50_000, index as u64));
-        let scene = dress_scene(
+        let mut scene = dress_scene(
             models,
             parts.clone(),
             &request,
             &cfg.randomisation,
             &mut rng,
         )?;
+        apply_look(cfg, &mut scene, tag + 50_000, index as u64);
         let camera_T_table = scene.table_T_camera.inverse();
         let part_centre = Point3::from(scene.parts[target].table_T_part.translation.vector);
         let c = cfg

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::config::item_seed;
+use super::config::{apply_look, item_seed};
 use super::overview::write_bop_image;
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{Window, render, window_covering};
@@ -85,7 +85,8 @@ pub(crate) fn write_feeder(
     if let (Split::Test, Some(d)) = (split, cfg.feeder_camera_distance) {
         rand.camera_height = Range::new(d, d);
     }
-    let scene = sample_scene(models, &request, &rand, &mut rng)?;
+    let mut scene = sample_scene(models, &request, &rand, &mut rng)?;
+    apply_look(cfg, &mut scene, 20 + split.code(), index as u64);
     let (lo_p, hi_p) = scene.footprint(models, FEEDER_MARGIN);
     let window = window_covering(&cfg.camera, &scene.table_T_camera, &lo_p, &hi_p)
         .ok_or_else(|| DatasetError::Config(format!("feeder frame {index}: parts not in view")))?;

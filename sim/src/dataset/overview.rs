@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::bop::{GtInfo, GtPose, SceneCamera, pose_to_bop, row_major};
-use super::config::item_seed;
+use super::config::{apply_look, item_seed};
 use super::files::{write_depth, write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use perception::camera::Camera;
@@ -52,7 +52,8 @@ pub(crate) fn write_overview(
         aim_at_part: None,
         nominal_table_T_camera: cfg.nominal_table_T_camera,
     };
-    let scene = sample_scene(models, &request, &cfg.randomisation, &mut rng)?;
+    let mut scene = sample_scene(models, &request, &cfg.randomisation, &mut rng)?;
+    apply_look(cfg, &mut scene, 10 + split.code(), index as u64);
     let camera = cfg
         .camera
         .scaled(cfg.overview_scale)

@@ -8,7 +8,7 @@ use nalgebra::Point3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::config::item_seed;
+use super::config::{apply_look, item_seed};
 use super::crops::crop_dir;
 use super::files::write_png;
 use super::{DatasetConfig, DatasetError, Split};
@@ -97,7 +97,8 @@ fn feeder_capture(
         aim_at_part: None,
         nominal_table_T_camera: cfg.nominal_table_T_camera,
     };
-    let scene = dress_scene(models, parts, &request, &cfg.randomisation, &mut rng)?;
+    let mut scene = dress_scene(models, parts, &request, &cfg.randomisation, &mut rng)?;
+    apply_look(cfg, &mut scene, 900, k);
     let (lo, hi) = FEEDER;
     let window = window_covering(
         &cfg.camera,

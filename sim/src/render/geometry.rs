@@ -13,7 +13,7 @@ use super::aabb::box_corners;
 use super::instance_grid::{InstanceGrid, slab_range};
 use super::light::PointLight;
 use super::shadow_grid::ShadowGrid;
-use super::{Appearance, TagBoard};
+use super::{Appearance, Environment, TagBoard};
 
 /// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
 #[derive(Clone)]
@@ -225,8 +225,15 @@ pub struct RenderScene {
     pub table: Option<Table>,
     /// Point lights (shadows are cast from each).
     pub lights: Vec<PointLight>,
-    /// Uniform ambient (sky) radiance per channel.
+    /// Uniform ambient (sky) radiance per channel (unused where [`RenderScene::environment`]
+    /// is set).
     pub ambient: [f64; 3],
+    /// The room around the cell as prefiltered image-based lighting, replacing the uniform
+    /// ambient when set (none by default).
+    pub environment: Option<Arc<Environment>>,
+    /// Radiance the board's top face emits per channel when the feeder plate is backlit (its
+    /// print passes the share its albedo has of the white's); none by default.
+    pub backlight: Option<[f64; 3]>,
     bounds: Vec<(Point3<f64>, Point3<f64>)>,
     /// `part_T_table` of each instance, inverted once instead of per ray.
     inverses: Vec<Isometry3<f64>>,
@@ -252,6 +259,8 @@ impl RenderScene {
             table,
             lights,
             ambient,
+            environment: None,
+            backlight: None,
             bounds,
             inverses,
             grid,

@@ -9,6 +9,7 @@
 mod aabb;
 mod appearance;
 mod capture;
+mod environment;
 mod geometry;
 mod incremental;
 mod instance_grid;
@@ -23,9 +24,10 @@ mod tag_board;
 
 pub use appearance::Appearance;
 pub use capture::{Capture, capture, window_covering};
+pub use environment::{CameraMount, CeilingPanel, Environment, Room};
 pub use geometry::{Hit, Instance, RenderMesh, RenderScene, SurfaceKind, Table};
 pub use incremental::IncrementalRenderer;
-pub use light::PointLight;
+pub use light::{AreaLight, PointLight};
 pub use output::{InstanceMask, RenderOutput, Window};
 pub use renderer::{CentreRays, RenderSettings, instance_mask, render, render_with_rays};
 pub use sensor::{SensorError, SensorModel};

@@ -400,7 +400,20 @@ impl Tracer<'_> {
         let mut lit = 0u32;
         let n = hit.normal;
         let v = -d;
-        let mut c = ambient(&a, &n, &v, &scene.ambient);
+        let mut c = match &scene.environment {
+            Some(env) => env.shade(&a, &n, &v),
+            None => ambient(&a, &n, &v, &scene.ambient),
+        };
+        if let (Some(glow), SurfaceKind::Board, Some(board)) =
+            (scene.backlight, hit.kind, scene.board.as_ref())
+            && board.top_face_at(&p, &n).is_some()
+        {
+            // Light from under the plate passes its print as the print's albedo passes it.
+            for ch in 0..3 {
+                let white = board.white.base_color[ch].max(1e-6);
+                c[ch] += glow[ch] * (a.base_color[ch] / white).min(1.0);
+            }
+        }
         let start = p + n * SHADOW_BIAS;
         for (k, light) in scene.lights.iter().enumerate() {
             let to = light.position - start;

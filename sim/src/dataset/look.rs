@@ -1,0 +1,370 @@
+//! The opt-in look of `cell dataset --environment`: a procedural room around the cell (walls,
+//! ceiling light panels, floor, the table and the camera's own mount) that metals reflect through
+//! prefiltered image-based lighting, rectangular area lights beside the randomisation's point
+//! lights, and a backlit feeder plate, each drawn per image from its own random stream so that
+//! the scene's other draws (parts, lights, camera, sensor) stay those of a run without it.
+
+use std::sync::Arc;
+
+use nalgebra::{Point3, Vector3};
+use rand::{Rng, RngExt};
+
+use crate::render::{AreaLight, CameraMount, CeilingPanel, Environment, Room};
+use crate::scene::{Range, SampledScene};
+
+/// Options of the look, as a TOML file gives them (every key optional; a range is written
+/// `key = { lo = 0.1, hi = 0.2 }`).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LookOptions {
+    /// The room the cell stands in.
+    pub room: RoomRanges,
+    /// Rectangular area lights, added to the randomisation's point lights.
+    pub area_lights: AreaLightRanges,
+    /// The backlit feeder plate.
+    pub backlight: BacklightRanges,
+}
+
+/// Ranges of the procedural room. Lengths in metres, radiances in linear sensor units (1 is full
+/// scale at exposure 1; the randomisation's ambient is 0.04–0.15).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RoomRanges {
+    /// Whether to draw a room at all (without it the uniform ambient stays).
+    pub enabled: bool,
+    /// Half size of the room (walls at ± this along x and, drawn again, y).
+    pub half_size: Range,
+    /// Height of the table top above the floor.
+    pub table_height: Range,
+    /// Height of the ceiling above the table top.
+    pub ceiling: Range,
+    /// Grey radiance of each wall at ceiling height.
+    pub wall: Range,
+    /// Per-channel colour variation of a wall (multiplier).
+    pub wall_tint: Range,
+    /// Radiance of the ceiling between the panels.
+    pub ceiling_radiance: Range,
+    /// Radiance of the floor.
+    pub floor: Range,
+    /// Number of light panels on the ceiling (rounded draw).
+    pub panels: Range,
+    /// Side of a panel (each side drawn).
+    pub panel_size: Range,
+    /// Radiance of a panel.
+    pub panel_radiance: Range,
+    /// Horizontal distance of a panel's centre from the cell, along x and along y.
+    pub panel_offset: Range,
+    /// Half size of the table top around the feeder plate.
+    pub table_half: Range,
+    /// Whether the camera's mount (its body and the beam holding it) is drawn.
+    pub mount: bool,
+    /// Half width of the camera body (its depth along the optical axis is 1.5 times this).
+    pub mount_size: Range,
+    /// Radiance of the mount (dark anodised to bare aluminium).
+    pub mount_radiance: Range,
+}
+
+impl Default for RoomRanges {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            half_size: Range::new(1.5, 4.0),
+            table_height: Range::new(0.75, 0.95),
+            ceiling: Range::new(1.9, 3.0),
+            wall: Range::new(0.03, 0.25),
+            wall_tint: Range::new(0.9, 1.1),
+            ceiling_radiance: Range::new(0.03, 0.2),
+            floor: Range::new(0.02, 0.1),
+            panels: Range::new(1.0, 6.0),
+            panel_size: Range::new(0.3, 1.2),
+            panel_radiance: Range::new(1.0, 5.0),
+            panel_offset: Range::new(-2.0, 2.0),
+            table_half: Range::new(0.3, 0.8),
+            mount: true,
+            mount_size: Range::new(0.03, 0.08),
+            mount_radiance: Range::new(0.005, 0.06),
+        }
+    }
+}
+
+/// Ranges of the rectangular area lights (horizontal, emitting downwards).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AreaLightRanges {
+    /// Number of area lights (rounded draw).
+    pub count: Range,
+    /// Side of a light (each side drawn).
+    pub size: Range,
+    /// Height above the table.
+    pub height: Range,
+    /// Horizontal distance from the parts.
+    pub radius: Range,
+    /// Radiance × area: the irradiance it gives 1 m below it, as a point light's intensity.
+    pub intensity: Range,
+    /// Per-channel colour variation (multiplier).
+    pub tint: Range,
+    /// Sphere lights per side the face is rendered with (samples² in all), 1–4.
+    pub samples: usize,
+}
+
+impl Default for AreaLightRanges {
+    fn default() -> Self {
+        Self {
+            count: Range::new(0.0, 2.0),
+            size: Range::new(0.2, 0.8),
+            height: Range::new(0.8, 1.6),
+            radius: Range::new(0.2, 0.9),
+            intensity: Range::new(0.5, 1.5),
+            tint: Range::new(0.92, 1.08),
+            samples: 2,
+        }
+    }
+}
+
+/// The backlit feeder plate: the board's top face glows.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BacklightRanges {
+    /// Share of the images whose plate is backlit, 0–1.
+    pub probability: f64,
+    /// Radiance the plate's white emits.
+    pub radiance: Range,
+}
+
+impl Default for BacklightRanges {
+    fn default() -> Self {
+        Self {
+            probability: 0.0,
+            radiance: Range::new(0.4, 1.0),
+        }
+    }
+}
+
+/// A look option that cannot be used: its key path (`room.panels`) and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{key}: {message}")]
+pub struct LookError {
+    /// The option's key path in the TOML file.
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl LookOptions {
+    /// Checks every range (finite, lo ≤ hi, inside its domain) and count; the error names the
+    /// key.
+    pub fn validate(&self) -> Result<(), LookError> {
+        let inf = f64::INFINITY;
+        let r = &self.room;
+        let a = &self.area_lights;
+        let ranges: [(&str, Range, f64, f64); 23] = [
+            ("room.half_size", r.half_size, 0.3, 100.0),
+            ("room.table_height", r.table_height, 0.0, 10.0),
+            ("room.ceiling", r.ceiling, 0.2, 100.0),
+            ("room.wall", r.wall, 0.0, inf),
+            ("room.wall_tint", r.wall_tint, 0.0, inf),
+            ("room.ceiling_radiance", r.ceiling_radiance, 0.0, inf),
+            ("room.floor", r.floor, 0.0, inf),
+            ("room.panels", r.panels, 0.0, 32.0),
+            ("room.panel_size", r.panel_size, 0.0, 10.0),
+            ("room.panel_radiance", r.panel_radiance, 0.0, inf),
+            ("room.panel_offset", r.panel_offset, -100.0, 100.0),
+            ("room.table_half", r.table_half, 0.0, 100.0),
+            ("room.mount_size", r.mount_size, 0.0, 0.5),
+            ("room.mount_radiance", r.mount_radiance, 0.0, inf),
+            ("area_lights.count", a.count, 0.0, 8.0),
+            ("area_lights.size", a.size, 0.0, 5.0),
+            ("area_lights.height", a.height, 0.05, 100.0),
+            ("area_lights.radius", a.radius, 0.0, 100.0),
+            ("area_lights.intensity", a.intensity, 0.0, inf),
+            ("area_lights.tint", a.tint, 0.0, inf),
+            (
+                "area_lights.samples",
+                Range::new(a.samples as f64, a.samples as f64),
+                1.0,
+                4.0,
+            ),
+            (
+                "backlight.probability",
+                Range::new(self.backlight.probability, self.backlight.probability),
+                0.0,
+                1.0,
+            ),
+            ("backlight.radiance", self.backlight.radiance, 0.0, inf),
+        ];
+        for (key, range, min, max) in ranges {
+            let fail = |message: String| {
+                Err(LookError {
+                    key: key.to_string(),
+                    message,
+                })
+            };
+            if !range.lo.is_finite() || !range.hi.is_finite() {
+                return fail(format!("non-finite bound ({}, {})", range.lo, range.hi));
+            }
+            if range.lo > range.hi {
+                return fail(format!("inverted: lo = {} > hi = {}", range.lo, range.hi));
+            }
+            if range.lo < min || range.hi > max {
+                return fail(format!(
+                    "[{}, {}] is outside the allowed [{min}, {max}]",
+                    range.lo, range.hi
+                ));
+            }
+        }
+        if r.half_size.lo <= r.table_half.hi {
+            return Err(LookError {
+                key: "room.table_half".into(),
+                message: format!(
+                    "the table (half size up to {} m) must fit inside the room (walls from {} m)",
+                    r.table_half.hi, r.half_size.lo
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// Dresses `scene` in the look, drawing from `rng` (a stream of its own): the room as its
+    /// environment (seen from the middle of its parts), the area lights appended to its lights,
+    /// and the backlight.
+    pub fn apply(&self, scene: &mut SampledScene, rng: &mut impl Rng) {
+        let eye = {
+            let n = scene.parts.len().max(1) as f64;
+            let sum = scene.parts.iter().fold(Vector3::zeros(), |s, p| {
+                s + p.table_T_part.translation.vector
+            });
+            Point3::new(sum.x / n, sum.y / n, 0.005)
+        };
+        let a = &self.area_lights;
+        let count = a.count.sample(rng).round().max(0.0) as usize;
+        for _ in 0..count {
+            let (su, sv) = (a.size.sample(rng), a.size.sample(rng));
+            let phi = rng.random_range(0.0..std::f64::consts::TAU);
+            let psi = rng.random_range(0.0..std::f64::consts::PI);
+            let r = a.radius.sample(rng);
+            let h = a.height.sample(rng);
+            let i = a.intensity.sample(rng);
+            let tint = [a.tint.sample(rng), a.tint.sample(rng), a.tint.sample(rng)];
+            let area = (su * sv).max(1e-9);
+            let light = AreaLight {
+                centre: Point3::new(eye.x + r * phi.cos(), eye.y + r * phi.sin(), h),
+                half_u: Vector3::new(psi.cos(), psi.sin(), 0.0) * (su / 2.0),
+                half_v: Vector3::new(psi.sin(), -psi.cos(), 0.0) * (sv / 2.0),
+                radiance: tint.map(|t| t * i / area),
+            };
+            scene
+                .render
+                .lights
+                .extend(light.point_lights(a.samples, &eye));
+        }
+        let backlit = self.backlight.probability > 0.0
+            && rng.random_range(0.0..1.0) < self.backlight.probability;
+        let glow = backlit.then(|| self.backlight.radiance.sample(rng));
+        scene.render.backlight = glow.map(|g| [g; 3]);
+        if self.room.enabled {
+            let room = self.draw_room(scene, eye, glow.unwrap_or(0.0), rng);
+            scene.render.environment = Some(Arc::new(Environment::from_room(&room)));
+        }
+    }
+
+    /// Draws the room around `scene` seen from `eye`; the plate and table radiances are their
+    /// albedos under the scene's lights and the room's upper half, plus the backlight's `glow`.
+    fn draw_room(
+        &self,
+        scene: &SampledScene,
+        eye: Point3<f64>,
+        glow: f64,
+        rng: &mut impl Rng,
+    ) -> Room {
+        let r = &self.room;
+        let half_size = [r.half_size.sample(rng), r.half_size.sample(rng)];
+        let floor = -r.table_height.sample(rng);
+        let ceiling = r.ceiling.sample(rng);
+        let walls = [0; 4].map(|_| {
+            let g = r.wall.sample(rng);
+            [
+                g * r.wall_tint.sample(rng),
+                g * r.wall_tint.sample(rng),
+                g * r.wall_tint.sample(rng),
+            ]
+        });
+        let ceiling_radiance = [r.ceiling_radiance.sample(rng); 3];
+        let floor_radiance = [r.floor.sample(rng); 3];
+        let n_panels = r.panels.sample(rng).round().max(0.0) as usize;
+        let panels = (0..n_panels)
+            .map(|_| {
+                let l = r.panel_radiance.sample(rng);
+                CeilingPanel {
+                    centre: [
+                        (eye.x + r.panel_offset.sample(rng)).clamp(-half_size[0], half_size[0]),
+                        (eye.y + r.panel_offset.sample(rng)).clamp(-half_size[1], half_size[1]),
+                    ],
+                    size: [r.panel_size.sample(rng), r.panel_size.sample(rng)],
+                    radiance: [l; 3],
+                }
+            })
+            .collect();
+        let mount = r.mount.then(|| {
+            let s = r.mount_size.sample(rng);
+            CameraMount {
+                position: Point3::from(scene.table_T_camera.translation.vector)
+                    + Vector3::new(0.0, 0.0, 0.75 * s),
+                half_extents: [s, s, 0.75 * s],
+                beam_azimuth: rng.random_range(0.0..std::f64::consts::TAU),
+                beam_half_width: s / 2.0,
+                radiance: [r.mount_radiance.sample(rng); 3],
+            }
+        });
+        let table_half = r.table_half.sample(rng);
+        let mut room = Room {
+            eye,
+            half_size,
+            floor,
+            ceiling,
+            walls,
+            ceiling_radiance,
+            floor_radiance,
+            table_half,
+            table_radiance: [0.0; 3],
+            plate_half: 0.105,
+            plate_radiance: [0.0; 3],
+            panels,
+            mount,
+        };
+        // Irradiance / π at the eye from the room's upper half (cosine-weighted midpoint rule)
+        // and from the lights, unshadowed.
+        let mut sky = [0.0; 3];
+        let (nt, np) = (24, 48);
+        for i in 0..nt {
+            let c = ((i as f64 + 0.5) / nt as f64).sqrt();
+            let s = (1.0 - c * c).sqrt();
+            for j in 0..np {
+                let phi = (j as f64 + 0.5) / np as f64 * std::f64::consts::TAU;
+                let l = room.radiance(&Vector3::new(s * phi.cos(), s * phi.sin(), c));
+                for (s, l) in sky.iter_mut().zip(l) {
+                    *s += l / (nt * np) as f64;
+                }
+            }
+        }
+        for light in &scene.render.lights {
+            let d = light.position - eye;
+            let dist2 = d.norm_squared().max(1e-9);
+            let cos = (d.z / dist2.sqrt()).max(0.0);
+            for (s, i) in sky.iter_mut().zip(light.intensity) {
+                *s += i * cos / dist2 / std::f64::consts::PI;
+            }
+        }
+        // The board is about half white print (0.78) and half black; the table's own albedo.
+        let (board, passed) = scene.render.board.as_ref().map_or((0.4, 0.5), |b| {
+            let (w, k) = (b.white.base_color[1], b.black.base_color[1]);
+            ((w + k) / 2.0, (1.0 + k / w.max(1e-6)) / 2.0)
+        });
+        let table = scene
+            .render
+            .table
+            .map_or([0.3; 3], |t| t.appearance.base_color);
+        room.plate_radiance = [0, 1, 2].map(|ch| board * sky[ch] + glow * passed);
+        room.table_radiance = [0, 1, 2].map(|ch| table[ch] * sky[ch]);
+        room
+    }
+}

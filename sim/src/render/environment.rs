@@ -1,0 +1,715 @@
+//! The room the cell stands in, as image-based lighting: a procedural room (walls, ceiling with
+//! light panels, floor, the table around the feeder plate and the camera's own mount) baked into
+//! a latitude–longitude radiance map seen from the feeder, prefiltered once per roughness level
+//! for the GGX lobe (filtered importance sampling over a mip chain) and once for the cosine lobe
+//! (diffuse irradiance). Shading reads the prefiltered radiance along the mirror direction and
+//! weighs it by the split-sum factors of a precomputed BRDF table (Karis 2013), so a metal
+//! reflects its room at the cost of a few texel reads per shading point.
+
+use std::f64::consts::PI;
+use std::sync::OnceLock;
+
+use nalgebra::{Point3, Vector3};
+
+use super::Appearance;
+
+/// An emitting rectangle on the ceiling (a light panel), axis-aligned in the table frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CeilingPanel {
+    /// Centre (x, y) in the table frame, metres.
+    pub centre: [f64; 2],
+    /// Side lengths along table x and y, metres.
+    pub size: [f64; 2],
+    /// Emitted radiance per linear RGB channel.
+    pub radiance: [f64; 3],
+}
+
+/// The camera's own mount: a box around the camera body and a horizontal beam from it to the
+/// wall (the gantry or profile that holds it), both of one dull radiance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraMount {
+    /// Centre of the camera body in the table frame, metres.
+    pub position: Point3<f64>,
+    /// Half extents of the body box along table x, y, z, metres.
+    pub half_extents: [f64; 3],
+    /// Azimuth of the beam from the body to the wall, radians from table +x.
+    pub beam_azimuth: f64,
+    /// Half width (and half height) of the beam's square section, metres.
+    pub beam_half_width: f64,
+    /// Radiance of body and beam per channel.
+    pub radiance: [f64; 3],
+}
+
+/// A procedural room in the table frame (z up, the feeder plate's top at z = 0), seen from a
+/// point just above the plate. Radiances are linear sensor units (1 = full scale at exposure 1).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Room {
+    /// The point the room is seen from (the middle of the parts), metres.
+    pub eye: Point3<f64>,
+    /// Half size of the room along table x and y (walls at ± these), metres.
+    pub half_size: [f64; 2],
+    /// Height of the floor (negative: below the table top), metres.
+    pub floor: f64,
+    /// Height of the ceiling above the table top, metres.
+    pub ceiling: f64,
+    /// Radiance of the +x, −x, +y and −y walls at ceiling height (they darken to 60 % at the
+    /// floor: the panels light them from above).
+    pub walls: [[f64; 3]; 4],
+    /// Radiance of the ceiling between the panels.
+    pub ceiling_radiance: [f64; 3],
+    /// Radiance of the floor.
+    pub floor_radiance: [f64; 3],
+    /// Half size of the table top around the feeder plate, metres.
+    pub table_half: f64,
+    /// Radiance of the table top.
+    pub table_radiance: [f64; 3],
+    /// Half size of the feeder plate (the board) at the table's centre, metres.
+    pub plate_half: f64,
+    /// Radiance of the feeder plate (lit from above, or glowing when backlit).
+    pub plate_radiance: [f64; 3],
+    /// Light panels on the ceiling.
+    pub panels: Vec<CeilingPanel>,
+    /// The camera's mount, if drawn.
+    pub mount: Option<CameraMount>,
+}
+
+impl Room {
+    /// Radiance arriving at [`Room::eye`] from unit direction `d`.
+    pub fn radiance(&self, d: &Vector3<f64>) -> [f64; 3] {
+        let o = self.eye;
+        if let Some(m) = &self.mount
+            && mount_hit(m, &o, d, self.half_size)
+        {
+            return m.radiance;
+        }
+        if d.z < 0.0 {
+            let t = -o.z / d.z;
+            let p = o + d * t;
+            if p.x.abs() <= self.plate_half && p.y.abs() <= self.plate_half {
+                return self.plate_radiance;
+            }
+            if p.x.abs() <= self.table_half && p.y.abs() <= self.table_half {
+                return self.table_radiance;
+            }
+        }
+        // The room's shell: the nearest of ceiling or floor and the four walls.
+        let mut best = (f64::INFINITY, 0usize);
+        if d.z > 1e-12 {
+            best = ((self.ceiling - o.z) / d.z, 4);
+        } else if d.z < -1e-12 {
+            best = ((self.floor - o.z) / d.z, 5);
+        }
+        for (axis, sides) in [(0usize, [0usize, 1]), (1, [2, 3])] {
+            let (dc, oc) = (d[axis], o[axis]);
+            if dc.abs() > 1e-12 {
+                let (wall, side) = if dc > 0.0 {
+                    (self.half_size[axis], sides[0])
+                } else {
+                    (-self.half_size[axis], sides[1])
+                };
+                let t = (wall - oc) / dc;
+                if t < best.0 {
+                    best = (t, side);
+                }
+            }
+        }
+        let p = o + d * best.0;
+        match best.1 {
+            4 => {
+                for panel in &self.panels {
+                    if (p.x - panel.centre[0]).abs() <= panel.size[0] / 2.0
+                        && (p.y - panel.centre[1]).abs() <= panel.size[1] / 2.0
+                    {
+                        return panel.radiance;
+                    }
+                }
+                self.ceiling_radiance
+            }
+            5 => self.floor_radiance,
+            side => {
+                let h = ((p.z - self.floor) / (self.ceiling - self.floor)).clamp(0.0, 1.0);
+                let k = 0.6 + 0.4 * h;
+                self.walls[side].map(|c| c * k)
+            }
+        }
+    }
+}
+
+/// Whether the ray from `o` along `d` hits the camera body or its beam.
+fn mount_hit(m: &CameraMount, o: &Point3<f64>, d: &Vector3<f64>, room: [f64; 2]) -> bool {
+    let c = m.position;
+    let e = m.half_extents;
+    if ray_box(
+        o,
+        d,
+        [c.x - e[0], c.y - e[1], c.z - e[2]],
+        [c.x + e[0], c.y + e[1], c.z + e[2]],
+    ) {
+        return true;
+    }
+    // The beam: a square bar from the body to the wall along its azimuth, tested in the bar's
+    // own frame (rotated about z).
+    let (s, co) = m.beam_azimuth.sin_cos();
+    let rot = |v: Vector3<f64>| Vector3::new(co * v.x + s * v.y, -s * v.x + co * v.y, v.z);
+    let ol = rot(o - c);
+    let dl = rot(*d);
+    let w = m.beam_half_width;
+    let length = room[0].hypot(room[1]) * 2.0;
+    ray_box(
+        &Point3::from(ol),
+        &dl,
+        [0.0, -w, e[2] - w],
+        [length, w, e[2] + w],
+    )
+}
+
+/// Whether a ray (from outside the box) enters the axis-aligned box [lo, hi] ahead of `o`.
+fn ray_box(o: &Point3<f64>, d: &Vector3<f64>, lo: [f64; 3], hi: [f64; 3]) -> bool {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for k in 0..3 {
+        if d[k].abs() < 1e-15 {
+            if o[k] < lo[k] || o[k] > hi[k] {
+                return false;
+            }
+            continue;
+        }
+        let (a, b) = ((lo[k] - o[k]) / d[k], (hi[k] - o[k]) / d[k]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    t0 <= t1
+}
+
+/// A latitude–longitude map: texel (i, j) holds the radiance around polar angle
+/// θ = (j + ½) π / h from table +z and azimuth φ = (i + ½) 2π / w from +x.
+#[derive(Debug, Clone)]
+struct LatLong {
+    w: usize,
+    h: usize,
+    texels: Vec<[f32; 3]>,
+}
+
+impl LatLong {
+    /// The map of `f` at `w` × `h`, each texel the mean of `ss` × `ss` directions over it.
+    fn bake(w: usize, h: usize, ss: usize, f: &(dyn Fn(&Vector3<f64>) -> [f64; 3] + Sync)) -> Self {
+        let mut texels = vec![[0f32; 3]; w * h];
+        for (k, t) in texels.iter_mut().enumerate() {
+            let (i, j) = (k % w, k / w);
+            let mut acc = [0.0; 3];
+            for sy in 0..ss {
+                for sx in 0..ss {
+                    let u = (i as f64 + (sx as f64 + 0.5) / ss as f64) / w as f64;
+                    let v = (j as f64 + (sy as f64 + 0.5) / ss as f64) / h as f64;
+                    let c = f(&direction(u, v));
+                    for ch in 0..3 {
+                        acc[ch] += c[ch];
+                    }
+                }
+            }
+            let m = 1.0 / (ss * ss) as f64;
+            *t = [
+                (acc[0] * m) as f32,
+                (acc[1] * m) as f32,
+                (acc[2] * m) as f32,
+            ];
+        }
+        Self { w, h, texels }
+    }
+
+    /// The map at half resolution (2 × 2 boxes, weighted by their rows' solid angle).
+    fn half(&self) -> Self {
+        let (w, h) = ((self.w / 2).max(1), (self.h / 2).max(1));
+        let mut texels = vec![[0f32; 3]; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let mut acc = [0f64; 3];
+                let mut wsum = 0.0;
+                for dj in 0..2 {
+                    let sj = (2 * j + dj).min(self.h - 1);
+                    let weight = ((sj as f64 + 0.5) * PI / self.h as f64).sin().max(1e-6);
+                    for di in 0..2 {
+                        let si = (2 * i + di) % self.w;
+                        let t = self.texels[sj * self.w + si];
+                        for ch in 0..3 {
+                            acc[ch] += weight * t[ch] as f64;
+                        }
+                        wsum += weight;
+                    }
+                }
+                texels[j * w + i] = [
+                    (acc[0] / wsum) as f32,
+                    (acc[1] / wsum) as f32,
+                    (acc[2] / wsum) as f32,
+                ];
+            }
+        }
+        Self { w, h, texels }
+    }
+
+    /// Bilinear lookup along unit direction `d` (wrapping in azimuth, clamped at the poles).
+    fn lookup(&self, d: &Vector3<f64>) -> [f64; 3] {
+        let (u, v) = lat_long(d);
+        let x = u * self.w as f64 - 0.5;
+        let y = (v * self.h as f64 - 0.5).clamp(0.0, (self.h - 1) as f64);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let i0 = (x0 as i64).rem_euclid(self.w as i64) as usize;
+        let i1 = (i0 + 1) % self.w;
+        let j0 = y0 as usize;
+        let j1 = (j0 + 1).min(self.h - 1);
+        let t = |i: usize, j: usize| self.texels[j * self.w + i];
+        let mut out = [0.0; 3];
+        for (ch, o) in out.iter_mut().enumerate() {
+            let a = t(i0, j0)[ch] as f64 * (1.0 - fx) + t(i1, j0)[ch] as f64 * fx;
+            let b = t(i0, j1)[ch] as f64 * (1.0 - fx) + t(i1, j1)[ch] as f64 * fx;
+            *o = a * (1.0 - fy) + b * fy;
+        }
+        out
+    }
+}
+
+/// The unit direction at map coordinates (u, v) in [0, 1]².
+fn direction(u: f64, v: f64) -> Vector3<f64> {
+    let (phi, theta) = (u * 2.0 * PI, v * PI);
+    let s = theta.sin();
+    Vector3::new(s * phi.cos(), s * phi.sin(), theta.cos())
+}
+
+/// Map coordinates (u, v) of a unit direction.
+fn lat_long(d: &Vector3<f64>) -> (f64, f64) {
+    let phi = d.y.atan2(d.x).rem_euclid(2.0 * PI);
+    let theta = d.z.clamp(-1.0, 1.0).acos();
+    (phi / (2.0 * PI), theta / PI)
+}
+
+/// Roughness of each prefiltered level (the last is the roughest the shading model takes).
+const LEVEL_ROUGHNESS: [f64; 7] = [0.0, 0.1, 0.2, 0.3, 0.45, 0.65, 1.0];
+/// Width of the base map (height is half); level k > 0 is stored at `LEVEL_WIDTH[k]`.
+const LEVEL_WIDTH: [usize; 7] = [256, 128, 64, 64, 32, 32, 16];
+/// GGX samples per texel when prefiltering.
+const PREFILTER_SAMPLES: usize = 48;
+
+/// A baked, prefiltered environment: what [`Room`] (or any radiance function) sends to a point
+/// of the feeder from every direction, ready for shading.
+#[derive(Debug, Clone)]
+pub struct Environment {
+    /// Prefiltered radiance per level of [`LEVEL_ROUGHNESS`].
+    levels: Vec<LatLong>,
+    /// Cosine-weighted mean radiance around each normal (irradiance / π).
+    irradiance: LatLong,
+}
+
+impl Environment {
+    /// Bakes a room.
+    pub fn from_room(room: &Room) -> Self {
+        Self::bake(&|d| room.radiance(d))
+    }
+
+    /// A uniform environment of radiance `l` (the analytic case: every level and the irradiance
+    /// are `l` exactly).
+    pub fn uniform(l: [f64; 3]) -> Self {
+        Self::bake(&move |_| l)
+    }
+
+    /// Bakes any radiance function of direction (table frame).
+    pub fn bake(f: &(dyn Fn(&Vector3<f64>) -> [f64; 3] + Sync)) -> Self {
+        let base = LatLong::bake(LEVEL_WIDTH[0], LEVEL_WIDTH[0] / 2, 2, f);
+        let mut mips = vec![base];
+        while mips.last().is_some_and(|m| m.h > 1) {
+            let next = mips
+                .last()
+                .map(LatLong::half)
+                .unwrap_or_else(|| mips[0].clone());
+            mips.push(next);
+        }
+        let mut levels = vec![mips[0].clone()];
+        for k in 1..LEVEL_ROUGHNESS.len() {
+            levels.push(prefilter(&mips, LEVEL_ROUGHNESS[k], LEVEL_WIDTH[k]));
+        }
+        let irradiance = cosine_filter(&mips, 16);
+        Self { levels, irradiance }
+    }
+
+    /// Prefiltered radiance along unit direction `r` for a lobe of `roughness` (linear between
+    /// the two nearest levels).
+    pub fn specular(&self, r: &Vector3<f64>, roughness: f64) -> [f64; 3] {
+        let rough = roughness.clamp(0.0, 1.0);
+        let k = LEVEL_ROUGHNESS
+            .iter()
+            .rposition(|x| *x <= rough)
+            .unwrap_or(0)
+            .min(LEVEL_ROUGHNESS.len() - 2);
+        let f = ((rough - LEVEL_ROUGHNESS[k]) / (LEVEL_ROUGHNESS[k + 1] - LEVEL_ROUGHNESS[k]))
+            .clamp(0.0, 1.0);
+        let a = self.levels[k].lookup(r);
+        if f <= 0.0 {
+            return a;
+        }
+        let b = self.levels[k + 1].lookup(r);
+        [0, 1, 2].map(|c| a[c] * (1.0 - f) + b[c] * f)
+    }
+
+    /// Cosine-weighted mean radiance over the hemisphere around unit normal `n` (irradiance / π).
+    pub fn irradiance(&self, n: &Vector3<f64>) -> [f64; 3] {
+        self.irradiance.lookup(n)
+    }
+
+    /// Radiance reflected towards `v` by a surface of appearance `a` with unit normal `n`: the
+    /// diffuse lobe under the irradiance, and the specular lobe as prefiltered radiance along the
+    /// mirror direction times the split-sum directional albedo; the diffuse share is what the
+    /// specular lobe leaves, so a white surface under a uniform environment returns it.
+    pub fn shade(&self, a: &Appearance, n: &Vector3<f64>, v: &Vector3<f64>) -> [f64; 3] {
+        let nv = n.dot(v).clamp(1e-4, 1.0);
+        let r = n * (2.0 * nv) - v;
+        let (scale, bias) = brdf_lut(a.roughness, nv);
+        let spec = self.specular(&r, a.roughness);
+        let irr = self.irradiance(n);
+        [0, 1, 2].map(|c| {
+            let f0 = a.specular * (1.0 - a.metallic) + a.base_color[c] * a.metallic;
+            let albedo = f0 * scale + bias;
+            let diffuse = (1.0 - a.metallic) * a.base_color[c] * (1.0 - albedo);
+            diffuse * irr[c] + albedo * spec[c]
+        })
+    }
+}
+
+/// One level of GGX-prefiltered radiance at `w` × `w/2`, each texel the lobe around its direction
+/// (n = v = r), sampled by filtered importance sampling over `mips`.
+fn prefilter(mips: &[LatLong], roughness: f64, w: usize) -> LatLong {
+    let alpha = (roughness * roughness).max(1e-4);
+    let a2 = alpha * alpha;
+    let base_texel = 4.0 * PI / (mips[0].w * mips[0].h) as f64;
+    // Sample half vectors about +z once; each texel rotates them onto its direction.
+    let samples: Vec<(Vector3<f64>, f64)> = (0..PREFILTER_SAMPLES)
+        .map(|i| {
+            let (u1, u2) = hammersley(i, PREFILTER_SAMPLES);
+            let cos_t = ((1.0 - u1) / (1.0 + (a2 - 1.0) * u1)).sqrt();
+            let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+            let phi = 2.0 * PI * u2;
+            let h = Vector3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+            let dd = cos_t * cos_t * (a2 - 1.0) + 1.0;
+            let d = a2 / (PI * dd * dd);
+            // pdf of l = pdf of h / (4 v·h); with n = v, v·h = n·h: D n·h / (4 n·h) = D / 4.
+            let pdf = d / 4.0;
+            let lod = (0.5 * (1.0 / (PREFILTER_SAMPLES as f64 * pdf) / base_texel).log2() + 1.0)
+                .clamp(0.0, (mips.len() - 1) as f64);
+            (h, lod)
+        })
+        .collect();
+    LatLong::bake(w, w / 2, 1, &|n| {
+        let (t, b) = frame(n);
+        let mut acc = [0.0; 3];
+        let mut wsum = 0.0;
+        for (h, lod) in &samples {
+            let hw = t * h.x + b * h.y + n * h.z;
+            let l = hw * (2.0 * n.dot(&hw)) - n;
+            let nl = n.dot(&l);
+            if nl <= 0.0 {
+                continue;
+            }
+            let c = mip_lookup(mips, &l, *lod);
+            for ch in 0..3 {
+                acc[ch] += c[ch] * nl;
+            }
+            wsum += nl;
+        }
+        let m = 1.0 / wsum.max(1e-12);
+        acc.map(|x| x * m)
+    })
+}
+
+/// Cosine-weighted mean radiance around each direction at `w` × `w/2`, summed over a coarse mip
+/// level's texels with their solid angles.
+fn cosine_filter(mips: &[LatLong], w: usize) -> LatLong {
+    let src = mips
+        .iter()
+        .find(|m| m.w <= 32)
+        .unwrap_or(&mips[mips.len() - 1]);
+    let texels: Vec<(Vector3<f64>, f64, [f32; 3])> = (0..src.w * src.h)
+        .map(|k| {
+            let (i, j) = (k % src.w, k / src.w);
+            let d = direction(
+                (i as f64 + 0.5) / src.w as f64,
+                (j as f64 + 0.5) / src.h as f64,
+            );
+            let solid = (2.0 * PI / src.w as f64)
+                * (((j as f64) * PI / src.h as f64).cos()
+                    - ((j as f64 + 1.0) * PI / src.h as f64).cos());
+            (d, solid, src.texels[k])
+        })
+        .collect();
+    LatLong::bake(w, w / 2, 1, &|n| {
+        let mut acc = [0.0; 3];
+        let mut wsum = 0.0;
+        for (d, solid, c) in &texels {
+            let cos = n.dot(d);
+            if cos <= 0.0 {
+                continue;
+            }
+            let wgt = cos * solid;
+            for ch in 0..3 {
+                acc[ch] += c[ch] as f64 * wgt;
+            }
+            wsum += wgt;
+        }
+        acc.map(|x| x / wsum.max(1e-12))
+    })
+}
+
+/// Trilinear lookup in a mip chain at a fractional level.
+fn mip_lookup(mips: &[LatLong], d: &Vector3<f64>, lod: f64) -> [f64; 3] {
+    let k = (lod.floor() as usize).min(mips.len() - 1);
+    let f = lod - k as f64;
+    let a = mips[k].lookup(d);
+    if f <= 0.0 || k + 1 >= mips.len() {
+        return a;
+    }
+    let b = mips[k + 1].lookup(d);
+    [0, 1, 2].map(|c| a[c] * (1.0 - f) + b[c] * f)
+}
+
+/// Two unit vectors completing unit `n` to an orthonormal frame.
+fn frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let up = if n.z.abs() < 0.9 {
+        Vector3::z()
+    } else {
+        Vector3::x()
+    };
+    let t = up.cross(n).normalize();
+    (t, n.cross(&t))
+}
+
+/// The i-th of n points of the Hammersley set in [0, 1)².
+fn hammersley(i: usize, n: usize) -> (f64, f64) {
+    let bits = (i as u32).reverse_bits();
+    ((i as f64 + 0.5) / n as f64, bits as f64 / 4_294_967_296.0)
+}
+
+/// Sides of the split-sum table (roughness × n·v).
+const LUT_SIZE: usize = 32;
+/// GGX samples per entry of the split-sum table.
+const LUT_SAMPLES: usize = 1024;
+
+/// The split-sum directional albedo of the specular lobe as (scale, bias) with
+/// albedo = F0 · scale + bias, for `roughness` and n·v: the GGX lobe with Smith height-correlated
+/// masking and Schlick's Fresnel (the model `shading::brdf_cos` evaluates), integrated once by
+/// importance sampling and read bilinearly.
+pub(crate) fn brdf_lut(roughness: f64, nv: f64) -> (f64, f64) {
+    static LUT: OnceLock<Vec<(f64, f64)>> = OnceLock::new();
+    let lut = LUT.get_or_init(|| {
+        let mut t = Vec::with_capacity(LUT_SIZE * LUT_SIZE);
+        for j in 0..LUT_SIZE {
+            for i in 0..LUT_SIZE {
+                let r = j as f64 / (LUT_SIZE - 1) as f64;
+                let nv = (i as f64 / (LUT_SIZE - 1) as f64).max(1e-3);
+                t.push(integrate_brdf(r, nv, LUT_SAMPLES));
+            }
+        }
+        t
+    });
+    let x = (nv.clamp(0.0, 1.0) * (LUT_SIZE - 1) as f64).min((LUT_SIZE - 1) as f64 - 1e-9);
+    let y = (roughness.clamp(0.0, 1.0) * (LUT_SIZE - 1) as f64).min((LUT_SIZE - 1) as f64 - 1e-9);
+    let (i, j) = (x.floor() as usize, y.floor() as usize);
+    let (fx, fy) = (x - i as f64, y - j as f64);
+    let e = |i: usize, j: usize| lut[j * LUT_SIZE + i];
+    let mix = |a: (f64, f64), b: (f64, f64), f: f64| (a.0 + (b.0 - a.0) * f, a.1 + (b.1 - a.1) * f);
+    mix(
+        mix(e(i, j), e(i + 1, j), fx),
+        mix(e(i, j + 1), e(i + 1, j + 1), fx),
+        fy,
+    )
+}
+
+/// (scale, bias) of the specular directional albedo at (roughness, n·v), `n` GGX samples.
+pub(crate) fn integrate_brdf(roughness: f64, nv: f64, n: usize) -> (f64, f64) {
+    let alpha = (roughness * roughness).max(1e-4);
+    let a2 = alpha * alpha;
+    let v = Vector3::new((1.0 - nv * nv).max(0.0).sqrt(), 0.0, nv);
+    let (mut scale, mut bias) = (0.0, 0.0);
+    for i in 0..n {
+        let (u1, u2) = hammersley(i, n);
+        let cos_t = ((1.0 - u1) / (1.0 + (a2 - 1.0) * u1)).sqrt();
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        let phi = 2.0 * PI * u2;
+        let h = Vector3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+        let vh = v.dot(&h);
+        let l = h * (2.0 * vh) - v;
+        let (nl, nh) = (l.z, h.z);
+        if nl <= 0.0 || vh <= 0.0 {
+            continue;
+        }
+        // brdf · cos / pdf with pdf = D n·h / (4 v·h): 4 · Vis · n·l · v·h / n·h.
+        let lambda_v = nl * (nv * nv * (1.0 - a2) + a2).sqrt();
+        let lambda_l = nv * (nl * nl * (1.0 - a2) + a2).sqrt();
+        let vis = 0.5 / (lambda_v + lambda_l).max(1e-12);
+        let g = 4.0 * vis * nl * vh / nh;
+        let fc = (1.0 - vh).powi(5);
+        scale += (1.0 - fc) * g;
+        bias += fc * g;
+    }
+    (scale / n as f64, bias / n as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mirror(f0: f64, roughness: f64) -> Appearance {
+        Appearance {
+            base_color: [f0; 3],
+            metallic: 1.0,
+            roughness,
+            specular: 0.04,
+            anisotropy: 0.0,
+        }
+    }
+
+    /// A uniform environment stays uniform through every prefiltered level and the irradiance.
+    #[test]
+    fn a_uniform_environment_is_uniform_at_every_level() {
+        let env = Environment::uniform([0.3, 0.5, 0.7]);
+        for k in 0..30 {
+            let d = direction((k as f64 * 0.37).fract(), (k as f64 * 0.61).fract()).normalize();
+            for r in [0.0, 0.05, 0.2, 0.35, 0.7, 1.0] {
+                let s = env.specular(&d, r);
+                for (c, want) in [0.3, 0.5, 0.7].iter().enumerate() {
+                    assert!((s[c] - want).abs() < 1e-5, "level {r}: {s:?}");
+                }
+            }
+            let e = env.irradiance(&d);
+            assert!((e[1] - 0.5).abs() < 1e-5, "irradiance {e:?}");
+        }
+    }
+
+    /// White furnace: under a uniform environment of radiance 1, a white Lambertian surface, a
+    /// white dielectric and a white (F0 = 1) metal reflect at most 1 at every roughness and
+    /// angle; the diffuse ones exactly 1, a mirror-smooth white metal 1, and a rough one loses
+    /// only what single scattering loses.
+    #[test]
+    fn white_furnace() {
+        let env = Environment::uniform([1.0; 3]);
+        let n = Vector3::z();
+        for r in [0.02, 0.1, 0.3, 0.5, 0.8, 1.0] {
+            for nv in [0.05, 0.3, 0.6, 0.9, 1.0] {
+                let v = Vector3::new((1.0f64 - nv * nv).sqrt(), 0.0, nv);
+                let metal = env.shade(&mirror(1.0, r), &n, &v)[0];
+                assert!(metal <= 1.0 + 1e-3, "metal r {r}, n·v {nv}: {metal}");
+                // Single scattering loses up to about two thirds at roughness 1 (no multiple
+                // scattering is modelled; Kulla & Conty 2017).
+                let floor = if r <= 0.1 { 0.97 } else { 0.3 };
+                assert!(metal >= floor, "metal r {r}, n·v {nv}: {metal}");
+                if nv >= 0.3 {
+                    let smoother = env.shade(&mirror(1.0, r * 0.8), &n, &v)[0];
+                    assert!(
+                        smoother >= metal - 1e-3,
+                        "r {r}, n·v {nv}: {smoother} < {metal}"
+                    );
+                }
+                let white = Appearance {
+                    base_color: [1.0; 3],
+                    metallic: 0.0,
+                    ..mirror(1.0, r)
+                };
+                let d = env.shade(&white, &n, &v)[0];
+                assert!(
+                    (d - 1.0).abs() < 1e-9,
+                    "white dielectric r {r}, n·v {nv}: {d}"
+                );
+            }
+        }
+    }
+
+    /// The split-sum table agrees with a brute-force integral of the direct-light BRDF
+    /// (`shading::brdf_cos`) over the hemisphere, which itself never reflects more than it gets.
+    #[test]
+    fn the_split_sum_table_integrates_the_direct_brdf() {
+        let n = Vector3::z();
+        for r in [0.25, 0.35, 0.5, 0.8, 1.0] {
+            for nv in [0.2, 0.5, 0.9] {
+                let v = Vector3::new((1.0f64 - nv * nv).sqrt(), 0.0, nv);
+                let a = mirror(1.0, r);
+                // Midpoint rule over (cos θ, φ): dω = d(cos θ) dφ.
+                let (nt, np) = (400, 400);
+                let mut sum = 0.0;
+                for i in 0..nt {
+                    let c = (i as f64 + 0.5) / nt as f64;
+                    let s = (1.0 - c * c).sqrt();
+                    for j in 0..np {
+                        let phi = (j as f64 + 0.5) / np as f64 * 2.0 * PI;
+                        let l = Vector3::new(s * phi.cos(), s * phi.sin(), c);
+                        sum += super::super::shading::brdf_cos(&a, &n, &v, &l, None, 0.0)[0];
+                    }
+                }
+                let direct = sum * (1.0 / nt as f64) * (2.0 * PI / np as f64);
+                let (scale, bias) = brdf_lut(r, nv);
+                assert!(direct <= 1.0 + 1e-3, "r {r} n·v {nv}: {direct}");
+                assert!(
+                    (direct - (scale + bias)).abs() < 0.02,
+                    "r {r} n·v {nv}: integral {direct}, table {}",
+                    scale + bias
+                );
+            }
+        }
+    }
+
+    /// A sharp environment (bright above the horizon, dark below) reaches a smooth level
+    /// unblurred and a rough level blurred across the horizon.
+    #[test]
+    fn prefiltering_blurs_with_roughness() {
+        let env = Environment::bake(&|d| if d.z > 0.0 { [1.0; 3] } else { [0.0; 3] });
+        let above = Vector3::new(1.0, 0.0, 0.2).normalize();
+        let below = Vector3::new(1.0, 0.0, -0.2).normalize();
+        assert!(env.specular(&above, 0.0)[0] > 0.99);
+        assert!(env.specular(&below, 0.0)[0] < 0.01);
+        let (a, b) = (env.specular(&above, 0.8)[0], env.specular(&below, 0.8)[0]);
+        assert!(a < 0.9 && b > 0.1 && a > b, "rough: {a} above, {b} below");
+        // Straight up, a lobe that ends well above the horizon sees sky: within the 1–2 % the
+        // coarse mip levels of the lobe's tail samples let through.
+        let up = env.specular(&Vector3::z(), 0.3)[0];
+        assert!(up > 0.98, "straight up at roughness 0.3: {up}");
+    }
+
+    /// The room: up sees the panel over the eye, straight down the plate, sideways a wall, and
+    /// the mount where the camera is.
+    #[test]
+    fn the_room_is_where_it_is_drawn() {
+        let room = Room {
+            eye: Point3::new(0.0, 0.0, 0.005),
+            half_size: [2.0, 3.0],
+            floor: -0.9,
+            ceiling: 2.5,
+            walls: [[0.2; 3], [0.3; 3], [0.4; 3], [0.5; 3]],
+            ceiling_radiance: [0.1; 3],
+            floor_radiance: [0.05; 3],
+            table_half: 0.5,
+            table_radiance: [0.07; 3],
+            plate_half: 0.1,
+            plate_radiance: [0.6; 3],
+            panels: vec![CeilingPanel {
+                centre: [0.5, 0.0],
+                size: [0.6, 0.6],
+                radiance: [5.0; 3],
+            }],
+            mount: Some(CameraMount {
+                position: Point3::new(0.0, 0.0, 1.5),
+                half_extents: [0.04, 0.04, 0.06],
+                beam_azimuth: PI / 2.0,
+                beam_half_width: 0.02,
+                radiance: [0.01; 3],
+            }),
+        };
+        assert_eq!(room.radiance(&Vector3::z()), [0.01; 3]);
+        let to_panel = (Point3::new(0.5, 0.0, 2.5) - room.eye).normalize();
+        assert_eq!(room.radiance(&to_panel), [5.0; 3]);
+        let to_ceiling = (Point3::new(-0.5, -0.5, 2.5) - room.eye).normalize();
+        assert_eq!(room.radiance(&to_ceiling), [0.1; 3]);
+        assert_eq!(room.radiance(&-Vector3::z()), [0.6; 3]);
+        let wall = room.radiance(&Vector3::new(1.0, 0.0, 0.3).normalize());
+        assert!(wall[0] > 0.12 && wall[0] < 0.2, "{wall:?}");
+        // The beam runs along +y at the body's top: seen above the body, not beside it.
+        let beam = (Point3::new(0.0, 1.0, 1.55) - room.eye).normalize();
+        assert_eq!(room.radiance(&beam), [0.01; 3]);
+        let off_beam = (Point3::new(0.0, -1.0, 1.55) - room.eye).normalize();
+        assert_ne!(room.radiance(&off_beam), [0.01; 3]);
+    }
+}
