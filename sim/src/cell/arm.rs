@@ -34,6 +34,9 @@ pub struct SimArm {
     was_moving: bool,
     /// The scenario's gripper actuation time (`cell.gripper.actuation_time`), s.
     actuation_time: f64,
+    /// The motion in progress is a stop commanded while the tool pressed on something (a
+    /// guarded move stopped on force): it ends as the in-process guarded move does.
+    guarded_stop: bool,
 }
 
 impl SimArm {
@@ -61,6 +64,7 @@ impl SimArm {
             elapsed: 0.0,
             was_moving: false,
             actuation_time,
+            guarded_stop: false,
         }
     }
 
@@ -107,7 +111,19 @@ impl ArmModel for SimArm {
                 .check_controller_move(m)
                 .map_err(arm_error)?;
         }
+        let stop = matches!(cmd, ArmCommand::Stop { .. } | ArmCommand::StopL { .. });
+        let pressing = stop && self.arm.is_moving() && {
+            let c = lock(&self.cell);
+            c.pressing_at(&c.model().kinematics.forward_tcp(&self.arm.state().q))
+        };
         self.arm.command(cmd)?;
+        if pressing {
+            // A stop on contact ends the motion in progress: its time keeps counting.
+            self.guarded_stop = true;
+            self.was_moving = self.arm.is_moving();
+            return Ok(());
+        }
+        self.guarded_stop = false;
         self.elapsed = 0.0;
         self.was_moving = self.arm.is_moving();
         if !self.was_moving && matches!(cmd, ArmCommand::MoveJ { .. } | ArmCommand::MoveL { .. }) {
@@ -127,7 +143,11 @@ impl ArmModel for SimArm {
         let moving = self.arm.is_moving();
         if self.was_moving && !moving {
             let q = self.arm.state().q;
-            lock(&self.cell).set_joints_after_motion(q, self.elapsed);
+            if std::mem::take(&mut self.guarded_stop) {
+                lock(&self.cell).set_joints_after_guarded_stop(q, self.elapsed);
+            } else {
+                lock(&self.cell).set_joints_after_motion(q, self.elapsed);
+            }
             self.elapsed = 0.0;
         }
         self.was_moving = moving;

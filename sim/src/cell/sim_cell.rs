@@ -1051,6 +1051,35 @@ impl SimCell {
         self.model.kinematics.forward_tcp(&self.q)
     }
 
+    /// Whether the tool presses on something with the arm commanded at `base_T_tcp`
+    /// ([`Self::contact_wrench_at`] is not zero).
+    #[allow(non_snake_case)]
+    pub fn pressing_at(&self, base_T_tcp: &Isometry3<f64>) -> bool {
+        self.contact_wrench_at(base_T_tcp).iter().any(|v| *v != 0.0)
+    }
+
+    /// Moves the arm to joints `q` where a stop while pressing on something brought it to rest
+    /// (a guarded move stopped on force by the virtual controller), `elapsed` seconds after the
+    /// motion began: as [`Self::move_until_contact_sync`] ends, the repeatability is not redrawn
+    /// and a held part is scored where the contact began (the press, along the contact force,
+    /// is elastic and does not slip the part up the fingers).
+    pub(crate) fn set_joints_after_guarded_stop(&mut self, q: Joints, elapsed: f64) {
+        self.begin_motion();
+        self.q = q;
+        self.clock += elapsed;
+        self.clock = self.clock.max(self.fingers_ready_at);
+        if !self.gripper_open {
+            let stop = self.tcp_pose_now();
+            let w = self.contact_wrench_at(&stop);
+            let f = Vector3::new(w[0], w[1], w[2]);
+            let touch = match f.try_normalize(1e-12) {
+                Some(dir) => Translation3::from(dir * (f.norm() / HELD_CONTACT_STIFFNESS)) * stop,
+                None => stop,
+            };
+            self.settle_insertion_at(Translation3::from(self.tcp_error) * touch, 0.0);
+        }
+    }
+
     /// Moves the arm to joints `q` at once without timing or checks (used by the virtual
     /// controller's arm model, which times the motion itself).
     pub(crate) fn set_joints_after_motion(&mut self, q: Joints, elapsed: f64) {

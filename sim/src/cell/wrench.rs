@@ -45,8 +45,8 @@ pub const GRIPPER_MASS: f64 = 1.0;
 pub const GRIPPER_COM_FRACTION: f64 = 0.4;
 
 /// Axial stiffness of a held part pressed onto what stops it (fingers, part and receiver in
-/// series), N/m: a guarded move at 10 N stops 0.1 mm past first contact. A modelled value.
-pub const HELD_CONTACT_STIFFNESS: f64 = 1e5;
+/// series), N/m: a guarded move at 10 N stops 0.05 mm past first contact. A modelled value.
+pub const HELD_CONTACT_STIFFNESS: f64 = 2e5;
 
 /// Axial force at which a held part slips up the fingers, N (grip force times friction on both
 /// fingers): a position-controlled push never loads the wrist beyond it. A modelled value.

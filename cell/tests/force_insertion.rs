@@ -1,0 +1,265 @@
+//! Force-guided insertion (`[force_insertion]`): the strategy of `cell::orchestrator::insertion`
+//! on the simulated cell through the `Robot` seam, and the engine running it.
+
+#![allow(non_snake_case)]
+
+mod support;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use robots::limited::Limited;
+use robots::robot::LinearMotion;
+use sim::cell::SimCell;
+use sim::cell::insertion::{InsertionCause, Verdict};
+
+use cell::episode::StepOutcome;
+use cell::harness::{SimSetup, run_sim_episode};
+use cell::orchestrator::insertion::{InsertionGeometry, force_insert};
+use cell::orchestrator::{Motion, Planner, Speeds, grasped_offset};
+use cell::scenario::ForceInsertionSpec;
+use support::load_variant;
+
+/// The nominal scenario with every error source off, `[force_insertion]` on, and `extra`
+/// appended.
+fn setup(tag: &str, extra: &str) -> SimSetup {
+    let text = std::fs::read_to_string(support::nominal()).unwrap();
+    let noise = text.find("[noise]").expect("a noise table");
+    let text = format!(
+        "{}[noise]\nrobot_repeatability = 0.0\ncalibration_translation = 0.0\n\
+         calibration_rotation = 0.0\ngrasp_offset = 0.0\ngrasp_rotation = 0.0\n\n\
+         [force_insertion]\n{extra}\n",
+        &text[..noise]
+    );
+    SimSetup::new(load_variant(tag, &text).unwrap()).unwrap()
+}
+
+/// A cell of `setup` holding a main shell (picked with a perfect grasp), with the planned
+/// insertion into the fixture moved by `correction` (insertion frame): the moves to the
+/// pre-insert pose, and the insertion's geometry.
+fn holding_a_shell(
+    setup: &SimSetup,
+    correction: Isometry3<f64>,
+) -> (
+    Limited<SimCell>,
+    Vec<(&'static str, Motion)>,
+    InsertionGeometry,
+) {
+    let mut cell = setup.model.limited(setup.sim_cell(0).unwrap()).unwrap();
+    let sim = cell.inner_mut();
+    let camera = sim.base_T_camera_nominal();
+    let (grasp, base_T_part) = sim
+        .camera_view()
+        .into_iter()
+        .filter(|c| c.part == "main_shell")
+        .find_map(|c| {
+            let base_T_part = camera * c.camera_T_part;
+            Some((sim.model().grasp_tcp(&c.part, &base_T_part)?, base_T_part))
+        })
+        .expect("a graspable main shell in view");
+    let fast = LinearMotion {
+        speed: 0.2,
+        acceleration: 1.0,
+    };
+    sim.move_l_sync(Translation3::new(0.0, 0.0, 0.01) * grasp, fast)
+        .unwrap();
+    sim.move_l_sync(grasp, fast).unwrap();
+    sim.close_gripper_sync();
+    assert!(sim.held().is_some(), "the shell is in the fingers");
+    sim.move_l_sync(Translation3::new(0.0, 0.0, 0.01) * grasp, fast)
+        .unwrap();
+    let tcp_T_part = grasped_offset(&(grasp.inverse() * base_T_part));
+    let k = &setup.engine.knowledge;
+    let config = setup.engine.settings.planning;
+    let planner = Planner {
+        knowledge: k,
+        config,
+        speeds: Speeds::within(&setup.model.spec.limits, config.slow_speed),
+    };
+    let fixture = k.part(&k.geometry.fixture_part).unwrap();
+    let plan = planner
+        .insert(
+            0,
+            ((k.part("main_shell").unwrap(), &tcp_T_part), 0.012),
+            &correction,
+            &sim.joints_now(),
+            &[(fixture, k.geometry.base_T_fixture)],
+        )
+        .unwrap();
+    let at = plan
+        .motions
+        .iter()
+        .position(|(n, _)| *n == "insert")
+        .unwrap();
+    let Motion::MoveL(seated, slow) = plan.motions[at].1 else {
+        panic!("the insert is a straight move")
+    };
+    let s = &k.steps[0];
+    let geometry = InsertionGeometry {
+        seated,
+        base_T_ins: k.base_T_insertions[0],
+        engagement: plan.engagement,
+        capture: s.clearance / 2.0 + s.lead_in,
+        lead_in: s.lead_in,
+        slow,
+    };
+    (cell, plan.motions[..at].to_vec(), geometry)
+}
+
+/// Runs the planner's moves on the cell.
+fn run(cell: &mut Limited<SimCell>, motions: &[(&'static str, Motion)]) {
+    for (_, m) in motions {
+        match m {
+            Motion::MoveJ(q, s) => cell.inner_mut().move_j_sync(*q, *s).unwrap(),
+            Motion::MoveL(p, s) => cell.inner_mut().move_l_sync(*p, *s).unwrap(),
+            Motion::Open(w) => cell.inner_mut().open_gripper_to_sync(*w),
+            Motion::Close => cell.inner_mut().close_gripper_sync(),
+        }
+    }
+}
+
+/// A sideways error of the planned insertion: `by` times the main shell's capture band along
+/// the insertion frame's x (and a third of that along y), as a correction.
+fn sideways(setup: &SimSetup, by: f64) -> Isometry3<f64> {
+    let s = &setup.engine.knowledge.steps[0];
+    let d = by * (s.clearance / 2.0 + s.lead_in);
+    Isometry3::translation(d, d / 3.0, 0.0)
+}
+
+#[tokio::test]
+async fn a_part_landing_just_beyond_the_capture_band_is_found_by_the_spiral_and_seated() {
+    let setup = setup("spiral", "");
+    // Plain, position-controlled: the same offset lands on the rim and is released there.
+    let offset = sideways(&setup, 1.1);
+    let (mut plain, approach, g) = holding_a_shell(&setup, offset);
+    run(&mut plain, &approach);
+    plain.inner_mut().move_l_sync(g.seated, g.slow).unwrap();
+    plain.inner_mut().open_gripper_to_sync(0.012);
+    let r = plain.inner().last_release().cloned().unwrap();
+    assert_eq!(r.verdict, Verdict::Missed, "{r:?}");
+    assert!(
+        matches!(r.cause, InsertionCause::LateralBeyondCapture { .. }),
+        "{r:?}"
+    );
+
+    // Force-guided: the descent stops on the rim, a spiral probe finds the hole.
+    let spec = ForceInsertionSpec::default();
+    let (mut cell, approach, g) = holding_a_shell(&setup, offset);
+    run(&mut cell, &approach);
+    let v = force_insert(&mut cell, &g, &spec).await.unwrap();
+    assert_eq!(v.outcome, StepOutcome::Seated, "{}", v.describe());
+    assert_eq!(v.probes[0].outcome, StepOutcome::Missed, "{}", v.describe());
+    assert!(v.probes[0].contact);
+    assert!(
+        (v.probes[0].height - g.engagement).abs() < 0.1e-3,
+        "the first descent stopped on the rim: {}",
+        v.describe()
+    );
+    assert!(v.probes.len() > 1 && v.probes.len() <= 1 + spec.search_points as usize);
+    assert!(v.cause.contains("spiral probes"), "{}", v.cause);
+    // And the seat is real: released, the simulator scores it seated.
+    cell.inner_mut().open_gripper_to_sync(0.012);
+    let r = cell.inner().last_release().cloned().unwrap();
+    assert_eq!(r.verdict, Verdict::Seated, "{r:?}");
+}
+
+#[tokio::test]
+async fn nothing_under_the_tool_is_a_miss_and_a_yawed_part_a_jam() {
+    let setup = setup("told_apart", "");
+    let spec = ForceInsertionSpec::default();
+
+    // 30 mm beside the fixture's pocket: the descent reaches its end without contact.
+    let (mut cell, approach, g) = holding_a_shell(&setup, Isometry3::translation(0.0, 0.03, 0.0));
+    run(&mut cell, &approach);
+    let v = force_insert(&mut cell, &g, &spec).await.unwrap();
+    assert_eq!(v.outcome, StepOutcome::Missed, "{}", v.describe());
+    assert!(v.cause.contains("nothing under the tool"), "{}", v.cause);
+    assert_eq!(v.probes.len(), 1, "no search where nothing was met");
+    assert!(!v.probes[0].contact);
+
+    // Turned 3° about the insertion axis: it enters the chamfer and sticks there.
+    let yaw = Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 3f64.to_radians()),
+    );
+    let (mut cell, approach, g) = holding_a_shell(&setup, yaw);
+    run(&mut cell, &approach);
+    let v = force_insert(&mut cell, &g, &spec).await.unwrap();
+    assert_eq!(v.outcome, StepOutcome::Jammed, "{}", v.describe());
+    assert!(v.probes[0].contact);
+    assert!(
+        v.probes[0].height > spec.seat_band && v.probes[0].height < g.engagement,
+        "{}",
+        v.describe()
+    );
+    assert_eq!(v.probes.len(), 1, "a jam is not searched sideways");
+    // Still in the fingers: the strategy never opens them.
+    assert!(cell.inner().held().is_some());
+}
+
+#[tokio::test]
+async fn the_engine_never_releases_a_part_whose_seat_was_not_confirmed() {
+    // No search and one attempt: every insertion that lands off the band fails; a large
+    // calibration error makes some do.
+    let text = std::fs::read_to_string(support::nominal()).unwrap();
+    let noise = text.find("[noise]").unwrap();
+    let text = format!(
+        "{}[noise]\nrobot_repeatability = 0.00001\ncalibration_translation = 0.0005\n\
+         calibration_rotation = 0.00002\ngrasp_offset = 0.00002\ngrasp_rotation = 0.002\n\n\
+         [policy]\nmax_insertion_attempts = 1\n\n[force_insertion]\nsearch_points = 0\n",
+        &text[..noise]
+    );
+    let setup = SimSetup::new(load_variant("refuse_noisy", &text).unwrap()).unwrap();
+    let mut refused = 0;
+    for episode in 0..12 {
+        let mut cell = setup
+            .model
+            .limited(setup.sim_cell(episode).unwrap())
+            .unwrap();
+        let mut perception = setup
+            .perception
+            .for_episode(setup.scenario(), episode)
+            .unwrap();
+        let out = cell::orchestrator::run_episode(
+            setup.engine.context(episode),
+            &mut cell,
+            &mut perception,
+        )
+        .await;
+        let Some(last) = out.record.steps.last() else {
+            continue;
+        };
+        if matches!(last.outcome, StepOutcome::Jammed | StepOutcome::Missed) {
+            refused += 1;
+            let cause = last.cause.clone().unwrap_or_default();
+            assert!(cause.contains("not released"), "{cause}");
+            // The part is still in the fingers, lifted clear, and no release was scored.
+            let sim = cell.inner();
+            assert!(sim.held().is_some(), "episode {episode}: {cause}");
+            assert_eq!(
+                sim.placed().len(),
+                out.record.steps.len() - 1,
+                "episode {episode}: only the seated parts were released"
+            );
+        }
+    }
+    assert!(refused > 0, "some insertion failed and was refused");
+}
+
+#[tokio::test]
+async fn force_guided_nominal_episodes_assemble_and_log_their_readings() {
+    let text = std::fs::read_to_string(support::nominal()).unwrap();
+    let setup = SimSetup::new(
+        load_variant("nominal_force", &format!("{text}\n[force_insertion]\n")).unwrap(),
+    )
+    .unwrap();
+    for episode in 0..5 {
+        let out = run_sim_episode(&setup, episode).await.unwrap();
+        assert!(out.record.success, "episode {episode}: {:?}", out.record);
+        let readings = out
+            .events
+            .events()
+            .iter()
+            .filter(|e| e.detail.starts_with("force-guided:") && e.detail.contains("wrench ["))
+            .count();
+        assert_eq!(readings, 3, "episode {episode}: one force log per step");
+    }
+}
