@@ -79,6 +79,12 @@ pub struct Args {
     /// `sim::scene::Randomisation`), e.g. `exposure = { lo = 0.9, hi = 1.1 }`.
     #[arg(long)]
     pub randomisation: Option<PathBuf>,
+    /// Opt-in look: `room` for the built-in one, or a TOML file (every key optional; see
+    /// `docs/reference/cycles.md`): a procedural room around the cell (walls, ceiling light
+    /// panels, the camera's mount) that metals reflect, rectangular area lights, and a backlit
+    /// feeder plate, drawn per image. Without it images are as before, byte for byte.
+    #[arg(long)]
+    pub environment: Option<PathBuf>,
     /// Also write a contact sheet (PNG) of the first training crops of each part and two
     /// randomised feeder captures, to judge the randomisation at a glance.
     #[arg(long)]
@@ -140,6 +146,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     cfg.progress = !args.quiet;
     if let Some(path) = &args.randomisation {
         cfg.randomisation = load_randomisation(path)?;
+    }
+    if let Some(path) = &args.environment {
+        cfg.look = Some(cell::scenario::load_look(path)?);
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))

@@ -2,11 +2,13 @@
 //! (catalog loaded, paths absolute) that runs use.
 
 mod locate;
+mod look;
 mod messages;
 mod spec;
 mod validate;
 
 pub use locate::{KeyPath, Locator, Seg};
+pub use look::{DEFAULT_LOOK, load_look, parse_look};
 pub use sim::config::*;
 pub use spec::*;
 

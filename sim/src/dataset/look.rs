@@ -14,7 +14,7 @@ use crate::scene::{Range, SampledScene};
 
 /// Options of the look, as a TOML file gives them (every key optional; a range is written
 /// `key = { lo = 0.1, hi = 0.2 }`).
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LookOptions {
     /// The room the cell stands in.
@@ -23,6 +23,20 @@ pub struct LookOptions {
     pub area_lights: AreaLightRanges,
     /// The backlit feeder plate.
     pub backlight: BacklightRanges,
+    /// Whether the randomisation's point lights stay (false: only the room and the area lights
+    /// light the scene; the point lights are still drawn, so the other draws are unchanged).
+    pub point_lights: bool,
+}
+
+impl Default for LookOptions {
+    fn default() -> Self {
+        Self {
+            room: RoomRanges::default(),
+            area_lights: AreaLightRanges::default(),
+            backlight: BacklightRanges::default(),
+            point_lights: true,
+        }
+    }
 }
 
 /// Ranges of the procedural room. Lengths in metres, radiances in linear sensor units (1 is full
@@ -235,6 +249,9 @@ impl LookOptions {
             });
             Point3::new(sum.x / n, sum.y / n, 0.005)
         };
+        if !self.point_lights {
+            scene.render.lights.clear();
+        }
         let a = &self.area_lights;
         let count = a.count.sample(rng).round().max(0.0) as usize;
         for _ in 0..count {

@@ -1,0 +1,113 @@
+//! Look files (`cell dataset --environment FILE`): the opt-in room, area lights and backlit
+//! feeder plate of `sim::dataset::LookOptions`, read with file:line:column errors.
+
+use std::path::Path;
+
+use perception::part::line_column;
+use sim::dataset::LookOptions;
+
+use super::{KeyPath, Locator, Problem, ScenarioError, messages};
+
+/// The name that stands for the built-in look (every option at its default) instead of a file.
+pub const DEFAULT_LOOK: &str = "room";
+
+/// Reads a look: [`DEFAULT_LOOK`] gives the defaults, anything else is a TOML file whose syntax,
+/// type and range errors name its line and column.
+pub fn load_look(arg: &Path) -> Result<LookOptions, ScenarioError> {
+    if arg.as_os_str() == DEFAULT_LOOK && !arg.exists() {
+        return Ok(LookOptions::default());
+    }
+    let text = std::fs::read_to_string(arg).map_err(|e| {
+        ScenarioError(vec![Problem {
+            file: arg.into(),
+            line: 1,
+            column: 1,
+            key: None,
+            message: format!("cannot read the look file: {e}"),
+        }])
+    })?;
+    parse_look(&text, arg)
+}
+
+/// Parses and checks look text read from `path`.
+pub fn parse_look(text: &str, path: &Path) -> Result<LookOptions, ScenarioError> {
+    let look: LookOptions = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map(|s| line_column(text, s.start))
+            .unwrap_or((1, 1));
+        ScenarioError(vec![Problem {
+            file: path.into(),
+            line,
+            column,
+            key: None,
+            message: messages::toml_message(e.message(), text, e.span()),
+        }])
+    })?;
+    look.validate().map_err(|e| {
+        let (line, column) = Locator::new(text)
+            .offset(&KeyPath::parse(&e.key))
+            .map(|o| line_column(text, o))
+            .unwrap_or((1, 1));
+        ScenarioError(vec![Problem {
+            file: path.into(),
+            line,
+            column,
+            key: Some(e.key.clone()),
+            message: e.message.clone(),
+        }])
+    })?;
+    Ok(look)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_empty_file_is_the_default_look() {
+        let look = parse_look("", Path::new("look.toml")).unwrap();
+        assert_eq!(look, LookOptions::default());
+        let look = load_look(Path::new(DEFAULT_LOOK)).unwrap();
+        assert_eq!(look, LookOptions::default());
+    }
+
+    #[test]
+    fn keys_are_read() {
+        let text = "[room]\npanels = { lo = 2, hi = 2 }\nmount = false\n\n[backlight]\n\
+                    probability = 1.0\n";
+        let look = parse_look(text, Path::new("l.toml")).unwrap();
+        assert_eq!(look.room.panels.lo, 2.0);
+        assert!(!look.room.mount);
+        assert_eq!(look.backlight.probability, 1.0);
+    }
+
+    #[test]
+    fn a_bad_range_is_refused_at_its_line_and_column() {
+        let text = "[room]\nmount = true\npanels = { lo = 3, hi = 1 }\n";
+        let e = parse_look(text, Path::new("l.toml"))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e, "l.toml:3:10: room.panels: inverted: lo = 3 > hi = 1",
+            "{e}"
+        );
+        let text = "[backlight]\n\nprobability = 1.5\n";
+        let e = parse_look(text, Path::new("l.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("l.toml:3:15: backlight.probability: "), "{e}");
+    }
+
+    #[test]
+    fn an_unknown_key_or_wrong_type_is_refused_at_its_line_and_column() {
+        let e = parse_look("[room]\npanles = 3\n", Path::new("l.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("l.toml:2:1: unknown field `panles`"), "{e}");
+        let e = parse_look("[area_lights]\nsamples = \"two\"\n", Path::new("l.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("l.toml:2:11: "), "{e}");
+    }
+}
