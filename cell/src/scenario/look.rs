@@ -11,10 +11,10 @@ use super::{KeyPath, Locator, Problem, ScenarioError, messages};
 /// The name that stands for the built-in look (every option at its default) instead of a file.
 pub const DEFAULT_LOOK: &str = "room";
 
-/// Reads a look: [`DEFAULT_LOOK`] gives the defaults, anything else is a TOML file whose syntax,
-/// type and range errors name its line and column.
+/// Reads a look: [`DEFAULT_LOOK`] (unless a file of that name exists) gives the defaults,
+/// anything else is a TOML file whose syntax, type and range errors name its line and column.
 pub fn load_look(arg: &Path) -> Result<LookOptions, ScenarioError> {
-    if arg.as_os_str() == DEFAULT_LOOK && !arg.exists() {
+    if arg.as_os_str() == DEFAULT_LOOK && !arg.is_file() {
         return Ok(LookOptions::default());
     }
     let text = std::fs::read_to_string(arg).map_err(|e| {

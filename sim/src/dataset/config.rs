@@ -224,21 +224,51 @@ impl DatasetConfig {
 /// its own, so the item's other draws are those of a run without it.
 pub(crate) const LOOK_TAG: u64 = 1 << 40;
 
-/// Dresses `scene` in the configured look, if any, from the look stream of item (tag, index).
+/// Dresses `scene` in the configured look, if any, from the look stream of item (tag, index),
+/// with the run's shared rooms (baked on first use, once per seed and look).
 pub(crate) fn apply_look(
     cfg: &DatasetConfig,
     scene: &mut crate::scene::SampledScene,
     tag: u64,
     index: u64,
 ) {
-    if let Some(look) = &cfg.look {
-        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(item_seed(
-            cfg.seed,
-            tag + LOOK_TAG,
-            index,
-        ));
-        look.apply(scene, &mut rng);
+    let Some(look) = &cfg.look else {
+        return;
+    };
+    let pool = (look.room.pool > 0).then(|| shared_rooms(cfg, look));
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(item_seed(
+        cfg.seed,
+        tag + LOOK_TAG,
+        index,
+    ));
+    look.apply(scene, pool.as_deref().map(Vec::as_slice), &mut rng);
+}
+
+/// The shared rooms of a run's seed, look and randomisation, baked once.
+fn shared_rooms(
+    cfg: &DatasetConfig,
+    look: &LookOptions,
+) -> std::sync::Arc<Vec<std::sync::Arc<crate::render::Environment>>> {
+    type Pool = std::sync::Arc<Vec<std::sync::Arc<crate::render::Environment>>>;
+    static CACHE: std::sync::Mutex<Option<(String, Pool)>> = std::sync::Mutex::new(None);
+    let key = format!(
+        "{} {:?} {:?} {:?}",
+        cfg.seed, look, cfg.randomisation, cfg.nominal_table_T_camera
+    );
+    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((k, pool)) = cache.as_ref()
+        && *k == key
+    {
+        return pool.clone();
     }
+    let camera = nalgebra::Point3::from(cfg.nominal_table_T_camera.translation.vector);
+    let pool: Pool = std::sync::Arc::new(look.bake_pool(
+        item_seed(cfg.seed, LOOK_TAG, 0),
+        &camera,
+        &cfg.randomisation,
+    ));
+    *cache = Some((key, pool.clone()));
+    pool
 }
 
 /// The random stream of one work item: (master seed, stream tag, index) mixed by splitmix64.
