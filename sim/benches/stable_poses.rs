@@ -3,16 +3,23 @@
 //! Prints wall time, CPU time (user + system, Linux) and each part's share of jittering drops.
 //!
 //! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
-//! for the parts of another catalog).
+//! for the parts of another catalog, `-- rest_time=S` for another rest time in seconds, `-- solver_iterations=N`).
 //! One timed run, not criterion's repeats: a run takes tens of seconds.
+//!
+//! `-- paired rest_time=S` drops each part twice, with the default settings and with the
+//! changed ones, the same orientations in the same order, and counts the drops that came to
+//! rest on another face (more than 0.2 rad apart): a paired comparison, far tighter than the
+//! shares' sampling noise.
 
 #![allow(missing_docs)]
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use perception::part::{Catalog, PartRole};
-use sim::stable_poses::{DropSettings, stable_poses};
+use nalgebra::Vector3;
+use perception::part::{Catalog, PartRole, TriMesh};
+use rayon::prelude::*;
+use sim::stable_poses::{DropBody, DropOutcome, DropSettings, simulate_batch, stable_poses};
 
 /// CPU seconds this process has used (user + system), from /proc; `None` elsewhere.
 fn cpu_seconds() -> Option<f64> {
@@ -48,10 +55,29 @@ fn main() {
             (p, mesh)
         })
         .collect();
-    let settings = DropSettings {
+    let mut settings = DropSettings {
         drops,
         ..DropSettings::default()
     };
+    if let Some(t) = args.iter().find_map(|a| a.strip_prefix("rest_time=")) {
+        settings.rest_time = t.parse().expect("rest_time=SECONDS");
+    }
+    if let Some(n) = args
+        .iter()
+        .find_map(|a| a.strip_prefix("solver_iterations="))
+    {
+        settings.solver_iterations = n.parse().expect("solver_iterations=N");
+    }
+    if args.iter().any(|a| a == "paired") {
+        let reference = DropSettings {
+            drops,
+            ..DropSettings::default()
+        };
+        for (part, mesh) in &parts {
+            paired(&part.name, mesh, part.density(), &reference, &settings);
+        }
+        return;
+    }
     let (wall, cpu) = (Instant::now(), cpu_seconds());
     let mut total = 0;
     for (part, mesh) in &parts {
@@ -86,5 +112,53 @@ fn main() {
         parts.len(),
         wall.elapsed().as_secs_f64(),
         rayon::current_num_threads()
+    );
+}
+
+/// Every drop's outcome in order, batched as [`stable_poses`] batches them, and the CPU seconds.
+fn outcomes(body: &DropBody, settings: &DropSettings) -> (Vec<DropOutcome>, f64) {
+    let cpu = cpu_seconds();
+    let starts: Vec<usize> = (0..settings.drops).step_by(settings.batch).collect();
+    let out = starts
+        .par_iter()
+        .flat_map_iter(|&first| {
+            simulate_batch(
+                body,
+                settings,
+                first,
+                settings.batch.min(settings.drops - first),
+            )
+        })
+        .collect();
+    let spent = match (cpu, cpu_seconds()) {
+        (Some(a), Some(b)) => b - a,
+        _ => f64::NAN,
+    };
+    (out, spent)
+}
+
+/// Drops one part with both settings and prints how many drops rest on another face.
+fn paired(name: &str, mesh: &TriMesh, density: f64, a: &DropSettings, b: &DropSettings) {
+    let body = DropBody::new(mesh, density);
+    let (first, cpu_a) = outcomes(&body, a);
+    let (second, cpu_b) = outcomes(&body, b);
+    let up = |o: &DropOutcome| o.rotation.inverse() * Vector3::z();
+    let moved = first
+        .iter()
+        .zip(&second)
+        .filter(|(x, y)| up(x).angle(&up(y)) > 0.2)
+        .count();
+    let unsettled = |o: &[DropOutcome]| o.iter().filter(|o| !o.settled).count();
+    println!(
+        "{name}: {moved} of {} drops rest on another face; {cpu_a:.1} CPU-s (rest {} s, {} \
+         iterations, {} unsettled) against {cpu_b:.1} CPU-s (rest {} s, {} iterations, {} \
+         unsettled)",
+        first.len(),
+        a.rest_time,
+        a.solver_iterations,
+        unsettled(&first),
+        b.rest_time,
+        b.solver_iterations,
+        unsettled(&second)
     );
 }
