@@ -190,7 +190,15 @@ async fn nothing_under_the_tool_is_a_miss_and_a_yawed_part_a_jam() {
         "{}",
         v.describe()
     );
-    assert_eq!(v.probes.len(), 1, "a jam is not searched sideways");
+    // The spiral tried every point of the band (a sideways step cannot undo a yaw), and the
+    // planned descent's reading is the verdict the retries search by.
+    assert_eq!(
+        v.probes.len(),
+        1 + spec.search_points as usize,
+        "{}",
+        v.describe()
+    );
+    assert!(v.probes.iter().all(|p| p.outcome != StepOutcome::Seated));
     // Still in the fingers: the strategy never opens them.
     assert!(cell.inner().held().is_some());
 }
@@ -262,4 +270,48 @@ async fn force_guided_nominal_episodes_assemble_and_log_their_readings() {
             .count();
         assert_eq!(readings, 3, "episode {episode}: one force log per step");
     }
+}
+
+#[test]
+fn bad_force_insertion_values_are_refused_at_their_line_and_column() {
+    let text = std::fs::read_to_string(support::nominal()).unwrap();
+    for (line, key, words) in [
+        (
+            "contact_force = 2.0",
+            "force_insertion.contact_force",
+            "precision",
+        ),
+        (
+            "contact_speed = 5.0",
+            "force_insertion.contact_speed",
+            "max_tcp_speed",
+        ),
+        (
+            "seat_band = -0.001",
+            "force_insertion.seat_band",
+            "positive",
+        ),
+        (
+            "search_points = 100",
+            "force_insertion.search_points",
+            "at most 32",
+        ),
+    ] {
+        let variant = format!("{text}\n[force_insertion]\n{line}\n");
+        let err = load_variant("bad_force", &variant).unwrap_err();
+        let p = &err.0[0];
+        assert_eq!(p.key.as_deref(), Some(key), "{err}");
+        assert_eq!(p.line, support::line_of(&variant, line), "{err}");
+        let value_column = line.find('=').unwrap() + 3;
+        assert_eq!(p.column, value_column, "{err}");
+        assert!(p.message.contains(words), "{err}");
+    }
+    // An unknown key in the table is refused too.
+    let variant = format!("{text}\n[force_insertion]\ncontact_forse = 10.0\n");
+    let err = load_variant("bad_force_key", &variant).unwrap_err();
+    assert_eq!(
+        err.0[0].line,
+        support::line_of(&variant, "contact_forse"),
+        "{err}"
+    );
 }

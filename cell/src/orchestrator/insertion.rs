@@ -9,9 +9,9 @@
 //!    nothing under the tool; first contact (the stop, less the press's compliance) within
 //!    [`ForceInsertionSpec::seat_band`] of seated is a seat; at the receiver's top (within half
 //!    the lead-in of the engagement depth) a miss on the rim; in between a jam.
-//! 4. A miss on the rim starts a bounded spiral search within the capture band: lift clear of
-//!    the rim, step sideways to the next point (rings of radius k × capture band, 8k points
-//!    each), descend again; a seat or a jam ends it.
+//! 4. A miss on the rim or a jam starts a bounded spiral search within the capture band: lift
+//!    clear, step sideways to the next point (rings of radius k × capture band, 8k points each),
+//!    descend again; a seat, or a descent that meets nothing, ends it.
 //! 5. A seat is confirmed before the fingers open ([`confirm_seat`]): the wrist must still feel
 //!    the part pressed, and the arm must still be at seated depth.
 //!
@@ -203,8 +203,8 @@ pub fn spiral(capture: f64, points: u32) -> Vec<[f64; 2]> {
     while out.len() < points as usize {
         let n = 8 * ring;
         let r = capture * f64::from(ring);
-        // Odd rings start half a step round, so the rings' points do not line up.
-        let phase = if ring % 2 == 0 { 0.5 } else { 0.0 };
+        // Even rings start half a step round, so the rings' points do not line up.
+        let phase = if ring.is_multiple_of(2) { 0.5 } else { 0.0 };
         for k in 0..n {
             if out.len() == points as usize {
                 break;
@@ -243,7 +243,7 @@ async fn descend(
 }
 
 /// Runs the force-guided insertion from the pre-insert pose: the guarded descent, the spiral
-/// search after a miss on the rim, and the seat confirmation. The part stays in the fingers:
+/// search after a miss on the rim or a jam, and the seat confirmation. The part stays in the fingers:
 /// the caller releases it only on a confirmed seat.
 pub async fn force_insert(
     robot: &mut dyn Robot,
@@ -255,7 +255,7 @@ pub async fn force_insert(
     let mut search = spiral(geometry.capture, spec.search_points).into_iter();
     loop {
         let last = probes.last().expect("one probe at least");
-        if !(last.contact && last.outcome == StepOutcome::Missed) {
+        if !last.contact || last.outcome == StepOutcome::Seated {
             break;
         }
         let Some(offset) = search.next() else { break };
@@ -273,7 +273,12 @@ pub async fn force_insert(
             .await?;
         probes.push(descend(robot, geometry, spec, offset).await?);
     }
-    let last = probes.last().expect("one probe at least").clone();
+    // A seat found by the search is the verdict; otherwise the planned descent's reading says
+    // what went wrong (the retries search by it: yaw after a jam, sideways after a miss).
+    let last = match probes.last() {
+        Some(p) if p.outcome == StepOutcome::Seated => p.clone(),
+        _ => probes[0].clone(),
+    };
     let searched = probes.len() - 1;
     let tried = if searched == 0 {
         String::new()
@@ -310,7 +315,7 @@ pub async fn force_insert(
         o => (
             o,
             format!(
-                "stopped {:.3} mm above seated, inside the lead-in{tried}",
+                "stopped {:.3} mm above seated, below the receiver's top{tried}",
                 last.height * 1e3
             ),
         ),

@@ -13,7 +13,7 @@
 //! found jammed or missed before the fingers open (`CellIo::seating_check`) → lift clear, correct
 //! (the measured slip, a search offset) and insert again, at most `policy.max_insertion_attempts`
 //! insertions, then release with the cause (with `[force_insertion]`, the cell's own judgment
-//! from force and depth decides instead, after a spiral search on a miss, and a part not
+//! from force and depth decides instead, after a spiral search on a miss or jam, and a part not
 //! confirmed seated is never released: it is lifted clear and the step fails); a robot error (protective stop, e-stop, lost
 //! connection, timeout) → stop the arm → SafeStop, and the record says why. A failed step ends
 //! the episode (later steps build on it). Every transition is an [`Event`] (JSON line) with

@@ -52,7 +52,8 @@ pub struct ForceInsertionSpec {
     /// precision (±4 N on a UR5e) and below the force that makes a held part slip in the fingers.
     #[serde(default = "default_contact_force")]
     pub contact_force: f64,
-    /// Speed of the guarded descent, m/s.
+    /// Speed of the guarded descent, m/s (the planner's slow insertion speed; the contact
+    /// engines' wrist descends at 25 mm/s).
     #[serde(default = "default_contact_speed")]
     pub contact_speed: f64,
     /// Axial stiffness of the held part pressed onto what stops it, N/m: the stop is this much
@@ -66,8 +67,8 @@ pub struct ForceInsertionSpec {
     /// Largest height above seated at which first contact still counts as seated, metres.
     #[serde(default = "default_seat_band")]
     pub seat_band: f64,
-    /// Probes of the spiral search after a miss on the receiver's rim, per insertion attempt
-    /// (0 = no search): lift clear of the rim, step sideways within the capture band, descend.
+    /// Probes of the spiral search after a miss on the receiver's rim or a jam, per insertion
+    /// attempt (0 = no search): lift clear, step sideways within the capture band, descend.
     #[serde(default = "default_search_points")]
     pub search_points: u32,
 }
@@ -80,7 +81,7 @@ fn default_contact_force() -> f64 {
 }
 
 fn default_contact_speed() -> f64 {
-    0.01
+    0.02
 }
 
 fn default_contact_stiffness() -> f64 {
