@@ -23,6 +23,11 @@ use super::mesh_topology::edge_uses;
 /// 1e-6 of it (see the tests).
 pub const UNION_RAYS: usize = 256;
 
+/// An excess below this share of the bodies' summed volume is rounding, not overlap (faces
+/// two bodies share, crossed at x values computed from different triangles), and is dropped: a
+/// single 48-gon peg measured 2e-16 of its volume.
+pub const UNION_NOISE_REL: f64 = 1e-9;
+
 /// Triangle bins per side over a box's cross-section, so each ray tests only its bin's triangles.
 const BINS: usize = 32;
 
@@ -121,13 +126,17 @@ pub struct UnionMoments {
 
 impl TriMesh {
     /// Volume integrals over the union of the mesh's closed bodies (see the module): exact when
-    /// no two bodies overlap, otherwise within about 1e-6 of the union's volume.
+    /// no two bodies overlap (an excess below [`UNION_NOISE_REL`] of the volume is dropped as
+    /// rounding), otherwise within about 1e-6 of the union's volume.
     pub fn union_moments(&self) -> UnionMoments {
         let sum = VolumeMoments::of_surface(self);
-        let excess = overlap_boxes(self)
+        let mut excess = overlap_boxes(self)
             .iter()
             .map(|b| excess_in_box(self, b))
             .fold(VolumeMoments::ZERO, Add::add);
+        if excess.volume <= UNION_NOISE_REL * sum.volume.abs() {
+            excess = VolumeMoments::ZERO;
+        }
         UnionMoments {
             union: sum - excess,
             excess,
@@ -232,12 +241,17 @@ fn owns_edge(p0: [f64; 2], p1: [f64; 2]) -> bool {
 
 impl Projected {
     /// Whether the ray at (u, v) passes through the triangle.
-    fn contains(&self, p: [f64; 2]) -> bool {
-        (0..3).all(|k| {
+    /// Whether the ray at (u, v) passes through the triangle, and whether it grazes one of its
+    /// edges or corners (then it may run along a face two bodies share, see [`excess_in_box`]).
+    fn contains(&self, p: [f64; 2]) -> (bool, bool) {
+        let mut grazes = false;
+        let inside = (0..3).all(|k| {
             let (p0, p1) = (self.corners[k], self.corners[(k + 1) % 3]);
             let e = edge_function(p0, p1, p);
+            grazes |= e == 0.0;
             e > 0.0 || (e == 0.0 && owns_edge(p0, p1))
-        })
+        });
+        (inside, grazes && inside)
     }
 }
 
@@ -296,16 +310,29 @@ fn excess_in_box(mesh: &TriMesh, region: &Aabb) -> VolumeMoments {
         let pu = lo[u] + (i as f64 + 0.5) * cell[0];
         for j in 0..n[1] {
             let pv = lo[v] + (j as f64 + 0.5) * cell[1];
-            events.clear();
-            for &t in &binned[bin_of(0, pu) * bins[1] + bin_of(1, pv)] {
-                let t = &triangles[t as usize];
-                if !t.contains([pu, pv]) {
-                    continue;
+            // A ray through an edge of the mesh may run along a face two touching bodies share
+            // and count as inside both: such a ray is cast again a hair to the side (a millionth
+            // of a cell, weighed still at the cell's centre).
+            for attempt in 0..4 {
+                let nudge = attempt as f64 * 1e-6;
+                let p = [pu + nudge * 0.618 * cell[0], pv + nudge * 0.755 * cell[1]];
+                events.clear();
+                let mut grazed = false;
+                for &t in &binned[bin_of(0, p[0]) * bins[1] + bin_of(1, p[1])] {
+                    let t = &triangles[t as usize];
+                    let (inside, grazes) = t.contains(p);
+                    if !inside {
+                        continue;
+                    }
+                    grazed |= grazes;
+                    let x = t.origin[a]
+                        - (t.normal[u] * (p[0] - t.origin[u]) + t.normal[v] * (p[1] - t.origin[v]))
+                            / t.normal[a];
+                    events.push((x, t.step));
                 }
-                let x = t.origin[a]
-                    - (t.normal[u] * (pu - t.origin[u]) + t.normal[v] * (pv - t.origin[v]))
-                        / t.normal[a];
-                events.push((x, t.step));
+                if !grazed {
+                    break;
+                }
             }
             if events.is_empty() {
                 continue;

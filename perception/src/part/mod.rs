@@ -21,7 +21,7 @@ pub use catalog::{
 };
 pub use error::{MeshAt, PartError};
 pub use keypoints::{farthest_point_sample, sample_surface};
-pub use mass::{UNION_RAYS, UnionMoments, VolumeMoments};
+pub use mass::{UNION_NOISE_REL, UNION_RAYS, UnionMoments, VolumeMoments};
 pub use mesh::{MeshDefect, OpenRegion, TriMesh};
 pub use mesh_bodies::{FilledHoles, HOLE_PLANARITY_REL, MAX_FILLED_HOLE_M};
 pub use mesh_io::{LengthUnit, load_mesh, load_mesh_repaired, write_obj};
