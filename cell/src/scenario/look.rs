@@ -6,7 +6,7 @@ use std::path::Path;
 use perception::part::line_column;
 use sim::dataset::LookOptions;
 
-use super::{KeyPath, Locator, Problem, ScenarioError, messages};
+use super::{KeyPath, Locator, Problem, ScenarioError};
 
 /// The name that stands for the built-in look (every option at its default) instead of a file.
 pub const DEFAULT_LOOK: &str = "room";
@@ -31,19 +31,8 @@ pub fn load_look(arg: &Path) -> Result<LookOptions, ScenarioError> {
 
 /// Parses and checks look text read from `path`.
 pub fn parse_look(text: &str, path: &Path) -> Result<LookOptions, ScenarioError> {
-    let look: LookOptions = toml::from_str(text).map_err(|e| {
-        let (line, column) = e
-            .span()
-            .map(|s| line_column(text, s.start))
-            .unwrap_or((1, 1));
-        ScenarioError(vec![Problem {
-            file: path.into(),
-            line,
-            column,
-            key: None,
-            message: messages::toml_message(e.message(), text, e.span()),
-        }])
-    })?;
+    let look: LookOptions =
+        toml::from_str(text).map_err(|e| ScenarioError::from_toml(&e, text, path))?;
     look.validate().map_err(|e| {
         let (line, column) = Locator::new(text)
             .offset(&KeyPath::parse(&e.key))

@@ -47,6 +47,23 @@ impl fmt::Display for Problem {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub struct ScenarioError(pub Vec<Problem>);
 
+impl ScenarioError {
+    /// A TOML syntax or type error in `text` (read from `path`), at its line and column.
+    pub fn from_toml(e: &toml::de::Error, text: &str, path: &Path) -> Self {
+        let (line, column) = e
+            .span()
+            .map(|s| line_column(text, s.start))
+            .unwrap_or((1, 1));
+        Self(vec![Problem {
+            file: path.into(),
+            line,
+            column,
+            key: None,
+            message: messages::toml_message(e.message(), text, e.span()),
+        }])
+    }
+}
+
 impl fmt::Display for ScenarioError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         for (i, p) in self.0.iter().enumerate() {
@@ -117,19 +134,8 @@ impl Scenario {
 
     /// Parses and validates scenario text that was read from `path`.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ScenarioError> {
-        let spec: ScenarioSpec = toml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map(|s| line_column(text, s.start))
-                .unwrap_or((1, 1));
-            ScenarioError(vec![Problem {
-                file: path.into(),
-                line,
-                column,
-                key: None,
-                message: messages::toml_message(e.message(), text, e.span()),
-            }])
-        })?;
+        let spec: ScenarioSpec =
+            toml::from_str(text).map_err(|e| ScenarioError::from_toml(&e, text, path))?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         let (catalog, robot, issues) = validate::validate(&spec, &dir);
         if !issues.is_empty() {
