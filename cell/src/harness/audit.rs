@@ -7,8 +7,9 @@
 //! its top end is right when perceived standing on its bottom end (the symmetry maps one stable
 //! pose onto the other).
 
-use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion};
 use perception::DetectedPart;
+use perception::part::StablePose;
 use perception::symmetry::{nearest_twin, stable_pose_twins, symmetry_group};
 use sim::cell::SimCell;
 use sim::cell::feeder::FeederPart;
@@ -41,18 +42,10 @@ fn matched<'a>(cell: &'a SimCell, d: &DetectedPart) -> Option<&'a FeederPart> {
 /// (in the part frame) is nearest to the table normal seen from the part.
 #[allow(non_snake_case)]
 fn stable_pose_of(cell: &SimCell, part: &str, table_T_part: &Isometry3<f64>) -> Option<String> {
-    let up = table_T_part.rotation.inverse() * Vector3::z();
-    cell.model()
-        .geometry
-        .parts
-        .get(part)?
-        .stable_poses
-        .iter()
-        .max_by(|a, b| {
-            let dot = |s: &[f64; 3]| Vector3::from(*s).dot(&up);
-            dot(&a.up_in_part).total_cmp(&dot(&b.up_in_part))
-        })
-        .map(|s| s.name.clone())
+    let part = cell.model().geometry.parts.get(part)?;
+    let group = symmetry_group(&part.symmetries);
+    StablePose::nearest_up_to(&part.stable_poses, &table_T_part.rotation, &group)
+        .map(|(s, _)| s.name.clone())
 }
 
 /// Whether the stable pose named `seen` is the one named `truth`, or its twin under the part's
@@ -142,7 +135,7 @@ pub fn table_error(truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> [f64; 3
 mod tests {
     use std::path::Path;
 
-    use nalgebra::{Matrix6, Translation3, UnitQuaternion};
+    use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
 
     use super::*;
     use crate::harness::SimSetup;
@@ -258,20 +251,30 @@ mod tests {
                 "{} {pose}: {dx} {dy} {yaw}",
                 truth.part
             );
-            // The twin stable pose (the other end, the opposite side) is the same resting state;
-            // a side for an end, or an end for a side, is not.
+            // The twin resting state (the other end, the opposite side) is merged into the one
+            // class the catalog names: the truth turned end over end (a symmetry of the peg)
+            // lies in it too, and is seen right; a side for an end, or an end for a side, is not.
             let poses = &geometry.stable_poses;
             let own = poses.iter().find(|s| s.name == pose).unwrap();
             let group = symmetry_group(&geometry.symmetries);
-            let twin = (poses.iter())
-                .find(|s| s.name != pose && stable_pose_twins(own, s, &group))
-                .unwrap();
-            d.stable_pose = twin.name.clone();
+            let end_over_end = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI);
+            let flipped = Isometry3::from_parts(
+                truth.table_T_part.translation,
+                truth.table_T_part.rotation * end_over_end,
+            );
             assert_eq!(
-                audit(&pegs, &d).verdict,
+                stable_pose_of(&pegs, &truth.part, &flipped).as_deref(),
+                Some(pose.as_str()),
+                "{} on its other end",
+                truth.part
+            );
+            let mut f = detection(&truth.part, flipped, &pose);
+            f.truth_instance = Some(truth.instance);
+            assert_eq!(
+                audit(&pegs, &f).verdict,
                 PerceptionVerdict::Right,
-                "{}",
-                twin.name
+                "{} {pose} on its other end",
+                truth.part
             );
             let other = (poses.iter())
                 .find(|s| !stable_pose_twins(own, s, &group))

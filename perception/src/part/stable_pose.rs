@@ -44,9 +44,27 @@ impl StablePose {
         poses: &'a [StablePose],
         table_r_part: &UnitQuaternion<f64>,
     ) -> Option<(&'a StablePose, f64)> {
+        Self::nearest_up_to(poses, table_r_part, &[UnitQuaternion::identity()])
+    }
+
+    /// [`nearest`](Self::nearest) up to the part's exact symmetries `group` (the rotations that
+    /// map it onto itself, e.g. `crate::symmetry::symmetry_group`): a class also holds its twins,
+    /// so a peg on its other end lies in the one class its table names, tilted 0 from it.
+    pub fn nearest_up_to<'a>(
+        poses: &'a [StablePose],
+        table_r_part: &UnitQuaternion<f64>,
+        group: &[UnitQuaternion<f64>],
+    ) -> Option<(&'a StablePose, f64)> {
+        let up = table_r_part.inverse() * Vector3::z();
+        let tilt = |s: &StablePose| {
+            let u = Vector3::from(s.up_in_part);
+            (group.iter())
+                .map(|g| up.angle(&(g * u)))
+                .fold(up.angle(&u), f64::min)
+        };
         poses
             .iter()
-            .map(|s| (s, s.tilt(table_r_part)))
+            .map(|s| (s, tilt(s)))
             .min_by(|a, b| a.1.total_cmp(&b.1))
     }
 
@@ -129,6 +147,29 @@ pub fn footprints_mm2(mesh: &TriMesh, poses: &[StablePose]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A peg's classes "+z" (on an end) and "+x" (on a side): turned end over end it lies in
+    /// "+z" only up to its symmetry, and without the symmetry nearer a side than "+z".
+    #[test]
+    fn a_twin_lies_in_its_class_up_to_the_symmetries() {
+        let class = |name: &str, up: [f64; 3]| StablePose {
+            name: name.into(),
+            probability: 0.5,
+            up_in_part: up,
+            rotation: StablePose::canonical_rotation(&Vector3::from(up))
+                .scaled_axis()
+                .into(),
+            rest_height: 0.006,
+        };
+        let poses = [class("+z", [0.0, 0.0, 1.0]), class("+x", [1.0, 0.0, 0.0])];
+        let flip = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let group = [UnitQuaternion::identity(), flip];
+        let on_other_end = poses[0].rest_rotation() * flip;
+        let (s, tilt) = StablePose::nearest_up_to(&poses, &on_other_end, &group).unwrap();
+        assert_eq!((s.name.as_str(), tilt < 1e-9), ("+z", true), "{tilt}");
+        let (s, _) = StablePose::nearest(&poses, &on_other_end).unwrap();
+        assert_eq!(s.name, "+x");
+    }
 
     #[test]
     fn canonical_rotation_maps_up_to_table_z() {

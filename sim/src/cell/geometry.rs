@@ -109,11 +109,12 @@ impl PartGeometry {
             })
     }
 
-    /// The stable-pose class a table pose belongs to: the class whose up direction is nearest
-    /// the table's up expressed in the part frame.
+    /// The stable-pose class a table pose belongs to: the class whose up direction, or a twin's
+    /// under the part's exact symmetries, is nearest the table's up expressed in the part frame.
     #[allow(non_snake_case)]
     pub fn stable_pose_of(&self, table_T_part: &Isometry3<f64>) -> Option<&StablePose> {
-        StablePose::nearest(&self.stable_poses, &table_T_part.rotation)
+        let group = perception::symmetry::symmetry_group(&self.symmetries);
+        StablePose::nearest_up_to(&self.stable_poses, &table_T_part.rotation, &group)
             .filter(|(_, tilt)| tilt.cos() > 0.9)
             .map(|(s, _)| s)
     }

@@ -142,10 +142,13 @@ pub(crate) fn write_crop_group(
             break;
         }
     }
-    // The stable pose the target lies in: the nearest within the classes' own spread.
-    let stable_pose = StablePose::nearest(stable_poses, &parts[target].table_T_part.rotation)
-        .filter(|(_, tilt)| !leans && *tilt < CLASS_ANGLE_RAD)
-        .map(|(s, _)| s.name.clone());
+    // The stable pose the target lies in: the nearest (up to its exact symmetries: a peg on
+    // either end) within the classes' own spread.
+    let group = perception::symmetry::symmetry_group(&models[model].spec.symmetries);
+    let stable_pose =
+        StablePose::nearest_up_to(stable_poses, &parts[target].table_T_part.rotation, &group)
+            .filter(|(_, tilt)| !leans && *tilt < CLASS_ANGLE_RAD)
+            .map(|(s, _)| s.name.clone());
     let request = SceneRequest {
         counts,
         drop_centre: centre,
