@@ -593,17 +593,23 @@ impl<'a> Engine<'a> {
         if self.step.insertions < self.ctx.max_insertion_attempts {
             return self.retry_insertion(state, check).await;
         }
-        let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
-            .into_iter()
-            .filter(|(_, m)| !matches!(m, Motion::Open(_)))
-            .map(|(_, m)| ("lift clear", m))
-            .collect();
-        self.execute(state, &lift).await?;
+        self.lift_clear(state).await?;
         let cause = format!(
             "{} after {} insertion attempts; not released: the part stays in the fingers",
             v.cause, self.step.insertions
         );
         Ok(self.finish_step(v.outcome, Some(cause), check.sources, check.pose_error))
+    }
+
+    /// The rest of the insertion plan with the fingers kept closed: the held part lifted clear
+    /// of its receiver along the planned retreat.
+    async fn lift_clear(&mut self, state: State) -> Result<(), Stop> {
+        let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
+            .into_iter()
+            .filter(|(_, m)| !matches!(m, Motion::Open(_)))
+            .map(|(_, m)| ("lift clear", m))
+            .collect();
+        self.execute(state, &lift).await
     }
 
     /// A jammed or missed insertion with the part still in the fingers: lift it clear along
@@ -617,12 +623,7 @@ impl<'a> Engine<'a> {
         state: State,
         check: InsertionCheck,
     ) -> Result<State, Stop> {
-        let lift: Vec<(&'static str, Motion)> = std::mem::take(&mut self.step.pending)
-            .into_iter()
-            .filter(|(_, m)| !matches!(m, Motion::Open(_)))
-            .map(|(_, m)| ("lift clear", m))
-            .collect();
-        self.execute(state, &lift).await?;
+        self.lift_clear(state).await?;
         // The part pushed back comes out a little higher in the fingers than it went in.
         let planning = &self.ctx.settings.planning;
         let slip_cap = planning.clearance_height / 2.0;
