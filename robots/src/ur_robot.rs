@@ -60,6 +60,11 @@ pub struct UrRobotConfig {
     pub heartbeat_period: Duration,
     /// RTDE stall timeout.
     pub stall_timeout: Duration,
+    /// Longest wait, before a new command or reading, for a link that is re-establishing itself
+    /// (after a stall or a dropped connection) to stream again; a link still down then is a
+    /// lost connection. No command is sent meanwhile, and the program's watchdog has stopped the
+    /// arm if the heartbeat was missed for longer than it allows.
+    pub reconnect_grace: Duration,
     /// Gripper output.
     pub gripper: GripperOutput,
     /// Output level that closes the gripper.
@@ -99,6 +104,7 @@ impl UrRobotConfig {
             program_start_timeout: Duration::from_secs(5),
             heartbeat_period: Duration::from_millis(50),
             stall_timeout: Duration::from_millis(200),
+            reconnect_grace: Duration::from_secs(1),
             gripper: GripperOutput::Tool(0),
             gripper_close_level: true,
             gripper_actuation_s: 0.25,
@@ -296,6 +302,37 @@ impl UrRobot {
         })
     }
 
+    /// [`Self::state`] once the link streams: a link that is stalled or reconnecting gets
+    /// [`UrRobotConfig::reconnect_grace`] to come back, and the state is then a package of the
+    /// new connection, not the last one from before the silence.
+    async fn live_state(&self) -> Result<Arc<OutputState>, RobotError> {
+        let recovering =
+            |s: &LinkStatus| matches!(s, LinkStatus::Stalled | LinkStatus::Reconnecting(_));
+        if !recovering(&self.rtde.status()) {
+            return self.state();
+        }
+        let grace = self.config.reconnect_grace;
+        let deadline = Instant::now() + grace;
+        let mut status = self.rtde.subscribe_status();
+        let back = tokio::time::timeout(grace, async {
+            while recovering(&status.borrow_and_update()) {
+                if status.changed().await.is_err() {
+                    return false;
+                }
+            }
+            true
+        })
+        .await;
+        if back != Ok(true) {
+            return self.state();
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        match self.rtde.next_state(left).await {
+            Ok(state) => self.state().map(|_| state),
+            Err(_) => self.state(),
+        }
+    }
+
     async fn wait_state(
         &self,
         deadline: Instant,
@@ -421,7 +458,7 @@ impl UrRobot {
             level,
             wait,
         } = cmd;
-        let state = self.state()?;
+        let state = self.live_state().await?;
         if let Some(e) = blocking_error(&state) {
             return Err(e);
         }
@@ -501,7 +538,8 @@ impl Robot for UrRobot {
 
     fn joints(&mut self) -> RobotFuture<'_, Joints> {
         Box::pin(async move {
-            self.state()?
+            self.live_state()
+                .await?
                 .vector6d("actual_q")
                 .ok_or(RobotError::ConnectionLost {
                     detail: "actual_q missing".into(),
@@ -511,7 +549,8 @@ impl Robot for UrRobot {
 
     fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
         Box::pin(async move {
-            self.state()?
+            self.live_state()
+                .await?
                 .vector6d("actual_TCP_pose")
                 .map(|p| from_ur_pose(&p))
                 .ok_or(RobotError::ConnectionLost {
@@ -564,7 +603,7 @@ impl Robot for UrRobot {
 
     fn stop(&mut self) -> RobotFuture<'_, ()> {
         Box::pin(async move {
-            let state = self.state()?;
+            let state = self.live_state().await?;
             if blocking_error(&state).is_some() {
                 // A safety stop already halted the arm, or no program moves it.
                 return Ok(());
@@ -620,17 +659,17 @@ impl Robot for UrRobot {
 
     fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
         Box::pin(async move {
-            self.state()?
-                .vector6d("actual_TCP_force")
-                .ok_or(RobotError::ConnectionLost {
+            self.live_state().await?.vector6d("actual_TCP_force").ok_or(
+                RobotError::ConnectionLost {
                     detail: "actual_TCP_force missing".into(),
-                })
+                },
+            )
         })
     }
 
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
         Box::pin(async move {
-            let state = self.state()?;
+            let state = self.live_state().await?;
             // A code this crate does not know reads as the most conservative state.
             let mode = state.robot_mode().unwrap_or(RobotMode::Disconnected);
             let safety = state.safety_mode().unwrap_or(SafetyStatus::Fault);

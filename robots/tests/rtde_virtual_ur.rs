@@ -13,6 +13,7 @@ use robots::rtde::types::{Slot, Value};
 use robots::ur_robot::{UrRobot, UrRobotConfig, upload_script};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
 use std::f64::consts::FRAC_PI_2;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
@@ -188,6 +189,44 @@ async fn client_recovers_from_dropped_connections_silence_and_skipped_packages()
     assert!(s.f64("timestamp").is_some());
     vur.faults.set_output_delay(Duration::ZERO);
     assert_eq!(client.status(), LinkStatus::Streaming);
+}
+
+/// A client that owns input registers and writes them often (as `UrRobot`'s heartbeat does)
+/// still sees a silent controller as a stall, and gets its registers back on reconnecting: the
+/// old connection is closed before the new one claims them.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_writing_client_detects_silence_and_reclaims_its_inputs() {
+    let vur = virtual_ur().await;
+    let client = Arc::new(
+        RtdeClient::connect(client_config(&vur).with_input_recipe(&["input_int_register_30"]))
+            .await
+            .unwrap(),
+    );
+    client.next_state(Duration::from_secs(1)).await.unwrap();
+    let writer = {
+        let client = client.clone();
+        tokio::spawn(async move {
+            for beat in 0.. {
+                let _ = client.send_inputs(0, &[Value::Int32(beat)]).await;
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+    };
+    vur.faults.go_silent(Duration::from_millis(400));
+    wait_count(|| client.stalls(), 1, Duration::from_secs(2)).await;
+    wait_count(|| client.reconnects(), 1, Duration::from_secs(3)).await;
+    wait_status(
+        &client,
+        |s| *s == LinkStatus::Streaming,
+        Duration::from_secs(3),
+    )
+    .await;
+    client
+        .send_inputs(0, &[Value::Int32(-7)])
+        .await
+        .expect("the reconnected client writes its registers");
+    writer.abort();
+    assert_eq!(vur.controller.claimed_inputs(), 1);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -412,36 +451,56 @@ async fn refused_program_and_dropped_link_give_typed_errors() {
         }
     };
 
-    // A dropped RTDE link is re-established and commands work again.
+    // A dropped RTDE link is re-established and commands work again: a query made while it
+    // reconnects waits for it (within `reconnect_grace`) and answers from the new connection.
     vur.drop_rtde_connections();
-    // While the link is down, state queries fail with a typed error.
     let deadline = Instant::now() + Duration::from_secs(1);
-    loop {
-        let status = robot.inner_mut().rtde().status();
-        if status != LinkStatus::Streaming {
-            match robot.joints().await {
-                Err(RobotError::ConnectionLost { .. }) => break,
-                Ok(_) if robot.inner_mut().rtde().reconnects() > 0 => break, // already back up
-                other => panic!("{other:?} while {status:?}"),
-            }
-        }
+    while robot.inner_mut().rtde().status() == LinkStatus::Streaming
+        && robot.inner_mut().rtde().reconnects() == 0
+    {
         assert!(Instant::now() < deadline, "drop not noticed");
         tokio::time::sleep(Duration::from_millis(1)).await;
     }
-    let deadline = Instant::now() + Duration::from_secs(3);
-    while robot.inner_mut().rtde().status() != LinkStatus::Streaming {
-        assert!(Instant::now() < deadline, "link not back");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
     robot
-        .inner_mut()
-        .rtde()
-        .next_state(Duration::from_secs(1))
+        .joints()
         .await
-        .unwrap();
+        .expect("a query waits for the link to come back");
+    assert_eq!(robot.inner_mut().rtde().reconnects(), 1);
     let q = [0.1, -1.5, 1.5, -1.5, -FRAC_PI_2, 0.1];
     robot.move_j(q, JOINT).await.unwrap();
     assert!(max_diff(&robot.joints().await.unwrap(), &q) < 1e-6);
+}
+
+/// A controller that is gone for good is a lost connection once the reconnect grace is over:
+/// the query neither hangs nor answers from the last state before the silence.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_link_that_does_not_come_back_is_lost_after_the_grace() {
+    let vur = virtual_ur().await;
+    let mut config = robot_config(&vur);
+    config.reconnect_grace = Duration::from_millis(300);
+    let mut robot = UrRobot::connect(config).await.unwrap();
+    robot.joints().await.unwrap();
+    drop(vur);
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while robot.inner_mut().rtde().status() == LinkStatus::Streaming {
+        assert!(
+            Instant::now() < deadline,
+            "the controller's end not noticed"
+        );
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    let asked = Instant::now();
+    match robot.joints().await {
+        Err(RobotError::ConnectionLost { detail }) => {
+            assert!(detail.contains("RTDE link"), "{detail}")
+        }
+        other => panic!("expected a lost connection, got {other:?}"),
+    }
+    let waited = asked.elapsed();
+    assert!(
+        (Duration::from_millis(250)..Duration::from_secs(1)).contains(&waited),
+        "answered after {waited:?}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -344,6 +344,30 @@ async fn the_arm_model_stops_a_path_into_the_table() {
     assert!(!status.ready());
 }
 
+/// The controller reads the wrist sensor every 2 ms cycle; while the cell is busy elsewhere (a
+/// capture rendering, a shake dropping parts) the arm model answers the last reading at once
+/// instead of stalling the control loop, and the RTDE stream with it.
+#[test]
+fn the_arm_models_sensor_never_waits_for_a_busy_cell() {
+    let cell = Arc::new(std::sync::Mutex::new(
+        SimCell::new(model(&zero_noise(), Scorer::Analytic), 11, 0).unwrap(),
+    ));
+    let arm = SimArm::new(cell.clone());
+    let free = arm
+        .external_wrench()
+        .expect("the cell simulates its contacts");
+    let busy = cell.lock().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(arm.external_wrench());
+    });
+    let held = rx
+        .recv_timeout(std::time::Duration::from_secs(5))
+        .expect("the sensor reading waited for the cell");
+    drop(busy);
+    assert_eq!(held, Some(free));
+}
+
 #[test]
 fn impossible_scenarios_are_rejected_with_the_reason() {
     let cat = catalog();

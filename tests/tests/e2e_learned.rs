@@ -70,6 +70,11 @@ async fn a_short_learned_run_ends_cleanly_and_blames_each_failure() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn learned_episodes_over_rtde_match_the_in_process_run() {
+    // The link's warnings (a stall, a reconnect, a stopped program) print with a failure.
+    let _ = tracing_subscriber::fmt()
+        .with_test_writer()
+        .with_max_level(tracing_subscriber::filter::LevelFilter::WARN)
+        .try_init();
     let setup = learned();
     for episode in 0..2u32 {
         let local = run_sim_episode(&setup, episode).await.unwrap().record;
@@ -90,6 +95,12 @@ async fn learned_episodes_over_rtde_match_the_in_process_run() {
         let remote = run_episode(setup.engine.context(episode), &mut cell, &mut perception)
             .await
             .record;
+        let link = robot.inner_mut().rtde();
+        eprintln!(
+            "episode {episode} over RTDE: {} stalls, {} reconnects",
+            link.stalls(),
+            link.reconnects()
+        );
         drop(robot);
         drop(vur);
         assert_eq!(remote.abort, None, "episode {episode}");

@@ -459,15 +459,21 @@ async fn stream_session(
     writes: &mut mpsc::Receiver<InputWrite>,
 ) -> LinkEnd {
     let mut buf = Vec::with_capacity(256);
+    // The stall deadline runs from the last package received: our own writes (a heartbeat every
+    // few tens of ms) must not keep a silent controller looking alive.
+    let mut last_package = tokio::time::Instant::now();
     loop {
         tokio::select! {
-            frame = tokio::time::timeout(config.stall_timeout, session.reader.next()) => {
+            // Buffered packages are read before the deadline is looked at, so a client that was
+            // itself descheduled for a while does not mistake its backlog for silence.
+            biased;
+            frame = session.reader.next() => {
                 let (ty, payload) = match frame {
-                    Err(_) => return LinkEnd::Stalled,
-                    Ok(Err(e)) => return LinkEnd::Failed(e.into()),
-                    Ok(Ok(None)) => return LinkEnd::Failed(ClientError::Io("controller closed the connection".into())),
-                    Ok(Ok(Some(frame))) => frame,
+                    Err(e) => return LinkEnd::Failed(e.into()),
+                    Ok(None) => return LinkEnd::Failed(ClientError::Io("controller closed the connection".into())),
+                    Ok(Some(frame)) => frame,
                 };
+                last_package = tokio::time::Instant::now();
                 if ty != TYPE_DATA {
                     match Reply::decode(ty, payload, Protocol::V2) {
                         Ok(Reply::Text(t)) => tracing::info!(level = t.level, "controller says: {}", t.message),
@@ -507,6 +513,7 @@ async fn stream_session(
                     return LinkEnd::Failed(e.into());
                 }
             }
+            () = tokio::time::sleep_until(last_package + config.stall_timeout) => return LinkEnd::Stalled,
         }
     }
 }
@@ -521,6 +528,9 @@ async fn run_link(
 ) {
     loop {
         let end = stream_session(&config, &mut session, &state_tx, &mut writes).await;
+        // Close the old connection before dialling again: the controller releases the input
+        // registers it holds only when it sees that socket close.
+        drop(session);
         match end {
             LinkEnd::Closed => {
                 status_tx.send_replace(LinkStatus::Closed);

@@ -7,7 +7,8 @@
 //! repeatability, insertions and the simulated clock then work exactly as in-process. The gripper
 //! follows the controller's tool digital output through [`SimArm::set_tool_output`].
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::cell::Cell;
+use std::sync::{Arc, Mutex, MutexGuard, TryLockError};
 
 use robots::kinematics::{Joints, UrKinematics};
 use robots::robot::RobotError;
@@ -37,6 +38,8 @@ pub struct SimArm {
     /// The motion in progress is a stop commanded while the tool pressed on something (a
     /// guarded move stopped on force): it ends as the in-process guarded move does.
     guarded_stop: bool,
+    /// The contact wrench last read from the cell: the sensor's value while the cell is busy.
+    last_wrench: Cell<[f64; 6]>,
 }
 
 impl SimArm {
@@ -65,6 +68,7 @@ impl SimArm {
             was_moving: false,
             actuation_time,
             guarded_stop: false,
+            last_wrench: Cell::new([0.0; 6]),
         }
     }
 
@@ -181,11 +185,20 @@ impl ArmModel for SimArm {
     }
 
     /// The cell's contact model at the arm's present pose ([`SimCell::contact_wrench_at`]): a
-    /// held part pressed into its target, or the tool on the table.
+    /// held part pressed into its target, or the tool on the table. The controller reads the
+    /// sensor every cycle and must never wait for the cell: while the cell is busy elsewhere (a
+    /// capture rendering, a feeder shake dropping parts) the last reading is held, as a real
+    /// sensor's sample is between updates, so the control loop and its RTDE stream keep time.
     fn external_wrench(&self) -> Option<[f64; 6]> {
-        let c = lock(&self.cell);
+        let c = match self.cell.try_lock() {
+            Ok(c) => c,
+            Err(TryLockError::Poisoned(p)) => p.into_inner(),
+            Err(TryLockError::WouldBlock) => return Some(self.last_wrench.get()),
+        };
         let tcp = c.model().kinematics.forward_tcp(&self.arm.state().q);
-        Some(c.contact_wrench_at(&tcp))
+        let wrench = c.contact_wrench_at(&tcp);
+        self.last_wrench.set(wrench);
+        Some(wrench)
     }
 
     fn actuation_time(&self, pin: u32) -> f64 {
