@@ -85,6 +85,13 @@ pub struct Args {
     /// feeder plate, drawn per image. Without it images are as before, byte for byte.
     #[arg(long)]
     pub environment: Option<PathBuf>,
+    /// Randomisation families that widen the ranges (opt-in, each on its own random stream):
+    /// a comma-separated list of `lights`, `plating`, `plastic`, `textures`, `distractors`,
+    /// `sensor` (or `all`, and `all,-NAME` for an ablation), or a TOML file of their switches
+    /// and ranges (see `docs/reference/cycles.md`). Without it images are as before, byte for
+    /// byte.
+    #[arg(long)]
+    pub families: Option<String>,
     /// Also write a contact sheet (PNG) of the first training crops of each part and two
     /// randomised feeder captures, to judge the randomisation at a glance.
     #[arg(long)]
@@ -146,6 +153,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     cfg.progress = !args.quiet;
     if let Some(path) = &args.randomisation {
         cfg.randomisation = load_randomisation(path)?;
+    }
+    if let Some(list) = &args.families {
+        cfg.families = cell::scenario::load_families(list)?;
     }
     if let Some(path) = &args.environment {
         cfg.look = Some(cell::scenario::load_look(path)?);

@@ -1,10 +1,11 @@
 //! Look files (`cell dataset --environment FILE`): the opt-in room, area lights and backlit
-//! feeder plate of `sim::dataset::LookOptions`, read with file:line:column errors.
+//! feeder plate of `sim::dataset::LookOptions`; and randomisation family files (`cell dataset
+//! --families FILE`, `sim::dataset::Families`); both read with file:line:column errors.
 
 use std::path::Path;
 
 use perception::part::line_column;
-use sim::dataset::LookOptions;
+use sim::dataset::{Families, LookOptions};
 
 use super::{KeyPath, Locator, Problem, ScenarioError};
 
@@ -47,6 +48,54 @@ pub fn parse_look(text: &str, path: &Path) -> Result<LookOptions, ScenarioError>
         }])
     })?;
     Ok(look)
+}
+
+/// Reads the randomisation families: an existing TOML file (every key optional; a family is on
+/// when its `enabled` is true), else a comma-separated list of family names (`all`, `none`,
+/// names, `-name` to turn one off after `all`) at their default ranges.
+pub fn load_families(arg: &str) -> Result<Families, ScenarioError> {
+    let path = Path::new(arg);
+    if !path.is_file() {
+        return Families::from_list(arg).map_err(|e| {
+            ScenarioError(vec![Problem {
+                file: path.into(),
+                line: 1,
+                column: 1,
+                key: None,
+                message: format!("not a file, nor a list of randomisation families: {e}"),
+            }])
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        ScenarioError(vec![Problem {
+            file: path.into(),
+            line: 1,
+            column: 1,
+            key: None,
+            message: format!("cannot read the families file: {e}"),
+        }])
+    })?;
+    parse_families(&text, path)
+}
+
+/// Parses and checks randomisation family text read from `path`.
+pub fn parse_families(text: &str, path: &Path) -> Result<Families, ScenarioError> {
+    let families: Families =
+        toml::from_str(text).map_err(|e| ScenarioError::from_toml(&e, text, path))?;
+    families.validate().map_err(|e| {
+        let (line, column) = Locator::new(text)
+            .offset(&KeyPath::parse(&e.key))
+            .map(|o| line_column(text, o))
+            .unwrap_or((1, 1));
+        ScenarioError(vec![Problem {
+            file: path.into(),
+            line,
+            column,
+            key: Some(e.key.clone()),
+            message: e.message.clone(),
+        }])
+    })?;
+    Ok(families)
 }
 
 #[cfg(test)]
@@ -98,5 +147,32 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("l.toml:2:11: "), "{e}");
+    }
+
+    #[test]
+    fn families_are_read_from_files_and_lists() {
+        let text = "[plating]\nenabled = true\nroughness = { lo = 0.05, hi = 0.3 }\n";
+        let f = parse_families(text, Path::new("f.toml")).unwrap();
+        assert_eq!(f.enabled(), ["plating"]);
+        assert_eq!(f.plating.roughness.hi, 0.3);
+        assert_eq!(load_families("all,-lights").unwrap().enabled().len(), 5);
+        let e = load_families("lights,glitter").unwrap_err().to_string();
+        assert!(e.contains("glitter: no randomisation family"), "{e}");
+    }
+
+    #[test]
+    fn a_bad_family_range_or_key_is_refused_at_its_line_and_column() {
+        let text = "[sensor]\nenabled = true\ngain = { lo = 2, hi = 1 }\n";
+        let e = parse_families(text, Path::new("f.toml"))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e, "f.toml:3:8: sensor.gain: inverted: lo = 2 > hi = 1",
+            "{e}"
+        );
+        let e = parse_families("[distractors]\ncuont = 3\n", Path::new("f.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("f.toml:2:1: unknown field `cuont`"), "{e}");
     }
 }

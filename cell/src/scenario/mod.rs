@@ -8,7 +8,7 @@ mod spec;
 mod validate;
 
 pub use locate::{KeyPath, Locator, Seg};
-pub use look::{DEFAULT_LOOK, load_look, parse_look};
+pub use look::{DEFAULT_LOOK, load_families, load_look, parse_families, parse_look};
 pub use sim::config::*;
 pub use spec::*;
 

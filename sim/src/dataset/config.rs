@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use perception::camera::Camera;
 
-use super::{DatasetError, LookOptions};
+use super::{DatasetError, Families, FamilyDraw, LookOptions};
 use crate::render::RenderSettings;
 use crate::scene::Randomisation;
 
@@ -94,6 +94,10 @@ pub struct DatasetConfig {
     /// The opt-in look (room, area lights, backlit plate), drawn from a stream of its own;
     /// `None` (the default) renders as without it.
     pub look: Option<LookOptions>,
+    /// The randomisation families that widen the ranges (lights, plating, plastic, textures,
+    /// distractors, sensor), each opt-in and drawn from a stream of its own; all off by
+    /// default (renders unchanged).
+    pub families: Families,
     /// Render settings.
     pub render: RenderSettings,
     /// Millimetres per unit of the 16-bit depth PNGs.
@@ -132,6 +136,7 @@ impl DatasetConfig {
             feeder_camera_distance: None,
             randomisation: Randomisation::default(),
             look: None,
+            families: Families::default(),
             render: RenderSettings::default(),
             depth_scale: 0.1,
             images_per_scene: 1000,
@@ -146,6 +151,9 @@ impl DatasetConfig {
             look.validate()
                 .map_err(|e| DatasetError::Config(format!("look: {e}")))?;
         }
+        self.families
+            .validate()
+            .map_err(|e| DatasetError::Config(format!("randomisation families: {e}")))?;
         self.camera
             .validate()
             .map_err(|e| DatasetError::Config(e.to_string()))?;
@@ -223,6 +231,27 @@ impl DatasetConfig {
 /// Offset of a work item's look stream tag from its own tag: the look draws from a stream of
 /// its own, so the item's other draws are those of a run without it.
 pub(crate) const LOOK_TAG: u64 = 1 << 40;
+
+/// Offset of a work item's family stream tags from its own tag (family k draws from the stream
+/// of (tag + FAMILY_TAG, index) mixed with k): the item's other draws stay those of a run
+/// without the families, and each family's those of a run without the others.
+pub(crate) const FAMILY_TAG: u64 = 1 << 41;
+
+/// Applies the configured randomisation families to `scene` from the family streams of item
+/// (tag, index), about part `focus` if given; what the sensor must apply is returned (nothing
+/// when every family is off).
+pub(crate) fn apply_families(
+    cfg: &DatasetConfig,
+    scene: &mut crate::scene::SampledScene,
+    models: &[crate::scene::PartModel],
+    focus: Option<usize>,
+    tag: u64,
+    index: u64,
+) -> FamilyDraw {
+    let base = item_seed(cfg.seed, tag + FAMILY_TAG, index);
+    cfg.families
+        .apply(scene, models, focus, |k| item_seed(base, k, 0))
+}
 
 /// Dresses `scene` in the configured look, if any, from the look stream of item (tag, index),
 /// with the run's shared rooms (baked on first use, once per seed and look).

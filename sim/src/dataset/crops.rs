@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::bop::{pose_to_bop, row_major};
-use super::config::{apply_look, item_seed};
+use super::config::{apply_families, apply_look, item_seed};
 use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, Window, instance_mask, render};
@@ -165,6 +165,14 @@ pub(crate) fn write_crop_group(
             &cfg.randomisation,
             &mut rng,
         )?;
+        let draw = apply_families(
+            cfg,
+            &mut scene,
+            models,
+            Some(target),
+            tag + 50_000,
+            index as u64,
+        );
         apply_look(cfg, &mut scene, tag + 50_000, index as u64);
         let camera_T_table = scene.table_T_camera.inverse();
         let part_centre = Point3::from(scene.parts[target].table_T_part.translation.vector);
@@ -210,7 +218,7 @@ pub(crate) fn write_crop_group(
         );
         let image = scene
             .metered_sensor(&out)
-            .capture(&out, &mut rng)
+            .capture_balanced(&out, draw.white_balance, &mut rng)
             .map_err(|e| DatasetError::Config(e.to_string()))?;
         let id = (target + 1) as u16;
         let mask: Vec<bool> = out.visible.iter().map(|v| *v == id).collect();

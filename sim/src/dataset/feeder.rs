@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{apply_look, item_seed};
+use super::config::{apply_families, apply_look, item_seed};
 use super::overview::write_bop_image;
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{Window, render, window_covering};
@@ -86,6 +86,14 @@ pub(crate) fn write_feeder(
         rand.camera_height = Range::new(d, d);
     }
     let mut scene = sample_scene(models, &request, &rand, &mut rng)?;
+    let draw = apply_families(
+        cfg,
+        &mut scene,
+        models,
+        None,
+        20 + split.code(),
+        index as u64,
+    );
     apply_look(cfg, &mut scene, 20 + split.code(), index as u64);
     let (lo_p, hi_p) = scene.footprint(models, FEEDER_MARGIN);
     let window = window_covering(&cfg.camera, &scene.table_T_camera, &lo_p, &hi_p)
@@ -107,6 +115,7 @@ pub(crate) fn write_feeder(
         &out,
         &scene_dir,
         im,
+        draw,
         &mut rng,
     )
 }

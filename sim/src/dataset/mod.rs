@@ -8,6 +8,7 @@ mod bop;
 mod config;
 mod crops;
 mod error;
+mod families;
 mod feeder;
 mod files;
 mod generate;
@@ -22,6 +23,10 @@ pub use bop::{
 pub use config::{DatasetConfig, Split};
 pub use crops::CropLabel;
 pub use error::DatasetError;
+pub use families::{
+    DistractorFamily, FAMILY_NAMES, Families, FamilyDraw, FamilyError, LightFamily, PLATINGS,
+    PlasticFamily, PlatingFamily, SensorFamily, TextureFamily,
+};
 pub use generate::{GenerateSummary, generate};
 pub use look::{AreaLightRanges, BacklightRanges, LookError, LookOptions, RoomRanges};
 pub use preview::write_preview;

@@ -9,9 +9,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::bop::{GtInfo, GtPose, SceneCamera, pose_to_bop, row_major};
-use super::config::{apply_look, item_seed};
+use super::config::{apply_families, apply_look, item_seed};
 use super::files::{write_depth, write_json, write_mask, write_png};
-use super::{DatasetConfig, DatasetError, Split};
+use super::{DatasetConfig, DatasetError, FamilyDraw, Split};
 use perception::camera::Camera;
 
 use crate::render::{RenderOutput, Window, render};
@@ -53,6 +53,14 @@ pub(crate) fn write_overview(
         nominal_table_T_camera: cfg.nominal_table_T_camera,
     };
     let mut scene = sample_scene(models, &request, &cfg.randomisation, &mut rng)?;
+    let draw = apply_families(
+        cfg,
+        &mut scene,
+        models,
+        None,
+        10 + split.code(),
+        index as u64,
+    );
     apply_look(cfg, &mut scene, 10 + split.code(), index as u64);
     let camera = cfg
         .camera
@@ -87,12 +95,12 @@ pub(crate) fn write_overview(
         &cfg.render,
     );
     write_bop_image(
-        cfg, models, &scene, &camera, window, &out, &scene_dir, im, &mut rng,
+        cfg, models, &scene, &camera, window, &out, &scene_dir, im, draw, &mut rng,
     )
 }
 
 /// Labels `out` (a render of `window` of `camera` showing `scene`), passes it through the
-/// scene's sensor and writes it as image `im` of `scene_dir`: rgb, depth, masks and the label
+/// scene's sensor (with the families' white balance, `draw`) and writes it as image `im` of `scene_dir`: rgb, depth, masks and the label
 /// fragment (intrinsics shifted to the window origin).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn write_bop_image(
@@ -104,13 +112,14 @@ pub(crate) fn write_bop_image(
     out: &RenderOutput,
     scene_dir: &Path,
     im: usize,
+    draw: FamilyDraw,
     rng: &mut ChaCha8Rng,
 ) -> Result<(), DatasetError> {
     let camera_T_table = scene.table_T_camera.inverse();
     let labels = label_instances(&scene.parts, models, camera, &scene.table_T_camera, out);
     let image = scene
         .metered_sensor(out)
-        .capture(out, rng)
+        .capture_balanced(out, draw.white_balance, rng)
         .map_err(|e| DatasetError::Config(e.to_string()))?;
 
     let (ww, wh) = (window.width, window.height);

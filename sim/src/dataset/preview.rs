@@ -8,7 +8,7 @@ use nalgebra::Point3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{apply_look, item_seed};
+use super::config::{apply_families, apply_look, item_seed};
 use super::crops::crop_dir;
 use super::files::write_png;
 use super::{DatasetConfig, DatasetError, Split};
@@ -98,6 +98,7 @@ fn feeder_capture(
         nominal_table_T_camera: cfg.nominal_table_T_camera,
     };
     let mut scene = dress_scene(models, parts, &request, &cfg.randomisation, &mut rng)?;
+    let draw = apply_families(cfg, &mut scene, models, None, 900, k);
     apply_look(cfg, &mut scene, 900, k);
     let (lo, hi) = FEEDER;
     let window = window_covering(
@@ -124,7 +125,7 @@ fn feeder_capture(
     // Re-expose the same render through the metered sensor.
     scene
         .metered_sensor(&first.output)
-        .capture(&first.output, &mut rng)
+        .capture_balanced(&first.output, draw.white_balance, &mut rng)
         .map_err(|e| DatasetError::Config(e.to_string()))
 }
 

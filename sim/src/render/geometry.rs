@@ -13,7 +13,7 @@ use super::aabb::box_corners;
 use super::instance_grid::{InstanceGrid, slab_range};
 use super::light::PointLight;
 use super::shadow_grid::ShadowGrid;
-use super::{Appearance, Environment, TagBoard};
+use super::{Appearance, Environment, TableTexture, TagBoard};
 
 /// A part mesh ready for ray casting, in the part frame (metres), shared by its instances.
 #[derive(Clone)]
@@ -234,6 +234,8 @@ pub struct RenderScene {
     /// Radiance the board's top face emits per channel when the feeder plate is backlit (its
     /// print passes the share its albedo has of the white's); none by default.
     pub backlight: Option<[f64; 3]>,
+    /// A procedural texture modulating the table's albedo (none by default: a uniform table).
+    pub table_texture: Option<TableTexture>,
     bounds: Vec<(Point3<f64>, Point3<f64>)>,
     /// `part_T_table` of each instance, inverted once instead of per ray.
     inverses: Vec<Isometry3<f64>>,
@@ -261,6 +263,7 @@ impl RenderScene {
             ambient,
             environment: None,
             backlight: None,
+            table_texture: None,
             bounds,
             inverses,
             grid,

@@ -21,6 +21,7 @@ mod sensor;
 mod shading;
 mod shadow_grid;
 mod tag_board;
+mod texture;
 
 pub use appearance::Appearance;
 pub use capture::{Capture, capture, window_covering};
@@ -32,3 +33,4 @@ pub use output::{InstanceMask, RenderOutput, Window};
 pub use renderer::{CentreRays, RenderSettings, instance_mask, render, render_with_rays};
 pub use sensor::{SensorError, SensorModel};
 pub use tag_board::{BoardMark, TagBoard};
+pub use texture::{TableTexture, TexturePattern};

@@ -370,13 +370,16 @@ fn surface_at(scene: &RenderScene, hit: &Hit, p: &Point3<f64>) -> Surface {
                 None,
             ),
         },
-        SurfaceKind::Table => (
-            scene.table.map(|t| t.appearance).unwrap_or_else(|| {
+        SurfaceKind::Table => {
+            let mut a = scene.table.map(|t| t.appearance).unwrap_or_else(|| {
                 Appearance::for_material(perception::part::Material::DarkPlastic)
-            }),
-            1,
-            None,
-        ),
+            });
+            if let Some(texture) = &scene.table_texture {
+                let f = texture.factor(p);
+                a.base_color = a.base_color.map(|c| (c * f).clamp(0.0, 1.0));
+            }
+            (a, 1, None)
+        }
     };
     Surface {
         appearance,

@@ -152,7 +152,28 @@ impl SensorModel {
     /// Order: exposure, optics (Gaussian blur, defocus disk, motion streak), shot and read noise,
     /// gain, clipping and sRGB encoding, then optional JPEG-like block compression.
     pub fn capture(&self, out: &RenderOutput, rng: &mut impl Rng) -> Result<RgbImage, SensorError> {
+        self.capture_balanced(out, [1.0; 3], rng)
+    }
+
+    /// [`SensorModel::capture`] with a white balance: per-channel multipliers (red, green,
+    /// blue) applied with the gain, after the noise, as a camera's processing applies them
+    /// (`[1, 1, 1]` is `capture`, byte for byte).
+    pub fn capture_balanced(
+        &self,
+        out: &RenderOutput,
+        balance: [f64; 3],
+        rng: &mut impl Rng,
+    ) -> Result<RgbImage, SensorError> {
         self.validate()?;
+        for b in balance {
+            if !(b.is_finite() && b > 0.0) {
+                return Err(SensorError {
+                    name: "white_balance",
+                    value: b,
+                    why: "finite and > 0",
+                });
+            }
+        }
         let (w, h) = (out.window.width as usize, out.window.height as usize);
         let mut lin: Vec<[f64; 3]> = out
             .radiance
@@ -184,7 +205,7 @@ impl SensorModel {
                     let z: f64 = StandardNormal.sample(rng);
                     x += sd * z;
                 }
-                px.0[k] = encode_srgb(x * self.gain);
+                px.0[k] = encode_srgb(x * self.gain * balance[k]);
             }
         }
         if self.jpeg_quality > 0.0 {

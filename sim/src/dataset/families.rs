@@ -1,0 +1,760 @@
+//! Randomisation families (`cell dataset --families`): six opt-in widenings of the dataset
+//! randomisation, after BlenderProc's practice (random lights in number, strength, position and
+//! colour; random materials; random textures; distractor objects; camera effects), so that the
+//! training images span both our renderer and Blender Cycles. Each family is switched on alone
+//! and draws from a random stream of its own, so an ablation can turn any one off and the other
+//! families' draws stay the same; with every family off (the default) images are unchanged, byte
+//! for byte.
+
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use perception::part::TriMesh;
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::render::{
+    Appearance, Instance, PointLight, RenderMesh, RenderScene, TableTexture, TexturePattern,
+};
+use crate::scene::{PartModel, Range, SampledScene};
+
+/// The family names, in the order their streams are numbered.
+pub const FAMILY_NAMES: [&str; 6] = [
+    "lights",
+    "plating",
+    "plastic",
+    "textures",
+    "distractors",
+    "sensor",
+];
+
+/// The families' switches and ranges, as a TOML file gives them (every key optional; a range is
+/// written `key = { lo = 0.1, hi = 0.2 }`; a family is on when its `enabled` is true).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Families {
+    /// Point lights redrawn in number, size, position, strength and colour, and a coloured sky.
+    pub lights: LightFamily,
+    /// Metal platings (nickel, tin, chromium, silver, iron) from matte to mirror.
+    pub plating: PlatingFamily,
+    /// Plastic gloss, brightness and specular level.
+    pub plastic: PlasticFamily,
+    /// Table textures and feeder plate colour, gloss and wear.
+    pub textures: TextureFamily,
+    /// Simple non-catalog shapes on the table beside the parts (never labelled).
+    pub distractors: DistractorFamily,
+    /// Sensor gain, blur, noise and white balance.
+    pub sensor: SensorFamily,
+}
+
+/// Lights: the randomisation's point lights and sky are replaced.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LightFamily {
+    /// Whether the family is on.
+    pub enabled: bool,
+    /// Number of point lights (rounded draw).
+    pub count: Range,
+    /// Height above the table, m.
+    pub height: Range,
+    /// Horizontal distance from the parts, m.
+    pub radius: Range,
+    /// Irradiance a light gives the parts facing it (its intensity is this times its distance
+    /// squared, so near and far lights are equally usable), split over the lights drawn.
+    pub irradiance: Range,
+    /// Radius of a light's sphere, m (hard to soft shadows).
+    pub size: Range,
+    /// Colour temperature shift: −1 warm (about 3 000 K) … 1 cool (about 8 000 K), as
+    /// multipliers (1 − 0.25 w, 1, 1 + 0.25 w).
+    pub warmth: Range,
+    /// Sky (ambient) radiance.
+    pub ambient: Range,
+}
+
+impl Default for LightFamily {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            count: Range::new(1.0, 4.0),
+            height: Range::new(0.4, 2.5),
+            radius: Range::new(0.0, 1.5),
+            irradiance: Range::new(0.5, 2.5),
+            size: Range::new(0.0, 0.3),
+            warmth: Range::new(-1.0, 1.0),
+            ambient: Range::new(0.01, 0.25),
+        }
+    }
+}
+
+/// Plating: the metal parts' finish, drawn per part kind and image.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlatingFamily {
+    /// Whether the family is on.
+    pub enabled: bool,
+    /// Brightness multiplier of the drawn plating's reflectance.
+    pub brightness: Range,
+    /// GGX roughness (0.03 mirror … 0.7 matte).
+    pub roughness: Range,
+    /// Brushing, 0–1.
+    pub anisotropy: Range,
+}
+
+impl Default for PlatingFamily {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            brightness: Range::new(0.85, 1.1),
+            roughness: Range::new(0.03, 0.7),
+            anisotropy: Range::new(0.0, 0.8),
+        }
+    }
+}
+
+/// The platings a metal part is drawn from: linear F0 reflectances.
+pub const PLATINGS: [(&str, [f64; 3]); 5] = [
+    ("nickel", [0.659, 0.609, 0.526]),
+    ("tin", [0.75, 0.75, 0.73]),
+    ("chromium", [0.549, 0.556, 0.554]),
+    ("silver", [0.962, 0.949, 0.922]),
+    ("iron", [0.531, 0.512, 0.496]),
+];
+
+/// Plastic: the dielectric parts' gloss and colour, drawn per part kind and image.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlasticFamily {
+    /// Whether the family is on.
+    pub enabled: bool,
+    /// GGX roughness (0.08 glossy … 0.9 matte).
+    pub roughness: Range,
+    /// Specular reflectance at normal incidence.
+    pub specular: Range,
+    /// Multiplier of the nominal albedo (black plastics range from deep black to dark grey).
+    pub brightness: Range,
+}
+
+impl Default for PlasticFamily {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            roughness: Range::new(0.08, 0.9),
+            specular: Range::new(0.03, 0.06),
+            brightness: Range::new(0.5, 2.5),
+        }
+    }
+}
+
+/// Textures: the table's pattern and colour, the feeder plate's colour, gloss and wear.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TextureFamily {
+    /// Whether the family is on.
+    pub enabled: bool,
+    /// Table albedo (grey level before its colour).
+    pub table_albedo: Range,
+    /// Per-channel colour of the table (multiplier).
+    pub table_tint: Range,
+    /// Table roughness.
+    pub table_roughness: Range,
+    /// Feature size of the table's pattern, m.
+    pub table_scale: Range,
+    /// Amplitude of the table's pattern, 0–1.
+    pub table_contrast: Range,
+    /// Per-channel colour of the plate's white (multiplier of its albedo).
+    pub plate_tint: Range,
+    /// Roughness of the plate's white.
+    pub plate_roughness: Range,
+    /// Amplitude of the plate print's smooth albedo variation.
+    pub plate_grain: Range,
+    /// Dust specks on the plate per cm².
+    pub plate_dust: Range,
+    /// Scratches through the plate's print per 100 cm².
+    pub plate_scratches: Range,
+}
+
+impl Default for TextureFamily {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            table_albedo: Range::new(0.03, 0.8),
+            table_tint: Range::new(0.8, 1.2),
+            table_roughness: Range::new(0.3, 0.95),
+            table_scale: Range::new(0.002, 0.05),
+            table_contrast: Range::new(0.0, 0.6),
+            plate_tint: Range::new(0.8, 1.05),
+            plate_roughness: Range::new(0.2, 0.9),
+            plate_grain: Range::new(0.0, 0.2),
+            plate_dust: Range::new(0.0, 2.0),
+            plate_scratches: Range::new(0.0, 12.0),
+        }
+    }
+}
+
+/// Distractors: boxes and cylinders of random size and material lying on the table beside the
+/// parts, never touching them. They are rendered (they shadow, reflect and hide parts behind
+/// them, so the visible masks stay right) but are not parts: not in the BOP ground truth or the
+/// crops' labels.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DistractorFamily {
+    /// Whether the family is on.
+    pub enabled: bool,
+    /// Number of distractors (rounded draw).
+    pub count: Range,
+    /// Side (box) or diameter (cylinder) of a distractor, m.
+    pub size: Range,
+    /// Height of a distractor, m.
+    pub height: Range,
+    /// Distance of a distractor's centre from the parts' centre (a crop's target), m.
+    pub radius: Range,
+    /// Share of the distractors that are metal, 0–1.
+    pub metal_probability: f64,
+    /// Albedo (or a metal's reflectance) of a distractor's colour channels.
+    pub albedo: Range,
+    /// Roughness of a distractor.
+    pub roughness: Range,
+}
+
+impl Default for DistractorFamily {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            count: Range::new(1.0, 6.0),
+            size: Range::new(0.003, 0.02),
+            height: Range::new(0.001, 0.012),
+            radius: Range::new(0.006, 0.05),
+            metal_probability: 0.3,
+            albedo: Range::new(0.02, 0.9),
+            roughness: Range::new(0.05, 0.9),
+        }
+    }
+}
+
+/// Sensor: wider gain, blur and noise than the randomisation's, and a white balance error.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SensorFamily {
+    /// Whether the family is on.
+    pub enabled: bool,
+    /// Analogue gain.
+    pub gain: Range,
+    /// Gaussian blur sigma, px.
+    pub blur_sigma: Range,
+    /// Read noise standard deviation (full scale 1).
+    pub read_noise: Range,
+    /// Shot noise variance per unit signal.
+    pub shot_noise: Range,
+    /// White balance multipliers of red and of blue relative to green.
+    pub white_balance: Range,
+}
+
+impl Default for SensorFamily {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            gain: Range::new(1.0, 2.5),
+            blur_sigma: Range::new(0.0, 1.5),
+            read_noise: Range::new(0.0, 0.02),
+            shot_noise: Range::new(0.0, 0.005),
+            white_balance: Range::new(0.8, 1.25),
+        }
+    }
+}
+
+/// A family option that cannot be used: its key path (`lights.count`) and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{key}: {message}")]
+pub struct FamilyError {
+    /// The option's key path in the TOML file.
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// What the families drew for an image beyond its scene: the white balance its sensor applies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FamilyDraw {
+    /// Per-channel white balance (red, green, blue); `[1, 1, 1]` without the sensor family.
+    pub white_balance: [f64; 3],
+}
+
+impl Default for FamilyDraw {
+    fn default() -> Self {
+        Self {
+            white_balance: [1.0; 3],
+        }
+    }
+}
+
+impl Families {
+    /// Every family on, at its default ranges.
+    pub fn all() -> Self {
+        let mut f = Self::default();
+        for name in FAMILY_NAMES {
+            f.set(name, true).expect("a known family");
+        }
+        f
+    }
+
+    /// Turns the family `name` on or off; an unknown name is an error listing the known ones.
+    pub fn set(&mut self, name: &str, on: bool) -> Result<(), FamilyError> {
+        let flag = match name {
+            "lights" => &mut self.lights.enabled,
+            "plating" => &mut self.plating.enabled,
+            "plastic" => &mut self.plastic.enabled,
+            "textures" => &mut self.textures.enabled,
+            "distractors" => &mut self.distractors.enabled,
+            "sensor" => &mut self.sensor.enabled,
+            _ => {
+                return Err(FamilyError {
+                    key: name.to_string(),
+                    message: format!(
+                        "no randomisation family of that name (known: {}, or all, none)",
+                        FAMILY_NAMES.join(", ")
+                    ),
+                });
+            }
+        };
+        *flag = on;
+        Ok(())
+    }
+
+    /// The names of the families that are on.
+    pub fn enabled(&self) -> Vec<&'static str> {
+        let on = [
+            self.lights.enabled,
+            self.plating.enabled,
+            self.plastic.enabled,
+            self.textures.enabled,
+            self.distractors.enabled,
+            self.sensor.enabled,
+        ];
+        FAMILY_NAMES
+            .iter()
+            .zip(on)
+            .filter(|(_, on)| *on)
+            .map(|(n, _)| *n)
+            .collect()
+    }
+
+    /// Families from a comma-separated list of names (`all`, `none`, or family names; `all`
+    /// followed by `-name` turns one off), at their default ranges.
+    pub fn from_list(list: &str) -> Result<Self, FamilyError> {
+        let mut f = Self::default();
+        for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+            match name {
+                "all" => f = Self::all(),
+                "none" => f = Self::default(),
+                _ => match name.strip_prefix('-') {
+                    Some(off) => f.set(off, false)?,
+                    None => f.set(name, true)?,
+                },
+            }
+        }
+        Ok(f)
+    }
+
+    /// Checks every range (finite, lo ≤ hi, inside its domain); the error names the key.
+    pub fn validate(&self) -> Result<(), FamilyError> {
+        let inf = f64::INFINITY;
+        let (l, p, q, t, d, s) = (
+            &self.lights,
+            &self.plating,
+            &self.plastic,
+            &self.textures,
+            &self.distractors,
+            &self.sensor,
+        );
+        let ranges: [(&str, Range, f64, f64); 34] = [
+            ("lights.count", l.count, 0.0, 8.0),
+            ("lights.height", l.height, 0.05, 100.0),
+            ("lights.radius", l.radius, 0.0, 100.0),
+            ("lights.irradiance", l.irradiance, 0.0, inf),
+            ("lights.size", l.size, 0.0, 1.0),
+            ("lights.warmth", l.warmth, -2.0, 2.0),
+            ("lights.ambient", l.ambient, 0.0, inf),
+            ("plating.brightness", p.brightness, 0.0, inf),
+            ("plating.roughness", p.roughness, 0.02, 1.0),
+            ("plating.anisotropy", p.anisotropy, 0.0, 1.0),
+            ("plastic.roughness", q.roughness, 0.02, 1.0),
+            ("plastic.specular", q.specular, 0.0, 1.0),
+            ("plastic.brightness", q.brightness, 0.0, inf),
+            ("textures.table_albedo", t.table_albedo, 0.0, 1.0),
+            ("textures.table_tint", t.table_tint, 0.0, inf),
+            ("textures.table_roughness", t.table_roughness, 0.02, 1.0),
+            ("textures.table_scale", t.table_scale, 1e-4, 10.0),
+            ("textures.table_contrast", t.table_contrast, 0.0, 1.0),
+            ("textures.plate_tint", t.plate_tint, 0.0, inf),
+            ("textures.plate_roughness", t.plate_roughness, 0.02, 1.0),
+            ("textures.plate_grain", t.plate_grain, 0.0, 1.0),
+            ("textures.plate_dust", t.plate_dust, 0.0, 100.0),
+            ("textures.plate_scratches", t.plate_scratches, 0.0, 100.0),
+            ("distractors.count", d.count, 0.0, 32.0),
+            ("distractors.size", d.size, 1e-4, 0.2),
+            ("distractors.height", d.height, 1e-4, 0.2),
+            ("distractors.radius", d.radius, 0.0, 1.0),
+            (
+                "distractors.metal_probability",
+                Range::new(d.metal_probability, d.metal_probability),
+                0.0,
+                1.0,
+            ),
+            ("distractors.albedo", d.albedo, 0.0, 1.0),
+            ("distractors.roughness", d.roughness, 0.02, 1.0),
+            ("sensor.gain", s.gain, 1e-6, inf),
+            ("sensor.blur_sigma", s.blur_sigma, 0.0, 10.0),
+            ("sensor.read_noise", s.read_noise, 0.0, 1.0),
+            ("sensor.shot_noise", s.shot_noise, 0.0, 1.0),
+        ];
+        let extra = [("sensor.white_balance", s.white_balance, 1e-3, 1e3)];
+        for (key, range, min, max) in ranges.into_iter().chain(extra) {
+            let fail = |message: String| {
+                Err(FamilyError {
+                    key: key.to_string(),
+                    message,
+                })
+            };
+            if !range.lo.is_finite() || !range.hi.is_finite() {
+                return fail(format!("non-finite bound ({}, {})", range.lo, range.hi));
+            }
+            if range.lo > range.hi {
+                return fail(format!("inverted: lo = {} > hi = {}", range.lo, range.hi));
+            }
+            if range.lo < min || range.hi > max {
+                return fail(format!(
+                    "[{}, {}] is outside the allowed [{min}, {max}]",
+                    range.lo, range.hi
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Applies the families that are on to `scene` (drawn for its `models`), each from its own
+    /// stream: `seed_of(k)` seeds family k of [`FAMILY_NAMES`]. Distractors and lights are
+    /// placed about part `focus` (a crop's target), else about the middle of the parts.
+    /// Returns what the sensor must apply.
+    pub fn apply(
+        &self,
+        scene: &mut SampledScene,
+        models: &[PartModel],
+        focus: Option<usize>,
+        seed_of: impl Fn(u64) -> u64,
+    ) -> FamilyDraw {
+        let mut draw = FamilyDraw::default();
+        let rng = |k: u64| ChaCha8Rng::seed_from_u64(seed_of(k));
+        if self.lights.enabled {
+            self.lights.apply(scene, focus, &mut rng(0));
+        }
+        if self.plating.enabled {
+            self.plating.apply(scene, models, &mut rng(1));
+        }
+        if self.plastic.enabled {
+            self.plastic.apply(scene, models, &mut rng(2));
+        }
+        if self.textures.enabled {
+            self.textures.apply(scene, &mut rng(3));
+        }
+        if self.distractors.enabled {
+            self.distractors.apply(scene, models, focus, &mut rng(4));
+        }
+        if self.sensor.enabled {
+            draw.white_balance = self.sensor.apply(scene, &mut rng(5));
+        }
+        draw
+    }
+}
+
+/// Where part `focus` lies on the table, else the middle of the scene's parts.
+fn parts_centre(scene: &SampledScene, focus: Option<usize>) -> Point3<f64> {
+    if let Some(p) = focus.and_then(|i| scene.parts.get(i)) {
+        let c = p.table_T_part.translation.vector;
+        return Point3::new(c.x, c.y, 0.0);
+    }
+    let n = scene.parts.len().max(1) as f64;
+    let sum = scene.parts.iter().fold(Vector3::zeros(), |s, p| {
+        s + p.table_T_part.translation.vector
+    });
+    Point3::new(sum.x / n, sum.y / n, 0.0)
+}
+
+impl LightFamily {
+    fn apply(&self, scene: &mut SampledScene, focus: Option<usize>, rng: &mut impl Rng) {
+        let centre = parts_centre(scene, focus);
+        let n = self.count.sample(rng).round().max(0.0) as usize;
+        let share = 1.0 / n.max(1) as f64;
+        scene.render.lights = (0..n)
+            .map(|_| {
+                let r = self.radius.sample(rng);
+                let phi = rng.random_range(0.0..std::f64::consts::TAU);
+                let h = self.height.sample(rng);
+                let position = Point3::new(centre.x + r * phi.cos(), centre.y + r * phi.sin(), h);
+                let e = self.irradiance.sample(rng) * share;
+                let w = self.warmth.sample(rng);
+                let i = e * (position - centre).norm_squared();
+                PointLight {
+                    position,
+                    intensity: [i * (1.0 - 0.25 * w), i, i * (1.0 + 0.25 * w)],
+                    radius: self.size.sample(rng),
+                }
+            })
+            .collect();
+        let sky = self.ambient.sample(rng);
+        let w = self.warmth.sample(rng);
+        scene.render.ambient = [sky * (1.0 - 0.25 * w), sky, sky * (1.0 + 0.25 * w)];
+    }
+}
+
+impl PlatingFamily {
+    fn apply(&self, scene: &mut SampledScene, models: &[PartModel], rng: &mut impl Rng) {
+        let finishes: Vec<Appearance> = models
+            .iter()
+            .map(|m| {
+                let (_, f0) = PLATINGS[rng.random_range(0..PLATINGS.len())];
+                let b = self.brightness.sample(rng);
+                Appearance {
+                    base_color: f0.map(|c| (c * b).clamp(0.0, 1.0)),
+                    metallic: 1.0,
+                    roughness: self.roughness.sample(rng),
+                    specular: m.appearance().specular,
+                    anisotropy: self.anisotropy.sample(rng),
+                }
+            })
+            .collect();
+        for (inst, part) in scene.render.instances.iter_mut().zip(&scene.parts) {
+            if inst.appearance.metallic >= 0.5 {
+                inst.appearance = finishes[part.model];
+            }
+        }
+    }
+}
+
+impl PlasticFamily {
+    fn apply(&self, scene: &mut SampledScene, models: &[PartModel], rng: &mut impl Rng) {
+        let draws: Vec<(f64, f64, f64)> = models
+            .iter()
+            .map(|_| {
+                (
+                    self.roughness.sample(rng),
+                    self.specular.sample(rng),
+                    self.brightness.sample(rng),
+                )
+            })
+            .collect();
+        for (inst, part) in scene.render.instances.iter_mut().zip(&scene.parts) {
+            if inst.appearance.metallic < 0.5 {
+                let (roughness, specular, b) = draws[part.model];
+                let a = &mut inst.appearance;
+                a.roughness = roughness;
+                a.specular = specular;
+                a.base_color = a.base_color.map(|c| (c * b).clamp(0.0, 1.0));
+            }
+        }
+    }
+}
+
+impl TextureFamily {
+    fn apply(&self, scene: &mut SampledScene, rng: &mut impl Rng) {
+        let grey = self.table_albedo.sample(rng);
+        let tint = [0; 3].map(|_| self.table_tint.sample(rng));
+        let roughness = self.table_roughness.sample(rng);
+        if let Some(table) = scene.render.table.as_mut() {
+            table.appearance.base_color = tint.map(|t| (grey * t).clamp(0.0, 1.0));
+            table.appearance.roughness = roughness;
+        }
+        let pattern = if rng.random_bool(0.5) {
+            TexturePattern::Noise
+        } else {
+            TexturePattern::Stripes
+        };
+        scene.render.table_texture = Some(TableTexture {
+            pattern,
+            scale: self.table_scale.sample(rng),
+            contrast: self.table_contrast.sample(rng),
+            angle: rng.random_range(0.0..std::f64::consts::PI),
+            seed: rng.random(),
+        });
+        let tint = [0; 3].map(|_| self.plate_tint.sample(rng));
+        let roughness = self.plate_roughness.sample(rng);
+        let (grain, dust, scratches) = (
+            self.plate_grain.sample(rng),
+            self.plate_dust.sample(rng),
+            self.plate_scratches.sample(rng),
+        );
+        if let Some(board) = scene.render.board.as_mut() {
+            board.white = board.white.tinted(tint, roughness);
+            board.grain = grain;
+            board.dust = dust;
+            board.scratches = scratches;
+        }
+    }
+}
+
+/// A closed prism of `sides` sides (a cylinder for many) of `diameter` and `height`, standing on
+/// z = 0.
+fn prism(sides: usize, diameter: f64, height: f64) -> TriMesh {
+    let r = diameter / 2.0;
+    let mut vertices = Vec::with_capacity(2 * sides + 2);
+    for z in [0.0, height] {
+        for k in 0..sides {
+            let a = std::f64::consts::TAU * k as f64 / sides as f64;
+            vertices.push(Point3::new(r * a.cos(), r * a.sin(), z));
+        }
+    }
+    vertices.push(Point3::new(0.0, 0.0, 0.0));
+    vertices.push(Point3::new(0.0, 0.0, height));
+    let (n, bottom, top) = (sides as u32, 2 * sides as u32, 2 * sides as u32 + 1);
+    let mut triangles = Vec::with_capacity(4 * sides);
+    for k in 0..n {
+        let k1 = (k + 1) % n;
+        triangles.push([k, k1, n + k1]);
+        triangles.push([k, n + k1, n + k]);
+        triangles.push([bottom, k1, k]);
+        triangles.push([top, n + k, n + k1]);
+    }
+    TriMesh::new(vertices, triangles)
+}
+
+impl DistractorFamily {
+    fn apply(
+        &self,
+        scene: &mut SampledScene,
+        models: &[PartModel],
+        focus: Option<usize>,
+        rng: &mut impl Rng,
+    ) {
+        let centre = parts_centre(scene, focus);
+        // Footprint circles of the parts (and of the distractors placed so far): a distractor
+        // never overlaps one, so no body interpenetrates another.
+        let mut taken: Vec<(Point3<f64>, f64)> = scene
+            .parts
+            .iter()
+            .map(|p| {
+                let c = p.table_T_part.translation.vector;
+                (
+                    Point3::new(c.x, c.y, 0.0),
+                    models[p.model].mesh.extents().norm() / 2.0,
+                )
+            })
+            .collect();
+        let n = self.count.sample(rng).round().max(0.0) as usize;
+        let mut extra = Vec::with_capacity(n);
+        for _ in 0..n {
+            let (size, height) = (self.size.sample(rng), self.height.sample(rng));
+            let cylinder = rng.random_bool(0.5);
+            let aspect = if cylinder {
+                1.0
+            } else {
+                rng.random_range(0.3..=1.0)
+            };
+            let mesh = if cylinder {
+                prism(16, size, height)
+            } else {
+                let mut m = TriMesh::cuboid(Vector3::new(size, size * aspect, height));
+                for v in &mut m.vertices {
+                    v.z += height / 2.0;
+                }
+                m
+            };
+            let reach = (size * (1.0 + aspect * aspect).sqrt()) / 2.0;
+            let metal = rng.random_bool(self.metal_probability);
+            let grey = self.albedo.sample(rng);
+            let hue = [0; 3].map(|_| rng.random_range(0.6..=1.0));
+            let appearance = Appearance {
+                base_color: hue.map(|h| (grey * h).clamp(0.0, 1.0)),
+                metallic: if metal { 1.0 } else { 0.0 },
+                roughness: self.roughness.sample(rng),
+                specular: 0.04,
+                anisotropy: 0.0,
+            };
+            let yaw = rng.random_range(0.0..std::f64::consts::TAU);
+            // A free spot: up to 20 tries, else the distractor is left out.
+            let spot = (0..20).find_map(|_| {
+                let r = self.radius.sample(rng);
+                let phi = rng.random_range(0.0..std::f64::consts::TAU);
+                let p = Point3::new(centre.x + r * phi.cos(), centre.y + r * phi.sin(), 0.0);
+                taken
+                    .iter()
+                    .all(|(q, rq)| (p - q).norm() > reach + rq + 0.001)
+                    .then_some(p)
+            });
+            let (Some(p), Some(render_mesh)) = (spot, RenderMesh::new(&mesh)) else {
+                continue;
+            };
+            taken.push((p, reach));
+            extra.push(Instance::new(
+                Arc::new(render_mesh),
+                Isometry3::from_parts(
+                    Translation3::new(p.x, p.y, 0.0),
+                    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
+                ),
+                appearance,
+            ));
+        }
+        if extra.is_empty() {
+            return;
+        }
+        // The parts keep their instance numbers (their mask ids); the distractors come after.
+        let r = &scene.render;
+        let mut instances = r.instances.clone();
+        instances.extend(extra);
+        let mut render = RenderScene::new(
+            instances,
+            r.board.clone(),
+            r.table,
+            r.lights.clone(),
+            r.ambient,
+        );
+        render.environment = r.environment.clone();
+        render.backlight = r.backlight;
+        render.table_texture = r.table_texture;
+        scene.render = render;
+    }
+}
+
+impl SensorFamily {
+    fn apply(&self, scene: &mut SampledScene, rng: &mut impl Rng) -> [f64; 3] {
+        let s = &mut scene.sensor;
+        s.gain = self.gain.sample(rng);
+        s.blur_sigma = self.blur_sigma.sample(rng);
+        s.read_noise = self.read_noise.sample(rng);
+        s.shot_noise = self.shot_noise.sample(rng);
+        [
+            self.white_balance.sample(rng),
+            1.0,
+            self.white_balance.sample(rng),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lists_name_families_and_unknown_names_are_refused() {
+        assert!(Families::from_list("").unwrap().enabled().is_empty());
+        assert_eq!(Families::from_list("all").unwrap().enabled(), FAMILY_NAMES);
+        assert_eq!(
+            Families::from_list("all,-sensor").unwrap().enabled(),
+            FAMILY_NAMES[..5]
+        );
+        assert_eq!(
+            Families::from_list("plating, textures").unwrap().enabled(),
+            ["plating", "textures"]
+        );
+        let e = Families::from_list("lights,glare").unwrap_err().to_string();
+        assert!(e.starts_with("glare: no randomisation family"), "{e}");
+        assert!(Families::all().validate().is_ok());
+    }
+
+    #[test]
+    fn a_prism_is_closed_and_stands_on_the_table() {
+        let m = prism(16, 0.01, 0.004);
+        m.check_closed().unwrap();
+        let (lo, hi) = m.aabb();
+        assert!(lo.z.abs() < 1e-15 && (hi.z - 0.004).abs() < 1e-15);
+        assert!(m.volume() > 0.0, "outward triangles");
+    }
+}
