@@ -404,6 +404,10 @@ mod safety {
             self.motions.fetch_add(1, Ordering::SeqCst);
             self.inner.move_l(base_T_tcp, motion)
         }
+        fn move_path(&mut self, path: Vec<robots::robot::Waypoint>) -> RobotFuture<'_, ()> {
+            self.motions.fetch_add(1, Ordering::SeqCst);
+            self.inner.move_path(path)
+        }
         fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
             self.motions.fetch_add(1, Ordering::SeqCst);
             self.inner.open_gripper()

@@ -161,6 +161,19 @@ pub enum LimitViolation {
         /// Limit (rad/s²).
         max: f64,
     },
+    /// A blended path's via-point radius over half of a segment it blends (or non-zero at the
+    /// path's end, where nothing follows to blend into).
+    #[error(
+        "blend radius {radius:.4} m at via-point {index} exceeds {max:.4} m (half the shorter adjacent segment; 0 at the last via-point)"
+    )]
+    BlendRadius {
+        /// Via-point index, 0 = the first.
+        index: usize,
+        /// The requested radius (m).
+        radius: f64,
+        /// The largest radius allowed there (m).
+        max: f64,
+    },
     /// A joint target outside its position limits.
     #[error(
         "joint {} = {value:.4} rad is {excess:.4} rad outside its range [{lower:.4}, {upper:.4}] rad",
@@ -199,6 +212,7 @@ impl LimitViolation {
             | Self::TcpAcceleration { requested, max }
             | Self::JointSpeed { requested, max }
             | Self::JointAcceleration { requested, max } => requested - max,
+            Self::BlendRadius { radius, max, .. } => radius - max,
             Self::JointPosition {
                 value,
                 lower,

@@ -268,6 +268,55 @@ impl ContactOutcome {
     }
 }
 
+/// Where a blended path's via-point is and how the arm gets there.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WaypointTarget {
+    /// Joint positions (rad), reached by a joint-space move (URScript `movej`): speed in rad/s,
+    /// acceleration in rad/s².
+    Joints(Joints),
+    /// A TCP pose `base_T_tcp`, reached in a straight tool line (URScript `movel`): speed in
+    /// m/s, acceleration in m/s².
+    Linear(Isometry3<f64>),
+}
+
+/// One via-point of a blended path ([`Robot::move_path`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Waypoint {
+    /// The via-point and the kind of move to it.
+    pub target: WaypointTarget,
+    /// Speed of the move to it (rad/s for joints, m/s for a tool line).
+    pub speed: f64,
+    /// Acceleration of the move to it (rad/s² or m/s²).
+    pub acceleration: f64,
+    /// Blend radius around it (m, measured at the TCP): within it the arm starts the next move
+    /// instead of stopping. 0 stops at the via-point; the last via-point's radius must be 0.
+    pub blend: f64,
+}
+
+impl Waypoint {
+    /// A joint-space via-point.
+    pub fn joints(q: Joints, motion: JointMotion, blend: f64) -> Waypoint {
+        Waypoint {
+            target: WaypointTarget::Joints(q),
+            speed: motion.speed,
+            acceleration: motion.acceleration,
+            blend,
+        }
+    }
+
+    /// A straight-line via-point.
+    #[allow(non_snake_case)]
+    pub fn linear(base_T_tcp: Isometry3<f64>, motion: LinearMotion, blend: f64) -> Waypoint {
+        Waypoint {
+            target: WaypointTarget::Linear(base_T_tcp),
+            speed: motion.speed,
+            acceleration: motion.acceleration,
+            blend,
+        }
+    }
+}
+
 /// An arm the orchestrator commands: a UR over RTDE, or the in-process simulated cell.
 ///
 /// Motions complete (or fail) before their future resolves. All poses are in the robot's base
@@ -288,6 +337,11 @@ pub trait Robot: Send {
     /// Moves the TCP in a straight line to `base_T_tcp`.
     #[allow(non_snake_case)]
     fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()>;
+
+    /// Runs a blended path through `path`'s via-points (a URScript `movej`/`movel` sequence
+    /// with blend radii): the arm rounds each corner within its via-point's radius instead of
+    /// stopping, and stops at the last. Completes when the arm rests at the last via-point.
+    fn move_path(&mut self, path: Vec<Waypoint>) -> RobotFuture<'_, ()>;
 
     /// Opens the gripper the full stroke and waits until it is open.
     fn open_gripper(&mut self) -> RobotFuture<'_, ()>;
@@ -349,6 +403,9 @@ macro_rules! forward_robot {
                 motion: LinearMotion,
             ) -> RobotFuture<'_, ()> {
                 (**self).move_l(base_T_tcp, motion)
+            }
+            fn move_path(&mut self, path: Vec<Waypoint>) -> RobotFuture<'_, ()> {
+                (**self).move_path(path)
             }
             fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
                 (**self).open_gripper()

@@ -17,6 +17,7 @@ use crate::robot::{
     ContactOutcome, JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode,
     RobotStatus, SafetyStatus, Wrench,
 };
+use crate::robot::{Waypoint, WaypointTarget};
 use crate::rtde::client::{Backoff, ClientConfig, ClientError, LinkStatus, RtdeClient};
 use crate::rtde::state::{
     OutputState, RuntimeState, SAFETY_BIT_EMERGENCY_STOPPED, SAFETY_BIT_PROTECTIVE_STOPPED,
@@ -250,6 +251,7 @@ impl UrRobot {
             L::command_recipe(),
             L::heartbeat_recipe(),
             L::force_limit_recipe(),
+            L::blend_recipe(),
         ];
         rtde_config.stall_timeout = config.stall_timeout;
         rtde_config.backoff = Backoff::default();
@@ -504,6 +506,7 @@ impl UrRobot {
                 L::ERROR_MOTION => "controller could not execute the motion",
                 L::ERROR_INVALID_WAIT => "program refused the output wait",
                 L::ERROR_INVALID_FORCE => "program refused the contact force limit",
+                L::ERROR_INVALID_PATH => "program refused the path (order, length or radius)",
                 _ => "program reported an unknown error",
             };
             return Err(RobotError::Rejected {
@@ -585,6 +588,54 @@ impl Robot for UrRobot {
                 ..Command::default()
             };
             self.run_command(cmd, "move_l").await
+        })
+    }
+
+    /// Sent through our program: each via-point as a `KIND_PATH_ADD_*` command (its blend radius
+    /// in its register first), then `KIND_PATH_RUN`, which the program runs as one blended
+    /// `movej`/`movel ..., r=` sequence and reports done at rest, as a single move.
+    fn move_path(&mut self, path: Vec<Waypoint>) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            if path.is_empty() || path.len() > L::MAX_PATH_POINTS {
+                return Err(RobotError::Rejected {
+                    detail: format!(
+                        "move_path: {} via-points (our program takes 1 to {})",
+                        path.len(),
+                        L::MAX_PATH_POINTS
+                    ),
+                });
+            }
+            let mut near = self.joints().await?;
+            for (index, w) in path.iter().enumerate() {
+                let (kind, target) = match w.target {
+                    WaypointTarget::Joints(q) => {
+                        near = q;
+                        (L::KIND_PATH_ADD_MOVEJ, q)
+                    }
+                    WaypointTarget::Linear(pose) => {
+                        near = self.config.kinematics.inverse_nearest(&pose, &near)?.joints;
+                        (L::KIND_PATH_ADD_MOVEL, to_ur_pose(&pose))
+                    }
+                };
+                self.rtde
+                    .send_inputs(3, &[Value::Double(w.blend)])
+                    .await
+                    .map_err(link_error)?;
+                let cmd = Command {
+                    kind,
+                    target,
+                    speed: w.speed,
+                    accel: w.acceleration,
+                    pin: index as i32,
+                    ..Command::default()
+                };
+                self.run_command(cmd, "move_path").await?;
+            }
+            let cmd = Command {
+                kind: L::KIND_PATH_RUN,
+                ..Command::default()
+            };
+            self.run_command(cmd, "move_path").await
         })
     }
 

@@ -44,6 +44,8 @@ fn every_register_is_in_the_external_client_range() {
     let names = layout::command_recipe()
         .into_iter()
         .chain(layout::heartbeat_recipe())
+        .chain(layout::force_limit_recipe())
+        .chain(layout::blend_recipe())
         .chain(layout::output_registers());
     for name in names {
         let index = match Register::parse(&name) {

@@ -69,6 +69,10 @@ impl Robot for CountingRobot<'_> {
         self.moves += 1;
         self.inner.move_l(base_T_tcp, motion)
     }
+    fn move_path(&mut self, path: Vec<robots::robot::Waypoint>) -> RobotFuture<'_, ()> {
+        self.moves += 1;
+        self.inner.move_path(path)
+    }
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.inner.open_gripper()
     }

@@ -400,6 +400,17 @@ impl<R: Robot> Robot for SimHoldingArm<R> {
         })
     }
 
+    /// The arm settles at the path's end as after a joint move: the held target's reading
+    /// is taken from where the arm rests.
+    fn move_path(&mut self, path: Vec<robots::robot::Waypoint>) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            self.robot.move_path(path).await?;
+            let reading = self.robot.tcp_pose().await?;
+            self.settle(reading);
+            Ok(())
+        })
+    }
+
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
         self.robot.open_gripper()
     }

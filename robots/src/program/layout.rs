@@ -27,6 +27,9 @@ pub const DO_WAIT_REG: usize = 32;
 /// when the wrist reads more than this against the direction of motion. Its own recipe
 /// ([`force_limit_recipe`]).
 pub const FORCE_LIMIT_REG: usize = 33;
+/// input_double: blend radius (m) of a path via-point (`KIND_PATH_ADD_*`). Its own recipe
+/// ([`blend_recipe`]), sent before the command that uses it.
+pub const BLEND_REG: usize = 34;
 /// output_int: id of the newest command the program accepted.
 pub const ACCEPTED_ID_REG: usize = 24;
 /// output_int: id of the newest command that finished.
@@ -54,6 +57,17 @@ pub const KIND_SET_TOOL_DO: i32 = 5;
 /// Command kind: guarded linear move to a pose, stopping on contact (`FORCE_LIMIT_REG`).
 pub const KIND_MOVE_UNTIL_CONTACT: i32 = 6;
 
+/// Command kind: append a joint via-point (`movej`) to the path buffer: target, speed,
+/// acceleration, blend radius (`BLEND_REG`); `DO_PIN_REG` carries its index in the path (0
+/// starts a new path).
+pub const KIND_PATH_ADD_MOVEJ: i32 = 7;
+/// Command kind: append a tool-line via-point (`movel` to a pose) to the path buffer, as
+/// [`KIND_PATH_ADD_MOVEJ`].
+pub const KIND_PATH_ADD_MOVEL: i32 = 8;
+/// Command kind: run the buffered path as one blended `movej`/`movel ..., r=` sequence; done
+/// when the arm rests at its last via-point. The buffer is emptied.
+pub const KIND_PATH_RUN: i32 = 9;
+
 /// Status: idle / the last command succeeded.
 pub const STATUS_IDLE: i32 = 0;
 /// Status: a motion is running.
@@ -77,6 +91,14 @@ pub const ERROR_INVALID_WAIT: i32 = 5;
 /// Error: a guarded move's force limit (`FORCE_LIMIT_REG`) was not a positive number up to
 /// [`MAX_CONTACT_FORCE_N`]; the arm did not move.
 pub const ERROR_INVALID_FORCE: i32 = 6;
+
+/// Error: a path command out of order (a via-point index that is not the next, more than
+/// [`MAX_PATH_POINTS`], running an empty path) or with a blend radius that is negative or not a
+/// number; the arm did not move.
+pub const ERROR_INVALID_PATH: i32 = 7;
+
+/// Most via-points a path may have.
+pub const MAX_PATH_POINTS: usize = 16;
 
 /// Seconds without a heartbeat change before the watchdog stops the arm.
 pub const WATCHDOG_TIMEOUT_S: f64 = 0.5;
@@ -108,12 +130,16 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("ERROR_REG", ERROR_REG as f64),
     ("PROGRAM_BEAT_REG", PROGRAM_BEAT_REG as f64),
     ("CONTACT_REG", CONTACT_REG as f64),
+    ("BLEND_REG", BLEND_REG as f64),
     ("KIND_MOVEJ", KIND_MOVEJ as f64),
     ("KIND_MOVEL", KIND_MOVEL as f64),
     ("KIND_STOP", KIND_STOP as f64),
     ("KIND_SET_STANDARD_DO", KIND_SET_STANDARD_DO as f64),
     ("KIND_SET_TOOL_DO", KIND_SET_TOOL_DO as f64),
     ("KIND_MOVE_UNTIL_CONTACT", KIND_MOVE_UNTIL_CONTACT as f64),
+    ("KIND_PATH_ADD_MOVEJ", KIND_PATH_ADD_MOVEJ as f64),
+    ("KIND_PATH_ADD_MOVEL", KIND_PATH_ADD_MOVEL as f64),
+    ("KIND_PATH_RUN", KIND_PATH_RUN as f64),
     ("STATUS_IDLE", STATUS_IDLE as f64),
     ("STATUS_BUSY", STATUS_BUSY as f64),
     ("STATUS_FAILED", STATUS_FAILED as f64),
@@ -124,6 +150,8 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("ERROR_MOTION", ERROR_MOTION as f64),
     ("ERROR_INVALID_WAIT", ERROR_INVALID_WAIT as f64),
     ("ERROR_INVALID_FORCE", ERROR_INVALID_FORCE as f64),
+    ("ERROR_INVALID_PATH", ERROR_INVALID_PATH as f64),
+    ("MAX_PATH_POINTS", MAX_PATH_POINTS as f64),
     ("WATCHDOG_TIMEOUT", WATCHDOG_TIMEOUT_S),
     ("STOP_DECELERATION", STOP_DECELERATION),
     ("MAX_DO_WAIT", MAX_DO_WAIT_S),
@@ -150,6 +178,12 @@ pub fn command_recipe() -> Vec<String> {
 /// uses it, so clients of the plain command recipe are unaffected).
 pub fn force_limit_recipe() -> Vec<String> {
     vec![format!("input_double_register_{FORCE_LIMIT_REG}")]
+}
+
+/// Name of the path via-point blend radius register (its own recipe, sent before each
+/// `KIND_PATH_ADD_*` command).
+pub fn blend_recipe() -> Vec<String> {
+    vec![format!("input_double_register_{BLEND_REG}")]
 }
 
 /// Name of the heartbeat input register (its own recipe).

@@ -395,6 +395,23 @@ impl KinematicArm {
         &self.kinematics
     }
 
+    /// While a blended path runs: whether every segment moving now is a straight tool line (the
+    /// TCP speed limit of linear moves applies then); `None` when no path runs.
+    pub fn path_on_tool_lines(&self) -> Option<bool> {
+        match &self.motion {
+            Motion::Path {
+                segments,
+                first,
+                started,
+            } => Some(
+                segments[*first..*started]
+                    .iter()
+                    .all(|s| matches!(s.shape, SegmentShape::Linear { .. })),
+            ),
+            _ => None,
+        }
+    }
+
     /// Refuses joints outside the kinematics' joint limits.
     fn check_limits(&self, q: &Joints) -> Result<(), ArmError> {
         let limits = &self.kinematics.joint_limits;

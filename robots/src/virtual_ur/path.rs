@@ -3,6 +3,15 @@
 //! (`signal_async_progress(i)` and `movej(q, a=…, v=…, r=…)` / `movel(p[…], a=…, v=…, r=…)`),
 //! re-upload it and send command 45. This module reads those statements and applies URScript's
 //! rule for blend radii that overlap.
+//!
+//! It is also the one model of a blended path's execution outside the controller:
+//! [`execute_path`] runs a path on a [`KinematicArm`] (the virtual UR's own arm model) cycle by
+//! cycle, so the simulated cell times its blended paths, and [`crate::limited::Limited`] samples
+//! them, with exactly the motion the virtual UR executes over RTDE.
+
+use super::arm::{ArmError, ArmModel, ArmState, KinematicArm};
+use crate::kinematics::{Joints, UrKinematics, to_ur_pose};
+use crate::robot::{Waypoint, WaypointTarget};
 
 /// Where a path statement goes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,6 +93,108 @@ impl PathMove {
             },
         }
     }
+}
+
+/// The arm model's moves for a [`Waypoint`] path (poses as UR pose vectors).
+pub fn waypoint_moves(path: &[Waypoint]) -> Vec<PathMove> {
+    path.iter()
+        .map(|w| match w.target {
+            WaypointTarget::Joints(q) => PathMove::Joint {
+                q,
+                speed: w.speed,
+                accel: w.acceleration,
+                blend: w.blend,
+            },
+            WaypointTarget::Linear(pose) => PathMove::Linear {
+                pose: to_ur_pose(&pose),
+                speed: w.speed,
+                accel: w.acceleration,
+                blend: w.blend,
+            },
+        })
+        .collect()
+}
+
+/// The TCP positions of a path's start (joints `start`) and of every via-point, as
+/// [`settle_blends`] takes them: joint via-points through `kinematics`' forward kinematics
+/// (with its TCP), tool-line via-points as given.
+pub fn via_points(kinematics: &UrKinematics, start: &Joints, moves: &[PathMove]) -> Vec<[f64; 3]> {
+    let tcp = |q: &Joints| {
+        let p = kinematics.forward_tcp(q).translation.vector;
+        [p.x, p.y, p.z]
+    };
+    std::iter::once(tcp(start))
+        .chain(moves.iter().map(|m| match m {
+            PathMove::Joint { q, .. } => tcp(q),
+            PathMove::Linear { pose, .. } => [pose[0], pose[1], pose[2]],
+        }))
+        .collect()
+}
+
+/// How a path ran in [`execute_path`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PathRun {
+    /// Seconds from the path's start until the arm rests at its end: whole control cycles, as
+    /// the virtual UR's arm model counts them.
+    pub duration: f64,
+    /// The joints it ends at.
+    pub q: Joints,
+    /// URScript's warnings for blends it skipped ([`settle_blends`]).
+    pub warnings: Vec<String>,
+}
+
+/// One control cycle of a path in [`execute_path`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathCycle {
+    /// Seconds since the path started (the end of this cycle).
+    pub t: f64,
+    /// The arm after this cycle: joints, their speeds and accelerations over the cycle, TCP.
+    pub state: ArmState,
+    /// Every segment moving in this cycle is a straight tool line.
+    pub tool_lines: bool,
+}
+
+/// The virtual UR's control period, s (500 Hz, its default configuration): the cycle a
+/// simulated cell times its blended paths at, so in-process and over RTDE they count the same.
+pub const CONTROLLER_PERIOD: f64 = 0.002;
+
+/// Longest a path may run in [`execute_path`] before it is given up as not ending, s.
+pub const MAX_PATH_DURATION: f64 = 600.0;
+
+/// Runs a blended path on `arm` (from its present joints) at control period `dt`: the blend
+/// radii settled by URScript's rule, then the arm model's blended execution stepped cycle by
+/// cycle until the arm rests; `each` sees every cycle and may stop the run with an error.
+pub fn execute_path<E: From<ArmError>>(
+    arm: &mut KinematicArm,
+    moves: &[PathMove],
+    dt: f64,
+    mut each: impl FnMut(&PathCycle) -> Result<(), E>,
+) -> Result<PathRun, E> {
+    let start = arm.state().q;
+    let points = via_points(arm.kinematics(), &start, moves);
+    let (moves, warnings) = settle_blends(moves, &points);
+    arm.command_path(&moves)?;
+    let mut t = 0.0;
+    let mut cycles = 0u64;
+    while arm.is_moving() {
+        let tool_lines = arm.path_on_tool_lines().unwrap_or(false);
+        arm.step(dt, 1.0)?;
+        cycles += 1;
+        t = cycles as f64 * dt;
+        each(&PathCycle {
+            t,
+            state: arm.state(),
+            tool_lines,
+        })?;
+        if t > MAX_PATH_DURATION {
+            return Err(ArmError::InvalidParameter("a path that does not end").into());
+        }
+    }
+    Ok(PathRun {
+        duration: t,
+        q: arm.state().q,
+        warnings,
+    })
 }
 
 /// The line ur_rtde injects the path after.

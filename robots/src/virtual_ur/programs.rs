@@ -3,6 +3,7 @@
 //! script is recognised by its `def` name and its register protocol is executed here.
 
 use super::arm::{ArmCommand, ArmError, ArmModel};
+use super::path::{PathMove, settle_blends, via_points};
 use super::registers::{Payload, Registers, StandardIo};
 use crate::kinematics::Joints;
 use crate::program::layout as L;
@@ -113,6 +114,10 @@ pub struct CellProgram {
     guard: Option<([f64; 3], f64)>,
     /// The guarded move running met its limit and is coming to rest.
     contact: bool,
+    /// The path buffer (`KIND_PATH_ADD_*`).
+    path: Vec<PathMove>,
+    /// A path to run once the arm is at rest (after a stop): its command id and moves.
+    pending_path: Option<(i32, Vec<PathMove>)>,
 }
 
 impl CellProgram {
@@ -136,6 +141,9 @@ impl CellProgram {
         if let Some((id, _)) = self.pending.take() {
             Self::finish(io.regs, id, L::STATUS_FAILED, error);
         }
+        if let Some((id, _)) = self.pending_path.take() {
+            Self::finish(io.regs, id, L::STATUS_FAILED, error);
+        }
         if io.arm.is_moving() {
             // A positive constant deceleration is always accepted.
             let _ = io.arm.command(ArmCommand::Stop {
@@ -152,6 +160,30 @@ impl CellProgram {
             }
             Err(e) => {
                 tracing::warn!(id, error = %e, "cell_program: motion refused");
+                if matches!(e, ArmError::ProtectiveStop(_)) {
+                    io.protective_stop = true;
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
+                } else {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_MOTION);
+                }
+            }
+        }
+    }
+
+    /// Starts the buffered path as the script's path thread does: URScript's blend rule
+    /// settles the radii (warnings as its popups), then the arm runs the blended sequence.
+    fn start_path(&mut self, io: &mut ProgramIo<'_>, id: i32, moves: Vec<PathMove>) {
+        let start = io.arm.state().q;
+        let points = via_points(io.arm.kinematics(), &start, &moves);
+        let (moves, warnings) = settle_blends(&moves, &points);
+        io.warnings.extend(warnings);
+        match io.arm.command_path(&moves) {
+            Ok(()) => {
+                self.active = Some(id);
+                io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
+            }
+            Err(e) => {
+                tracing::warn!(id, error = %e, "cell_program: path refused");
                 if matches!(e, ArmError::ProtectiveStop(_)) {
                     io.protective_stop = true;
                     Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
@@ -227,6 +259,54 @@ impl CellProgram {
                 }
                 if self.active.is_some() || self.pending.is_some() {
                     self.guard = Some((dir, limit));
+                }
+            }
+            L::KIND_PATH_ADD_MOVEJ | L::KIND_PATH_ADD_MOVEL => {
+                let index = io.regs.input_int[L::DO_PIN_REG];
+                let blend = io.regs.input_double[L::BLEND_REG];
+                if index == 0 {
+                    self.path.clear();
+                }
+                // Like the script: out of order, too many or a negative (or NaN) radius empties
+                // the buffer and fails.
+                if usize::try_from(index).ok() != Some(self.path.len())
+                    || self.path.len() >= L::MAX_PATH_POINTS
+                    || blend.is_nan()
+                    || blend < 0.0
+                {
+                    self.path.clear();
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_INVALID_PATH);
+                    return;
+                }
+                self.path.push(if kind == L::KIND_PATH_ADD_MOVEJ {
+                    PathMove::Joint {
+                        q: target,
+                        speed,
+                        accel,
+                        blend,
+                    }
+                } else {
+                    PathMove::Linear {
+                        pose: target,
+                        speed,
+                        accel,
+                        blend,
+                    }
+                });
+                Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
+            }
+            L::KIND_PATH_RUN => {
+                if self.path.is_empty() {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_INVALID_PATH);
+                    return;
+                }
+                let moves = std::mem::take(&mut self.path);
+                self.stop_motion(io, L::ERROR_STOPPED);
+                if io.arm.is_moving() {
+                    self.pending_path = Some((id, moves));
+                    io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
+                } else {
+                    self.start_path(io, id, moves);
                 }
             }
             L::KIND_STOP => {
@@ -347,6 +427,12 @@ impl Program for CellProgram {
         {
             self.start_move(io, id, cmd);
         }
+        if self.pending_path.is_some()
+            && !io.arm.is_moving()
+            && let Some((id, moves)) = self.pending_path.take()
+        {
+            self.start_path(io, id, moves);
+        }
         if let Some((id, left)) = self.settling.as_mut() {
             *left -= io.dt;
             if *left > 1e-9 {
@@ -376,6 +462,9 @@ impl Program for CellProgram {
             Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
         }
         if let Some((id, _)) = self.pending.take() {
+            Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
+        }
+        if let Some((id, _)) = self.pending_path.take() {
             Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_STOPPED);
         }
     }

@@ -13,6 +13,7 @@ use std::sync::{Arc, Mutex, MutexGuard, TryLockError};
 use robots::kinematics::{Joints, UrKinematics};
 use robots::robot::RobotError;
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
+use robots::virtual_ur::path::PathMove;
 
 use robots::kinematics::from_ur_pose;
 
@@ -45,22 +46,12 @@ pub struct SimArm {
 impl SimArm {
     /// Wraps a shared cell; the arm starts at the cell's joints.
     pub fn new(cell: Arc<Mutex<SimCell>>) -> Self {
-        let (q, limits, kinematics, actuation_time) = {
-            let c = lock(&cell);
-            (
-                c.joints_now(),
-                c.model().spec.limits.clone(),
-                c.model().kinematics.clone(),
-                c.model().spec.gripper.actuation_time,
-            )
-        };
         // The cell's kinematics carry its gripper TCP, so `actual_TCP_pose` and `movel`
         // targets are the gripper's, as with the TCP set in a real controller's installation.
-        let mut arm = KinematicArm::new(kinematics, q);
-        arm.max_joint_speed = limits.max_joint_speed;
-        arm.max_joint_accel = limits.max_joint_acceleration;
-        arm.max_tool_speed = limits.max_tcp_speed;
-        arm.max_tool_accel = limits.max_tcp_acceleration;
+        let (arm, actuation_time) = {
+            let c = lock(&cell);
+            (c.controller_arm(), c.model().spec.gripper.actuation_time)
+        };
         Self {
             cell,
             arm,
@@ -176,6 +167,31 @@ impl ArmModel for SimArm {
 
     fn kinematics(&self) -> &UrKinematics {
         self.arm.kinematics()
+    }
+
+    /// A blended path: every segment checked for table clearance as a single move is, then
+    /// the kinematic arm's blended execution; the cell gets the final joints and the time when
+    /// the arm comes to rest, as for a single move.
+    fn command_path(&mut self, path: &[PathMove]) -> Result<(), ArmError> {
+        if let Some(e) = lock(&self.cell).status_now().safety.motion_error() {
+            return Err(arm_error(e));
+        }
+        lock(&self.cell)
+            .check_controller_path(path)
+            .map_err(arm_error)?;
+        self.arm.command_path(path)?;
+        self.guarded_stop = false;
+        self.elapsed = 0.0;
+        self.was_moving = self.arm.is_moving();
+        if !self.was_moving {
+            let q = self.arm.state().q;
+            lock(&self.cell).set_joints_after_motion(q, 0.0);
+        }
+        Ok(())
+    }
+
+    fn path_progress(&self) -> Option<usize> {
+        self.arm.path_progress()
     }
 
     fn digital_output(&mut self, pin: u32, level: bool) {

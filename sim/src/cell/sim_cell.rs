@@ -5,12 +5,16 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, Vector2, Vector3};
 use robots::kinematics::Joints;
+use robots::kinematics::from_ur_pose;
 use robots::limits::Limits;
+use robots::robot::Waypoint;
 use robots::robot::{
     ContactOutcome, JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode,
     RobotStatus, SafetyStatus, Wrench,
 };
+use robots::virtual_ur::arm::{ArmError, KinematicArm};
 use robots::virtual_ur::force::{FtNoise, TABLE_STIFFNESS};
+use robots::virtual_ur::path::{CONTROLLER_PERIOD, PathMove, execute_path, waypoint_moves};
 use serde::{Deserialize, Serialize};
 
 use super::error::CellError;
@@ -673,6 +677,74 @@ impl SimCell {
         Ok(())
     }
 
+    /// Runs a blended path now (the `Robot::move_path` body): the clearance of every segment
+    /// checked as a move's (a blend cuts a corner by at most its radius), then the motion, its
+    /// time and its final joints from the virtual UR's arm model ([`execute_path`] on
+    /// [`Self::controller_arm`] at the controller's period), the model the controller runs the
+    /// same path with over RTDE.
+    pub fn move_path_sync(&mut self, path: &[Waypoint]) -> Result<(), RobotError> {
+        self.check_motion_allowed()?;
+        let moves = waypoint_moves(path);
+        self.check_controller_path(&moves)?;
+        let mut arm = self.controller_arm();
+        let run = execute_path(&mut arm, &moves, CONTROLLER_PERIOD, |_| {
+            Ok::<_, ArmError>(())
+        })
+        .map_err(|e| RobotError::Rejected {
+            detail: format!("blended path: {e}"),
+        })?;
+        // A blend URScript would skip (`run.warnings`) is skipped here too: the arm stops at
+        // that via-point, as the controller's does.
+        self.clock += run.duration;
+        self.q = run.q;
+        self.end_motion();
+        Ok(())
+    }
+
+    /// The virtual UR's kinematic arm model for this cell, at its joints: the cell's kinematics
+    /// (with its gripper TCP) and its speed and acceleration limits as the arm's.
+    pub fn controller_arm(&self) -> KinematicArm {
+        let limits = &self.model.spec.limits;
+        let mut arm = KinematicArm::new(self.model.kinematics.clone(), self.q);
+        arm.max_joint_speed = limits.max_joint_speed;
+        arm.max_joint_accel = limits.max_joint_acceleration;
+        arm.max_tool_speed = limits.max_tcp_speed;
+        arm.max_tool_accel = limits.max_tcp_acceleration;
+        arm
+    }
+
+    /// For a blended path about to start (in process or in the virtual UR's arm model): each
+    /// segment, from the previous via-point, checked for table clearance as a single move is;
+    /// protective stop on the first that is not clear.
+    pub(crate) fn check_controller_path(&mut self, moves: &[PathMove]) -> Result<(), RobotError> {
+        let kinematics = &self.model.kinematics;
+        let mut q = self.q;
+        let mut poses = Vec::with_capacity(moves.len() * PATH_SAMPLES);
+        for m in moves {
+            match *m {
+                PathMove::Joint { q: target, .. } => {
+                    poses.extend((1..=PATH_SAMPLES).map(|k| {
+                        let s = k as f64 / PATH_SAMPLES as f64;
+                        let qs: Joints = std::array::from_fn(|i| q[i] + s * (target[i] - q[i]));
+                        kinematics.forward_tcp(&qs)
+                    }));
+                    q = target;
+                }
+                PathMove::Linear { pose, .. } => {
+                    let start = kinematics.forward_tcp(&q);
+                    let end = from_ur_pose(&pose);
+                    for k in 1..=PATH_SAMPLES {
+                        let p = start.lerp_slerp(&end, k as f64 / PATH_SAMPLES as f64);
+                        q = kinematics.inverse_nearest(&p, &q)?.joints;
+                        poses.push(p);
+                    }
+                }
+            }
+        }
+        self.begin_motion();
+        self.check_clearance(&poses)
+    }
+
     /// The TCP poses a joint move from the current joints to `target` is checked at.
     fn joint_path(&self, target: &Joints) -> Vec<Isometry3<f64>> {
         (1..=PATH_SAMPLES)
@@ -1120,6 +1192,10 @@ impl Robot for SimCell {
 
     fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
         Box::pin(async move { self.move_l_sync(base_T_tcp, motion) })
+    }
+
+    fn move_path(&mut self, path: Vec<Waypoint>) -> RobotFuture<'_, ()> {
+        Box::pin(async move { self.move_path_sync(&path) })
     }
 
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
