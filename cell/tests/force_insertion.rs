@@ -155,6 +155,34 @@ async fn a_part_landing_just_beyond_the_capture_band_is_found_by_the_spiral_and_
     );
     assert!(v.probes.len() > 1 && v.probes.len() <= 1 + spec.search_points as usize);
     assert!(v.cause.contains("spiral probes"), "{}", v.cause);
+    // The wrench trace is the contact model sampled along every descent: free down to the
+    // rim, then the press up to the stop on the rim; the last descent presses on the seat.
+    let t = &v.trace;
+    assert_eq!(t.contact_force_n, spec.contact_force);
+    assert!(t.samples.len() <= cell::orchestrator::insertion::TRACE_BUDGET);
+    let probes: std::collections::BTreeSet<u32> = t.samples.iter().map(|s| s.probe).collect();
+    assert_eq!(probes.len(), v.probes.len(), "every descent traced");
+    let first: Vec<_> = t.samples.iter().filter(|s| s.probe == 0).collect();
+    assert!(first.len() >= 8, "{first:?}");
+    for s in &first {
+        if s.height_mm > g.engagement * 1e3 + 1e-3 {
+            assert_eq!(s.force_n, 0.0, "free above the rim: {s:?}");
+        }
+    }
+    let stop = first.last().unwrap();
+    assert!(stop.force_n >= spec.contact_force, "{stop:?}");
+    assert!(
+        (stop.height_mm - g.engagement * 1e3).abs() < 0.1,
+        "{stop:?}"
+    );
+    assert!(
+        first
+            .windows(2)
+            .all(|w| w[0].t_s < w[1].t_s && w[0].height_mm > w[1].height_mm)
+    );
+    let last = t.samples.last().unwrap();
+    assert!(last.force_n >= spec.contact_force, "{last:?}");
+    assert!(last.height_mm.abs() < spec.seat_band * 1e3, "{last:?}");
     // And the seat is real: released, the simulator scores it seated.
     cell.inner_mut().open_gripper_to_sync(0.012);
     let r = cell.inner().last_release().cloned().unwrap();
@@ -269,7 +297,43 @@ async fn force_guided_nominal_episodes_assemble_and_log_their_readings() {
             .filter(|e| e.detail.starts_with("force-guided:") && e.detail.contains("wrench ["))
             .count();
         assert_eq!(readings, 3, "episode {episode}: one force log per step");
+        // Each of those events carries its wrench trace, and it survives the event file.
+        for e in out.events.events() {
+            assert_eq!(
+                e.wrench_trace.is_some(),
+                e.detail.starts_with("force-guided:"),
+                "{e:?}"
+            );
+        }
+        let mut jsonl = Vec::new();
+        out.events.write_jsonl(&mut jsonl).unwrap();
+        let read: Vec<cell::orchestrator::Event> = std::str::from_utf8(&jsonl)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(read.len(), out.events.events().len());
+        for (r, e) in read.iter().zip(out.events.events()) {
+            let (Some(a), Some(b)) = (&r.wrench_trace, &e.wrench_trace) else {
+                assert_eq!(r.wrench_trace.is_some(), e.wrench_trace.is_some());
+                continue;
+            };
+            assert_eq!(a.samples.len(), b.samples.len());
+            for (x, y) in a.samples.iter().zip(&b.samples) {
+                assert_eq!(x.probe, y.probe);
+                assert!(
+                    (x.height_mm - y.height_mm).abs() < 1e-9
+                        && (x.force_n - y.force_n).abs() < 1e-9
+                );
+            }
+        }
     }
+    // An event file from before traces were kept still loads, without one.
+    let old: cell::orchestrator::Event = serde_json::from_str(
+        r#"{"episode":0,"step":0,"from":"insert","to":"verify","sim_time_s":3.2,"wall_time_s":0.1,"detail":"force-guided: ..."}"#,
+    )
+    .unwrap();
+    assert_eq!(old.wrench_trace, None);
 }
 
 #[test]

@@ -246,8 +246,19 @@ pub enum RobotError {
 /// A wrench as six numbers: force (N) then moment (N·m).
 pub type Wrench = [f64; 6];
 
-/// How a guarded move ([`Robot::move_until_contact`]) ended.
+/// One wrist reading along a guarded move: when, where the TCP was, and what the wrist felt.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContactSample {
+    /// Seconds since the guarded move began.
+    pub t: f64,
+    /// TCP position, base frame, metres.
+    pub tcp: [f64; 3],
+    /// The wrist's reading there (as [`ContactOutcome::wrench`]).
+    pub wrench: Wrench,
+}
+
+/// How a guarded move ([`Robot::move_until_contact`]) ended.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[allow(non_snake_case)]
 pub struct ContactOutcome {
     /// Where the TCP stopped, `base_T_tcp` (measured).
@@ -258,6 +269,9 @@ pub struct ContactOutcome {
     /// True when the move stopped on contact (the force against the motion reached the limit);
     /// false when it reached its target without.
     pub contact: bool,
+    /// The wrist's readings along the move, in time order (empty where the robot keeps none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub trace: Vec<ContactSample>,
 }
 
 impl ContactOutcome {

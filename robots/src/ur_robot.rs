@@ -14,8 +14,8 @@ use crate::limited::Limited;
 use crate::limits::Limits;
 use crate::program::{self, layout as L};
 use crate::robot::{
-    ContactOutcome, JointMotion, LinearMotion, Robot, RobotError, RobotFuture, RobotMode,
-    RobotStatus, SafetyStatus, Wrench,
+    ContactOutcome, ContactSample, JointMotion, LinearMotion, Robot, RobotError, RobotFuture,
+    RobotMode, RobotStatus, SafetyStatus, Wrench,
 };
 use crate::robot::{Waypoint, WaypointTarget};
 use crate::rtde::client::{Backoff, ClientConfig, ClientError, LinkStatus, RtdeClient};
@@ -160,6 +160,23 @@ pub struct UrRobot {
     dashboard: Option<DashboardClient>,
     next_id: i32,
     heartbeat: tokio::task::JoinHandle<()>,
+}
+
+impl UrRobot {
+    /// Whether the controller's arm has a wrist force/torque sensor, from its software version:
+    /// an e-Series (5 and later) has one at the flange; a CB3 (3.x) only estimates the TCP force
+    /// from its joint currents, too coarse to tell a seat from a jam. `Err` says why not.
+    pub fn force_sensor(&self) -> Result<(), String> {
+        let v = self.rtde.controller_version();
+        if v.major >= 5 {
+            return Ok(());
+        }
+        Err(format!(
+            "the controller runs software {}.{}.{}, a CB-series arm without the e-Series' flange \
+             force/torque sensor (its actual_TCP_force is estimated from joint currents)",
+            v.major, v.minor, v.bugfix
+        ))
+    }
 }
 
 impl Drop for UrRobot {
@@ -441,15 +458,19 @@ impl UrRobot {
 
     /// Sends one command and waits until the program reports it done.
     async fn run_command(&mut self, cmd: Command, operation: &str) -> Result<(), RobotError> {
-        self.run_command_state(cmd, operation).await.map(|_| ())
+        self.run_command_state(cmd, operation, &mut |_| {})
+            .await
+            .map(|_| ())
     }
 
     /// Sends one command and waits until the program reports it done; returns the state that
-    /// reported it.
+    /// reported it. `observe` sees every state received while the command runs, that one
+    /// included.
     async fn run_command_state(
         &mut self,
         cmd: Command,
         operation: &str,
+        observe: &mut (dyn FnMut(&OutputState) + Send),
     ) -> Result<Arc<OutputState>, RobotError> {
         let Command {
             kind,
@@ -492,6 +513,7 @@ impl UrRobot {
             if let Some(e) = blocking_error(&state) {
                 return Err(e);
             }
+            observe(&state);
             if register(&state, L::DONE_ID_REG) != id {
                 continue;
             }
@@ -691,7 +713,25 @@ impl Robot for UrRobot {
                 accel: motion.acceleration,
                 ..Command::default()
             };
-            let state = self.run_command_state(cmd, "move_until_contact").await?;
+            // The wrist's readings along the move, as the controller streamed them.
+            let mut trace = Vec::new();
+            let mut t0 = None;
+            let state = self
+                .run_command_state(cmd, "move_until_contact", &mut |s: &OutputState| {
+                    if let (Some(t), Some(p), Some(w)) = (
+                        s.f64("timestamp"),
+                        s.vector6d("actual_TCP_pose"),
+                        s.vector6d("actual_TCP_force"),
+                    ) {
+                        let t0 = *t0.get_or_insert(t);
+                        trace.push(ContactSample {
+                            t: t - t0,
+                            tcp: [p[0], p[1], p[2]],
+                            wrench: w,
+                        });
+                    }
+                })
+                .await?;
             let missing = |what: &str| RobotError::ConnectionLost {
                 detail: format!("{what} missing"),
             };
@@ -704,6 +744,7 @@ impl Robot for UrRobot {
                     .vector6d("actual_TCP_force")
                     .ok_or_else(|| missing("actual_TCP_force"))?,
                 contact: register(&state, L::CONTACT_REG) == 1,
+                trace,
             })
         })
     }

@@ -150,6 +150,30 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         sim::fsutil::write_atomic(&path, svg.as_bytes())?;
         pictures.push(path);
     }
+    // Each force-guided insertion's wrench trace, numbered by step and attempt.
+    let mut attempts = std::collections::BTreeMap::<Option<usize>, u32>::new();
+    for e in out.events.events() {
+        let Some(trace) = &e.wrench_trace else {
+            continue;
+        };
+        let n = attempts.entry(e.step).or_default();
+        *n += 1;
+        let step = e.step.map_or_else(|| "x".to_string(), |s| s.to_string());
+        let path = dir.join(format!(
+            "episode-{:06}-step-{step}-insertion-{n}-wrench.svg",
+            r.episode
+        ));
+        let svg = cell::report::wrench::wrench_trace_plot(
+            &format!(
+                "episode {}, step {step}, insertion {n}: the wrist during the guarded descents",
+                r.episode
+            ),
+            trace,
+        )?;
+        std::fs::create_dir_all(&dir)?;
+        sim::fsutil::write_atomic(&path, svg.as_bytes())?;
+        pictures.push(path);
+    }
     if !r.success && setup.perception.needs_pixels() {
         pictures.extend(cell::report::capture_picture::capture_picture(
             &setup, r, &dir,

@@ -39,6 +39,12 @@ pub struct Args {
     /// Also write the counts and every disagreement as JSON (atomically).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Instead of comparing engines, read each boundary insertion as force-guided insertion
+    /// does (first contact from force and depth, through the wrist sensor's noise, against the
+    /// scenario's `[force_insertion]` thresholds, or the defaults) and compare the verdicts with
+    /// the `--reference` engine's truth; `--min-agreement` applies to seated-or-not.
+    #[arg(long)]
+    pub force_verdicts: bool,
 }
 
 /// Scores boundary misalignments with every engine, prints a table per step, the cases where
@@ -79,6 +85,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
+    if args.force_verdicts {
+        let truth = engines
+            .iter()
+            .find(|e| e.name() == reference)
+            .expect("the reference is among the engines");
+        return force_verdicts(&args, &scenario, &steps, truth);
+    }
     let started = Instant::now();
     let agreement = compare_scorers(&steps, args.samples, args.seed, &engines)?;
     let elapsed = started.elapsed().as_secs_f64();
@@ -223,4 +236,99 @@ fn pose(p: &PoseError) -> String {
         p.tilt * 1e3,
         p.yaw * 1e3
     )
+}
+
+/// `--force-verdicts`: the force-guided verdicts against the reference engine's truth.
+fn force_verdicts(
+    args: &Args,
+    scenario: &Scenario,
+    steps: &[StepGeometry<'_>],
+    truth: &Arc<dyn InsertionScorer>,
+) -> anyhow::Result<ExitCode> {
+    use cell::orchestrator::insertion::agreement::{ForceCounts, force_agreement};
+    let spec = scenario.spec.force_insertion.unwrap_or_default();
+    let started = Instant::now();
+    let a = force_agreement(steps, args.samples, args.seed, truth, &spec)?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let t = &a.truth;
+    println!(
+        "force-guided verdicts against {t} (seat band {:.3} mm, contact {:.1} N at {:.0} N/mm, \
+         UR5e sensor noise); \"from {t}'s stop\": first contact where {t} stopped the part; \
+         \"from the cell's stop\": where the simulated cell's analytic contact model stops it",
+        spec.seat_band * 1e3,
+        spec.contact_force,
+        spec.contact_stiffness * 1e-3
+    );
+    println!(
+        "{:<14} {:>7} {:>10} {:>22} {:>22} {:>22} {:>22}",
+        "step",
+        "samples",
+        format!("{t} seated"),
+        format!("seated? from {t} %"),
+        format!("outcome from {t} %"),
+        "seated? from cell %",
+        "outcome from cell %"
+    );
+    let row = |name: &str, c: &ForceCounts| {
+        println!(
+            "{:<14} {:>7} {:>10} {:>22.1} {:>22.1} {:>22.1} {:>22.1}",
+            name,
+            c.samples,
+            c.truth_seated,
+            100.0 * c.rate(c.engine_seating),
+            100.0 * c.rate(c.engine_outcome),
+            100.0 * c.rate(c.cell_seating),
+            100.0 * c.rate(c.cell_outcome)
+        );
+    };
+    for (part, c) in &a.steps {
+        row(part, c);
+    }
+    row("all", &a.all);
+    println!("{} insertions in {elapsed:.1} s", a.all.samples);
+    let word = |o: cell::episode::StepOutcome| format!("{o:?}").to_lowercase();
+    if !a.disagreements.is_empty() {
+        println!(
+            "\n{} cases where a force verdict differs from {t} (stops µm above seated; noise N){}:",
+            a.disagreements.len(),
+            if a.disagreements.len() > SHOWN_CASES {
+                format!("; the first {SHOWN_CASES}")
+            } else {
+                String::new()
+            }
+        );
+        for c in a.disagreements.iter().take(SHOWN_CASES) {
+            println!(
+                "  step {} sample {}: start {}\n    {t} {} stop {:+.1}; force from {t}'s stop \
+                 {}; cell stop {:+.1} → {}; noise {:+.2}",
+                c.step + 1,
+                c.sample,
+                pose(&c.start),
+                word(c.truth),
+                c.truth_stop * 1e6,
+                word(c.engine),
+                c.cell_stop * 1e6,
+                word(c.cell),
+                c.noise_n
+            );
+        }
+    }
+    if let Some(out) = &args.out {
+        let json = serde_json::to_vec_pretty(&a)?;
+        sim::fsutil::write_atomic(out, &json)
+            .with_context(|| format!("writing {}", out.display()))?;
+        println!("wrote {}", out.display());
+    }
+    let rate = a.all.rate(a.all.engine_seating);
+    Ok(if rate >= args.min_agreement {
+        ExitCode::SUCCESS
+    } else {
+        eprintln!(
+            "error: force-guided seating verdicts agree with {t} on {:.1} %, below \
+             --min-agreement {:.1} %",
+            100.0 * rate,
+            100.0 * args.min_agreement
+        );
+        ExitCode::FAILURE
+    })
 }

@@ -129,6 +129,9 @@ impl<'a> Engine<'a> {
             let step = (self.index < self.steps()).then_some(self.index);
             let now = self.clock();
             self.log.push(step, state, next, now, detail);
+            if let (State::Insert, Some(v)) = (state, self.step.force.as_ref()) {
+                self.log.attach_trace(v.trace.clone());
+            }
             state = next;
         }
         let success = self.records.len() == self.steps()

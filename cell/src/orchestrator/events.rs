@@ -28,6 +28,43 @@ pub struct Event {
     /// What happened, in words.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub detail: String,
+    /// A force-guided insertion's wrist readings, on the transition into Verify (absent
+    /// otherwise, and in event files from before traces were kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wrench_trace: Option<WrenchTrace>,
+}
+
+/// A force-guided insertion's wrist readings along its guarded descents, in the insertion frame,
+/// decimated, with the thresholds its verdicts were read against.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WrenchTrace {
+    /// Force against the motion at which a guarded descent stops, N.
+    pub contact_force_n: f64,
+    /// Stiffness the verdicts assume for the press, N/m (first contact is the stop's height
+    /// plus force / stiffness).
+    pub contact_stiffness_n_per_m: f64,
+    /// First contact at most this high above seated reads as seated, mm.
+    pub seat_band_mm: f64,
+    /// First contact at least this high above seated reads as missed on the rim, mm (jammed
+    /// between the two).
+    pub rim_mm: f64,
+    /// The readings, descent by descent, each in time order.
+    pub samples: Vec<WrenchSample>,
+}
+
+/// One wrist reading of a [`WrenchTrace`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WrenchSample {
+    /// Which guarded descent (0: the planned one, then the spiral probes).
+    pub probe: u32,
+    /// Seconds since that descent began.
+    pub t_s: f64,
+    /// TCP height above seated along the insertion axis, mm.
+    pub height_mm: f64,
+    /// Force out of the hole (against the descent), N.
+    pub force_n: f64,
+    /// Force across the insertion axis, N.
+    pub lateral_n: f64,
 }
 
 /// The events of one episode, in order.
@@ -71,7 +108,15 @@ impl EventLog {
             sim_time_s,
             wall_time_s: self.start.elapsed().as_secs_f64(),
             detail,
+            wrench_trace: None,
         });
+    }
+
+    /// Attaches a force-guided insertion's wrench trace to the last event recorded.
+    pub fn attach_trace(&mut self, trace: WrenchTrace) {
+        if let Some(e) = self.events.last_mut() {
+            e.wrench_trace = Some(trace);
+        }
     }
 
     /// Records that a motion named `waypoint` ended at `sim_time_s`: the time since the state's

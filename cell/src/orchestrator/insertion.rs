@@ -20,8 +20,9 @@
 //! not confirmed seated.
 
 use nalgebra::{Isometry3, Translation3, Vector3};
-use robots::robot::{ContactOutcome, LinearMotion, Robot, RobotError};
+use robots::robot::{ContactOutcome, ContactSample, LinearMotion, Robot, RobotError};
 
+use super::events::{WrenchSample, WrenchTrace};
 use crate::episode::StepOutcome;
 use crate::scenario::ForceInsertionSpec;
 
@@ -32,6 +33,10 @@ const PROBE_LIFT_LEAD_INS: f64 = 2.0;
 const MIN_PROBE_LIFT: f64 = 1e-4;
 /// Share of the contact force the wrist must still feel for a seat to be confirmed.
 const CONFIRM_FORCE_SHARE: f64 = 0.5;
+/// Most wrist readings one insertion keeps in its wrench trace, over all its descents.
+pub const TRACE_BUDGET: usize = 360;
+/// Fewest readings kept of each descent, whatever the number of probes.
+const TRACE_PER_PROBE_MIN: usize = 8;
 
 /// The geometry of one insertion, in the base frame.
 #[derive(Debug, Clone, Copy)]
@@ -77,6 +82,8 @@ pub struct Probe {
     pub wrench: [f64; 6],
     /// The outcome read from it.
     pub outcome: StepOutcome,
+    /// The wrist's readings along the descent, in the insertion frame, decimated.
+    pub samples: Vec<WrenchSample>,
 }
 
 impl Probe {
@@ -123,6 +130,51 @@ pub struct ForceVerdict {
     pub cause: String,
     /// Every guarded descent, in order (the first is the planned one, the rest spiral probes).
     pub probes: Vec<Probe>,
+    /// The wrist readings of every descent with the thresholds they were read against, for
+    /// the episode events.
+    pub trace: WrenchTrace,
+}
+
+/// First contact at least this high above seated reads as a miss on the receiver's rim, metres.
+fn rim_height(geometry: &InsertionGeometry) -> f64 {
+    geometry.engagement - geometry.lead_in / 2.0
+}
+
+/// A guarded move's readings in the insertion frame, at most `keep` of them (evenly spread,
+/// the first and the last, the stop, always kept).
+pub fn trace_samples(
+    trace: &[ContactSample],
+    geometry: &InsertionGeometry,
+    probe: u32,
+    keep: usize,
+) -> Vec<WrenchSample> {
+    let out = geometry.out();
+    let n = trace.len();
+    let picked: Vec<usize> = if n <= keep.max(2) {
+        (0..n).collect()
+    } else {
+        let mut v: Vec<usize> = (0..keep)
+            .map(|i| (i * (n - 1) + (keep - 1) / 2) / (keep - 1))
+            .collect();
+        v.dedup();
+        v
+    };
+    picked
+        .into_iter()
+        .map(|i| {
+            let s = &trace[i];
+            let f = Vector3::new(s.wrench[0], s.wrench[1], s.wrench[2]);
+            let along = f.dot(&out);
+            let tcp = Vector3::from(s.tcp);
+            WrenchSample {
+                probe,
+                t_s: s.t,
+                height_mm: (tcp - geometry.seated.translation.vector).dot(&out) * 1e3,
+                force_n: along,
+                lateral_n: (f - out * along).norm(),
+            }
+        })
+        .collect()
 }
 
 impl ForceVerdict {
@@ -156,14 +208,20 @@ pub fn classify(
         return (StepOutcome::Missed, stop);
     }
     let height = stop + outcome.force_along(&out).max(0.0) / spec.contact_stiffness;
-    let verdict = if height <= spec.seat_band {
+    (verdict_at(height, rim_height(geometry), spec), height)
+}
+
+/// The verdict of a first contact `height` above seated (metres): seated within
+/// [`ForceInsertionSpec::seat_band`], missed on the rim at or above `rim` (the engagement depth
+/// less half the lead-in), jammed in between.
+pub fn verdict_at(height: f64, rim: f64, spec: &ForceInsertionSpec) -> StepOutcome {
+    if height <= spec.seat_band {
         StepOutcome::Seated
-    } else if height >= geometry.engagement - geometry.lead_in / 2.0 {
+    } else if height >= rim {
         StepOutcome::Missed
     } else {
         StepOutcome::Jammed
-    };
-    (verdict, height)
+    }
 }
 
 /// Confirms a seat before release from a fresh reading with the arm still pressing: the wrist
@@ -223,6 +281,7 @@ async fn descend(
     geometry: &InsertionGeometry,
     spec: &ForceInsertionSpec,
     offset: [f64; 2],
+    probe: u32,
 ) -> Result<Probe, RobotError> {
     let motion = LinearMotion {
         speed: spec.contact_speed,
@@ -233,12 +292,14 @@ async fn descend(
         .move_until_contact(target, motion, spec.contact_force)
         .await?;
     let (verdict, height) = classify(&outcome, geometry, spec);
+    let keep = (TRACE_BUDGET / (1 + spec.search_points as usize)).max(TRACE_PER_PROBE_MIN);
     Ok(Probe {
         offset,
         contact: outcome.contact,
         height,
         wrench: outcome.wrench,
         outcome: verdict,
+        samples: trace_samples(&outcome.trace, geometry, probe, keep),
     })
 }
 
@@ -250,7 +311,7 @@ pub async fn force_insert(
     geometry: &InsertionGeometry,
     spec: &ForceInsertionSpec,
 ) -> Result<ForceVerdict, RobotError> {
-    let mut probes = vec![descend(robot, geometry, spec, [0.0, 0.0]).await?];
+    let mut probes = vec![descend(robot, geometry, spec, [0.0, 0.0], 0).await?];
     let lift = geometry.engagement + (PROBE_LIFT_LEAD_INS * geometry.lead_in).max(MIN_PROBE_LIFT);
     let mut search = spiral(geometry.capture, spec.search_points).into_iter();
     loop {
@@ -271,7 +332,8 @@ pub async fn force_insert(
         robot
             .move_l(geometry.at(offset, lift), geometry.slow)
             .await?;
-        probes.push(descend(robot, geometry, spec, offset).await?);
+        let probe = u32::try_from(probes.len()).unwrap_or(u32::MAX);
+        probes.push(descend(robot, geometry, spec, offset, probe).await?);
     }
     // A seat found by the search is the verdict; otherwise the planned descent's reading says
     // what went wrong (the retries search by it: yaw after a jam, sideways after a miss).
@@ -320,11 +382,184 @@ pub async fn force_insert(
             ),
         ),
     };
+    let trace = WrenchTrace {
+        contact_force_n: spec.contact_force,
+        contact_stiffness_n_per_m: spec.contact_stiffness,
+        seat_band_mm: spec.seat_band * 1e3,
+        rim_mm: rim_height(geometry) * 1e3,
+        samples: probes.iter().flat_map(|p| p.samples.clone()).collect(),
+    };
     Ok(ForceVerdict {
         outcome,
         cause,
         probes,
+        trace,
     })
+}
+
+/// How well the force-guided verdicts tell seated, jammed and missed apart near the capture
+/// boundary, against a contact engine's truth (`cell scorers --force-verdicts`).
+pub mod agreement {
+    use std::sync::Arc;
+
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rayon::prelude::*;
+    use robots::virtual_ur::force::FtNoise;
+    use serde::Serialize;
+    use sim::cell::insertion::agreement::{StepGeometry, boundary_misalignment};
+    use sim::cell::insertion::{InsertionCase, InsertionScorer, PoseError, ScorerError, Verdict};
+
+    use super::verdict_at;
+    use crate::episode::StepOutcome;
+    use crate::scenario::ForceInsertionSpec;
+
+    /// One boundary insertion: the truth and what the guarded descent reads.
+    #[derive(Debug, Clone, Serialize)]
+    pub struct ForceCase {
+        /// Assembly step index.
+        pub step: usize,
+        /// Sample index (with the seed it redraws the misalignment).
+        pub sample: usize,
+        /// The held part's misalignment at the start.
+        pub start: PoseError,
+        /// The contact engine's verdict (the truth).
+        pub truth: StepOutcome,
+        /// Where the contact engine stopped the part, metres above seated.
+        pub truth_stop: f64,
+        /// The force-guided verdict from the contact engine's stop.
+        pub engine: StepOutcome,
+        /// Where the simulated cell's contact model (the analytic capture model) stops it.
+        pub cell_stop: f64,
+        /// The force-guided verdict from the simulated cell's stop.
+        pub cell: StepOutcome,
+        /// The sensor's error along the insertion axis in this reading, N.
+        pub noise_n: f64,
+    }
+
+    /// Counts of one step, or of all.
+    #[derive(Debug, Clone, Default, Serialize)]
+    pub struct ForceCounts {
+        /// Insertions scored.
+        pub samples: usize,
+        /// The truth seated.
+        pub truth_seated: usize,
+        /// Seated-or-not agrees, verdicts from the contact engine's stop.
+        pub engine_seating: usize,
+        /// Seated / jammed / missed agree, from the contact engine's stop.
+        pub engine_outcome: usize,
+        /// Seated-or-not agrees, verdicts from the simulated cell's stop.
+        pub cell_seating: usize,
+        /// Seated / jammed / missed agree, from the simulated cell's stop.
+        pub cell_outcome: usize,
+    }
+
+    impl ForceCounts {
+        fn add(&mut self, c: &ForceCase) {
+            let seated = |o: StepOutcome| o == StepOutcome::Seated;
+            self.samples += 1;
+            self.truth_seated += usize::from(seated(c.truth));
+            self.engine_seating += usize::from(seated(c.engine) == seated(c.truth));
+            self.engine_outcome += usize::from(c.engine == c.truth);
+            self.cell_seating += usize::from(seated(c.cell) == seated(c.truth));
+            self.cell_outcome += usize::from(c.cell == c.truth);
+        }
+
+        /// `count` as a fraction of the samples.
+        pub fn rate(&self, count: usize) -> f64 {
+            count as f64 / self.samples.max(1) as f64
+        }
+    }
+
+    /// The measurement: counts per step and overall, and every case where a verdict differs
+    /// from the truth.
+    #[derive(Debug, Clone, Serialize)]
+    pub struct ForceAgreement {
+        /// The truth's engine.
+        pub truth: String,
+        /// Per step: its part and counts.
+        pub steps: Vec<(String, ForceCounts)>,
+        /// All steps together.
+        pub all: ForceCounts,
+        /// The cases where either force verdict differs from the truth.
+        pub disagreements: Vec<ForceCase>,
+    }
+
+    fn outcome(v: Verdict) -> StepOutcome {
+        match v {
+            Verdict::Seated => StepOutcome::Seated,
+            Verdict::Jammed => StepOutcome::Jammed,
+            Verdict::Missed => StepOutcome::Missed,
+        }
+    }
+
+    /// Draws `samples` misalignments around the capture boundary (as `cell scorers` does, the
+    /// same seed the same draws), scores each with `truth`, and reads each as the force-guided
+    /// strategy does: first contact where the part stops (the contact engine's stop, and the
+    /// simulated cell's analytic one), read back through the UR5e sensor's noise at the
+    /// contact stiffness, against the seat band and the rim (the mating's engagement depth
+    /// less half its lead-in).
+    pub fn force_agreement(
+        steps: &[StepGeometry<'_>],
+        samples: usize,
+        seed: u64,
+        truth: &Arc<dyn InsertionScorer>,
+        spec: &ForceInsertionSpec,
+    ) -> Result<ForceAgreement, ScorerError> {
+        let cases: Vec<ForceCase> = (0..samples)
+            .into_par_iter()
+            .map(|k| {
+                let i = k % steps.len().max(1);
+                let s = &steps[i];
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                rng.set_stream(k as u64);
+                let case = InsertionCase {
+                    mating: &s.mating,
+                    held: s.held,
+                    receivers: &s.receivers,
+                    ins_T_part: boundary_misalignment(&s.mating, &mut rng),
+                };
+                let scored = truth.score(&case)?.result;
+                let cell_stop = sim::cell::insertion::analytic::score(&s.mating, &case.ins_T_part)
+                    .end
+                    .height;
+                // The reading's error along the axis, in N: a fresh bias and noise per case.
+                let noise_n = FtNoise::ur5e(seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+                    .sample()[2];
+                let rim = s.mating.engagement - s.mating.lead_in / 2.0;
+                let read =
+                    |stop: f64| verdict_at(stop + noise_n / spec.contact_stiffness, rim, spec);
+                Ok(ForceCase {
+                    step: i,
+                    sample: k,
+                    start: scored.start,
+                    truth: outcome(scored.verdict),
+                    truth_stop: scored.end.height,
+                    engine: read(scored.end.height),
+                    cell_stop,
+                    cell: read(cell_stop),
+                    noise_n,
+                })
+            })
+            .collect::<Result<_, ScorerError>>()?;
+        let mut out = ForceAgreement {
+            truth: truth.name().to_string(),
+            steps: steps
+                .iter()
+                .map(|s| (s.mating.part.clone(), ForceCounts::default()))
+                .collect(),
+            all: ForceCounts::default(),
+            disagreements: Vec::new(),
+        };
+        for c in cases {
+            out.steps[c.step].1.add(&c);
+            out.all.add(&c);
+            if c.engine != c.truth || c.cell != c.truth {
+                out.disagreements.push(c);
+            }
+        }
+        Ok(out)
+    }
 }
 
 #[cfg(test)]
@@ -350,6 +585,7 @@ mod tests {
             stopped_at: Isometry3::translation(0.1, -0.4, 0.02 + height),
             wrench: [0.0, 0.0, force, 0.0, 0.0, 0.0],
             contact,
+            trace: vec![],
         }
     }
 
@@ -376,6 +612,35 @@ mod tests {
         let (o, h) = classify(&stop(-spec.overtravel, 0.5, false), &g, &spec);
         assert_eq!(o, StepOutcome::Missed);
         assert!(h < 0.0);
+    }
+
+    #[test]
+    fn a_trace_is_read_in_the_insertion_frame_and_decimated_keeping_its_ends() {
+        let g = geometry();
+        let trace: Vec<ContactSample> = (0..100)
+            .map(|k| ContactSample {
+                t: f64::from(k) * 0.01,
+                tcp: [0.1, -0.4, 0.02 + 0.003 - f64::from(k) * 3e-5],
+                wrench: [3.0, 4.0, f64::from(k) * 0.1, 0.0, 0.0, 0.0],
+            })
+            .collect();
+        let all = trace_samples(&trace, &g, 2, 200);
+        assert_eq!(all.len(), 100);
+        assert!((all[0].height_mm - 3.0).abs() < 1e-9);
+        assert!((all[99].force_n - 9.9).abs() < 1e-9);
+        assert!((all[99].lateral_n - 5.0).abs() < 1e-9);
+        assert!(all.iter().all(|s| s.probe == 2));
+        let some = trace_samples(&trace, &g, 0, 10);
+        assert_eq!(some.len(), 10);
+        assert_eq!(some[0], all[0].clone_with_probe(0));
+        assert_eq!(some[9], all[99].clone_with_probe(0));
+        assert!(some.windows(2).all(|w| w[0].t_s < w[1].t_s));
+    }
+
+    impl WrenchSample {
+        fn clone_with_probe(&self, probe: u32) -> WrenchSample {
+            WrenchSample { probe, ..*self }
+        }
     }
 
     #[test]

@@ -57,13 +57,14 @@ pub use activity::Activity;
 pub use cell_io::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, SplitCell, Workcell};
 pub use context::{EpisodeContext, EpisodeSettings, Setup};
 pub use engine::{FEEDER_EXHAUSTED, FEEDER_SHAKE_BOUND};
-pub use events::{Event, EventLog};
+pub use events::{Event, EventLog, WrenchSample, WrenchTrace};
 pub use geometry::{CellKnowledge, KnowledgeError, top_down};
 pub use planning::{
     Motion, Plan, PlanError, Planner, PlanningConfig, SearchConfig, Speeds, grasped_offset,
 };
 pub use production::{
-    ProductionCellIo, ProductionError, ProductionOptions, open_camera, preflight,
+    ProductionCellIo, ProductionError, ProductionOptions, force_sensor_preflight, open_camera,
+    preflight,
 };
 pub use selection::{
     Neighbour, Rejection, Selection, SelectionConfig, SelectionResult, UnposedObstacle,

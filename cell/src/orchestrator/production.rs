@@ -44,6 +44,25 @@ pub enum ProductionError {
     /// The perception mode cannot read camera images.
     #[error("perception mode {0:?} cannot read camera images")]
     Perception(PerceptionMode),
+    /// The scenario inserts by feel and the arm reports no wrist force sensor.
+    #[error(
+        "the scenario's [force_insertion] inserts by feel and needs the wrist's force/torque \
+         sensor, and the arm reports none: {0}"
+    )]
+    NoForceSensor(String),
+}
+
+/// The pre-flight check of a connected arm, before anything moves: a scenario with
+/// `[force_insertion]` needs a wrist force sensor, and `sensor` is the arm's own answer
+/// (`Err` with why it has none, e.g. `robots::ur_robot::UrRobot::force_sensor`).
+pub fn force_sensor_preflight(
+    scenario: &Scenario,
+    sensor: Result<(), String>,
+) -> Result<(), ProductionError> {
+    match (&scenario.spec.force_insertion, sensor) {
+        (Some(_), Err(why)) => Err(ProductionError::NoForceSensor(why)),
+        _ => Ok(()),
+    }
 }
 
 /// Checks everything a production run needs before anything connects or moves; opens the

@@ -7,6 +7,7 @@ pub mod html;
 pub mod pictures;
 pub mod plots;
 pub mod timeline;
+pub mod wrench;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -20,7 +20,7 @@ use crate::harness::{
 use crate::learned;
 use crate::orchestrator::{
     EpisodeOutput, KnowledgeError, ProductionCellIo, ProductionError, ProductionOptions, Setup,
-    SplitCell, preflight, run_episode,
+    SplitCell, force_sensor_preflight, preflight, run_episode,
 };
 use crate::report::{ReportError, ReportFiles, write_report};
 use crate::scenario::{PerceptionMode, Scenario};
@@ -43,6 +43,14 @@ pub enum EpisodeError {
         robot: String,
         /// The failure.
         source: robots::robot::RobotError,
+    },
+    /// The connected controller failed a pre-flight check; nothing moved.
+    #[error("{robot}: refused before anything moves: {source}")]
+    Preflight {
+        /// The controller.
+        robot: String,
+        /// The check that failed.
+        source: ProductionError,
     },
     /// The episode's event log could not be written.
     #[error("writing {}: {source}", path.display())]
@@ -291,6 +299,12 @@ impl Production {
         config.limits = cell.limits.clone();
         config.gripper_actuation_s = cell.gripper.actuation_time;
         let mut robot = UrRobot::connect(config).await.map_err(robot_err)?;
+        force_sensor_preflight(&setup.scenario, robot.inner().force_sensor()).map_err(
+            |source| EpisodeError::Preflight {
+                robot: self.robot.to_string(),
+                source,
+            },
+        )?;
         let (mut io, mut perception) = self
             .side
             .lock()

@@ -35,6 +35,10 @@ const PATH_SAMPLES: usize = 12;
 /// Samples along a guarded move's path searched for the first contact (then refined by
 /// bisection).
 const GUARD_SAMPLES: usize = 400;
+/// Even steps of a guarded move at which its wrench trace samples the contact model.
+const GUARD_TRACE_SAMPLES: usize = 64;
+/// Further even steps of the trace from first touch to the stop (the press).
+const GUARD_TRACE_PRESS_SAMPLES: usize = 16;
 
 /// A move a controller is about to run, for [`SimCell::check_controller_move`].
 #[derive(Debug, Clone, Copy)]
@@ -1085,6 +1089,7 @@ impl SimCell {
         };
         let stop = pose_at(stop_s);
         let (_, q) = self.linear_path(&stop)?;
+        let trace = self.guard_trace(&start, &pose_at, stop_s, touch_s, &motion);
         let reading = {
             let truth = self.contact_wrench_at(&stop);
             let e = self.ft.sample();
@@ -1101,7 +1106,57 @@ impl SimCell {
             stopped_at: self.tcp_pose_now(),
             wrench: reading,
             contact,
+            trace,
         })
+    }
+
+    /// The contact model's true wrench ([`Self::contact_wrench_at`], without the sensor's
+    /// noise, whose stream it leaves alone) sampled along a guarded move up to its stop
+    /// (`stop_s` of the way): [`GUARD_TRACE_SAMPLES`] even steps, and
+    /// [`GUARD_TRACE_PRESS_SAMPLES`] from first touch (`touch_s`) to the stop, timed by the
+    /// commanded speed profile from rest.
+    fn guard_trace(
+        &self,
+        start: &Isometry3<f64>,
+        pose_at: &dyn Fn(f64) -> Isometry3<f64>,
+        stop_s: f64,
+        touch_s: f64,
+        motion: &LinearMotion,
+    ) -> Vec<robots::robot::ContactSample> {
+        let limits = &self.model.spec.limits;
+        let v = motion.speed.min(limits.max_tcp_speed).max(1e-9);
+        let a = motion
+            .acceleration
+            .min(limits.max_tcp_acceleration)
+            .max(1e-9);
+        let ramp = v * v / (2.0 * a);
+        let mut at: Vec<f64> = (0..=GUARD_TRACE_SAMPLES)
+            .map(|k| stop_s * k as f64 / GUARD_TRACE_SAMPLES as f64)
+            .collect();
+        // The press from first touch to the stop, resolved on its own.
+        at.extend(
+            (0..GUARD_TRACE_PRESS_SAMPLES).map(|k| {
+                touch_s + (stop_s - touch_s) * k as f64 / GUARD_TRACE_PRESS_SAMPLES as f64
+            }),
+        );
+        at.sort_by(f64::total_cmp);
+        at.dedup();
+        at.into_iter()
+            .map(|s| {
+                let pose = pose_at(s);
+                let x = (pose.translation.vector - start.translation.vector).norm();
+                let t = if x < ramp {
+                    (2.0 * x / a).sqrt()
+                } else {
+                    v / (2.0 * a) + x / v
+                };
+                robots::robot::ContactSample {
+                    t,
+                    tcp: pose.translation.vector.into(),
+                    wrench: self.contact_wrench_at(&pose),
+                }
+            })
+            .collect()
     }
 
     /// Mode, safety and program state.
