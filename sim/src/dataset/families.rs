@@ -78,8 +78,8 @@ impl Default for LightFamily {
             count: Range::new(1.0, 4.0),
             height: Range::new(0.4, 2.5),
             radius: Range::new(0.0, 1.5),
-            irradiance: Range::new(0.5, 2.5),
-            size: Range::new(0.0, 0.3),
+            irradiance: Range::new(0.4, 1.6),
+            size: Range::new(0.0, 0.2),
             warmth: Range::new(-1.0, 1.0),
             ambient: Range::new(0.01, 0.25),
         }
@@ -111,13 +111,15 @@ impl Default for PlatingFamily {
     }
 }
 
-/// The platings a metal part is drawn from: linear F0 reflectances.
+/// The platings a metal part is drawn from: linear F0 reflectances (nickel, chromium, silver and
+/// iron from Real-Time Rendering's table as Unity's Metal Reflectance node gives it; tin a
+/// neutral 0.75, an assumption: no measured value at hand).
 pub const PLATINGS: [(&str, [f64; 3]); 5] = [
-    ("nickel", [0.659, 0.609, 0.526]),
-    ("tin", [0.75, 0.75, 0.73]),
-    ("chromium", [0.549, 0.556, 0.554]),
-    ("silver", [0.962, 0.949, 0.922]),
-    ("iron", [0.531, 0.512, 0.496]),
+    ("nickel", [0.660, 0.609, 0.526]),
+    ("tin", [0.75, 0.75, 0.75]),
+    ("chromium", [0.550, 0.556, 0.554]),
+    ("silver", [0.972, 0.960, 0.915]),
+    ("iron", [0.560, 0.570, 0.580]),
 ];
 
 /// Plastic: the dielectric parts' gloss and colour, drawn per part kind and image.
@@ -178,11 +180,11 @@ impl Default for TextureFamily {
         Self {
             enabled: false,
             table_albedo: Range::new(0.03, 0.8),
-            table_tint: Range::new(0.8, 1.2),
+            table_tint: Range::new(0.85, 1.15),
             table_roughness: Range::new(0.3, 0.95),
             table_scale: Range::new(0.002, 0.05),
             table_contrast: Range::new(0.0, 0.6),
-            plate_tint: Range::new(0.8, 1.05),
+            plate_tint: Range::new(0.9, 1.05),
             plate_roughness: Range::new(0.2, 0.9),
             plate_grain: Range::new(0.0, 0.2),
             plate_dust: Range::new(0.0, 2.0),
@@ -257,7 +259,7 @@ impl Default for SensorFamily {
             blur_sigma: Range::new(0.0, 1.5),
             read_noise: Range::new(0.0, 0.02),
             shot_noise: Range::new(0.0, 0.005),
-            white_balance: Range::new(0.8, 1.25),
+            white_balance: Range::new(0.88, 1.12),
         }
     }
 }
