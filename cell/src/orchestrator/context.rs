@@ -59,6 +59,7 @@ impl Setup {
         let knowledge = CellKnowledge::new(&scenario)?;
         let mut settings = EpisodeSettings::default();
         settings.selection.min_confidence = scenario.spec.policy.min_pick_confidence;
+        settings.planning.blend_radius = scenario.spec.motion.blend_radius;
         Ok(Self {
             scenario,
             knowledge,

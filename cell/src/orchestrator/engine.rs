@@ -5,7 +5,8 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
 use robots::kinematics::Joints;
-use robots::robot::RobotError;
+use robots::limited::check_path;
+use robots::robot::{RobotError, Waypoint};
 use sim::cell::geometry::PartGeometry;
 
 use super::cell_io::{CellIo, InsertionCheck, Workcell};
@@ -13,7 +14,7 @@ use super::context::EpisodeContext;
 use super::events::EventLog;
 use super::geometry::CellKnowledge;
 use super::insertion;
-use super::planning::{Motion, Planner, Speeds, grasped_offset};
+use super::planning::{Motion, NamedMotion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
 use super::step::StepState;
@@ -71,6 +72,9 @@ pub(super) struct Engine<'a> {
     abort: Option<String>,
     /// Why the last recovery (shake, retract, insertion retry) was chosen, for the event log.
     last_reason: String,
+    /// With blending on, a pick's lift held back to start the insertion's blended path, and
+    /// the joints it ends at (where the insertion is planned from).
+    deferred_lift: Option<(NamedMotion, Joints)>,
 }
 
 impl<'a> Engine<'a> {
@@ -94,6 +98,7 @@ impl<'a> Engine<'a> {
             placed: Vec::new(),
             abort: None,
             last_reason: String::new(),
+            deferred_lift: None,
         }
     }
 
@@ -378,7 +383,15 @@ impl<'a> Engine<'a> {
         // A new part in the fingers: nothing learnt from an earlier one applies.
         self.step.correction = Isometry3::identity();
         self.step.slip = 0.0;
-        self.execute(state, &plan.motions).await?;
+        let mut motions = plan.motions;
+        self.deferred_lift = None;
+        if self.ctx.settings.planning.blend_radius > 0.0
+            && matches!(motions.last(), Some(("lift", Motion::MoveL(..))))
+        {
+            // Blending: the lift starts the insertion's path (the grasp is judged before it).
+            self.deferred_lift = motions.pop().map(|lift| (lift, plan.end_joints));
+        }
+        self.execute(state, &motions).await?;
         Ok(State::VerifyGrasp)
     }
 
@@ -406,6 +419,7 @@ impl<'a> Engine<'a> {
 
     /// Open the gripper and back away upwards, then look again.
     async fn retract(&mut self, state: State) -> Result<State, Stop> {
+        self.deferred_lift = None;
         let clearance = self.ctx.settings.planning.clearance_height;
         let opening = self.step.selection.as_ref().map(|s| s.opening);
         let robot = self.cell.robot();
@@ -438,7 +452,10 @@ impl<'a> Engine<'a> {
         let tcp_T_part =
             Translation3::new(0.0, 0.0, -self.step.slip) * grasped_offset(&sel.tcp_T_part);
         let correction = self.step.correction;
-        let start = self.joints(state).await?;
+        let start = match &self.deferred_lift {
+            Some((_, lifted)) => *lifted,
+            None => self.joints(state).await?,
+        };
         let placed = self.placed_shapes();
         match self.planner().insert(
             self.index,
@@ -455,6 +472,7 @@ impl<'a> Engine<'a> {
                 Ok(State::Insert)
             }
             Err(e) => {
+                self.deferred_lift = None;
                 let cause = format!("insertion plan: {e}");
                 // Put the part down where it came from rather than carry it around (let go
                 // 1 mm above the grasp: the grasp may have shifted it down).
@@ -475,9 +493,12 @@ impl<'a> Engine<'a> {
 
     /// Transfer, pre-insert and insert; the fingers stay closed until the insertion is judged.
     async fn insert(&mut self, state: State) -> Result<State, Stop> {
-        let Some(plan) = self.step.plan.take() else {
+        let Some(mut plan) = self.step.plan.take() else {
             return Ok(State::PlanInsert);
         };
+        if let Some((lift, _)) = self.deferred_lift.take() {
+            plan.motions.insert(0, lift);
+        }
         let split = plan
             .motions
             .iter()
@@ -758,7 +779,13 @@ impl<'a> Engine<'a> {
         state: State,
         motions: &[(&'static str, Motion)],
     ) -> Result<(), Stop> {
-        for (name, m) in motions {
+        let mut next = 0;
+        while let Some((name, m)) = motions.get(next) {
+            if let Some(n) = self.try_blend(state, &motions[next..]).await? {
+                next += n;
+                continue;
+            }
+            next += 1;
             let robot = self.cell.robot();
             let r = match m {
                 Motion::MoveJ(q, s) => robot.move_j(*q, *s).await,
@@ -784,6 +811,68 @@ impl<'a> Engine<'a> {
             }
         }
         Ok(())
+    }
+
+    /// With blending on (`[motion] blend_radius`), the leading run of fast arm moves of
+    /// `motions` (joint moves and straight lines at the fast speed; never the slow segments
+    /// into a grasp or an insertion) as one blended path, when there are two or more and the
+    /// path passes the limit check ([`robots::limited::check_path`]: a refused one runs stop
+    /// by stop). `Some(n)` when it ran the first `n` motions.
+    async fn try_blend(
+        &mut self,
+        state: State,
+        motions: &[NamedMotion],
+    ) -> Result<Option<usize>, Stop> {
+        let radius = self.ctx.settings.planning.blend_radius;
+        if radius <= 0.0 {
+            return Ok(None);
+        }
+        let fast = self.planner().speeds.fast.speed;
+        let n = motions
+            .iter()
+            .take_while(|(_, m)| match m {
+                Motion::MoveJ(..) => true,
+                Motion::MoveL(_, s) => s.speed >= fast,
+                _ => false,
+            })
+            .count();
+        if n < 2 {
+            return Ok(None);
+        }
+        let path: Vec<Waypoint> = motions[..n]
+            .iter()
+            .enumerate()
+            .filter_map(|(i, (_, m))| {
+                let blend = if i + 1 < n { radius } else { 0.0 };
+                match m {
+                    Motion::MoveJ(q, s) => Some(Waypoint::joints(*q, *s, blend)),
+                    Motion::MoveL(p, s) => Some(Waypoint::linear(*p, *s, blend)),
+                    _ => None,
+                }
+            })
+            .collect();
+        let from = self.joints(state).await?;
+        let kinematics = &self.ctx.knowledge.kinematics;
+        let robot = self.cell.robot();
+        if let Err(e) = check_path(robot.limits(), kinematics, &from, &path) {
+            tracing::debug!(
+                episode = self.ctx.episode,
+                waypoint = motions[0].0,
+                "blended path refused, moving stop by stop: {e}"
+            );
+            return Ok(None);
+        }
+        let r = robot.move_path(path).await;
+        let clock = self.clock();
+        // One span, the transit's: the path is its joint move with the corners rounded.
+        let name = motions[..n]
+            .iter()
+            .find(|(_, m)| matches!(m, Motion::MoveJ(..)))
+            .unwrap_or(&motions[0])
+            .0;
+        self.log.motion_done(name, clock);
+        r.map_err(|e| Stop::Robot(state, e))?;
+        Ok(Some(n))
     }
 
     fn planner(&mut self) -> Planner<'a> {

@@ -36,6 +36,10 @@ pub struct PlanningConfig {
     pub samples: usize,
     /// Search offsets of insertion retries.
     pub search: SearchConfig,
+    /// Blend radius of the lift → transit → approach chains, m (`[motion] blend_radius`; 0
+    /// stops at every via-point). Above 0 the lift, approach and transfer poses rise by it, so
+    /// a corner rounded within it keeps the clearance height.
+    pub blend_radius: f64,
 }
 
 /// How a retried insertion searches for the hole (the cell measures neither the lateral nor the
@@ -68,6 +72,7 @@ impl Default for PlanningConfig {
             transit_margin: 0.001,
             samples: 10,
             search: SearchConfig::default(),
+            blend_radius: 0.0,
         }
     }
 }
@@ -388,7 +393,9 @@ impl Planner<'_> {
     ) -> Result<Plan, PlanError> {
         let c = &self.config;
         let grasp = selection.base_T_grasp;
-        let approach = raised(&grasp, c.clearance_height);
+        // Raised by the blend radius (0 unless blending): a blended corner cuts it by at most
+        // that much.
+        let approach = raised(&grasp, c.clearance_height + c.blend_radius);
         let pre = raised(&grasp, c.slow_distance);
         let s = &self.speeds;
         let Descent {
@@ -445,7 +452,8 @@ impl Planner<'_> {
         let out = base_T_ins.rotation * nalgebra::Vector3::z();
         let along = |h: f64| Translation3::from(out * h) * insert;
         let engagement = engagement_depth(held, &base_T_target, placed);
-        let transfer = along(c.clearance_height.max(engagement + 2.0 * c.slow_distance));
+        let transfer =
+            along(c.clearance_height.max(engagement + 2.0 * c.slow_distance) + c.blend_radius);
         // Slow from before the held part can first touch what it goes into (its engagement
         // depth, from the shapes) to seated.
         let pre = along(engagement + c.slow_distance);

@@ -42,6 +42,30 @@ pub struct ScenarioSpec {
     /// miss; absent, insertions are position-controlled as before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_insertion: Option<ForceInsertionSpec>,
+    /// How the orchestrator moves the arm between stops (`[motion]`); absent, every move stops
+    /// at its target as before.
+    #[serde(default, skip_serializing_if = "MotionSpec::is_default")]
+    pub motion: MotionSpec,
+}
+
+/// `[motion]`: blended transits.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionSpec {
+    /// Blend radius (m) of the lift → transit → approach chains: above 0 the orchestrator runs
+    /// them as one blended path ([`robots::robot::Robot::move_path`]), its corners raised by
+    /// the radius so the rounded corner keeps the planner's clearance; 0 (the default) stops at
+    /// every via-point. At most the planner's clearance height less its slow distance (half of
+    /// the shortest segment it blends).
+    #[serde(default)]
+    pub blend_radius: f64,
+}
+
+impl MotionSpec {
+    /// True for the default (no blending), which is not written out.
+    pub fn is_default(&self) -> bool {
+        *self == MotionSpec::default()
+    }
 }
 
 /// Force-guided insertion settings (`[force_insertion]`), the same in simulation and production.

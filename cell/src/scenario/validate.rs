@@ -77,6 +77,41 @@ fn force_insertion(spec: &ScenarioSpec, f: &super::ForceInsertionSpec, issues: &
     }
 }
 
+/// Checks `[motion] blend_radius`: finite, not negative, and at most half of the shortest
+/// segment it blends. With the planner's clearance height `c` and slow distance `s`, a blended
+/// lift rises `c + r` and a blended descent comes down `c + r - s` (the corners are raised by
+/// the radius `r`), so `r ≤ (c + r - s) / 2`, that is `r ≤ c - s`.
+fn blend_radius(r: f64, issues: &mut Issues) {
+    let key = root().key("motion").key("blend_radius");
+    if !r.is_finite() {
+        issues.push((
+            key,
+            format!("blend_radius must be a finite number, got {r}"),
+        ));
+        return;
+    }
+    if r < 0.0 {
+        issues.push((
+            key,
+            format!("blend_radius must be zero or positive, got {r}"),
+        ));
+        return;
+    }
+    let p = crate::orchestrator::PlanningConfig::default();
+    let max = p.clearance_height - p.slow_distance;
+    if r > max {
+        issues.push((
+            key,
+            format!(
+                "blend_radius {r} m is larger than half the shortest segment it would blend: the \
+                 planner's lift and descent ({} m clearance, {} m slow distance, raised by the \
+                 radius) allow at most {max} m",
+                p.clearance_height, p.slow_distance
+            ),
+        ));
+    }
+}
+
 /// The arm the scenario's `cell.robot` describes (a UR arm's URDF, relative to `dir`), and its
 /// joint speed limits against the scenario's; `None` (with the problem recorded) when unusable.
 fn load_arm(spec: &ScenarioSpec, dir: &Path, issues: &mut Issues) -> Option<UrArm> {
@@ -163,6 +198,7 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
     if let Some(f) = &spec.force_insertion {
         force_insertion(spec, f, &mut issues);
     }
+    blend_radius(spec.motion.blend_radius, &mut issues);
     let bar = spec.policy.min_pick_confidence;
     if !(0.0..=1.0).contains(&bar) {
         issues.push((
