@@ -10,8 +10,9 @@
 #   OUT  a folder for the datasets, models, evaluations and the table (OUT/ablation.md); a second
 #        run with the same settings reuses the datasets (they resume) and retrains
 # Environment:
-#   SIZE          toy (a smoke run: seconds per configuration on CPU) or full (sized for a
-#                 16-core GPU machine in about 10 minutes in all) [full]
+#   SIZE          toy (a smoke run: 3 min on 2 CPU cores, nets that detect nothing) or full
+#                 (sized for a 16-core GPU machine: datasets about 1 400 CPU-s, 1.5 min a
+#                 net in two waves of 4 configurations, evals under a minute: 7-8 min) [full]
 #   TRAIN_CROPS   keypoint crops per part of each training set; TRAIN_FEEDER feeder frames;
 #   TEST_CROPS, TEST_FEEDER  the trainers' own held-out set (our renderer, no family, seed 2);
 #   MINUTES       training budget of each net; SEG_STEPS, KP_EPOCHS their step and epoch caps;
@@ -43,7 +44,7 @@ case "${SIZE:-full}" in
     toy) : "${TRAIN_CROPS:=8}" "${TRAIN_FEEDER:=4}" "${TEST_CROPS:=4}" "${TEST_FEEDER:=2}" \
              "${MINUTES:=0.1}" "${SEG_STEPS:=3}" "${KP_EPOCHS:=1}" ;;
     full) : "${TRAIN_CROPS:=1500}" "${TRAIN_FEEDER:=300}" "${TEST_CROPS:=60}" "${TEST_FEEDER:=20}" \
-             "${MINUTES:=1}" "${SEG_STEPS:=100000}" "${KP_EPOCHS:=1000}" ;;
+             "${MINUTES:=1.5}" "${SEG_STEPS:=100000}" "${KP_EPOCHS:=1000}" ;;
     *) echo "run.sh: SIZE must be toy or full, not ${SIZE}" >&2; exit 2 ;;
 esac
 families=(lights plating plastic textures distractors sensor)
@@ -128,11 +129,15 @@ eval_all() {
 }
 timed "eval ${#configs[@]} configurations x 2 looks" eval_all
 # The committed models as the reference row (trained on the full default randomisation).
-for look in soft hard; do
-    "${cell[@]}" eval "cell/tests/fixtures/cycles/$look" --models scenarios/models/usbc \
-        --catalog "$catalog" --max-rms-px 12 --no-finger-check --gallery 0 \
-        --out "$out/committed/eval_$look" --quiet > /dev/null
-done
+eval_committed() {
+    local look
+    for look in soft hard; do
+        "${cell[@]}" eval "cell/tests/fixtures/cycles/$look" --models scenarios/models/usbc \
+            --catalog "$catalog" --max-rms-px 12 --no-finger-check --gallery 0 \
+            --out "$out/committed/eval_$look" --quiet > /dev/null
+    done
+}
+timed "eval of the committed models x 2 looks" eval_committed
 
 "$py" "$root/scripts/ablation/table.py" "$out" committed "${configs[@]}" | tee "$out/ablation.md"
 echo "table: $out/ablation.md; times: $log"
