@@ -154,8 +154,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if let Some(path) = &args.randomisation {
         cfg.randomisation = load_randomisation(path)?;
     }
-    if let Some(list) = &args.families {
-        cfg.families = cell::scenario::load_families(list)?;
+    if let Some(arg) = &args.families {
+        let path = std::path::Path::new(arg);
+        cfg.families = if path.is_file() {
+            cell::scenario::load_families(path)?
+        } else {
+            sim::dataset::Families::from_list(arg).map_err(|e| {
+                anyhow::anyhow!("--families {arg}: neither a file nor a list of families: {e}")
+            })?
+        };
     }
     if let Some(path) = &args.environment {
         cfg.look = Some(cell::scenario::load_look(path)?);

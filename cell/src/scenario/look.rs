@@ -50,22 +50,9 @@ pub fn parse_look(text: &str, path: &Path) -> Result<LookOptions, ScenarioError>
     Ok(look)
 }
 
-/// Reads the randomisation families: an existing TOML file (every key optional; a family is on
-/// when its `enabled` is true), else a comma-separated list of family names (`all`, `none`,
-/// names, `-name` to turn one off after `all`) at their default ranges.
-pub fn load_families(arg: &str) -> Result<Families, ScenarioError> {
-    let path = Path::new(arg);
-    if !path.is_file() {
-        return Families::from_list(arg).map_err(|e| {
-            ScenarioError(vec![Problem {
-                file: path.into(),
-                line: 1,
-                column: 1,
-                key: None,
-                message: format!("not a file, nor a list of randomisation families: {e}"),
-            }])
-        });
-    }
+/// Reads a randomisation families file (TOML, every key optional; a family is on when its
+/// `enabled` is true), its syntax, type and range errors at their line and column.
+pub fn load_families(path: &Path) -> Result<Families, ScenarioError> {
     let text = std::fs::read_to_string(path).map_err(|e| {
         ScenarioError(vec![Problem {
             file: path.into(),
@@ -150,14 +137,18 @@ mod tests {
     }
 
     #[test]
-    fn families_are_read_from_files_and_lists() {
+    fn families_are_read_from_files() {
         let text = "[plating]\nenabled = true\nroughness = { lo = 0.05, hi = 0.3 }\n";
         let f = parse_families(text, Path::new("f.toml")).unwrap();
         assert_eq!(f.enabled(), ["plating"]);
         assert_eq!(f.plating.roughness.hi, 0.3);
-        assert_eq!(load_families("all,-lights").unwrap().enabled().len(), 5);
-        let e = load_families("lights,glitter").unwrap_err().to_string();
-        assert!(e.contains("glitter: no randomisation family"), "{e}");
+        let e = load_families(Path::new("no/such/families.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("no/such/families.toml:1:1: cannot read"),
+            "{e}"
+        );
     }
 
     #[test]
