@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use sim::dataset::{DatasetConfig, FAMILY_NAMES, Families, generate};
 use sim::render::RenderSettings;
+use sim::scene::Range;
 
 mod support;
 
@@ -81,6 +82,10 @@ fn each_family_changes_the_images_and_keeps_the_ground_truth() {
         let out = tmp.path().join(name);
         let mut cfg = tiny(out.clone());
         cfg.families = Families::from_list(name).unwrap();
+        // Many tall distractors close to the parts (their shadows and sides reach the parts).
+        cfg.families.distractors.count = Range::new(8.0, 8.0);
+        cfg.families.distractors.height = Range::new(0.06, 0.1);
+        cfg.families.distractors.radius = Range::new(0.008, 0.03);
         generate(&cfg, &models).unwrap();
         let on = tree(&out);
         assert_eq!(
@@ -157,10 +162,10 @@ fn families_that_are_off_change_nothing_whatever_their_ranges() {
     let a = tmp.path().join("a");
     generate(&tiny(a.clone()), &models).unwrap();
     let mut families = Families::all();
-    families.lights.count = sim::scene::Range::new(5.0, 6.0);
-    families.plating.roughness = sim::scene::Range::new(0.5, 0.5);
-    families.distractors.count = sim::scene::Range::new(8.0, 8.0);
-    families.sensor.gain = sim::scene::Range::new(3.0, 3.0);
+    families.lights.count = Range::new(5.0, 6.0);
+    families.plating.roughness = Range::new(0.5, 0.5);
+    families.distractors.count = Range::new(8.0, 8.0);
+    families.sensor.gain = Range::new(3.0, 3.0);
     for name in FAMILY_NAMES {
         families.set(name, false).unwrap();
     }
