@@ -379,3 +379,169 @@ fn bad_force_insertion_values_are_refused_at_their_line_and_column() {
         "{err}"
     );
 }
+
+/// The verdict bench of `cell scorers --force-verdicts` on boundary insertions scored by the
+/// rapier contact engine: read from the engine's stop, seated-or-not agrees with the engine on
+/// every insertion and the seat band lies between the seated and the unseated stops; a seat band
+/// above the receivers' rims would call misses seated, and the bench says so.
+#[test]
+fn force_verdicts_agree_with_the_contact_engine_on_boundary_insertions() {
+    use cell::orchestrator::insertion::agreement::force_agreement;
+    use sim::cell::geometry::CellGeometry;
+    use sim::cell::insertion::Scorer;
+    use sim::cell::insertion::agreement::StepGeometry;
+
+    let setup = setup("verdict_bench", "");
+    let spec = &setup.scenario().spec;
+    let geometry =
+        CellGeometry::new(&spec.cell, &spec.assembly, &setup.scenario().catalog).unwrap();
+    let steps: Vec<StepGeometry<'_>> = (0..spec.assembly.len())
+        .map(|i| StepGeometry::nominal(&geometry, &spec.assembly, i).unwrap())
+        .collect();
+    let rapier = Scorer::from_name("rapier").unwrap().build().unwrap();
+    let force = spec.force_insertion.unwrap();
+    let a = force_agreement(&steps, 60, 3, &rapier, &force).unwrap();
+    assert_eq!(a.all.samples, 60);
+    assert_eq!(a.steps.iter().map(|(_, c)| c.samples).sum::<usize>(), 60);
+    assert!(
+        a.all.truth_seated > 0 && a.all.truth_seated < 60,
+        "{:?}",
+        a.all
+    );
+    assert_eq!(a.all.engine_seating, 60, "{:#?}", a.disagreements);
+    let (seated, unseated) = (
+        a.all.seated_stop_max.unwrap(),
+        a.all.unseated_stop_min.unwrap(),
+    );
+    assert!(
+        seated < force.seat_band && force.seat_band < unseated,
+        "{seated} {unseated}"
+    );
+    // Every case where a verdict differs from the truth is listed, and only those.
+    let listed = a
+        .disagreements
+        .iter()
+        .filter(|c| (c.engine == StepOutcome::Seated) != (c.truth == StepOutcome::Seated))
+        .count();
+    assert_eq!(listed, 60 - a.all.engine_seating);
+    assert_eq!(
+        a.disagreements.len(),
+        a.disagreements
+            .iter()
+            .filter(|c| c.engine != c.truth || c.cell != c.truth)
+            .count()
+    );
+
+    let wide = ForceInsertionSpec {
+        seat_band: 0.003,
+        ..force
+    };
+    let b = force_agreement(&steps, 60, 3, &rapier, &wide).unwrap();
+    assert!(
+        b.all.engine_seating < 60,
+        "a 3 mm seat band calls parts on a rim seated"
+    );
+    assert_eq!(
+        b.disagreements
+            .iter()
+            .filter(|c| c.engine == StepOutcome::Seated && c.truth != StepOutcome::Seated)
+            .count(),
+        60 - b.all.engine_seating
+    );
+}
+
+/// `cell scorers --force-verdicts` through the real binary: the table of every step, the
+/// seated and unseated stops around the seat band, the JSON of the counts and disagreements,
+/// and the exit status against `--min-agreement`.
+#[test]
+fn the_scorers_command_measures_the_force_verdicts() {
+    let out = std::env::temp_dir().join(format!("cell_force_verdicts_{}.json", std::process::id()));
+    let o = support::cell(&[
+        "scorers",
+        &support::nominal(),
+        "--force-verdicts",
+        "--samples",
+        "45",
+        "--min-agreement",
+        "0.99",
+        "--out",
+        &out.display().to_string(),
+    ]);
+    let t = support::text(&o);
+    assert!(o.status.success(), "{t}");
+    for part in ["main_shell", "insert_mold", "top_shell"] {
+        assert!(
+            t.contains(&format!("{part}: contact stops seated parts up to")),
+            "{t}"
+        );
+    }
+    assert!(t.contains("45 insertions in"), "{t}");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    std::fs::remove_file(&out).unwrap();
+    assert_eq!(json["all"]["samples"], 45);
+    assert_eq!(json["all"]["engine_seating"], 45, "{json}");
+    assert_eq!(json["truth"], "contact");
+    // Seated-or-not agrees on every insertion, so even a minimum of 100 % passes.
+    let o = support::cell(&[
+        "scorers",
+        &support::nominal(),
+        "--force-verdicts",
+        "--samples",
+        "45",
+        "--engines",
+        "analytic,rapier",
+        "--min-agreement",
+        "1.0",
+    ]);
+    assert!(
+        o.status.success(),
+        "seating agrees on all 45: {}",
+        support::text(&o)
+    );
+}
+
+/// `cell replay` of a force-guided episode draws each insertion's wrench trace.
+#[test]
+fn replay_plots_the_wrench_trace_of_each_force_guided_insertion() {
+    struct Scenario(std::path::PathBuf);
+    impl Drop for Scenario {
+        fn drop(&mut self) {
+            std::fs::remove_file(&self.0).ok();
+        }
+    }
+    let text = std::fs::read_to_string(support::nominal()).unwrap();
+    let scenario = Scenario(support::root().join(format!(
+        "scenarios/.replay_force_{}.toml",
+        std::process::id()
+    )));
+    std::fs::write(&scenario.0, format!("{text}\n[force_insertion]\n")).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let o = support::cell(&[
+        "run",
+        &scenario.0.display().to_string(),
+        "--episodes",
+        "1",
+        "--pictures",
+        "0",
+        "--out",
+        &tmp.path().display().to_string(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", support::text(&o));
+    let dir = tmp.path().join("usbc-nominal/all");
+    // The stored events carry the traces.
+    let events = std::fs::read_to_string(dir.join("events/episode-000000.jsonl")).unwrap();
+    assert_eq!(events.matches("\"wrench_trace\"").count(), 3, "{events}");
+    let o = support::cell(&["replay", &dir.display().to_string(), "--episode", "0"]);
+    let t = support::text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("the replay matches the stored record"), "{t}");
+    for step in 0..3 {
+        let name = format!("episode-000000-step-{step}-insertion-1-wrench.svg");
+        assert!(t.contains(&name), "{t}");
+        let svg = std::fs::read_to_string(dir.join("pictures").join(&name)).unwrap();
+        for text in ["seat band 0.200 mm", "stop at 10.0 N", "planned descent"] {
+            assert!(svg.contains(text), "{name}: {text} missing");
+        }
+    }
+}

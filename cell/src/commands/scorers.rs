@@ -285,6 +285,21 @@ fn force_verdicts(
         row(part, c);
     }
     row("all", &a.all);
+    let um = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}", v * 1e6));
+    for (part, c) in a
+        .steps
+        .iter()
+        .map(|(p, c)| (p.as_str(), c))
+        .chain([("all", &a.all)])
+    {
+        println!(
+            "{part}: {t} stops seated parts up to {} µm above seated and the rest from {} µm; \
+             the seat band is {:.1} µm",
+            um(c.seated_stop_max),
+            um(c.unseated_stop_min),
+            spec.seat_band * 1e6
+        );
+    }
     println!("{} insertions in {elapsed:.1} s", a.all.samples);
     let word = |o: cell::episode::StepOutcome| format!("{o:?}").to_lowercase();
     if !a.disagreements.is_empty() {

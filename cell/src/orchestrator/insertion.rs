@@ -452,6 +452,12 @@ pub mod agreement {
         pub cell_seating: usize,
         /// Seated / jammed / missed agree, from the simulated cell's stop.
         pub cell_outcome: usize,
+        /// The highest stop above seated of a part the truth seated, metres (the seated
+        /// signature: the seat band must lie above it).
+        pub seated_stop_max: Option<f64>,
+        /// The lowest stop above seated of a part the truth did not seat, metres (the seat
+        /// band must lie below it).
+        pub unseated_stop_min: Option<f64>,
     }
 
     impl ForceCounts {
@@ -463,6 +469,17 @@ pub mod agreement {
             self.engine_outcome += usize::from(c.engine == c.truth);
             self.cell_seating += usize::from(seated(c.cell) == seated(c.truth));
             self.cell_outcome += usize::from(c.cell == c.truth);
+            if seated(c.truth) {
+                self.seated_stop_max = Some(
+                    self.seated_stop_max
+                        .map_or(c.truth_stop, |m| m.max(c.truth_stop)),
+                );
+            } else {
+                self.unseated_stop_min = Some(
+                    self.unseated_stop_min
+                        .map_or(c.truth_stop, |m| m.min(c.truth_stop)),
+                );
+            }
         }
 
         /// `count` as a fraction of the samples.
