@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use super::bop::{pose_to_bop, row_major};
 use super::config::{apply_families, apply_look, item_seed};
+use super::families::metering_view;
 use super::files::{write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, Window, instance_mask, render};
@@ -217,7 +218,7 @@ pub(crate) fn write_crop_group(
             full.as_ref(),
         );
         let image = scene
-            .metered_sensor(&out)
+            .metered_sensor(&metering_view(&out, scene.parts.len()))
             .capture_balanced(&out, draw.white_balance, &mut rng)
             .map_err(|e| DatasetError::Config(e.to_string()))?;
         let id = (target + 1) as u16;

@@ -6,6 +6,7 @@
 //! families' draws stay the same; with every family off (the default) images are unchanged, byte
 //! for byte.
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
@@ -14,7 +15,8 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::render::{
-    Appearance, Instance, PointLight, RenderMesh, RenderScene, TableTexture, TexturePattern,
+    Appearance, Instance, PointLight, RenderMesh, RenderOutput, RenderScene, TableTexture,
+    TexturePattern,
 };
 use crate::scene::{PartModel, Range, SampledScene};
 
@@ -466,6 +468,27 @@ impl Families {
         }
         draw
     }
+}
+
+/// What the sensor meters on: `out` itself, or, when distractors are in the scene (instances
+/// beyond its `parts`), a copy whose distractor pixels count as background, so that a bright
+/// distractor does not darken the parts (metering keeps the parts' highlights below full scale).
+pub(crate) fn metering_view(out: &RenderOutput, parts: usize) -> Cow<'_, RenderOutput> {
+    let last = parts as u16;
+    if out.visible.iter().all(|v| *v <= last) {
+        return Cow::Borrowed(out);
+    }
+    Cow::Owned(RenderOutput {
+        window: out.window,
+        radiance: out.radiance.clone(),
+        depth: Vec::new(),
+        visible: out
+            .visible
+            .iter()
+            .map(|v| if *v > last { 0 } else { *v })
+            .collect(),
+        full_masks: Vec::new(),
+    })
 }
 
 /// Where part `focus` lies on the table, else the middle of the scene's parts.

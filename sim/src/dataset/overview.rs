@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::bop::{GtInfo, GtPose, SceneCamera, pose_to_bop, row_major};
 use super::config::{apply_families, apply_look, item_seed};
+use super::families::metering_view;
 use super::files::{write_depth, write_json, write_mask, write_png};
 use super::{DatasetConfig, DatasetError, FamilyDraw, Split};
 use perception::camera::Camera;
@@ -118,7 +119,7 @@ pub(crate) fn write_bop_image(
     let camera_T_table = scene.table_T_camera.inverse();
     let labels = label_instances(&scene.parts, models, camera, &scene.table_T_camera, out);
     let image = scene
-        .metered_sensor(out)
+        .metered_sensor(&metering_view(out, scene.parts.len()))
         .capture_balanced(out, draw.white_balance, rng)
         .map_err(|e| DatasetError::Config(e.to_string()))?;
 

@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::config::{apply_families, apply_look, item_seed};
 use super::crops::crop_dir;
+use super::families::metering_view;
 use super::files::write_png;
 use super::{DatasetConfig, DatasetError, Split};
 use crate::render::{RenderSettings, capture, window_covering};
@@ -124,7 +125,7 @@ fn feeder_capture(
     .map_err(|e| DatasetError::Config(e.to_string()))?;
     // Re-expose the same render through the metered sensor.
     scene
-        .metered_sensor(&first.output)
+        .metered_sensor(&metering_view(&first.output, scene.parts.len()))
         .capture_balanced(&first.output, draw.white_balance, &mut rng)
         .map_err(|e| DatasetError::Config(e.to_string()))
 }

@@ -103,7 +103,8 @@ pub struct RenderOutput {
     pub radiance: Vec<[f32; 3]>,
     /// Depth (camera-frame z of the surface at the pixel centre), metres; 0 where nothing is hit.
     pub depth: Vec<f64>,
-    /// Instance seen at the pixel centre: 0 for none (board, table, background), i + 1 for part i.
+    /// Instance seen at the pixel centre: 0 for none (board, table, background), i + 1 for
+    /// instance i (the parts, then any distractors).
     pub visible: Vec<u16>,
     /// Full silhouettes per instance (empty when not requested).
     pub full_masks: Vec<InstanceMask>,
