@@ -352,6 +352,10 @@ impl<'a> Engine<'a> {
         let Some(sel) = self.step.selection.clone() else {
             return Ok(State::Select);
         };
+        if let Some((lift, _)) = self.deferred_lift.take() {
+            // A step given up after its last grasp failed left the lift undone.
+            self.execute(state, &[lift]).await?;
+        }
         let start = self.joints(state).await?;
         let placed = self.placed_shapes();
         let k: &'a CellKnowledge = self.ctx.knowledge;
