@@ -146,3 +146,35 @@ async fn a_path_over_the_limits_is_refused_before_the_arm_moves() {
     assert_eq!(remote.cell.lock().unwrap().joints_now(), q);
     assert_eq!(remote.cell.lock().unwrap().clock(), t0);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_blended_episode_takes_the_same_time_over_rtde_within_2_percent() {
+    // Blending on; the opening margin set aside as a controller run does (its gripper output
+    // opens the full stroke).
+    let setup = setup(|doc| {
+        doc["cell"]["gripper"]
+            .as_table_mut()
+            .expect("a gripper table")
+            .remove("opening_margin")
+            .expect("the scenario sets an opening margin");
+        doc["motion"] = toml_edit::table();
+        doc["motion"]["blend_radius"] = toml_edit::value(0.003);
+    });
+    assert_eq!(setup.engine.settings.planning.blend_radius, 0.003);
+    let local = cell::harness::run_sim_episode(&setup, 0)
+        .await
+        .unwrap()
+        .record;
+    let remote = cell::harness::sim_episode_over_rtde(&setup, 0)
+        .await
+        .unwrap()
+        .record;
+    assert!(local.success && remote.success, "{local:?}\n{remote:?}");
+    let d = remote.cycle_time_s - local.cycle_time_s;
+    assert!(
+        d.abs() <= 0.02 * local.cycle_time_s,
+        "cycle {} s over RTDE, {} s in process",
+        remote.cycle_time_s,
+        local.cycle_time_s
+    );
+}
