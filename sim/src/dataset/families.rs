@@ -80,7 +80,7 @@ impl Default for LightFamily {
             count: Range::new(1.0, 4.0),
             height: Range::new(0.4, 2.5),
             radius: Range::new(0.0, 1.5),
-            irradiance: Range::new(0.4, 1.6),
+            irradiance: Range::new(0.4, 2.8),
             size: Range::new(0.0, 0.2),
             warmth: Range::new(-1.0, 1.0),
             ambient: Range::new(0.01, 0.25),
