@@ -99,6 +99,14 @@ impl CellIo for SimCell {
         SimCell::clock(self)
     }
 
+    fn wait_until(&mut self, t: f64) {
+        SimCell::wait_until(self, t);
+    }
+
+    fn feeder_at_rest(&self) -> Option<bool> {
+        Some(self.feeder_rest_at() <= SimCell::clock(self))
+    }
+
     fn audit(&self, detection: &DetectedPart) -> Option<PerceptionAudit> {
         Some(audit::audit(self, detection))
     }
@@ -179,6 +187,14 @@ impl CellIo for SimCellIo {
 
     fn clock(&self) -> f64 {
         CellIo::clock(&*self.lock())
+    }
+
+    fn wait_until(&mut self, t: f64) {
+        CellIo::wait_until(&mut *self.lock(), t);
+    }
+
+    fn feeder_at_rest(&self) -> Option<bool> {
+        self.lock().feeder_at_rest()
     }
 
     fn audit(&self, detection: &DetectedPart) -> Option<PerceptionAudit> {

@@ -64,6 +64,14 @@ pub trait CellIo: Send {
     }
     /// Seconds on the cell's clock since the episode started (simulated time in simulation).
     fn clock(&self) -> f64;
+    /// Lets the cell's clock run on to `t` while the engine waits for work off the arm's path
+    /// (perception); the simulated cell advances its clock, a real cell's time passes anyway.
+    fn wait_until(&mut self, _t: f64) {}
+    /// Whether the feeder's parts are at rest now (no shake still settling); `None` when the
+    /// cell cannot tell.
+    fn feeder_at_rest(&self) -> Option<bool> {
+        None
+    }
     /// What the simulator knows of a detection (simulation only; for the error budget).
     fn audit(&self, _detection: &DetectedPart) -> Option<PerceptionAudit> {
         None

@@ -26,6 +26,12 @@ pub struct EpisodeSettings {
     pub max_grasp_attempts: u32,
     /// Home joints; the robot's joints at the start when `None`.
     pub home: Option<Joints>,
+    /// Capture and perceive the feeder for the next step while the arm inserts
+    /// (`[motion] overlap`).
+    pub overlap: bool,
+    /// Seconds a capture and its perception take on the cell's clock
+    /// (`[motion] perception_time`).
+    pub perception_time: f64,
 }
 
 impl Default for EpisodeSettings {
@@ -36,6 +42,8 @@ impl Default for EpisodeSettings {
             planning: PlanningConfig::default(),
             max_grasp_attempts: 3,
             home: None,
+            overlap: false,
+            perception_time: 0.0,
         }
     }
 }
@@ -60,6 +68,8 @@ impl Setup {
         let mut settings = EpisodeSettings::default();
         settings.selection.min_confidence = scenario.spec.policy.min_pick_confidence;
         settings.planning.blend_radius = scenario.spec.motion.blend_radius;
+        settings.overlap = scenario.spec.motion.overlap;
+        settings.perception_time = scenario.spec.motion.perception_time;
         Ok(Self {
             scenario,
             knowledge,

@@ -18,6 +18,7 @@ use super::planning::{Motion, NamedMotion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
 use super::step::StepState;
+use super::view::arm_in_feeder_view;
 use crate::episode::{
     EpisodeRecord, GRASP_MISSED, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome,
 };
@@ -30,6 +31,17 @@ pub const FEEDER_EXHAUSTED: &str = "feeder.parts";
 pub const CAMERA_SAW_NOTHING: &str = "camera.view";
 /// Error-budget name of a step given up after `max_shakes` shakes left no usable instance.
 pub const FEEDER_SHAKE_BOUND: &str = "feeder.max_shakes";
+
+/// A frame of the feeder taken and perceived for a later step while the arm worked elsewhere
+/// (`[motion] overlap`).
+struct Ahead {
+    /// The step it was taken for.
+    step: usize,
+    /// What perception found.
+    perceived: Perceived,
+    /// Cell clock when perception's result is ready (capture time plus perception time).
+    ready_at: f64,
+}
 
 /// Why the state machine stopped the episode early.
 enum Stop {
@@ -75,6 +87,10 @@ pub(super) struct Engine<'a> {
     /// With blending on, a pick's lift held back to start the insertion's blended path, and
     /// the joints it ends at (where the insertion is planned from).
     deferred_lift: Option<(NamedMotion, Joints)>,
+    /// With overlap on, the next step's feeder frame taken and perceived during an insertion.
+    ahead: Option<Ahead>,
+    /// What became of the last overlapped capture, for the event log.
+    ahead_note: String,
 }
 
 impl<'a> Engine<'a> {
@@ -99,6 +115,8 @@ impl<'a> Engine<'a> {
             abort: None,
             last_reason: String::new(),
             deferred_lift: None,
+            ahead: None,
+            ahead_note: String::new(),
         }
     }
 
@@ -118,13 +136,23 @@ impl<'a> Engine<'a> {
                     let d = match n {
                         State::Shake | State::Retract => self.last_reason.clone(),
                         State::PlanInsert if state == State::Verify => self.last_reason.clone(),
-                        // The force-guided insertion's readings and verdict.
-                        State::Verify if state == State::Insert => self
-                            .step
-                            .force
-                            .as_ref()
-                            .map(|v| v.describe())
-                            .unwrap_or_default(),
+                        // The force-guided insertion's readings and verdict, and what became
+                        // of an overlapped capture.
+                        State::Verify if state == State::Insert => {
+                            let force = self.step.force.as_ref().map(|v| v.describe());
+                            let ahead = std::mem::take(&mut self.ahead_note);
+                            [force.unwrap_or_default(), ahead]
+                                .into_iter()
+                                .filter(|t| !t.is_empty())
+                                .collect::<Vec<_>>()
+                                .join("; ")
+                        }
+                        State::Perceive if state == State::Capture => {
+                            std::mem::take(&mut self.ahead_note)
+                        }
+                        State::Capture | State::Done if state == State::Verify => {
+                            std::mem::take(&mut self.ahead_note)
+                        }
                         _ => String::new(),
                     };
                     (n, d)
@@ -200,8 +228,19 @@ impl<'a> Engine<'a> {
         Ok(State::Capture)
     }
 
-    /// Take a camera frame (the cell waits for the feeder to settle).
+    /// Take a camera frame (the cell waits for the feeder to settle). With overlap on, a frame
+    /// taken and perceived for this step during the last insertion is used instead.
     fn capture(&mut self) -> State {
+        if self.ahead.as_ref().is_some_and(|a| a.step == self.index) {
+            self.step.frame = None;
+            self.step.excluded.clear();
+            self.ahead_note = "the frame taken during the last insertion".into();
+            return State::Perceive;
+        }
+        // A frame taken for an earlier step is stale.
+        if self.ahead.as_ref().is_some_and(|a| a.step < self.index) {
+            self.ahead = None;
+        }
         match self.io().capture() {
             Ok(f) => {
                 self.step.frame = Some(f);
@@ -215,11 +254,81 @@ impl<'a> Engine<'a> {
         }
     }
 
+    /// Radius of the held part's bounding sphere around the TCP, metres (`None`: empty
+    /// fingers).
+    fn held_radius(&self) -> Option<f64> {
+        let sel = self.step.selection.as_ref()?;
+        let g = self.ctx.knowledge.part(&sel.detection.part)?;
+        let (lo, hi) = g.aabb;
+        let reach = (hi - lo).norm() / 2.0 + (sel.tcp_T_part.translation.vector).norm();
+        Some(reach)
+    }
+
+    /// With overlap on, over the fixture during an insertion: capture the feeder for the next
+    /// step and perceive it, when the feeder is at rest and neither the arm nor the held part
+    /// is in the camera's view of it (the arm's pose from its joints, against the calibrated
+    /// camera); a frame with the arm in view is never taken, and the next step captures anew.
+    async fn capture_ahead(&mut self, state: State) -> Result<(), Stop> {
+        let next = self.index + 1;
+        if !self.ctx.settings.overlap || next >= self.steps() {
+            return Ok(());
+        }
+        if self.io().feeder_at_rest() != Some(true) {
+            self.ahead_note = "no capture ahead: the feeder is still settling".into();
+            return Ok(());
+        }
+        let q = self.joints(state).await?;
+        if let Some(what) = arm_in_feeder_view(self.ctx.knowledge, &q, self.held_radius()) {
+            self.ahead_note =
+                format!("capture ahead refused: the {what} is in the camera's view of the feeder");
+            return Ok(());
+        }
+        let taken = self.clock();
+        let frame = match self.io().capture() {
+            Ok(f) => f,
+            Err(e) => {
+                self.ahead_note = format!("capture ahead failed: {e}");
+                return Ok(());
+            }
+        };
+        match self.perception.perceive(&frame) {
+            Ok(perceived) => {
+                self.ahead_note = format!("captured ahead for step {next} at {taken:.3} s");
+                self.ahead = Some(Ahead {
+                    step: next,
+                    perceived,
+                    ready_at: taken + self.ctx.settings.perception_time,
+                });
+            }
+            Err(e) => self.ahead_note = format!("perception ahead failed: {e}"),
+        }
+        Ok(())
+    }
+
+    /// The insertion judged, before the release: a second chance for the next step's capture
+    /// when the first (before the insert) found the feeder still settling or the arm in view.
+    async fn capture_ahead_again(&mut self, state: State) -> Result<(), Stop> {
+        if self.ahead.as_ref().is_some_and(|a| a.step > self.index) {
+            return Ok(());
+        }
+        self.capture_ahead(state).await
+    }
+
     /// Estimate the poses of the parts in the frame.
     fn perceive(&mut self) -> State {
-        let r = match self.step.frame.take() {
-            Some(f) => self.perception.perceive(&f),
-            None => Ok(Perceived::default()),
+        let r = match (self.step.frame.take(), self.ahead.take()) {
+            (_, Some(a)) if a.step == self.index => {
+                // Perception ran while the arm inserted: wait only for what remains.
+                self.io().wait_until(a.ready_at);
+                Ok(a.perceived)
+            }
+            (Some(f), _) => {
+                let done = self.clock() + self.ctx.settings.perception_time;
+                let r = self.perception.perceive(&f);
+                self.io().wait_until(done);
+                r
+            }
+            (None, _) => Ok(Perceived::default()),
         };
         match r {
             Ok(p) => {
@@ -337,6 +446,8 @@ impl<'a> Engine<'a> {
 
     /// Shake the feeder so parts come to rest anew.
     fn shake(&mut self) -> State {
+        // The parts move: a frame taken ahead no longer shows them.
+        self.ahead = None;
         match self.io().shake_feeder() {
             Ok(()) => {
                 self.step.shakes += 1;
@@ -511,7 +622,14 @@ impl<'a> Engine<'a> {
         self.step.insertions += 1;
         self.step.pending = plan.motions[split..].to_vec();
         let Some(spec) = self.ctx.force else {
-            self.execute(state, &plan.motions[..split]).await?;
+            // Over the fixture before the slow insert: the next step's capture, overlapped.
+            let insert = plan.motions[..split]
+                .iter()
+                .rposition(|(n, _)| *n == "insert")
+                .unwrap_or(split);
+            self.execute(state, &plan.motions[..insert]).await?;
+            self.capture_ahead(state).await?;
+            self.execute(state, &plan.motions[insert..split]).await?;
             return Ok(State::Verify);
         };
         // Force-guided: the planner's moves to the lead-in, then the guarded descent in place
@@ -524,6 +642,7 @@ impl<'a> Engine<'a> {
             }
         };
         self.execute(state, approach).await?;
+        self.capture_ahead(state).await?;
         let k = self.ctx.knowledge;
         let s = &k.steps[self.index];
         let geometry = insertion::InsertionGeometry {
@@ -553,6 +672,7 @@ impl<'a> Engine<'a> {
         {
             return self.retry_insertion(state, c).await;
         }
+        self.capture_ahead_again(state).await?;
         let pending = std::mem::take(&mut self.step.pending);
         self.execute(state, &pending).await?;
         let Some(c) = self.io().insertion_check() else {
@@ -584,6 +704,7 @@ impl<'a> Engine<'a> {
         v: insertion::ForceVerdict,
     ) -> Result<State, Stop> {
         if v.outcome == StepOutcome::Seated {
+            self.capture_ahead_again(state).await?;
             let pending = std::mem::take(&mut self.step.pending);
             self.execute(state, &pending).await?;
             let c = self.io().insertion_check().unwrap_or(InsertionCheck {

@@ -35,8 +35,8 @@
 //! (what the time is spent on, finer than states), `events`,
 //! `cell_io` (the cell seams), `perception` (the perception seam), `selection`, `planning`,
 //! `geometry` (the planner's model of the cell), `insertion` (force-guided insertion, the same
-//! in simulation and production), `production` (pre-flight, production side
-//! channels).
+//! in simulation and production), `view` (whether the arm hides the feeder from the camera),
+//! `production` (pre-flight, production side channels).
 
 #![allow(non_snake_case)]
 
@@ -52,6 +52,7 @@ mod production;
 mod selection;
 mod state;
 mod step;
+pub mod view;
 
 pub use activity::Activity;
 pub use cell_io::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, SplitCell, Workcell};

@@ -175,13 +175,21 @@ enum Runner<'d> {
 
 /// The scenario as a controller runs it: our program drives the gripper by one digital output,
 /// which opens the full stroke, so selection and planning must leave the fingers room for the
-/// full stroke (`cell.gripper.opening_margin` is set aside, with a warning).
+/// full stroke (`cell.gripper.opening_margin` is set aside, with a warning). `[motion] overlap`
+/// is set aside too, with a warning: a controller run perceives while the arm stands still (the
+/// engine awaits each command), so there is nothing to overlap yet.
 fn full_stroke(scenario: &Scenario) -> Scenario {
     let mut s = scenario.clone();
     if s.spec.cell.gripper.opening_margin.take().is_some() {
         tracing::warn!(
             "cell.gripper.opening_margin set aside: the controller's gripper output opens the \
              full stroke"
+        );
+    }
+    if std::mem::take(&mut s.spec.motion.overlap) {
+        tracing::warn!(
+            "[motion] overlap set aside: a controller run does not yet capture and perceive \
+             while the arm moves"
         );
     }
     s

@@ -48,7 +48,7 @@ pub struct ScenarioSpec {
     pub motion: MotionSpec,
 }
 
-/// `[motion]`: blended transits.
+/// `[motion]`: blended transits and overlapped work.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MotionSpec {
@@ -59,6 +59,17 @@ pub struct MotionSpec {
     /// the shortest segment it blends).
     #[serde(default)]
     pub blend_radius: f64,
+    /// Work overlapped (simulated cell only; a production run ignores it with a warning):
+    /// while the arm inserts a part, the camera captures the feeder and perception runs for
+    /// the next step, so that step starts with its detections ready. A capture with the arm
+    /// or the held part between the camera and the feeder is refused and taken again later.
+    #[serde(default)]
+    pub overlap: bool,
+    /// Seconds a capture and its perception take on the cell's clock (0, the default: free,
+    /// as before). Without `overlap` every step waits for them; with it, the insertion's
+    /// motion runs meanwhile and the next step waits only for what remains.
+    #[serde(default)]
+    pub perception_time: f64,
 }
 
 impl MotionSpec {

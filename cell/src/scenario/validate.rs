@@ -112,6 +112,16 @@ fn blend_radius(r: f64, issues: &mut Issues) {
     }
 }
 
+/// Checks `[motion] perception_time`: a finite number of seconds, zero or more.
+fn perception_time(t: f64, issues: &mut Issues) {
+    if !t.is_finite() || t < 0.0 {
+        issues.push((
+            root().key("motion").key("perception_time"),
+            format!("perception_time must be a finite number of seconds, zero or more, got {t}"),
+        ));
+    }
+}
+
 /// The arm the scenario's `cell.robot` describes (a UR arm's URDF, relative to `dir`), and its
 /// joint speed limits against the scenario's; `None` (with the problem recorded) when unusable.
 fn load_arm(spec: &ScenarioSpec, dir: &Path, issues: &mut Issues) -> Option<UrArm> {
@@ -199,6 +209,7 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
         force_insertion(spec, f, &mut issues);
     }
     blend_radius(spec.motion.blend_radius, &mut issues);
+    perception_time(spec.motion.perception_time, &mut issues);
     let bar = spec.policy.min_pick_confidence;
     if !(0.0..=1.0).contains(&bar) {
         issues.push((

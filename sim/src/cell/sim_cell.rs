@@ -374,6 +374,12 @@ impl SimCell {
         self.feeder_rest_at
     }
 
+    /// Lets the clock run on to `t` (work off the arm's path, such as perception, that the arm
+    /// waits for); never back.
+    pub fn wait_until(&mut self, t: f64) {
+        self.clock = self.clock.max(t);
+    }
+
     /// Waits (on the clock) until the parts of the last shake are at rest: a camera frame of the
     /// feeder or a grasp in it is only meaningful then.
     pub fn wait_for_feeder(&mut self) {
