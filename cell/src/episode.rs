@@ -74,6 +74,23 @@ pub struct PoseError {
     pub yaw_deg: f64,
 }
 
+/// What a force-guided insertion (`[force_insertion]`) decided before the fingers opened, from
+/// the wrist's force and the arm's depth alone: recorded alike in simulation and production (a
+/// production cell has nothing else to judge a seat by).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ForceRecord {
+    /// Seated (and confirmed), jammed or missed.
+    pub verdict: StepOutcome,
+    /// First contact above seated of the reading that decided, millimetres (a seat: the
+    /// confirming reading; otherwise the planned descent's, or where nothing was met, how far
+    /// the descent went, below seated).
+    pub contact_mm: f64,
+    /// Force out of the hole in that reading, newtons.
+    pub force_n: f64,
+    /// Guarded descents of the step's last insertion (the planned one and spiral probes).
+    pub probes: u32,
+}
+
 /// One assembly step of an episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepRecord {
@@ -116,6 +133,9 @@ pub struct StepRecord {
     pub confidence: Option<f64>,
     /// Simulated seconds the step took.
     pub sim_time_s: f64,
+    /// The force-guided insertion's own verdict, on a step that inserted by feel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force: Option<ForceRecord>,
 }
 
 /// One episode: the full assembly attempt from a fresh feeder.

@@ -231,6 +231,81 @@ async fn nothing_under_the_tool_is_a_miss_and_a_yawed_part_a_jam() {
     assert!(cell.inner().held().is_some());
 }
 
+/// With a contact engine as the scenario's scorer, the simulated cell's guarded descent stops
+/// where that engine's push stops the part (not at the analytic model's height), the wrist reads
+/// the engine's load there, and the insertion is scored by that very push: the force verdict
+/// and the engine's own agree.
+#[tokio::test]
+async fn with_rapier_as_the_scorer_the_descent_stops_where_rapier_stops_the_part() {
+    // The planned descent alone (no spiral), so the part stays where it stopped.
+    let spec = ForceInsertionSpec {
+        search_points: 0,
+        ..ForceInsertionSpec::default()
+    };
+    // Turned 3° about the insertion axis: jammed in the chamfer by both models, at heights
+    // of their own.
+    let yaw = Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 3f64.to_radians()),
+    );
+    let mut stops = Vec::new();
+    for scorer in ["analytic", "contact"] {
+        let setup = setup(
+            &format!("felt_{scorer}"),
+            &format!("\n[simulation]\ninsertion_scorer = \"{scorer}\"\n"),
+        );
+        let (mut cell, approach, g) = holding_a_shell(&setup, yaw);
+        run(&mut cell, &approach);
+        let started = std::time::Instant::now();
+        let v = force_insert(&mut cell, &g, &spec).await.unwrap();
+        let took = started.elapsed();
+        let truth = cell.inner().held_insertion().unwrap_or_else(|| {
+            panic!(
+                "{scorer}: not scored at the stop ({:?}): {}",
+                cell.inner().scorer_failure(),
+                v.describe()
+            )
+        });
+        let end = truth.insertion.as_ref().unwrap().end.height;
+        let p = &v.probes[0];
+        assert!(p.contact, "{}", v.describe());
+        // First contact read back from force and depth is the scorer's stop, to within the
+        // sensor's noise through the contact stiffness (±4 N is ±20 µm) and a micron.
+        assert!(
+            (p.height - end).abs() < 4.0 / spec.contact_stiffness + 1e-6,
+            "{scorer}: first contact {:.1} µm, the scorer's stop {:.1} µm",
+            p.height * 1e6,
+            end * 1e6
+        );
+        // Seated or not, the force verdict is the scorer's (jammed and missed are told apart
+        // by the rim height, which a jam high in the chamfer can pass).
+        assert_eq!(
+            p.outcome == StepOutcome::Seated,
+            truth.verdict == Verdict::Seated,
+            "{scorer}: {}",
+            v.describe()
+        );
+        assert_ne!(truth.verdict, Verdict::Seated, "{scorer}");
+        eprintln!(
+            "{scorer}: stop {:.1} µm above seated, wrench {:?}, {:.1} ms",
+            end * 1e6,
+            p.wrench,
+            took.as_secs_f64() * 1e3
+        );
+        stops.push((end, p.wrench));
+    }
+    let ((analytic, analytic_wrench), (rapier, rapier_wrench)) = (stops[0], stops[1]);
+    assert!(
+        (analytic - rapier).abs() > 4.0 / spec.contact_stiffness + 1e-6,
+        "the two models stop this part at heights of their own: {analytic} {rapier}"
+    );
+    // Both cells read through the same sensor noise: what differs is the load. Rapier's at its
+    // stop carries the yaw spring's moment; the analytic press is along the axis only.
+    let moment = |w: [f64; 6]| Vector3::new(w[3], w[4], w[5]);
+    let extra = (moment(rapier_wrench) - moment(analytic_wrench)).norm();
+    assert!(extra > 1e-3, "rapier's moment at the stop adds {extra} N·m");
+}
+
 #[tokio::test]
 async fn the_engine_never_releases_a_part_whose_seat_was_not_confirmed() {
     // No search and one attempt: every insertion that lands off the band fails; a large
@@ -399,8 +474,10 @@ fn force_verdicts_agree_with_the_contact_engine_on_boundary_insertions() {
         .map(|i| StepGeometry::nominal(&geometry, &spec.assembly, i).unwrap())
         .collect();
     let rapier = Scorer::from_name("rapier").unwrap().build().unwrap();
+    let analytic = Scorer::Analytic.build().unwrap();
     let force = spec.force_insertion.unwrap();
-    let a = force_agreement(&steps, 60, 3, &rapier, &force).unwrap();
+    let a = force_agreement(&steps, 60, 3, &rapier, &analytic, &force).unwrap();
+    assert_eq!((a.truth.as_str(), a.cell.as_str()), ("contact", "analytic"));
     assert_eq!(a.all.samples, 60);
     assert_eq!(a.steps.iter().map(|(_, c)| c.samples).sum::<usize>(), 60);
     assert!(
@@ -436,10 +513,23 @@ fn force_verdicts_agree_with_the_contact_engine_on_boundary_insertions() {
         seat_band: 0.003,
         ..force
     };
-    let b = force_agreement(&steps, 60, 3, &rapier, &wide).unwrap();
+    let b = force_agreement(&steps, 60, 3, &rapier, &analytic, &wide).unwrap();
     assert!(
         b.all.engine_seating < 60,
         "a 3 mm seat band calls parts on a rim seated"
+    );
+    // A cell scored by rapier feels rapier's stop: its verdicts are the engine's, case by case.
+    let c = force_agreement(&steps, 60, 3, &rapier, &rapier, &force).unwrap();
+    assert_eq!(c.all.cell_seating, c.all.engine_seating);
+    assert_eq!(c.all.cell_outcome, c.all.engine_outcome);
+    assert!(
+        c.disagreements
+            .iter()
+            .all(|d| d.cell_stop == d.truth_stop && d.cell == d.engine)
+    );
+    assert!(
+        a.disagreements.iter().any(|d| d.cell_stop != d.truth_stop),
+        "the analytic stop is not rapier's"
     );
     assert_eq!(
         b.disagreements

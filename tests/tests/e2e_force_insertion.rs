@@ -121,3 +121,80 @@ async fn force_guided_insertion_needs_an_arm_that_reports_a_force_sensor() {
         force_sensor_preflight(plain.scenario(), answer).unwrap();
     }
 }
+
+/// Item 4 of issue 43: a virtual-UR run of `scenarios/usbc_force.toml` (learned perception, two
+/// episodes, the production client over loopback RTDE) records each force-guided step's own
+/// verdict (seated, jammed or missed, and the first contact and force that decided it) in the
+/// step record, as a simulated run does, and the report shows them in its force-guided table.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_virtual_ur_run_records_and_reports_each_steps_force_verdict() {
+    use cell::harness::{SimSetup, sim_episode_over_rtde};
+    use cell::run::{LoadedScenario, Shard, Summary};
+
+    let path = e2e_support::prepared_scenarios().join("usbc_force.toml");
+    let loaded = LoadedScenario::load(&path).unwrap();
+    let mut scenario = loaded.scenario.clone();
+    // As `cell run --robot virtual-ur` runs it: the gripper output opens the full stroke.
+    scenario.spec.cell.gripper.opening_margin = None;
+    let force = scenario
+        .spec
+        .force_insertion
+        .expect("usbc_force inserts by feel");
+    let setup = SimSetup::new(scenario).unwrap();
+    let mut records = std::collections::BTreeMap::new();
+    for episode in 0..2u32 {
+        let out = sim_episode_over_rtde(&setup, episode).await.unwrap();
+        assert_eq!(out.record.abort, None, "{:#?}", out.record);
+        let inserted: Vec<_> = out
+            .record
+            .steps
+            .iter()
+            .filter(|s| s.insertion_attempts > 0)
+            .collect();
+        assert!(!inserted.is_empty(), "{:#?}", out.record);
+        for step in inserted {
+            let f = step
+                .force
+                .unwrap_or_else(|| panic!("episode {episode}: no force verdict in {step:?}"));
+            assert_eq!(f.verdict, step.outcome, "{step:?}");
+            assert!(f.probes >= 1, "{f:?}");
+            if f.verdict == StepOutcome::Seated {
+                // Confirmed on its seat: first contact within the seat band, pressed with at
+                // least half the contact force.
+                assert!(f.contact_mm.abs() <= force.seat_band * 1e3, "{f:?}");
+                assert!(f.force_n >= force.contact_force / 2.0, "{f:?}");
+            }
+            // The record round-trips through the results file.
+            let line = serde_json::to_string(step).unwrap();
+            assert!(line.contains("\"force\":{\"verdict\":"), "{line}");
+            let back = serde_json::from_str::<cell::episode::StepRecord>(&line)
+                .unwrap()
+                .force
+                .unwrap();
+            assert_eq!((back.verdict, back.probes), (f.verdict, f.probes));
+            assert!((back.contact_mm - f.contact_mm).abs() < 1e-12, "{back:?}");
+            assert!((back.force_n - f.force_n).abs() < 1e-9, "{back:?}");
+        }
+        records.insert(episode, out.record);
+    }
+    // The report's force-guided table: one row per step, its verdicts counted.
+    let summary = Summary::new(&loaded.header(Shard::ALL), records.values());
+    let html = cell::report::render_html(&summary, &records, &Default::default())
+        .unwrap()
+        .html;
+    assert!(html.contains("<h2>Force-guided verdicts</h2>"), "{html}");
+    let recs: Vec<_> = records.values().collect();
+    let rows = cell::report::force::force_rows(&recs);
+    assert_eq!(rows.len(), summary.steps.len());
+    for (row, t) in rows.iter().zip(&summary.steps) {
+        assert_eq!((row.index, row.part.as_str()), (t.index, t.part.as_str()));
+        assert_eq!(row.seated + row.jammed + row.missed, row.inserted);
+        assert_eq!(row.seated, t.seated, "{row:?} {t:?}");
+        assert_eq!(row.agree, row.inserted);
+        let cells = format!(
+            "<td class=l>{}: {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
+            row.index, row.part, row.inserted, row.seated, row.jammed, row.missed, row.agree
+        );
+        assert!(html.contains(&cells), "{cells} not in the report");
+    }
+}

@@ -38,6 +38,7 @@ fn episode(i: u32, success: bool) -> EpisodeRecord {
             perception_verdict: None,
             confidence: None,
             sim_time_s: 5.0,
+            force: None,
         });
         if !seated {
             break;

@@ -78,6 +78,7 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
             perception_verdict: None,
             confidence: None,
             sim_time_s: 4.0 + unit(seed, episode, 70 + i as u64),
+            force: None,
         });
         if failed {
             success = false;

@@ -248,16 +248,22 @@ fn force_verdicts(
     use cell::orchestrator::insertion::agreement::{ForceCounts, force_agreement};
     let spec = scenario.spec.force_insertion.unwrap_or_default();
     let started = Instant::now();
-    let a = force_agreement(steps, args.samples, args.seed, truth, &spec)?;
+    let cell_scorer = scenario.spec.simulation.insertion_scorer.build()?;
+    for part in steps.iter().map(|s| s.held) {
+        cell_scorer.check_part(part)?;
+    }
+    let a = force_agreement(steps, args.samples, args.seed, truth, &cell_scorer, &spec)?;
     let elapsed = started.elapsed().as_secs_f64();
     let t = &a.truth;
     println!(
         "force-guided verdicts against {t} (seat band {:.3} mm, contact {:.1} N at {:.0} N/mm, \
          UR5e sensor noise); \"from {t}'s stop\": first contact where {t} stopped the part; \
-         \"from the cell's stop\": where the simulated cell's analytic contact model stops it",
+         \"from the cell's stop\": where the simulated cell's contact model stops it (the \
+         scenario's scorer, {})",
         spec.seat_band * 1e3,
         spec.contact_force,
-        spec.contact_stiffness * 1e-3
+        spec.contact_stiffness * 1e-3,
+        a.cell
     );
     println!(
         "{:<14} {:>7} {:>10} {:>22} {:>22} {:>22} {:>22}",

@@ -87,6 +87,11 @@ pub struct Probe {
 }
 
 impl Probe {
+    /// The force of its reading out of the hole (along `out`, base frame), newtons.
+    pub fn force_along(&self, out: &Vector3<f64>) -> f64 {
+        Vector3::new(self.wrench[0], self.wrench[1], self.wrench[2]).dot(out)
+    }
+
     /// One line for the event log: offset, stop height, force and wrench.
     pub fn describe(&self) -> String {
         let w = &self.wrench;
@@ -133,6 +138,11 @@ pub struct ForceVerdict {
     /// The wrist readings of every descent with the thresholds they were read against, for
     /// the episode events.
     pub trace: WrenchTrace,
+    /// First contact above seated of the reading that decided (the confirming one for a
+    /// seat), metres.
+    pub height: f64,
+    /// Force out of the hole in that reading, newtons.
+    pub force_n: f64,
 }
 
 /// First contact at least this high above seated reads as a miss on the receiver's rim, metres.
@@ -178,6 +188,16 @@ pub fn trace_samples(
 }
 
 impl ForceVerdict {
+    /// The step record's account: the verdict and the depth and force that decided it.
+    pub fn record(&self) -> crate::episode::ForceRecord {
+        crate::episode::ForceRecord {
+            verdict: self.outcome,
+            contact_mm: self.height * 1e3,
+            force_n: self.force_n,
+            probes: u32::try_from(self.probes.len()).unwrap_or(u32::MAX),
+        }
+    }
+
     /// The event log's account: each probe's reading and the verdict.
     pub fn describe(&self) -> String {
         let probes: Vec<String> = self.probes.iter().map(Probe::describe).collect();
@@ -347,6 +367,8 @@ pub async fn force_insert(
     } else {
         format!(" after {searched} spiral probes")
     };
+    // The reading that decides: the confirming one for a seat, else the probe's stop.
+    let mut decided = (last.height, last.force_along(&geometry.out()));
     let (outcome, cause) = match last.outcome {
         StepOutcome::Seated => {
             let reading = robot.wrench().await?;
@@ -355,6 +377,7 @@ pub async fn force_insert(
             let stop =
                 (pose.translation.vector - geometry.seated.translation.vector).dot(&geometry.out());
             let height = stop + force_out.max(0.0) / spec.contact_stiffness;
+            decided = (height, force_out);
             match confirm_seat(force_out, height, spec) {
                 Ok(how) => (StepOutcome::Seated, format!("{how}{tried}")),
                 Err(why) => (StepOutcome::Jammed, format!("{why}{tried}")),
@@ -394,6 +417,8 @@ pub async fn force_insert(
         cause,
         probes,
         trace,
+        height: decided.0,
+        force_n: decided.1,
     })
 }
 
@@ -429,7 +454,8 @@ pub mod agreement {
         pub truth_stop: f64,
         /// The force-guided verdict from the contact engine's stop.
         pub engine: StepOutcome,
-        /// Where the simulated cell's contact model (the analytic capture model) stops it.
+        /// Where the simulated cell's contact model stops it (its scorer's stop:
+        /// `sim::cell::SimCell::felt_stop`).
         pub cell_stop: f64,
         /// The force-guided verdict from the simulated cell's stop.
         pub cell: StepOutcome,
@@ -494,6 +520,8 @@ pub mod agreement {
     pub struct ForceAgreement {
         /// The truth's engine.
         pub truth: String,
+        /// The scorer whose stop the simulated cell's guarded move feels (the scenario's).
+        pub cell: String,
         /// Per step: its part and counts.
         pub steps: Vec<(String, ForceCounts)>,
         /// All steps together.
@@ -513,14 +541,17 @@ pub mod agreement {
     /// Draws `samples` misalignments around the capture boundary (as `cell scorers` does, the
     /// same seed the same draws), scores each with `truth`, and reads each as the force-guided
     /// strategy does: first contact where the part stops (the contact engine's stop, and the
-    /// simulated cell's analytic one), read back through the UR5e sensor's noise at the
-    /// contact stiffness, against the seat band and the rim (the mating's engagement depth
-    /// less half its lead-in).
+    /// simulated cell's, which is where `cell`, the scenario's scorer, stops it: the analytic
+    /// capture model's end height, or a contact engine's push, the same call as `truth`'s when
+    /// they are one engine), read back through the UR5e sensor's noise at the contact
+    /// stiffness, against the seat band and the rim (the mating's engagement depth less half
+    /// its lead-in).
     pub fn force_agreement(
         steps: &[StepGeometry<'_>],
         samples: usize,
         seed: u64,
         truth: &Arc<dyn InsertionScorer>,
+        cell: &Arc<dyn InsertionScorer>,
         spec: &ForceInsertionSpec,
     ) -> Result<ForceAgreement, ScorerError> {
         let cases: Vec<ForceCase> = (0..samples)
@@ -537,9 +568,11 @@ pub mod agreement {
                     ins_T_part: boundary_misalignment(&s.mating, &mut rng),
                 };
                 let scored = truth.score(&case)?.result;
-                let cell_stop = sim::cell::insertion::analytic::score(&s.mating, &case.ins_T_part)
-                    .end
-                    .height;
+                let cell_stop = if cell.name() == truth.name() {
+                    scored.end.height
+                } else {
+                    cell.score(&case)?.result.end.height
+                };
                 // The reading's error along the axis, in N: a fresh bias and noise per case.
                 let noise_n = FtNoise::ur5e(seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
                     .sample()[2];
@@ -561,6 +594,7 @@ pub mod agreement {
             .collect::<Result<_, ScorerError>>()?;
         let mut out = ForceAgreement {
             truth: truth.name().to_string(),
+            cell: cell.name().to_string(),
             steps: steps
                 .iter()
                 .map(|s| (s.mating.part.clone(), ForceCounts::default()))

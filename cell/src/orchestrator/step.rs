@@ -50,6 +50,8 @@ pub(super) struct StepState {
     pub confidence: Option<f64>,
     /// What the force-guided insertion in progress found, until judged.
     pub force: Option<super::insertion::ForceVerdict>,
+    /// What the last force-guided insertion decided, for the record.
+    pub force_record: Option<crate::episode::ForceRecord>,
 }
 
 /// Detections closer than this (table plane) to a missed pick count as the same part, metres.
@@ -85,6 +87,7 @@ impl StepState {
             perception_verdict: None,
             confidence: None,
             force: None,
+            force_record: None,
         }
     }
 
@@ -111,6 +114,7 @@ impl StepState {
             perception_verdict: self.perception_verdict,
             confidence: self.confidence,
             sim_time_s: now - self.start,
+            force: self.force_record,
         }
     }
 }

@@ -102,9 +102,13 @@ impl ArmModel for SimArm {
             _ => None,
         };
         if let Some(m) = planned {
-            lock(&self.cell)
-                .check_controller_move(m)
-                .map_err(arm_error)?;
+            let mut c = lock(&self.cell);
+            c.check_controller_move(m).map_err(arm_error)?;
+            // A contact engine's push into the target is simulated before the arm moves, not
+            // by the control loop's first sensor reading in contact.
+            if let ControllerMove::Linear(target) = m {
+                c.prepare_contact(&target);
+            }
         }
         let stop = matches!(cmd, ArmCommand::Stop { .. } | ArmCommand::StopL { .. });
         let pressing = stop && self.arm.is_moving() && {

@@ -20,8 +20,9 @@ use serde::{Deserialize, Serialize};
 use super::error::CellError;
 use super::feeder::{self, FeederPart};
 use super::gripper::{self, Grasp, GraspCandidate, GraspFailure};
+use super::insertion::felt::{FeltKey, FeltStop, FeltStops};
 use super::insertion::{
-    InsertionCase, InsertionCause, InsertionResult, Mating, ReceiverPart, Verdict,
+    InsertionCase, InsertionCause, InsertionResult, Mating, ReceiverPart, Scorer, Verdict,
 };
 use super::model::CellModel;
 use super::motion::{move_j_time, move_l_time};
@@ -30,6 +31,9 @@ use super::wrench::{GRIP_SLIP_FORCE, HELD_CONTACT_STIFFNESS};
 use crate::config::{Destination, Placement};
 use crate::render::IncrementalRenderer;
 
+/// Least axial load (N) of a contact engine's push at its stop for its lateral force and
+/// moment to be scaled to the cell's press (under it, the press is along the axis only).
+const MIN_ENGINE_PUSH: f64 = 0.1;
 /// Samples along a motion's path checked for reachability and table clearance.
 const PATH_SAMPLES: usize = 12;
 /// Samples along a guarded move's path searched for the first contact (then refined by
@@ -172,6 +176,8 @@ pub struct SimCell {
     scorer_failure: Option<String>,
     /// The wrist sensor's reading error (UR5e precision, its own seeded stream).
     ft: FtNoise,
+    /// The contact engine's pushes already simulated for the held part's misalignments.
+    felt: FeltStops,
 }
 
 #[allow(non_snake_case)]
@@ -216,6 +222,7 @@ impl SimCell {
             ft: FtNoise::ur5e(
                 seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ episode.wrapping_add(0x5EED_F0CE),
             ),
+            felt: FeltStops::default(),
         };
         cell.refill()?;
         Ok(cell)
@@ -583,12 +590,14 @@ impl SimCell {
 
     /// After a motion: if the held part came down into its target, score the insertion.
     fn settle_insertion(&mut self, above: f64) {
-        self.settle_insertion_at(self.true_tcp(), above);
+        self.settle_insertion_at(self.true_tcp(), above, false);
     }
 
     /// Scores the insertion of the held part with the true TCP at `tcp`, if it came down into
-    /// its target there.
-    fn settle_insertion_at(&mut self, tcp: Isometry3<f64>, above: f64) {
+    /// its target there. `felt`: the part was pressed in by a guarded move, so a contact
+    /// engine's push that stopped it ([`Self::felt_stop`]) is its score (the same call), and the
+    /// part then rests where that push left it.
+    fn settle_insertion_at(&mut self, tcp: Isometry3<f64>, above: f64, felt: bool) {
         let Some((step, base_T_ins, mating)) = self.insertion_at(&tcp, above) else {
             return;
         };
@@ -612,17 +621,50 @@ impl SimCell {
             receivers: &receivers,
             ins_T_part,
         };
+        let key = FeltKey {
+            instance: held.part.instance,
+            step,
+            placed: self.placed.len(),
+            ins_T_part,
+        };
+        let pushed = if felt {
+            self.felt.get(&key).filter(|f| f.scored.is_some())
+        } else {
+            None
+        };
         // Every part was checked against the scorer when the model was built; an engine that
         // still fails leaves the part unscored and says why (`scorer_failure`).
-        let scored = match self.model.insertion.score(&case) {
-            Ok(scored) => scored,
-            Err(e) => {
-                self.scorer_failure = Some(format!("step {step}: {e}"));
-                return;
+        let scored = match pushed.as_ref().and_then(|f| f.scored.clone()) {
+            // The engines start every push from the same clear height: only the start's
+            // recorded height differs.
+            Some(mut s) => {
+                s.result = InsertionResult::ended_at(
+                    &mating,
+                    mating.pose_error(&ins_T_part),
+                    s.result.ins_T_part,
+                );
+                s
             }
+            None => match self.model.insertion.score(&case) {
+                Ok(scored) => scored,
+                Err(e) => {
+                    self.scorer_failure = Some(format!("step {step}: {e}"));
+                    return;
+                }
+            },
         };
         self.clock += scored.simulated_time;
         let result = scored.result;
+        if let Some(f) = pushed {
+            // The part now rests where the push left it: the same stop for its new pose.
+            self.felt.insert(
+                FeltKey {
+                    ins_T_part: result.ins_T_part,
+                    ..key
+                },
+                f,
+            );
+        }
         let budget = self.budget(&base_T_ins, &tcp, &result);
         let base_T_part = base_T_ins * result.ins_T_part;
         if let Some(h) = self.held.as_mut() {
@@ -991,30 +1033,39 @@ impl SimCell {
 
     /// The true external wrench on the tool (base frame, at the TCP: force N, moment N·m) with
     /// the arm commanded at `base_T_tcp`: a held part coming down into its target meets what
-    /// stops it (the analytic capture model's stop height for its present pose error: the seat,
-    /// the rim, or a jam) and presses on it with [`HELD_CONTACT_STIFFNESS`] up to
-    /// [`GRIP_SLIP_FORCE`], along the insertion frame's z; fingertips or a held part below the
-    /// table press on it with the table's stiffness. Zero otherwise (the fixture's and placed
-    /// parts' other faces are not modelled).
+    /// stops it ([`Self::felt_stop`]: the seat, the rim, or a jam, where the scenario's scorer
+    /// stops it) and presses on it with [`HELD_CONTACT_STIFFNESS`] up to [`GRIP_SLIP_FORCE`]
+    /// along the insertion frame's z (with a contact engine, the engine's load at its stop,
+    /// lateral force and moment included, scaled to that press); fingertips or a held part
+    /// below the table press on it with the table's stiffness. Zero otherwise (the fixture's
+    /// and placed parts' other faces are not modelled).
     #[allow(non_snake_case)]
     pub fn contact_wrench_at(&self, base_T_tcp: &Isometry3<f64>) -> Wrench {
         let tcp = Translation3::from(self.tcp_error) * base_T_tcp;
         if let Some(h) = self.held.as_ref()
             && !self.gripper_open
-            && let Some((_, base_T_ins, mating)) = self.insertion_at(&tcp, 0.0)
+            && let Some((step, base_T_ins, mating)) = self.insertion_at(&tcp, 0.0)
         {
             let ins_T_part = base_T_ins.inverse() * tcp * h.part.tcp_T_part;
-            let stop = super::insertion::analytic::score(&mating, &ins_T_part)
-                .end
-                .height;
-            let depth = stop - mating.pose_error(&ins_T_part).height;
+            let felt = self.felt_stop(step, &mating, &ins_T_part);
+            let depth = felt.height - mating.pose_error(&ins_T_part).height;
             if depth <= 0.0 {
                 return [0.0; 6];
             }
-            let f = base_T_ins.rotation
-                * Vector3::z()
-                * (HELD_CONTACT_STIFFNESS * depth).min(GRIP_SLIP_FORCE);
-            return [f.x, f.y, f.z, 0.0, 0.0, 0.0];
+            let press = (HELD_CONTACT_STIFFNESS * depth).min(GRIP_SLIP_FORCE);
+            let (f, m) = match felt.wrench.filter(|w| w.force.z > MIN_ENGINE_PUSH) {
+                // The engine's load at its stop, its share of lateral force and moment kept.
+                Some(w) => {
+                    let scale = press / w.force.z;
+                    let force = w.force * scale;
+                    let centre = ins_T_part * mating.lead_point;
+                    let at = base_T_ins.inverse() * Point3::from(tcp.translation.vector);
+                    let moment = w.moment * scale + (centre - at).cross(&force);
+                    (base_T_ins.rotation * force, base_T_ins.rotation * moment)
+                }
+                None => (base_T_ins.rotation * Vector3::z() * press, Vector3::zeros()),
+            };
+            return [f.x, f.y, f.z, m.x, m.y, m.z];
         }
         let below = -self.lowest_z(&tcp);
         if below > 0.0 {
@@ -1024,6 +1075,79 @@ impl SimCell {
             return [f.x, f.y, f.z, 0.0, 0.0, 0.0];
         }
         [0.0; 6]
+    }
+
+    /// Where the held part at `ins_T_part` (insertion frame of step `step`) stops when pressed
+    /// into its target, and what the wrist feels there, from the scenario's scorer: the
+    /// analytic capture model's end height; or a contact engine's push for this misalignment
+    /// (simulated once, then remembered: the same call scores the insertion when the guarded
+    /// move ends). An engine that fails falls back to the analytic stop (and the insertion's
+    /// scoring says why).
+    #[allow(non_snake_case)]
+    pub fn felt_stop(
+        &self,
+        step: usize,
+        mating: &Mating,
+        ins_T_part: &Isometry3<f64>,
+    ) -> Arc<FeltStop> {
+        let analytic = || {
+            Arc::new(FeltStop {
+                height: super::insertion::analytic::score(mating, ins_T_part)
+                    .end
+                    .height,
+                wrench: None,
+                scored: None,
+            })
+        };
+        let Some(held) = self.held.as_ref() else {
+            return analytic();
+        };
+        if self.model.scorer == Scorer::Analytic {
+            return analytic();
+        }
+        let key = FeltKey {
+            instance: held.part.instance,
+            step,
+            placed: self.placed.len(),
+            ins_T_part: *ins_T_part,
+        };
+        if let Some(f) = self.felt.get(&key) {
+            return f;
+        }
+        let s = &self.model.steps[step];
+        let base_T_dest = self
+            .destination(&s.into)
+            .unwrap_or(self.model.geometry.base_T_fixture);
+        let (Some(geom), Some(receivers)) = (
+            self.model.geometry.parts.get(&s.part),
+            self.receivers(step, &base_T_dest),
+        ) else {
+            return analytic();
+        };
+        let case = InsertionCase {
+            mating,
+            held: geom,
+            receivers: &receivers,
+            ins_T_part: *ins_T_part,
+        };
+        let Ok((scored, wrench)) = self.model.insertion.score_with_wrench(&case) else {
+            return analytic();
+        };
+        let felt = Arc::new(FeltStop {
+            height: scored.result.end.height,
+            wrench: wrench.last().copied(),
+            scored: Some(scored),
+        });
+        self.felt.insert(key, felt.clone());
+        felt
+    }
+
+    /// Makes ready the contact model for a move to `base_T_tcp` (a controller's `movel` target):
+    /// a contact engine's push for the held part's misalignment there is simulated now, before
+    /// the arm moves, rather than by the controller's first sensor reading in contact.
+    #[allow(non_snake_case)]
+    pub fn prepare_contact(&self, base_T_tcp: &Isometry3<f64>) {
+        let _ = self.contact_wrench_at(base_T_tcp);
     }
 
     /// One reading of the wrist sensor now (`actual_TCP_force`: the external wrench, base frame,
@@ -1106,7 +1230,7 @@ impl SimCell {
         self.clock = self.clock.max(self.fingers_ready_at);
         if !self.gripper_open {
             let touch = Translation3::from(self.tcp_error) * pose_at(touch_s);
-            self.settle_insertion_at(touch, 0.0);
+            self.settle_insertion_at(touch, 0.0, true);
         }
         Ok(ContactOutcome {
             stopped_at: self.tcp_pose_now(),
@@ -1209,7 +1333,7 @@ impl SimCell {
                 Some(dir) => Translation3::from(dir * (f.norm() / HELD_CONTACT_STIFFNESS)) * stop,
                 None => stop,
             };
-            self.settle_insertion_at(Translation3::from(self.tcp_error) * touch, 0.0);
+            self.settle_insertion_at(Translation3::from(self.tcp_error) * touch, 0.0, true);
         }
     }
 

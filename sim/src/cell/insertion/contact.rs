@@ -85,6 +85,13 @@ impl super::InsertionScorer for Rapier {
     }
 
     fn score(&self, case: &super::InsertionCase<'_>) -> Result<super::Scored, super::ScorerError> {
+        self.score_with_wrench(case).map(|(scored, _)| scored)
+    }
+
+    fn score_with_wrench(
+        &self,
+        case: &super::InsertionCase<'_>,
+    ) -> Result<(super::Scored, Vec<WristWrench>), super::ScorerError> {
         let run = simulate(
             case.mating,
             case.held,
@@ -92,11 +99,14 @@ impl super::InsertionScorer for Rapier {
             &case.ins_T_part,
             &self.settings,
         );
-        Ok(super::Scored {
-            result: run.result,
-            simulated_time: run.simulated_time,
-            steps: run.steps,
-        })
+        Ok((
+            super::Scored {
+                result: run.result,
+                simulated_time: run.simulated_time,
+                steps: run.steps,
+            },
+            run.wrench,
+        ))
     }
 }
 

@@ -16,6 +16,7 @@ pub mod agreement;
 pub mod analytic;
 pub mod contact;
 mod error;
+pub mod felt;
 mod mating;
 pub mod mujoco;
 mod outcome;

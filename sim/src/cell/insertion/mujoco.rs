@@ -164,6 +164,13 @@ impl InsertionScorer for Mujoco {
             .map(|(scored, _)| scored)
             .map_err(|e| to_scorer_error(e, "mujoco"))
     }
+
+    fn score_with_wrench(
+        &self,
+        case: &InsertionCase<'_>,
+    ) -> Result<(Scored, Vec<WristWrench>), ScorerError> {
+        Mujoco::score_with_wrench(self, case)
+    }
 }
 
 impl Mujoco {

@@ -7,6 +7,7 @@ use nalgebra::Isometry3;
 use super::error::ScorerError;
 use super::mating::{Mating, ReceiverPart};
 use super::outcome::InsertionResult;
+use super::wrist::WristWrench;
 use crate::cell::geometry::PartGeometry;
 
 /// One insertion to score: the step's geometry and where the held part starts.
@@ -48,4 +49,15 @@ pub trait InsertionScorer: Send + Sync + std::fmt::Debug {
 
     /// Scores one insertion.
     fn score(&self, case: &InsertionCase<'_>) -> Result<Scored, ScorerError>;
+
+    /// Scores one insertion as [`Self::score`] does (the same result) and records the wrist's
+    /// load through it ([`super::Wrist::spring_wrench`], every
+    /// [`super::contact::WRENCH_SAMPLE_PERIOD`] and at the end); a scorer that simulates no
+    /// wrist records nothing.
+    fn score_with_wrench(
+        &self,
+        case: &InsertionCase<'_>,
+    ) -> Result<(Scored, Vec<WristWrench>), ScorerError> {
+        Ok((self.score(case)?, Vec::new()))
+    }
 }
