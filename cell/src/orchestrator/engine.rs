@@ -18,7 +18,7 @@ use super::planning::{Motion, NamedMotion, Planner, Speeds, grasped_offset};
 use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
 use super::step::StepState;
-use super::view::arm_in_feeder_view;
+use super::view::{arm_in_feeder_view, arm_near_feeder};
 use crate::episode::{
     EpisodeRecord, GRASP_MISSED, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome,
 };
@@ -91,6 +91,9 @@ pub(super) struct Engine<'a> {
     ahead: Option<Ahead>,
     /// What became of the last overlapped capture, for the event log.
     ahead_note: String,
+    /// With overlap on, a shake for the next step decided after the pick and held back until
+    /// the arm is away from the feeder.
+    shake_pending: bool,
 }
 
 impl<'a> Engine<'a> {
@@ -117,6 +120,7 @@ impl<'a> Engine<'a> {
             deferred_lift: None,
             ahead: None,
             ahead_note: String::new(),
+            shake_pending: false,
         }
     }
 
@@ -241,6 +245,11 @@ impl<'a> Engine<'a> {
         if self.ahead.as_ref().is_some_and(|a| a.step < self.index) {
             self.ahead = None;
         }
+        // A shake held back while the arm was near the feeder starts now, counted against
+        // this step (the capture waits for it).
+        if std::mem::take(&mut self.shake_pending) && self.io().shake_feeder().is_ok() {
+            self.step.shakes += 1;
+        }
         match self.io().capture() {
             Ok(f) => {
                 self.step.frame = Some(f);
@@ -272,6 +281,21 @@ impl<'a> Engine<'a> {
         let next = self.index + 1;
         if !self.ctx.settings.overlap || next >= self.steps() {
             return Ok(());
+        }
+        if self.shake_pending {
+            let q = self.joints(state).await?;
+            match arm_near_feeder(self.ctx.knowledge, &q, self.held_radius()) {
+                Some(what) => {
+                    self.ahead_note = format!("shake held back: the {what} is near the feeder");
+                    return Ok(());
+                }
+                None => {
+                    self.shake_pending = false;
+                    if self.io().shake_feeder().is_ok() {
+                        self.shakes_ahead += 1;
+                    }
+                }
+            }
         }
         if self.io().feeder_at_rest() != Some(true) {
             self.ahead_note = "no capture ahead: the feeder is still settling".into();
@@ -703,7 +727,6 @@ impl<'a> Engine<'a> {
         state: State,
         v: insertion::ForceVerdict,
     ) -> Result<State, Stop> {
-        self.step.force_record = Some(v.record());
         if v.outcome == StepOutcome::Seated {
             self.capture_ahead_again(state).await?;
             let pending = std::mem::take(&mut self.step.pending);
@@ -842,8 +865,13 @@ impl<'a> Engine<'a> {
             here,
             &c.settings.selection,
         );
-        if ahead.chosen.is_none() && self.io().shake_feeder().is_ok() {
-            self.shakes_ahead += 1;
+        if ahead.chosen.is_none() {
+            if self.ctx.settings.overlap {
+                // Held back until the arm is away from the feeder.
+                self.shake_pending = true;
+            } else if self.io().shake_feeder().is_ok() {
+                self.shakes_ahead += 1;
+            }
         }
     }
 

@@ -20,17 +20,19 @@ const FEEDER_MARGIN: f64 = 0.008;
 /// Spacing of the points checked along each capsule's axis, metres.
 const STEP: f64 = 0.005;
 
-/// The first part of the arm (or the held part) found in the camera's view of the feeder at
-/// joints `q`, by name; `None` when the view is clear. `held` is the radius of a held part's
-/// bounding sphere around the TCP, metres.
+/// Height above the table below which an arm over the feeder is near it: a shake flips parts
+/// a few millimetres up, metres.
+pub const AWAY_HEIGHT: f64 = 0.05;
+
+/// The arm at joints `q` as spheres along its links' axes (table frame), by link name: the
+/// links, the gripper, and a held part as a sphere of radius `held` around the TCP.
 #[allow(non_snake_case)]
-pub fn arm_in_feeder_view(
+fn spheres(
     k: &CellKnowledge,
     q: &Joints,
     held: Option<f64>,
-) -> Option<&'static str> {
+) -> Vec<(&'static str, Point3<f64>, f64)> {
     let table_T_base = k.geometry.base_T_table.inverse();
-    let camera = table_T_base * Point3::from(k.geometry.base_T_camera_nominal.translation.vector);
     let frames = k.kinematics.dh.frames(q);
     let at = |iso: &Isometry3<f64>| table_T_base * Point3::from(iso.translation.vector);
     let base = at(&Isometry3::identity());
@@ -44,22 +46,60 @@ pub fn arm_in_feeder_view(
         ("wrist 3", at(&frames[4]), at(&frames[5]), LINK_RADIUS),
         ("gripper", at(&frames[5]), tcp, GRIPPER_RADIUS),
     ];
-    let f = &k.spec.feeder;
-    let half = [
-        0.5 * f.size[0] + FEEDER_MARGIN,
-        0.5 * f.size[1] + FEEDER_MARGIN,
-    ];
-    let hides = |p: &Point3<f64>, r: f64| shadow_hits(&camera, p, r, f.center, half);
+    let mut out = Vec::new();
     for (name, a, b, r) in links {
         let n = ((b - a).norm() / STEP).ceil().max(1.0) as usize;
-        if (0..=n).any(|i| hides(&(a + (b - a) * (i as f64 / n as f64)), r)) {
-            return Some(name);
-        }
+        out.extend((0..=n).map(|i| (name, a + (b - a) * (i as f64 / n as f64), r)));
     }
-    match held {
-        Some(r) if hides(&tcp, r) => Some("held part"),
-        _ => None,
+    if let Some(r) = held {
+        out.push(("held part", tcp, r));
     }
+    out
+}
+
+/// The feeder rectangle's centre and half sizes with the margin (table frame), metres.
+fn feeder_rect(k: &CellKnowledge) -> ([f64; 2], [f64; 2]) {
+    let f = &k.spec.feeder;
+    (
+        f.center,
+        [
+            0.5 * f.size[0] + FEEDER_MARGIN,
+            0.5 * f.size[1] + FEEDER_MARGIN,
+        ],
+    )
+}
+
+/// The first part of the arm (or the held part) found in the camera's view of the feeder at
+/// joints `q`, by name; `None` when the view is clear. `held` is the radius of a held part's
+/// bounding sphere around the TCP, metres.
+#[allow(non_snake_case)]
+pub fn arm_in_feeder_view(
+    k: &CellKnowledge,
+    q: &Joints,
+    held: Option<f64>,
+) -> Option<&'static str> {
+    let table_T_base = k.geometry.base_T_table.inverse();
+    let camera = table_T_base * Point3::from(k.geometry.base_T_camera_nominal.translation.vector);
+    let (center, half) = feeder_rect(k);
+    spheres(k, q, held)
+        .into_iter()
+        .find(|(_, p, r)| shadow_hits(&camera, p, *r, center, half))
+        .map(|(name, _, _)| name)
+}
+
+/// The first part of the arm (or the held part) near the feeder at joints `q`: over its
+/// rectangle and lower than [`AWAY_HEIGHT`] above the table, where a shake could throw parts
+/// against it; `None` when the arm is away from the feeder.
+pub fn arm_near_feeder(k: &CellKnowledge, q: &Joints, held: Option<f64>) -> Option<&'static str> {
+    let (center, half) = feeder_rect(k);
+    spheres(k, q, held)
+        .into_iter()
+        .find(|(_, p, r)| {
+            p.z - r < AWAY_HEIGHT
+                && (p.x - center[0]).abs() <= half[0] + r
+                && (p.y - center[1]).abs() <= half[1] + r
+        })
+        .map(|(name, _, _)| name)
 }
 
 /// Whether a sphere at `p` (table frame) of radius `r` casts its shadow from `camera` onto
