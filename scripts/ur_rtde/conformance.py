@@ -31,20 +31,14 @@ FK_Q = [0.3, -1.4, 1.5, -1.7, -1.5708, 0.2]
 STOPS = "the program stops with a runtime error; ur_rtde returns False / raises, isProgramRunning() is False"
 REALTIME = ("ur_rtde does not wait for this realtime command and returns at once; the program then "
             "stops with a runtime error, so isProgramRunning() is False and the next call returns False")
-POLYSCOPE_5_23 = (" (a PolyScope 5.23 function: ur_rtde's script guards it with $5.23 and the "
-                  "simulator reports 5.15)")
 UNSUPPORTED = {
     "ftRtdeInputEnable": STOPS,
     "enableExternalFtSensor": STOPS,
     "setExternalForceTorque": "ur_rtde 1.6.5 returns True without sending anything unless ftRtdeInputEnable succeeded, which fails loudly here; a written external_force_torque input stops the program",
     "setGravity": STOPS,
     "servoC": "ur_rtde does not wait for it; the program stops with a runtime error (servoc not simulated)",
-    "directTorque": REALTIME,
-    "getMassMatrix": REALTIME + POLYSCOPE_5_23,
-    "getCoriolisAndCentrifugalTorques": REALTIME + POLYSCOPE_5_23,
-    "getTargetJointAccelerations": REALTIME + POLYSCOPE_5_23,
-    "getJacobian": REALTIME + POLYSCOPE_5_23,
-    "getJacobianTimeDerivative": REALTIME + POLYSCOPE_5_23,
+    "directTorque": REALTIME + (" (a PolyScope 5.26 function: the simulator reports 5.23, so ur_rtde's "
+                                "script leaves it out; the kinematic arm takes no torque commands)"),
     "sendCustomScript": "the simulator does not interpret URScript: the uploaded script is refused (not started, logged as an error) and ur_rtde 1.6.5 keeps waiting for it to run; not called by this suite",
     "sendCustomScriptFile": "as sendCustomScript",
     "sendCustomScriptFunction": "as sendCustomScript",
@@ -726,6 +720,108 @@ def main():
         check(c.getFreedriveStatus() == 0, "out of freedrive")
         check(c.moveJ(Q1, 1.5, 3.0), "and back")
 
+    # ---------------- dynamics (PolyScope 5.23 functions) ----------------
+    def matrix(m):
+        """A 6x6 answer as rows (ur_rtde may hand back nested rows or 36 numbers, column-major)."""
+        m = [list(row) for row in m] if m and isinstance(m[0], (list, tuple)) else list(m)
+        if len(m) == 6 and all(isinstance(row, list) and len(row) == 6 for row in m):
+            return m
+        check(len(m) == 36, f"a 6x6 matrix: {m}")
+        return [[m[col * 6 + row] for col in range(6)] for row in range(6)]
+
+    @case("getMassMatrix: symmetric, positive definite, heavier with a payload", "getMassMatrix")
+    def mass_matrix():
+        check(c.setPayload(0.0, [0, 0, 0]), "no payload")
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        m = matrix(fresh(c.getMassMatrix))
+        check(max(abs(m[i][j] - m[j][i]) for i in range(6) for j in range(6)) < 1e-9, f"symmetric: {m}")
+        # Positive definite: a Cholesky factorisation exists.
+        low = [[0.0] * 6 for _ in range(6)]
+        for i in range(6):
+            for j in range(i + 1):
+                s = m[i][j] - sum(low[i][k] * low[j][k] for k in range(j))
+                if i == j:
+                    check(s > 0, f"not positive definite at {i}: {m}")
+                    low[i][i] = math.sqrt(s)
+                else:
+                    low[i][j] = s / low[j][j]
+        check(c.setPayload(2.0, [0, 0, 0.05]), "setPayload")
+        loaded = matrix(fresh(c.getMassMatrix))
+        check(loaded[1][1] > m[1][1] + 0.1, f"2 kg: M22 {m[1][1]} -> {loaded[1][1]}")
+        check(c.setPayload(0.0, [0, 0, 0]), "payload off")
+        check(c.isProgramRunning(), "the program still runs")
+        # The Rust test compares it with the URDF's rigid-body model at Q1.
+        return {"q": list(r.getActualQ()), "mass_matrix": m}
+
+    @case("getJacobian maps joint speeds to the TCP twist: getForwardKinematics' finite differences",
+          "getJacobian")
+    def jacobian():
+        check(c.setTcp([0, 0, 0.1, 0, 0, 0]), "a 10 cm TCP")
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        j = matrix(fresh(c.getJacobian))
+        h = 1e-5
+        worst = 0.0
+        for k in range(6):
+            qa, qb = list(Q1), list(Q1)
+            qa[k] -= h
+            qb[k] += h
+            a = c.getForwardKinematics(qa, [0, 0, 0.1, 0, 0, 0])
+            b = c.getForwardKinematics(qb, [0, 0, 0.1, 0, 0, 0])
+            v = [(b[i] - a[i]) / (2 * h) for i in range(3)]
+            ra, rb = rotvec_to_matrix(a[3:]), rotvec_to_matrix(b[3:])
+            # dR Rᵀ / dt is the skew matrix of the angular velocity.
+            dr = [[(rb[i][l] - ra[i][l]) / (2 * h) for l in range(3)] for i in range(3)]
+            rt = rotvec_to_matrix(c.getForwardKinematics(Q1, [0, 0, 0.1, 0, 0, 0])[3:])
+            w_skew = [[sum(dr[i][l] * rt[m_][l] for l in range(3)) for m_ in range(3)] for i in range(3)]
+            w = [w_skew[2][1], w_skew[0][2], w_skew[1][0]]
+            for i in range(3):
+                worst = max(worst, abs(j[i][k] - v[i]), abs(j[i + 3][k] - w[i]))
+        check(worst < 1e-6, f"Jacobian off the finite differences by {worst}: {j}")
+        check(c.setTcp([0] * 6), "TCP back")
+        check(c.isProgramRunning(), "the program still runs")
+        return {"worst": worst}
+
+    @case("getJacobianTimeDerivative, getCoriolisAndCentrifugalTorques, getTargetJointAccelerations: "
+          "zero at rest, the base rotation's while joint 1 turns",
+          "getJacobianTimeDerivative", "getCoriolisAndCentrifugalTorques", "getTargetJointAccelerations")
+    def dynamics_in_motion():
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        near([v for row in matrix(fresh(c.getJacobianTimeDerivative)) for v in row], [0] * 36, 1e-12)
+        near(fresh(c.getCoriolisAndCentrifugalTorques), [0] * 6, 1e-12)
+        near(fresh(c.getTargetJointAccelerations), [0] * 6, 1e-12)
+        # moveJ with 0.5 rad/s²: joint 1 alone accelerates for a second.
+        far = list(Q1)
+        far[0] += 1.0
+        check(c.moveJ(far, 1.0, 0.5, True), "async moveJ")
+        settle(0.3)
+        accel = fresh(c.getTargetJointAccelerations)
+        check(abs(abs(accel[0]) - 0.5) < 1e-6 and max(abs(a) for a in accel[1:]) < 1e-9,
+              f"target accelerations {accel}")
+        c.stopJ(5.0)
+        check(at_rest(), "at rest")
+        # Joint 1 turning at w about the base z: the whole arm rotates, so J̇ = [ŵ 0; 0 ŵ] J, and
+        # the links' centrifugal forces load the shoulder and elbow.
+        w = 0.2
+        check(c.speedJ([w, 0, 0, 0, 0, 0], 2.0, 0.0), "speedJ")
+        settle(0.3)
+        jd = matrix(fresh(c.getJacobianTimeDerivative))
+        j = matrix(fresh(c.getJacobian))
+        coriolis = fresh(c.getCoriolisAndCentrifugalTorques)
+        q, qd = r.getActualQ(), r.getActualQd()
+        check(c.speedStop(5.0), "speedStop")
+        skew = [[0, -w, 0], [w, 0, 0], [0, 0, 0]]
+        want = [[sum(skew[i % 3][l] * j[(i // 3) * 3 + l][k] for l in range(3)) for k in range(6)]
+                for i in range(6)]
+        scale = max(abs(v) for row in want for v in row)
+        worst = max(abs(jd[i][k] - want[i][k]) for i in range(6) for k in range(6))
+        # J and J̇ are read a few cycles apart while the arm turns at 0.2 rad/s.
+        check(scale > 0.01 and worst < 0.02 * scale, f"J̇ {jd} vs ŵJ {want}: {worst}")
+        check(abs(coriolis[1]) > 1e-3, f"centrifugal torques {coriolis}")
+        check(c.isProgramRunning(), "the program still runs")
+        check(c.moveJ(Q1, 1.5, 3.0), "the next move still runs")
+        # The Rust test compares the torques with the model at q, qd.
+        return {"q": q, "qd": qd, "coriolis": coriolis, "target_accel": accel}
+
     @case("setPayload / setTargetPayload reach the receive interface", "setPayload", "setTargetPayload",
           "getPayload", "getPayloadCog", "getPayloadInertia")
     def payload():
@@ -851,11 +947,6 @@ def main():
     loud("setGravity", lambda: c.setGravity([0, 0, 9.82]))
     loud("servoC", lambda: c.servoC(r.getActualTCPPose(), 0.1, 0.5, 0.0))
     loud("directTorque", lambda: c.directTorque([0] * 6))
-    loud("getMassMatrix", lambda: True if c.getMassMatrix() is not None else False)
-    loud("getCoriolisAndCentrifugalTorques", lambda: True if c.getCoriolisAndCentrifugalTorques() is not None else False)
-    loud("getTargetJointAccelerations", lambda: True if c.getTargetJointAccelerations() is not None else False)
-    loud("getJacobian", lambda: True if c.getJacobian() is not None else False)
-    loud("getJacobianTimeDerivative", lambda: True if c.getJacobianTimeDerivative() is not None else False)
     # Not called: the simulator refuses scripts it does not execute (see UNSUPPORTED), and
     # ur_rtde 1.6.5 then waits for the custom script to run.
     tested.update(["sendCustomScript", "sendCustomScriptFile", "sendCustomScriptFunction",
@@ -903,10 +994,14 @@ def main():
     @case("receive: output registers carry the control script's state", "getOutputIntRegister",
           "getOutputDoubleRegister")
     def registers():
-        # ur_rtde's receive interface reads registers 12-19 (its control script uses 0-2);
-        # nothing writes them here, and they read as the controller's zero.
+        # ur_rtde's receive interface reads registers 12-19; its control script writes int
+        # registers 0-2 only, and double registers 0-23 with 6x6 answers (get_jacobian()
+        # column-major: registers 12-17 are column 3, 18-19 the top of column 4).
         check(all(r.getOutputIntRegister(i) == 0 for i in range(12, 20)), "int registers 12-19")
-        check(all(r.getOutputDoubleRegister(i) == 0.0 for i in range(12, 20)), "double registers")
+        j = fresh(c.getJacobian)
+        check(wait_for(lambda: all(r.getOutputDoubleRegister(i) == j[i] for i in range(12, 20))),
+              f"double registers 12-19 {[r.getOutputDoubleRegister(i) for i in range(12, 20)]} vs {j[12:20]}")
+        check(max(abs(v) for v in j[12:18]) > 1e-3, f"column 3 of the Jacobian {j[12:18]}")
 
     @case("receive: file recording writes the stream", "startFileRecording", "stopFileRecording")
     def recording():
@@ -950,6 +1045,11 @@ def main():
             "getActualJointPositionsHistory": lambda: c.getActualJointPositionsHistory(10),
             "getTargetWaypoint": c.getTargetWaypoint,
             "getJointTorques": c.getJointTorques,
+            "getMassMatrix": c.getMassMatrix,
+            "getCoriolisAndCentrifugalTorques": c.getCoriolisAndCentrifugalTorques,
+            "getTargetJointAccelerations": c.getTargetJointAccelerations,
+            "getJacobian": c.getJacobian,
+            "getJacobianTimeDerivative": c.getJacobianTimeDerivative,
             "getFreedriveStatus": c.getFreedriveStatus,
             "getRobotStatus": c.getRobotStatus,
             "getAsyncOperationProgress": c.getAsyncOperationProgress,
@@ -963,8 +1063,7 @@ def main():
         }
         # Getters of features this suite lists as unsupported (see UNSUPPORTED): not called;
         # readContactDetection has its own case (it reads a running detection).
-        excluded = {"readContactDetection", "getMassMatrix", "getCoriolisAndCentrifugalTorques",
-                    "getTargetJointAccelerations", "getJacobian", "getJacobianTimeDerivative"}
+        excluded = {"readContactDetection"}
         getters = {m for m in dir(rtde_control.RTDEControlInterface) if m.startswith(("get", "is", "read"))}
         check(getters == set(control) | excluded, f"getters not called: {getters - set(control) - excluded}")
         answers = {}

@@ -95,6 +95,9 @@ pub struct Snapshot {
     pub target_current: [f64; 6],
     /// Motor currents (A) at the actual joints (`actual_current`).
     pub actual_current: [f64; 6],
+    /// Those currents as joint torques (N·m) through the torque constants
+    /// (`actual_current_as_torque`, PolyScope 5.23).
+    pub actual_current_as_torque: [f64; 6],
     /// The external wrench as the wrist sensor reads it (`actual_TCP_force`: base frame, at the
     /// TCP, payload compensated, with the sensor's noise).
     pub tcp_force: [f64; 6],
@@ -173,6 +176,7 @@ enum Quantity {
     TargetMoment,
     TargetCurrent,
     ActualCurrent,
+    ActualCurrentAsTorque,
     ActualTcpForce,
     FtRawWrench,
 }
@@ -215,6 +219,7 @@ const QUANTITIES: &[(&str, Quantity)] = &[
     ("target_moment", Quantity::TargetMoment),
     ("target_current", Quantity::TargetCurrent),
     ("actual_current", Quantity::ActualCurrent),
+    ("actual_current_as_torque", Quantity::ActualCurrentAsTorque),
     ("actual_TCP_force", Quantity::ActualTcpForce),
     ("ft_raw_wrench", Quantity::FtRawWrench),
 ];
@@ -495,15 +500,16 @@ impl VirtualController {
         // The joints hold gravity and, through the Jacobian's transpose, what the tool touches.
         let contact = core.sensor.joint_torques;
         let with_contact = |g: Joints| -> Joints { std::array::from_fn(|i| g[i] + contact[i]) };
-        let (target_moment, target_current, actual_current) = match core.arm.dynamics() {
-            Some(d) => {
-                let dh = &core.arm.kinematics().dh;
-                let target = with_contact(d.gravity_torques(dh, &arm.target_q, &core.payload));
-                let actual = with_contact(d.gravity_torques(dh, &arm.q, &core.payload));
-                (target, d.currents(&target), d.currents(&actual))
-            }
-            None => ([0.0; 6], [0.0; 6], [0.0; 6]),
-        };
+        let (target_moment, target_current, actual_current, actual_current_as_torque) =
+            match core.arm.dynamics() {
+                Some(d) => {
+                    let dh = &core.arm.kinematics().dh;
+                    let target = with_contact(d.gravity_torques(dh, &arm.target_q, &core.payload));
+                    let actual = with_contact(d.gravity_torques(dh, &arm.q, &core.payload));
+                    (target, d.currents(&target), d.currents(&actual), actual)
+                }
+                None => ([0.0; 6], [0.0; 6], [0.0; 6], [0.0; 6]),
+            };
         Snapshot {
             cycle: core.cycle,
             timestamp: core.time,
@@ -518,6 +524,7 @@ impl VirtualController {
             target_moment,
             target_current,
             actual_current,
+            actual_current_as_torque,
             tcp_force: core.sensor.tcp_force,
             ft_raw_wrench: core.sensor.raw,
         }
@@ -998,6 +1005,7 @@ impl Controller for VirtualController {
                     Quantity::TargetMoment => Value::Vector6d(s.target_moment),
                     Quantity::TargetCurrent => Value::Vector6d(s.target_current),
                     Quantity::ActualCurrent => Value::Vector6d(s.actual_current),
+                    Quantity::ActualCurrentAsTorque => Value::Vector6d(s.actual_current_as_torque),
                     Quantity::ActualTcpForce => Value::Vector6d(s.tcp_force),
                     Quantity::FtRawWrench => Value::Vector6d(s.ft_raw_wrench),
                 }

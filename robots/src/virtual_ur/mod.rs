@@ -64,7 +64,7 @@ impl Default for VirtualUrConfig {
             initial_q: [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0],
             version: ControllerVersion {
                 major: 5,
-                minor: 15,
+                minor: 23,
                 bugfix: 0,
                 build: 0,
             },

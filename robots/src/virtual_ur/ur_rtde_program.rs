@@ -5,13 +5,15 @@
 //! without the effect.
 
 use super::arm::{ArmCommand, ArmError};
+use super::dynamics::{ArmDynamics, jacobian, jacobian_time_derivative};
 use super::force::{ForceMode, ForceTuning, MAX_GAIN_SCALING};
 use super::path::{PathMove, PathStatement, PathTarget, injected_path, settle_blends};
 use super::programs::{Program, ProgramIo, ProgramStep};
 use super::registers::Registers;
+use crate::kinematics::UrDh;
 use crate::kinematics::{Joints, from_ur_pose, to_ur_pose};
 use crate::program::layout as L;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix6, UnitQuaternion, Vector3};
 
 /// ur_rtde 1.6.x command ids (`RTDE::RobotCommand::Type`).
 pub mod ur_rtde_cmd {
@@ -123,6 +125,18 @@ pub mod ur_rtde_cmd {
     pub const GET_IK_HAS_SOLUTION_ARGS: i32 = 61;
     /// setTargetPayload.
     pub const SET_TARGET_PAYLOAD: i32 = 65;
+    /// directTorque (realtime; PolyScope 5.26).
+    pub const DIRECT_TORQUE: i32 = 66;
+    /// getMassMatrix (realtime; PolyScope 5.23).
+    pub const GET_MASS_MATRIX: i32 = 67;
+    /// getCoriolisAndCentrifugalTorques (realtime; PolyScope 5.23).
+    pub const GET_CORIOLIS_AND_CENTRIFUGAL_TORQUES: i32 = 68;
+    /// getTargetJointAccelerations (realtime; PolyScope 5.23).
+    pub const GET_TARGET_JOINT_ACCELERATIONS: i32 = 69;
+    /// getJacobian (realtime; PolyScope 5.23).
+    pub const GET_JACOBIAN: i32 = 70;
+    /// getJacobianTimeDerivative (realtime; PolyScope 5.23).
+    pub const GET_JACOBIAN_TIME_DERIVATIVE: i32 = 71;
     /// Watchdog kick (ur_rtde sends it as a plain input update).
     pub const WATCHDOG: i32 = 99;
     /// stopScript.
@@ -306,6 +320,17 @@ fn write_vector(regs: &mut Registers, first: usize, v: &[f64; 6]) {
     regs.output_double[first..first + 6].copy_from_slice(v);
 }
 
+/// A 6×6 matrix as the script writes `get_mass_matrix()` and `get_jacobian()`: column-major,
+/// columns 0–3 in output_double_registers 0–23, columns 4–5 in 36–47.
+fn write_matrix(regs: &mut Registers, m: &Matrix6<f64>) {
+    for col in 0..6 {
+        let first = if col < 4 { col * 6 } else { 36 + (col - 4) * 6 };
+        for row in 0..6 {
+            regs.output_double[first + row] = m[(row, col)];
+        }
+    }
+}
+
 /// A runtime error for a command the model cannot do exactly.
 fn unsupported(cmd: i32) -> String {
     let what = match cmd {
@@ -313,9 +338,8 @@ fn unsupported(cmd: i32) -> String {
         MOVE_PATH => "movePath (custom script code)",
         56 | 57 => "external force/torque sensor",
         59 => "set_gravity",
-        66..=71 => {
-            "dynamics (torque command, mass matrix, Jacobians over registers 36-47: PolyScope \
-             5.23 functions; this controller reports 5.15)"
+        DIRECT_TORQUE => {
+            "direct_torque (a PolyScope 5.26 function: the kinematic arm takes no torque commands)"
         }
         _ => "this command",
     };
@@ -504,6 +528,17 @@ impl UrRtdeProgram {
         } else {
             Ok(Outcome::Wait)
         }
+    }
+
+    /// The arm's rigid-body model, or the runtime error of a dynamics function on an arm the
+    /// controller has no model of.
+    fn dynamics(io: &ProgramIo<'_>, cmd: i32) -> Result<(ArmDynamics, UrDh), String> {
+        let dh = io.arm.kinematics().dh;
+        io.arm.dynamics().map(|d| (d, dh)).ok_or_else(|| {
+            format!(
+                "virtual-ur: ur_rtde command {cmd}: no dynamics model for this arm's DH lengths"
+            )
+        })
     }
 
     fn inverse(io: &ProgramIo<'_>, pose: &[f64; 6], near: &Joints) -> Result<Joints, String> {
@@ -1112,6 +1147,38 @@ impl UrRtdeProgram {
                 Ok(())
             }
             GET_ACTUAL_TOOL_FLANGE_POSE => self.process(io, cmd).map(|_| ()),
+            GET_TARGET_JOINT_ACCELERATIONS => {
+                let qdd = io.arm.state().target_qdd;
+                write_vector(io.regs, 0, &qdd);
+                Ok(())
+            }
+            GET_CORIOLIS_AND_CENTRIFUGAL_TORQUES => {
+                let (d, dh) = Self::dynamics(io, cmd)?;
+                let state = io.arm.state();
+                let c = d.coriolis_and_centrifugal(&dh, &state.q, &state.qd, io.payload);
+                write_vector(io.regs, 0, &c);
+                Ok(())
+            }
+            GET_MASS_MATRIX => {
+                let (d, dh) = Self::dynamics(io, cmd)?;
+                let m = d.mass_matrix(&dh, &io.arm.state().q, io.payload);
+                write_matrix(io.regs, &m);
+                Ok(())
+            }
+            GET_JACOBIAN => {
+                let tcp = io.arm.kinematics().flange_T_tcp;
+                let (dh, q) = (io.arm.kinematics().dh, io.arm.state().q);
+                write_matrix(io.regs, &jacobian(&dh, &q, &tcp));
+                Ok(())
+            }
+            GET_JACOBIAN_TIME_DERIVATIVE => {
+                let tcp = io.arm.kinematics().flange_T_tcp;
+                let dh = io.arm.kinematics().dh;
+                let state = io.arm.state();
+                let jd = jacobian_time_derivative(&dh, &state.q, &state.qd, &tcp);
+                write_matrix(io.regs, &jd);
+                Ok(())
+            }
             other => Err(unsupported(other)),
         }
     }
