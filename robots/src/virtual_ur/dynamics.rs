@@ -191,7 +191,7 @@ impl ArmDynamics {
     ) -> Joints {
         let frames = joint_frames(dh, q);
         // Each link's bodies in the base frame: (mass, centre of mass, inertia about it).
-        let mut bodies: [Vec<(f64, Vector3<f64>, Matrix3<f64>)>; 6] = Default::default();
+        let mut bodies: [Vec<Body>; 6] = Default::default();
         for (i, l) in self.links.iter().enumerate() {
             let r = frames[i].rotation.to_rotation_matrix().into_inner();
             let c = (frames[i] * Point3::from(l.com)).coords;
@@ -326,6 +326,9 @@ pub fn jacobian_time_derivative(
     out
 }
 
+/// A rigid body in the base frame: mass (kg), centre of mass (m), inertia about it (kg m²).
+type Body = (f64, Vector3<f64>, Matrix3<f64>);
+
 /// Each joint's frame at `q`: DH frame i−1 (the base for joint 1) turned by q_i about its z.
 fn joint_frames(dh: &UrDh, q: &Joints) -> [Isometry3<f64>; 6] {
     let dh_frames = dh.frames(q);
@@ -371,7 +374,7 @@ mod tests {
     }
 
     const POSES: [Joints; 3] = [
-        [0.3, -1.4, 1.5, -1.7, -1.5708, 0.2],
+        [0.3, -1.4, 1.5, -1.7, -1.4, 0.2],
         [-0.7, -0.9, 2.1, 0.4, 1.1, -2.3],
         [1.9, -2.2, -1.3, -0.6, 0.35, 0.8],
     ];
