@@ -16,12 +16,16 @@ use super::Scored;
 use super::wrist::WristWrench;
 
 /// Two start poses differing laterally by less than this (insertion frame x, y; metres) are the
-/// same misalignment: along a guarded descent only the height changes, and the engines start
-/// every push from the same clear height whatever the start pose's.
-pub const SAME_LATERAL: f64 = 1e-9;
+/// same misalignment: the engines start every push from the same clear height whatever the
+/// start pose's, and along a guarded descent the part's lateral error drifts by a few microns
+/// (the planned descent runs about a milliradian off the true insertion axis: 1 µm per 0.9 mm
+/// of height, measured), well under the arm's repeatability (UR5e ±30 µm); the push simulated
+/// where the part first came down into its target stands for the whole descent. Spiral probes
+/// and retries step by tenths of a millimetre, so each is a push of its own.
+pub const SAME_LATERAL: f64 = 1e-5;
 /// Two start poses whose rotations differ by less than this (radians) are the same
 /// misalignment.
-pub const SAME_ANGLE: f64 = 1e-9;
+pub const SAME_ANGLE: f64 = 1e-5;
 /// Misalignments [`FeltStops`] remembers (the oldest goes first).
 const REMEMBERED: usize = 16;
 
@@ -120,12 +124,12 @@ mod tests {
     }
 
     #[test]
-    fn a_misalignment_is_the_same_at_any_height_and_differs_by_a_nanometre_or_a_nanoradian() {
+    fn a_misalignment_is_the_same_at_any_height_within_ten_microns_or_microradians() {
         let a = key(0.0001, 0.002, 0.001);
         assert!(a.same(&key(0.0001, -0.0005, 0.001)));
-        assert!(a.same(&key(0.0001 + 2e-10, 0.0, 0.001 + 2e-10)));
-        assert!(!a.same(&key(0.0001 + 2e-9, 0.002, 0.001)));
-        assert!(!a.same(&key(0.0001, 0.002, 0.001 + 2e-9)));
+        assert!(a.same(&key(0.0001 + 4e-6, 0.0, 0.001 + 4e-6)));
+        assert!(!a.same(&key(0.0001 + 2e-5, 0.002, 0.001)));
+        assert!(!a.same(&key(0.0001, 0.002, 0.001 + 2e-5)));
         assert!(!a.same(&FeltKey { placed: 2, ..a }));
         assert!(!a.same(&FeltKey { instance: 4, ..a }));
         let stops = FeltStops::default();
@@ -139,7 +143,7 @@ mod tests {
         assert_eq!(stops.get(&key(0.0002, 0.0, 0.001)), None);
         for k in 0..REMEMBERED {
             stops.insert(
-                key(f64::from(k as u32) * 1e-6 + 0.01, 0.0, 0.0),
+                key(f64::from(k as u32) * 1e-4 + 0.01, 0.0, 0.0),
                 Arc::new(FeltStop {
                     height: 0.0,
                     wrench: None,
