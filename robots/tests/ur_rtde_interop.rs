@@ -215,6 +215,22 @@ async fn ur_rtde_conformance_suite_passes_with_no_silent_success() {
             "C(q, q̇) q̇ at {q:?}, {qd:?}: {got:?} vs {want:?}"
         );
     }
+    // setGravity: the holding torques are the rigid-body model's under the set gravity.
+    let gravity = detail("setGravity");
+    let (q, up) = (joints(&gravity["q"]), f64s(&gravity["up"]));
+    let payload = Payload {
+        mass: 2.0,
+        cog: [0.0, 0.0, 0.05],
+        ..Payload::default()
+    };
+    let want = dynamics.holding_torques(&kin.dh, &q, &payload, &[up[0], up[1], up[2]]);
+    let got = f64s(&gravity["moment"]);
+    for j in 0..6 {
+        assert!(
+            (got[j] - want[j]).abs() < 1e-9,
+            "set_gravity({up:?}): {got:?} vs {want:?}"
+        );
+    }
     // Force mode held the commanded 10 N against the table within the sensor's precision, and
     // moveUntilContact stopped within 1 mm of it.
     let force = detail("forceMode pushes down");

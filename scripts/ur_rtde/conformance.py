@@ -35,7 +35,6 @@ UNSUPPORTED = {
     "ftRtdeInputEnable": STOPS,
     "enableExternalFtSensor": STOPS,
     "setExternalForceTorque": "ur_rtde 1.6.5 returns True without sending anything unless ftRtdeInputEnable succeeded, which fails loudly here; a written external_force_torque input stops the program",
-    "setGravity": STOPS,
     "servoC": "ur_rtde does not wait for it; the program stops with a runtime error (servoc not simulated)",
     "directTorque": REALTIME + (" (a PolyScope 5.26 function: the simulator reports 5.23, so ur_rtde's "
                                 "script leaves it out; the kinematic arm takes no torque commands)"),
@@ -822,6 +821,41 @@ def main():
         # The Rust test compares the torques with the model at q, qd.
         return {"q": q, "qd": qd, "coriolis": coriolis, "target_accel": accel}
 
+    @case("setGravity turns the payload's weight on the sensor and the joints' holding torques",
+          "setGravity")
+    def gravity():
+        check(c.moveJ(Q1, 1.5, 3.0), "moveJ")
+        check(c.setPayload(2.0, [0, 0, 0.05]), "setPayload")
+
+        def raw_force():
+            total = [0.0] * 3
+            for _ in range(50):
+                total = [a + b / 50 for a, b in zip(total, r.getFtRawWrench()[:3])]
+                time.sleep(0.004)
+            return total
+
+        settle(0.1)
+        upright, raw_up = r.getTargetMoment(), raw_force()
+        check(abs(upright[0]) < 1e-9, f"joint 1's vertical axis holds no gravity: {upright}")
+        side_up = [9.82, 0, 0]
+        check(c.setGravity(side_up), "setGravity along +x")
+        settle(0.1)
+        side, raw_side = r.getTargetMoment(), raw_force()
+        check(abs(side[0]) > 1.0, f"joint 1 holds the arm against gravity along -x: {side}")
+        # The weight in the flange frame turns with gravity; the sensor's bias cancels.
+        rot = rotvec_to_matrix(r.getActualTCPPose()[3:])  # the TCP is the flange here
+        weight = lambda up: [sum(rot[k][i] * -2.0 * up[k] for k in range(3)) for i in range(3)]
+        want = [a - b for a, b in zip(weight(side_up), weight([0, 0, 9.82]))]
+        got = [a - b for a, b in zip(raw_side, raw_up)]
+        check(dist3(got, want) < 1.0, f"raw force moved by {got}, the weight by {want}")
+        check(c.setGravity([0, 0, 9.82]), "upright again")
+        settle(0.1)
+        near(r.getTargetMoment(), upright, 1e-9)
+        check(c.setPayload(0.0, [0, 0, 0]), "payload off")
+        check(c.isProgramRunning(), "the program still runs")
+        # The Rust test compares the torques with the rigid-body model under that gravity.
+        return {"q": list(Q1), "up": side_up, "moment": side}
+
     @case("setPayload / setTargetPayload reach the receive interface", "setPayload", "setTargetPayload",
           "getPayload", "getPayloadCog", "getPayloadInertia")
     def payload():
@@ -944,7 +978,6 @@ def main():
     loud("ftRtdeInputEnable", lambda: c.ftRtdeInputEnable(True))
     loud("enableExternalFtSensor", lambda: c.enableExternalFtSensor(True))
     tested.add("setExternalForceTorque")  # client-side: see UNSUPPORTED; nothing reaches the controller
-    loud("setGravity", lambda: c.setGravity([0, 0, 9.82]))
     loud("servoC", lambda: c.servoC(r.getActualTCPPose(), 0.1, 0.5, 0.0))
     loud("directTorque", lambda: c.directTorque([0] * 6))
     # Not called: the simulator refuses scripts it does not execute (see UNSUPPORTED), and

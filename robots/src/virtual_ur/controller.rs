@@ -346,6 +346,8 @@ pub(crate) struct Core {
     pub protective_stop_at: Option<Instant>,
     pub text_log: Vec<String>,
     pub payload: Payload,
+    /// The running program's `set_gravity` vector (base frame, m/s², away from the earth).
+    pub gravity: [f64; 3],
     /// The RTDE watchdog the running program armed: minimum period between updates of
     /// `input_int_register_0` (s) and the controller time of the last update.
     pub watchdog: Option<Watchdog>,
@@ -415,6 +417,7 @@ impl Core {
             runtime_error: None,
             watchdog: None,
             payload: &mut self.payload,
+            gravity: &mut self.gravity,
             history: &self.history,
             warnings: Vec::new(),
             sensor: &mut self.sensor,
@@ -474,6 +477,7 @@ impl VirtualController {
             protective_stop_at: None,
             text_log: Vec::new(),
             payload: Payload::default(),
+            gravity: super::dynamics::UP,
             watchdog: None,
             history: VecDeque::with_capacity(HISTORY_LEN),
             loaded_script: None,
@@ -504,8 +508,9 @@ impl VirtualController {
             match core.arm.dynamics() {
                 Some(d) => {
                     let dh = &core.arm.kinematics().dh;
-                    let target = with_contact(d.gravity_torques(dh, &arm.target_q, &core.payload));
-                    let actual = with_contact(d.gravity_torques(dh, &arm.q, &core.payload));
+                    let hold = |q| d.holding_torques(dh, q, &core.payload, &core.gravity);
+                    let target = with_contact(hold(&arm.target_q));
+                    let actual = with_contact(hold(&arm.q));
                     (target, d.currents(&target), d.currents(&actual), actual)
                 }
                 None => ([0.0; 6], [0.0; 6], [0.0; 6], [0.0; 6]),
@@ -549,6 +554,7 @@ impl VirtualController {
             &jacobian,
             core.payload.mass,
             &core.payload.cog,
+            &core.gravity,
         );
     }
 

@@ -23,6 +23,10 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, UnitQuaternion, Vector3};
 /// (`set_gravity([0, 0, 9.82])`).
 pub const GRAVITY: f64 = 9.82;
 
+/// URScript's default `set_gravity([0, 0, 9.82])`: the vector opposite to gravity in the base
+/// frame (m/s²).
+pub const UP: [f64; 3] = [0.0, 0.0, GRAVITY];
+
 /// The modelled motor current (A) at which a joint delivers its rated torque (the URDF joint's
 /// `effort`): the torque constants are `effort / MODEL_PEAK_CURRENT`, 10 N·m/A for a UR5e's
 /// 150 N·m joints and 1.87 N·m/A for its 28 N·m wrists. A modelled value, not UR data.
@@ -170,6 +174,23 @@ impl ArmDynamics {
                 .map(|(_, m, c)| m * GRAVITY * axis.cross(&(c - origin)).z)
                 .sum()
         })
+    }
+
+    /// The torques (N·m) that hold the arm and `payload` still at `q` when `up` is the vector
+    /// URScript's `set_gravity(up)` set (m/s², pointing away from the earth; [`UP`] by default):
+    /// [`ArmDynamics::gravity_torques`] for the default, Newton–Euler for any other.
+    pub fn holding_torques(
+        &self,
+        dh: &UrDh,
+        q: &Joints,
+        payload: &Payload,
+        up: &[f64; 3],
+    ) -> Joints {
+        if *up == UP {
+            return self.gravity_torques(dh, q, payload);
+        }
+        let zero = [0.0; 6];
+        self.inverse_dynamics(dh, q, &zero, &zero, payload, &-Vector3::from(*up))
     }
 
     /// The motor current (A) for each joint torque: `τ / k`.

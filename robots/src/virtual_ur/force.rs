@@ -573,6 +573,7 @@ impl FtSensorState {
         jacobian: &Matrix6<f64>,
         payload_mass: f64,
         payload_cog: &[f64; 3],
+        up: &[f64; 3],
     ) {
         let touching = external.iter().any(|v| *v != 0.0);
         self.contact_cycles = if touching {
@@ -589,7 +590,7 @@ impl FtSensorState {
         let arm = base_T_tcp.translation.vector - base_T_flange.translation.vector;
         let m = Vector3::new(external[3], external[4], external[5]) + arm.cross(&f);
         let to_flange = base_T_flange.rotation.inverse();
-        let weight = to_flange * Vector3::new(0.0, 0.0, -super::dynamics::GRAVITY * payload_mass);
+        let weight = to_flange * (-Vector3::from(*up) * payload_mass);
         let cog = Vector3::new(payload_cog[0], payload_cog[1], payload_cog[2]);
         let (f, m) = (to_flange * f + weight, to_flange * m + cog.cross(&weight));
         self.raw = [

@@ -33,6 +33,8 @@ pub struct ProgramIo<'a> {
     pub watchdog: Option<f64>,
     /// The active payload (`set_payload`, `set_target_payload`).
     pub payload: &'a mut Payload,
+    /// The `set_gravity` vector (base frame, m/s², pointing away from the earth).
+    pub gravity: &'a mut [f64; 3],
     /// Actual joint positions of the last control cycles, newest (this cycle's) first.
     pub history: &'a VecDeque<Joints>,
     /// Warnings the program raises (the controller logs them for clients, as a UR's popups).

@@ -123,6 +123,8 @@ pub mod ur_rtde_cmd {
     pub const GET_IK_HAS_SOLUTION_DEFAULT: i32 = 60;
     /// getInverseKinematicsHasSolution(x, qnear, ...).
     pub const GET_IK_HAS_SOLUTION_ARGS: i32 = 61;
+    /// setGravity.
+    pub const SET_GRAVITY: i32 = 59;
     /// setTargetPayload.
     pub const SET_TARGET_PAYLOAD: i32 = 65;
     /// directTorque (realtime; PolyScope 5.26).
@@ -337,7 +339,6 @@ fn unsupported(cmd: i32) -> String {
         SERVO_C => "servoc",
         MOVE_PATH => "movePath (custom script code)",
         56 | 57 => "external force/torque sensor",
-        59 => "set_gravity",
         DIRECT_TORQUE => {
             "direct_torque (a PolyScope 5.26 function: the kinematic arm takes no torque commands)"
         }
@@ -759,6 +760,17 @@ impl UrRtdeProgram {
                 if cmd == SET_TARGET_PAYLOAD {
                     io.payload.inertia = std::array::from_fn(|i| regs.input_double[4 + i]);
                 }
+                Ok(Outcome::Done)
+            }
+            // set_gravity(d): the direction and size of the acceleration that holds the arm up
+            // (away from the earth); the payload's weight on the sensor and the joints' holding
+            // torques and currents follow it.
+            SET_GRAVITY => {
+                let up = [target[0], target[1], target[2]];
+                if !up.iter().all(|v| v.is_finite()) {
+                    return Err(format!("set_gravity: {up:?} is not a finite vector"));
+                }
+                *io.gravity = up;
                 Ok(Outcome::Done)
             }
             SET_TCP => {
@@ -1190,6 +1202,8 @@ impl Program for UrRtdeProgram {
     }
 
     fn start(&mut self, io: &mut ProgramIo<'_>) {
+        // A program starts with the installation's gravity (the arm on its base, upright).
+        *io.gravity = super::dynamics::UP;
         self.executing = false;
         self.waiting_for_motion = false;
         self.jog_frame = None;
