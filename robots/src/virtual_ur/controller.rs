@@ -552,9 +552,8 @@ impl VirtualController {
             &tcp,
             &flange,
             &jacobian,
-            core.payload.mass,
+            &core.gravity.map(|g| -g * core.payload.mass),
             &core.payload.cog,
-            &core.gravity,
         );
     }
 

@@ -562,8 +562,8 @@ impl FtSensorState {
     }
 
     /// One control cycle: the tool at `base_T_tcp` (flange at `base_T_flange`) meets
-    /// `external`, the Jacobian at the TCP is `jacobian`, the payload of `payload_mass` kg hangs
-    /// at `payload_cog` (flange frame).
+    /// `external`, the Jacobian at the TCP is `jacobian`, the payload's weight `payload_weight`
+    /// (N, base frame: its mass times gravity) acts at `payload_cog` (flange frame).
     #[allow(non_snake_case)]
     pub fn update(
         &mut self,
@@ -571,9 +571,8 @@ impl FtSensorState {
         base_T_tcp: &Isometry3<f64>,
         base_T_flange: &Isometry3<f64>,
         jacobian: &Matrix6<f64>,
-        payload_mass: f64,
+        payload_weight: &[f64; 3],
         payload_cog: &[f64; 3],
-        up: &[f64; 3],
     ) {
         let touching = external.iter().any(|v| *v != 0.0);
         self.contact_cycles = if touching {
@@ -590,7 +589,7 @@ impl FtSensorState {
         let arm = base_T_tcp.translation.vector - base_T_flange.translation.vector;
         let m = Vector3::new(external[3], external[4], external[5]) + arm.cross(&f);
         let to_flange = base_T_flange.rotation.inverse();
-        let weight = to_flange * (-Vector3::from(*up) * payload_mass);
+        let weight = to_flange * Vector3::from(*payload_weight);
         let cog = Vector3::new(payload_cog[0], payload_cog[1], payload_cog[2]);
         let (f, m) = (to_flange * f + weight, to_flange * m + cog.cross(&weight));
         self.raw = [
