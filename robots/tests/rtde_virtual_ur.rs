@@ -822,7 +822,7 @@ mod ur_rtde_handshake {
 
     /// Commands ur_rtde sends without waiting for "done" (and without clearing the register).
     const CLIENT_REALTIME: [i32; 8] = [11, 24, 12, 9, 10, 6, 38, 25];
-    const CLIENT_REALTIME_MORE: [i32; 2] = [26, 27];
+    const CLIENT_REALTIME_MORE: [i32; 8] = [26, 27, 66, 67, 68, 69, 70, 71];
     pub const HOME: Joints = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0];
     const CONN: ConnId = 7;
     pub const DT: f64 = 0.002;
@@ -1060,10 +1060,29 @@ fn issue15_item1_a_move_after_a_realtime_query_runs() {
     assert!(u.running());
     assert_eq!(u.out_doubles(), [0.0; 6]);
     assert!(u.move_j(TARGET_Q), "moveJ after getJointTorques");
-    // getMassMatrix (a PolyScope 5.23 function) is not simulated: the program stops, so the
+    // getMassMatrix (PolyScope 5.23) answers in registers 0-23 and 36-47, column by column, and
+    // the program runs on.
+    let mut u = UrRtde::start();
+    assert!(u.send(67, &[], &[]));
+    u.ticks(2);
+    assert!(u.running());
+    let m = robots::virtual_ur::dynamics::ArmDynamics::ur5e().mass_matrix(
+        &UrKinematics::ur5e().dh,
+        &HOME,
+        &robots::virtual_ur::registers::Payload::default(),
+    );
+    let regs = u.c.snapshot().regs.output_double;
+    for col in 0..6 {
+        let first = if col < 4 { col * 6 } else { 36 + (col - 4) * 6 };
+        for row in 0..6 {
+            assert_eq!(regs[first + row], m[(row, col)], "M[{row}, {col}]");
+        }
+    }
+    assert!(u.move_j(TARGET_Q), "moveJ after getMassMatrix");
+    // directTorque (a PolyScope 5.26 function) is not simulated: the program stops, so the
     // next moveJ returns False.
     let mut u = UrRtde::start();
-    let _ = u.send(67, &[], &[]);
+    let _ = u.send(66, &[], &[]);
     u.ticks(2);
     assert!(!u.running());
     assert!(
@@ -1071,7 +1090,7 @@ fn issue15_item1_a_move_after_a_realtime_query_runs() {
         "moveJ after an unsupported command fails"
     );
     assert!(diff(&u.q(), &HOME) < 1e-12, "and the arm did not move");
-    assert!(u.messages().contains("mass matrix"), "{}", u.messages());
+    assert!(u.messages().contains("direct_torque"), "{}", u.messages());
 }
 
 #[test]
