@@ -57,6 +57,7 @@ fn the_built_in_ur5e_table_is_the_ur5e_urdf() {
     for (a, b) in read.links.iter().zip(&table.links) {
         assert!((a.mass - b.mass).abs() < 1e-12, "{a:?} vs {b:?}");
         assert!((a.com - b.com).norm() < 1e-9, "{a:?} vs {b:?}");
+        assert!((a.inertia - b.inertia).abs().max() < 1e-9, "{a:?} vs {b:?}");
     }
     for (a, b) in read.torque_constants.iter().zip(&table.torque_constants) {
         assert!((a - b).abs() < 1e-12);
