@@ -727,6 +727,7 @@ impl<'a> Engine<'a> {
         state: State,
         v: insertion::ForceVerdict,
     ) -> Result<State, Stop> {
+        self.step.force_record = Some(v.record());
         if v.outcome == StepOutcome::Seated {
             self.capture_ahead_again(state).await?;
             let pending = std::mem::take(&mut self.step.pending);
