@@ -18,71 +18,70 @@ pub fn load_look(arg: &Path) -> Result<LookOptions, ScenarioError> {
     if arg.as_os_str() == DEFAULT_LOOK && !arg.is_file() {
         return Ok(LookOptions::default());
     }
-    let text = std::fs::read_to_string(arg).map_err(|e| {
-        ScenarioError(vec![Problem {
-            file: arg.into(),
-            line: 1,
-            column: 1,
-            key: None,
-            message: format!("cannot read the look file: {e}"),
-        }])
-    })?;
-    parse_look(&text, arg)
+    read_checked(arg, "look", parse_look)
 }
 
 /// Parses and checks look text read from `path`.
 pub fn parse_look(text: &str, path: &Path) -> Result<LookOptions, ScenarioError> {
-    let look: LookOptions =
-        toml::from_str(text).map_err(|e| ScenarioError::from_toml(&e, text, path))?;
-    look.validate().map_err(|e| {
-        let (line, column) = Locator::new(text)
-            .offset(&KeyPath::parse(&e.key))
-            .map(|o| line_column(text, o))
-            .unwrap_or((1, 1));
-        ScenarioError(vec![Problem {
-            file: path.into(),
-            line,
-            column,
-            key: Some(e.key.clone()),
-            message: e.message.clone(),
-        }])
-    })?;
-    Ok(look)
+    parse_checked(text, path, |l: &LookOptions| {
+        l.validate().map_err(|e| (e.key, e.message))
+    })
 }
 
 /// Reads a randomisation families file (TOML, every key optional; a family is on when its
 /// `enabled` is true), its syntax, type and range errors at their line and column.
 pub fn load_families(path: &Path) -> Result<Families, ScenarioError> {
+    read_checked(path, "families", parse_families)
+}
+
+/// Parses and checks randomisation family text read from `path`.
+pub fn parse_families(text: &str, path: &Path) -> Result<Families, ScenarioError> {
+    parse_checked(text, path, |f: &Families| {
+        f.validate().map_err(|e| (e.key, e.message))
+    })
+}
+
+/// Reads the `what` file at `path` and parses it with `parse`; an unreadable file is an error
+/// at its first line.
+fn read_checked<T>(
+    path: &Path,
+    what: &str,
+    parse: fn(&str, &Path) -> Result<T, ScenarioError>,
+) -> Result<T, ScenarioError> {
     let text = std::fs::read_to_string(path).map_err(|e| {
         ScenarioError(vec![Problem {
             file: path.into(),
             line: 1,
             column: 1,
             key: None,
-            message: format!("cannot read the families file: {e}"),
+            message: format!("cannot read the {what} file: {e}"),
         }])
     })?;
-    parse_families(&text, path)
+    parse(&text, path)
 }
 
-/// Parses and checks randomisation family text read from `path`.
-pub fn parse_families(text: &str, path: &Path) -> Result<Families, ScenarioError> {
-    let families: Families =
-        toml::from_str(text).map_err(|e| ScenarioError::from_toml(&e, text, path))?;
-    families.validate().map_err(|e| {
+/// Deserialises `text` and checks it with `validate` (which names the offending key path and
+/// what is wrong); either error points at its line and column in `path`.
+fn parse_checked<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &Path,
+    validate: impl Fn(&T) -> Result<(), (String, String)>,
+) -> Result<T, ScenarioError> {
+    let value: T = toml::from_str(text).map_err(|e| ScenarioError::from_toml(&e, text, path))?;
+    validate(&value).map_err(|(key, message)| {
         let (line, column) = Locator::new(text)
-            .offset(&KeyPath::parse(&e.key))
+            .offset(&KeyPath::parse(&key))
             .map(|o| line_column(text, o))
             .unwrap_or((1, 1));
         ScenarioError(vec![Problem {
             file: path.into(),
             line,
             column,
-            key: Some(e.key.clone()),
-            message: e.message.clone(),
+            key: Some(key),
+            message,
         }])
     })?;
-    Ok(families)
+    Ok(value)
 }
 
 #[cfg(test)]

@@ -413,24 +413,10 @@ impl Families {
         ];
         let extra = [("sensor.white_balance", s.white_balance, 1e-3, 1e3)];
         for (key, range, min, max) in ranges.into_iter().chain(extra) {
-            let fail = |message: String| {
-                Err(FamilyError {
-                    key: key.to_string(),
-                    message,
-                })
-            };
-            if !range.lo.is_finite() || !range.hi.is_finite() {
-                return fail(format!("non-finite bound ({}, {})", range.lo, range.hi));
-            }
-            if range.lo > range.hi {
-                return fail(format!("inverted: lo = {} > hi = {}", range.lo, range.hi));
-            }
-            if range.lo < min || range.hi > max {
-                return fail(format!(
-                    "[{}, {}] is outside the allowed [{min}, {max}]",
-                    range.lo, range.hi
-                ));
-            }
+            range.check(min, max).map_err(|e| FamilyError {
+                key: key.to_string(),
+                message: e.to_string(),
+            })?;
         }
         Ok(())
     }

@@ -214,24 +214,10 @@ impl LookOptions {
             ("backlight.radiance", self.backlight.radiance, 0.0, inf),
         ];
         for (key, range, min, max) in ranges {
-            let fail = |message: String| {
-                Err(LookError {
-                    key: key.to_string(),
-                    message,
-                })
-            };
-            if !range.lo.is_finite() || !range.hi.is_finite() {
-                return fail(format!("non-finite bound ({}, {})", range.lo, range.hi));
-            }
-            if range.lo > range.hi {
-                return fail(format!("inverted: lo = {} > hi = {}", range.lo, range.hi));
-            }
-            if range.lo < min || range.hi > max {
-                return fail(format!(
-                    "[{}, {}] is outside the allowed [{min}, {max}]",
-                    range.lo, range.hi
-                ));
-            }
+            range.check(min, max).map_err(|e| LookError {
+                key: key.to_string(),
+                message: e.to_string(),
+            })?;
         }
         if r.half_size.lo <= r.table_half.hi {
             return Err(LookError {

@@ -21,4 +21,4 @@ pub use compose::{
 pub use drop::{DropError, HeldPart, PlacedPart, drop_parts, drop_parts_around};
 pub use labels::{InstanceLabel, keypoint_vectors, label_instance, label_instances};
 pub use model::{PartModel, PartModelError};
-pub use randomisation::{Randomisation, RandomisationError, Range};
+pub use randomisation::{Randomisation, RandomisationError, Range, RangeError};

@@ -26,6 +26,73 @@ impl Range {
             self.lo
         }
     }
+
+    /// Whether the range can be drawn from within the domain [min, max]: both bounds finite,
+    /// lo ≤ hi, and both inside the domain (the one check of every randomisation, look and
+    /// family range).
+    pub fn check(&self, min: f64, max: f64) -> Result<(), RangeError> {
+        let (lo, hi) = (self.lo, self.hi);
+        if !lo.is_finite() || !hi.is_finite() {
+            return Err(RangeError::NotFinite { lo, hi });
+        }
+        if lo > hi {
+            return Err(RangeError::Inverted { lo, hi });
+        }
+        if lo < min || hi > max {
+            return Err(RangeError::OutOfDomain { lo, hi, min, max });
+        }
+        Ok(())
+    }
+}
+
+/// Why a [`Range`] cannot be drawn from ([`Range::check`]).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum RangeError {
+    /// A bound is NaN or infinite.
+    #[error("non-finite bound ({lo}, {hi})")]
+    NotFinite {
+        /// Lower bound given.
+        lo: f64,
+        /// Upper bound given.
+        hi: f64,
+    },
+    /// lo > hi.
+    #[error("inverted: lo = {lo} > hi = {hi}")]
+    Inverted {
+        /// Lower bound given.
+        lo: f64,
+        /// Upper bound given.
+        hi: f64,
+    },
+    /// A bound outside the domain.
+    #[error("[{lo}, {hi}] is outside the allowed [{min}, {max}]")]
+    OutOfDomain {
+        /// Lower bound given.
+        lo: f64,
+        /// Upper bound given.
+        hi: f64,
+        /// Smallest allowed value.
+        min: f64,
+        /// Largest allowed value.
+        max: f64,
+    },
+}
+
+impl RandomisationError {
+    /// The randomisation parameter `name`'s range error.
+    fn of_range(name: &'static str, e: RangeError) -> Self {
+        match e {
+            RangeError::NotFinite { lo, hi } => Self::NotFinite { name, lo, hi },
+            RangeError::Inverted { lo, hi } => Self::Inverted { name, lo, hi },
+            RangeError::OutOfDomain { lo, hi, min, max } => Self::OutOfDomain {
+                name,
+                lo,
+                hi,
+                min,
+                max,
+            },
+        }
+    }
 }
 
 /// A randomisation range that cannot be used.
@@ -244,29 +311,8 @@ impl Randomisation {
             ("jpeg_quality", self.jpeg_quality, 1.0, 100.0),
         ];
         for (name, r, min, max) in ranges {
-            if !r.lo.is_finite() || !r.hi.is_finite() {
-                return Err(RandomisationError::NotFinite {
-                    name,
-                    lo: r.lo,
-                    hi: r.hi,
-                });
-            }
-            if r.lo > r.hi {
-                return Err(RandomisationError::Inverted {
-                    name,
-                    lo: r.lo,
-                    hi: r.hi,
-                });
-            }
-            if r.lo < min || r.hi > max {
-                return Err(RandomisationError::OutOfDomain {
-                    name,
-                    lo: r.lo,
-                    hi: r.hi,
-                    min,
-                    max,
-                });
-            }
+            r.check(min, max)
+                .map_err(|e| RandomisationError::of_range(name, e))?;
         }
         if self.lights.hi.round() < 1.0 && self.ambient.hi <= 0.0 {
             return Err(RandomisationError::Empty {
