@@ -545,6 +545,23 @@ impl SimCell {
         })
     }
 
+    /// The pieces a contact engine pushes together for `step`: the inserted part's geometry and
+    /// its receivers where the step's destination stands now (the fixture when it is not placed).
+    #[allow(non_snake_case)]
+    fn insertion_pieces(
+        &self,
+        step: usize,
+    ) -> Option<(&super::geometry::PartGeometry, Vec<ReceiverPart<'_>>)> {
+        let s = &self.model.steps[step];
+        let base_T_dest = self
+            .destination(&s.into)
+            .unwrap_or(self.model.geometry.base_T_fixture);
+        Some((
+            self.model.geometry.parts.get(&s.part)?,
+            self.receivers(step, &base_T_dest)?,
+        ))
+    }
+
     fn receivers(
         &self,
         step: usize,
@@ -605,14 +622,7 @@ impl SimCell {
             return;
         };
         let ins_T_part = base_T_ins.inverse() * tcp * held.part.tcp_T_part;
-        let s = &self.model.steps[step];
-        let base_T_dest = self
-            .destination(&s.into)
-            .unwrap_or(self.model.geometry.base_T_fixture);
-        let (Some(geom), Some(receivers)) = (
-            self.model.geometry.parts.get(&s.part),
-            self.receivers(step, &base_T_dest),
-        ) else {
+        let Some((geom, receivers)) = self.insertion_pieces(step) else {
             return;
         };
         let case = InsertionCase {
@@ -1114,14 +1124,7 @@ impl SimCell {
         if let Some(f) = self.felt.get(&key) {
             return f;
         }
-        let s = &self.model.steps[step];
-        let base_T_dest = self
-            .destination(&s.into)
-            .unwrap_or(self.model.geometry.base_T_fixture);
-        let (Some(geom), Some(receivers)) = (
-            self.model.geometry.parts.get(&s.part),
-            self.receivers(step, &base_T_dest),
-        ) else {
+        let Some((geom, receivers)) = self.insertion_pieces(step) else {
             return analytic();
         };
         let case = InsertionCase {
