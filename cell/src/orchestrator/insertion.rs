@@ -427,13 +427,11 @@ pub async fn force_insert(
 pub mod agreement {
     use std::sync::Arc;
 
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
     use rayon::prelude::*;
     use robots::virtual_ur::force::FtNoise;
     use serde::Serialize;
-    use sim::cell::insertion::agreement::{StepGeometry, boundary_misalignment};
-    use sim::cell::insertion::{InsertionCase, InsertionScorer, PoseError, ScorerError, Verdict};
+    use sim::cell::insertion::agreement::{StepGeometry, boundary_case};
+    use sim::cell::insertion::{InsertionScorer, PoseError, ScorerError, Verdict};
 
     use super::verdict_at;
     use crate::episode::StepOutcome;
@@ -554,19 +552,12 @@ pub mod agreement {
         cell: &Arc<dyn InsertionScorer>,
         spec: &ForceInsertionSpec,
     ) -> Result<ForceAgreement, ScorerError> {
+        let samples = if steps.is_empty() { 0 } else { samples };
         let cases: Vec<ForceCase> = (0..samples)
             .into_par_iter()
             .map(|k| {
-                let i = k % steps.len().max(1);
+                let (i, case) = boundary_case(steps, seed, k);
                 let s = &steps[i];
-                let mut rng = ChaCha8Rng::seed_from_u64(seed);
-                rng.set_stream(k as u64);
-                let case = InsertionCase {
-                    mating: &s.mating,
-                    held: s.held,
-                    receivers: &s.receivers,
-                    ins_T_part: boundary_misalignment(&s.mating, &mut rng),
-                };
                 let scored = truth.score(&case)?.result;
                 let cell_stop = if cell.name() == truth.name() {
                     scored.end.height

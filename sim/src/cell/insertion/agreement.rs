@@ -101,6 +101,27 @@ pub fn boundary_misalignment(mating: &Mating, rng: &mut impl Rng) -> Isometry3<f
     )
 }
 
+/// Sample `k` of a seeded draw around the capture boundaries: step `k` mod the steps, with a
+/// [`boundary_misalignment`] from stream `k` of `seed` (the same seed, the same cases, however
+/// the samples are split between threads). `steps` must not be empty.
+pub fn boundary_case<'a>(
+    steps: &'a [StepGeometry<'a>],
+    seed: u64,
+    k: usize,
+) -> (usize, InsertionCase<'a>) {
+    let i = k % steps.len();
+    let s = &steps[i];
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(k as u64);
+    let case = InsertionCase {
+        mating: &s.mating,
+        held: s.held,
+        receivers: &s.receivers,
+        ins_T_part: boundary_misalignment(&s.mating, &mut rng),
+    };
+    (i, case)
+}
+
 /// One engine's outcome of a sample.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EngineOutcome {
@@ -258,17 +279,8 @@ pub fn compare_scorers(
     let scored: Vec<(usize, PoseError, Vec<EngineOutcome>)> = (0..samples)
         .into_par_iter()
         .map(|k| {
-            let i = k % steps.len();
-            let s = &steps[i];
-            let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            rng.set_stream(k as u64);
-            let case = InsertionCase {
-                mating: &s.mating,
-                held: s.held,
-                receivers: &s.receivers,
-                ins_T_part: boundary_misalignment(&s.mating, &mut rng),
-            };
-            let start = s.mating.pose_error(&case.ins_T_part);
+            let (i, case) = boundary_case(steps, seed, k);
+            let start = steps[i].mating.pose_error(&case.ins_T_part);
             let outcomes = scorers
                 .iter()
                 .map(|sc| {
