@@ -18,7 +18,7 @@ use super::stable_poses::StablePoseRow;
 use super::summary::{EvalSummary, MSPD_PX, MSSD_FRACTIONS, PartSummary};
 use super::table1::{Table1Row, seed_row};
 use super::{EvalOptions, EvalRun, FrameRecord};
-use crate::report::html::escape;
+use crate::report::escape::escape;
 
 /// Name of the JSON results.
 pub const JSON_FILE: &str = "eval.json";

@@ -65,8 +65,8 @@ impl Default for SearchConfig {
 impl Default for PlanningConfig {
     fn default() -> Self {
         Self {
-            clearance_height: 0.010,
-            slow_distance: 0.001,
+            clearance_height: crate::scenario::PLANNER_CLEARANCE_HEIGHT,
+            slow_distance: crate::scenario::PLANNER_SLOW_DISTANCE,
             slow_speed: 0.02,
             arm_table_margin: 0.02,
             transit_margin: 0.001,

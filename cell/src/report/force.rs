@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use crate::episode::{EpisodeRecord, StepOutcome};
 use crate::run::distribution::Distribution;
 
-use super::html::escape;
+use super::escape::escape;
 
 /// One step's force-guided verdicts.
 #[derive(Debug, Clone, PartialEq)]

@@ -12,21 +12,7 @@ use crate::run::Summary;
 use crate::run::distribution::Distribution;
 use crate::run::outcomes::outcome_name;
 
-/// Escapes text for HTML element content and attribute values.
-pub fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
-}
+use super::escape::escape;
 
 fn pct(x: f64) -> String {
     format!("{:.1}&nbsp;%", 100.0 * x)

@@ -3,6 +3,7 @@
 //! (`events/`) and pictures (`pictures/`) where they exist.
 
 pub mod capture_picture;
+pub mod escape;
 pub mod force;
 pub mod html;
 pub mod pictures;

@@ -48,6 +48,14 @@ pub struct ScenarioSpec {
     pub motion: MotionSpec,
 }
 
+/// How far (m) the planner's lifts and approaches rise above what they clear (the planner's
+/// default, kept here so that `cell check` bounds the blend radius without the planner).
+pub const PLANNER_CLEARANCE_HEIGHT: f64 = 0.010;
+
+/// Length (m) of the planner's slow final segments into a grasp or an insertion (as
+/// [`PLANNER_CLEARANCE_HEIGHT`]).
+pub const PLANNER_SLOW_DISTANCE: f64 = 0.001;
+
 /// `[motion]`: blended transits and overlapped work.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

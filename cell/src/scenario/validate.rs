@@ -8,7 +8,10 @@ use perception::part::{Catalog, PartRole};
 use robots::ur_arm::UrArm;
 use sim::cell::feasible::{check_geometry, check_values};
 
-use super::{KeyPath, MAX_INSERTION_ATTEMPTS, PerceptionMode, ScenarioSpec};
+use super::{
+    KeyPath, MAX_INSERTION_ATTEMPTS, PLANNER_CLEARANCE_HEIGHT, PLANNER_SLOW_DISTANCE,
+    PerceptionMode, ScenarioSpec,
+};
 
 type Issues = Vec<(KeyPath, String)>;
 
@@ -97,8 +100,8 @@ fn blend_radius(r: f64, issues: &mut Issues) {
         ));
         return;
     }
-    let p = crate::orchestrator::PlanningConfig::default();
-    let max = p.clearance_height - p.slow_distance;
+    let (clearance, slow) = (PLANNER_CLEARANCE_HEIGHT, PLANNER_SLOW_DISTANCE);
+    let max = clearance - slow;
     if r > max {
         issues.push((
             key,
@@ -106,7 +109,7 @@ fn blend_radius(r: f64, issues: &mut Issues) {
                 "blend_radius {r} m is larger than half the shortest segment it would blend: the \
                  planner's lift and descent ({} m clearance, {} m slow distance, raised by the \
                  radius) allow at most {max} m",
-                p.clearance_height, p.slow_distance
+                clearance, slow
             ),
         ));
     }

@@ -2,7 +2,7 @@
 //! and a kinematic joint-space model with velocity and acceleration limits stepped at 500 Hz.
 
 use super::dynamics::ArmDynamics;
-use super::path::PathMove;
+use super::path_move::PathMove;
 use crate::kinematics::{Joints, UrKinematics, from_ur_pose, to_ur_pose};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 use thiserror::Error;
@@ -157,7 +157,7 @@ pub trait ArmModel: Send + 'static {
     /// via-point (the arm's pose for the first) with its own speed and acceleration, and within
     /// a segment's blend radius of its via-point the next segment starts, so the arm rounds the
     /// corner instead of stopping. Blend radii must already be settled
-    /// ([`super::path::settle_blends`]). Models that cannot blend refuse.
+    /// (the path module's `settle_blends`). Models that cannot blend refuse.
     fn command_path(&mut self, _path: &[PathMove]) -> Result<(), ArmError> {
         Err(ArmError::Unsupported(
             "blended paths (moveJ/moveL with a path, movePath)",

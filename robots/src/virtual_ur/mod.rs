@@ -10,6 +10,7 @@ pub mod controller;
 pub mod dynamics;
 pub mod force;
 pub mod path;
+pub mod path_move;
 pub mod programs;
 pub mod registers;
 pub mod script_port;
