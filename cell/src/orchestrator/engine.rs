@@ -282,8 +282,9 @@ impl<'a> Engine<'a> {
         if !self.ctx.settings.overlap || next >= self.steps() {
             return Ok(());
         }
+        // Where the arm is now: both checks below read the same pose.
+        let q = self.joints(state).await?;
         if self.shake_pending {
-            let q = self.joints(state).await?;
             match arm_near_feeder(self.ctx.knowledge, &q, self.held_radius()) {
                 Some(what) => {
                     self.ahead_note = format!("shake held back: the {what} is near the feeder");
@@ -301,7 +302,6 @@ impl<'a> Engine<'a> {
             self.ahead_note = "no capture ahead: the feeder is still settling".into();
             return Ok(());
         }
-        let q = self.joints(state).await?;
         if let Some(what) = arm_in_feeder_view(self.ctx.knowledge, &q, self.held_radius()) {
             self.ahead_note =
                 format!("capture ahead refused: the {what} is in the camera's view of the feeder");
