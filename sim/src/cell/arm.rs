@@ -177,12 +177,13 @@ impl ArmModel for SimArm {
     /// the kinematic arm's blended execution; the cell gets the final joints and the time when
     /// the arm comes to rest, as for a single move.
     fn command_path(&mut self, path: &[PathMove]) -> Result<(), ArmError> {
-        if let Some(e) = lock(&self.cell).status_now().safety.motion_error() {
-            return Err(arm_error(e));
+        {
+            let mut c = lock(&self.cell);
+            if let Some(e) = c.status_now().safety.motion_error() {
+                return Err(arm_error(e));
+            }
+            c.check_controller_path(path).map_err(arm_error)?;
         }
-        lock(&self.cell)
-            .check_controller_path(path)
-            .map_err(arm_error)?;
         self.arm.command_path(path)?;
         self.guarded_stop = false;
         self.elapsed = 0.0;
