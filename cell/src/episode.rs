@@ -91,6 +91,50 @@ pub struct ForceRecord {
     pub probes: u32,
 }
 
+/// What a seat check by camera (`[seat_check]`) found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SeatCheckVerdict {
+    /// The placed part's outline was found within the tolerances.
+    Passed,
+    /// Found, but farther from its target than the tolerances allow.
+    Failed,
+    /// Too few of the part's own edges found: absent, hidden, or far off.
+    NotVisible,
+    /// No capture was used: the arm or a held part stood in the camera's view of the fixture,
+    /// or the camera failed.
+    Refused,
+}
+
+/// A seat check by camera on a step's placed part (`[seat_check]`), in simulation and
+/// production alike.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SeatCheckRecord {
+    /// Passed, failed, not visible or refused.
+    pub verdict: SeatCheckVerdict,
+    /// Measured offset from the target across the insertion axis (insertion frame x, y),
+    /// millimetres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset_mm: Option<[f64; 2]>,
+    /// Measured turn about the insertion axis, milliradians.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yaw_mrad: Option<f64>,
+    /// Share of the part's own outline samples that found an edge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub support: Option<f64>,
+    /// How many outline samples were the part's own (not on an edge of what was there before).
+    #[serde(default)]
+    pub samples: u32,
+    /// The lateral and yaw tolerances applied, millimetres and milliradians.
+    pub tolerance: [f64; 2],
+    /// Wall-clock milliseconds of the capture and the alignment.
+    pub ms: f64,
+    /// The true lateral offset of the placed part across the insertion axis (simulation only),
+    /// millimetres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub true_offset_mm: Option<[f64; 2]>,
+}
+
 /// One assembly step of an episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepRecord {
@@ -136,6 +180,9 @@ pub struct StepRecord {
     /// The force-guided insertion's own verdict, on a step that inserted by feel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force: Option<ForceRecord>,
+    /// The seat check by camera, on a step that seated with `[seat_check]` on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seat_check: Option<SeatCheckRecord>,
 }
 
 /// One episode: the full assembly attempt from a fresh feeder.

@@ -39,6 +39,7 @@ fn episode(i: u32, success: bool) -> EpisodeRecord {
             confidence: None,
             sim_time_s: 5.0,
             force: None,
+            seat_check: None,
         });
         if !seated {
             break;

@@ -79,6 +79,7 @@ fn record(s: &Scenario, episode: u32) -> EpisodeRecord {
             confidence: None,
             sim_time_s: 4.0 + unit(seed, episode, 70 + i as u64),
             force: None,
+            seat_check: None,
         });
         if failed {
             success = false;

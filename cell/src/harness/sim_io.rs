@@ -62,8 +62,39 @@ impl CellIo for SimCell {
         })
     }
 
+    fn capture_fixture(&mut self) -> Result<Frame, CellIoError> {
+        let shot = self
+            .render_fixture()
+            .map_err(|e| CellIoError::Camera(e.to_string()))?;
+        Ok(Frame {
+            camera: self.model().spec.camera.intrinsics,
+            base_T_camera: self.base_T_camera_nominal(),
+            content: FrameContent::Image(FrameImage {
+                pixels: image::DynamicImage::ImageRgb8(shot.image),
+                origin: [shot.window.x0, shot.window.y0],
+            }),
+        })
+    }
+
+    fn placed_truth(&self, step: usize) -> Option<nalgebra::Isometry3<f64>> {
+        self.placed()
+            .iter()
+            .rev()
+            .find(|p| p.step == step)
+            .map(|p| p.base_T_part)
+    }
+
     fn shake_feeder(&mut self) -> Result<(), CellIoError> {
         self.shake().map_err(|e| CellIoError::Feeder(e.to_string()))
+    }
+
+    fn shake_feeder_at(&mut self, t: f64) -> Result<(), CellIoError> {
+        self.shake_from(t)
+            .map_err(|e| CellIoError::Feeder(e.to_string()))
+    }
+
+    fn last_motion_trace(&self, step: f64) -> Option<Vec<(f64, robots::kinematics::Joints)>> {
+        Some(SimCell::last_motion_trace(self, step))
     }
 
     fn part_in_gripper(&mut self) -> Option<bool> {
@@ -167,6 +198,14 @@ impl CellIo for SimCellIo {
             .capture(DEFAULT_CAPTURE_TIMEOUT)
             .map_err(|e| CellIoError::Camera(e.to_string()))?;
         Ok(shot.into_frame(&self.lock().model().spec.camera))
+    }
+
+    fn capture_fixture(&mut self) -> Result<Frame, CellIoError> {
+        self.lock().capture_fixture()
+    }
+
+    fn placed_truth(&self, step: usize) -> Option<nalgebra::Isometry3<f64>> {
+        self.lock().placed_truth(step)
     }
 
     fn shake_feeder(&mut self) -> Result<(), CellIoError> {

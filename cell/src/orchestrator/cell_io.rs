@@ -48,6 +48,17 @@ pub struct PerceptionAudit {
 pub trait CellIo: Send {
     /// Takes a camera frame.
     fn capture(&mut self) -> Result<Frame, CellIoError>;
+    /// Takes a camera frame for a seat check: pixels that cover the fixture. A production
+    /// camera delivers its full sensor, so this is [`CellIo::capture`]; the simulated cell
+    /// renders the fixture window instead of the feeder's.
+    fn capture_fixture(&mut self) -> Result<Frame, CellIoError> {
+        self.capture()
+    }
+    /// Where the part placed by step `step` truly is, base frame (simulation only; for the
+    /// seat check's measured error).
+    fn placed_truth(&self, _step: usize) -> Option<nalgebra::Isometry3<f64>> {
+        None
+    }
     /// Starts a feeder shake so parts come to rest anew; the feeder runs on its own and the next
     /// [`CellIo::capture`] waits until the parts are at rest.
     fn shake_feeder(&mut self) -> Result<(), CellIoError>;

@@ -90,6 +90,7 @@ impl Setup {
             max_shakes: spec.cell.feeder.max_shakes,
             max_insertion_attempts: spec.policy.max_insertion_attempts.max(1),
             force: spec.force_insertion.as_ref(),
+            seat_check: spec.seat_check.as_ref(),
         }
     }
 }
@@ -115,4 +116,6 @@ pub struct EpisodeContext<'a> {
     pub max_insertion_attempts: u32,
     /// Force-guided insertion, when the scenario enables it (`[force_insertion]`).
     pub force: Option<&'a crate::scenario::ForceInsertionSpec>,
+    /// Seat verification by camera, when the scenario enables it (`[seat_check]`).
+    pub seat_check: Option<&'a crate::scenario::SeatCheckSpec>,
 }

@@ -15,6 +15,7 @@ use super::events::EventLog;
 use super::geometry::CellKnowledge;
 use super::insertion;
 use super::planning::{Motion, NamedMotion, Planner, Speeds, grasped_offset};
+use super::seat_check::{self, SEAT_CHECK_FAILED, SeatTolerance, arm_in_fixture_view};
 use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
 use super::step::StepState;
@@ -708,6 +709,10 @@ impl<'a> Engine<'a> {
             ));
         };
         if c.outcome == StepOutcome::Seated {
+            if let Some((outcome, why)) = self.check_seat(state).await? {
+                let sources = vec![SEAT_CHECK_FAILED.into()];
+                return Ok(self.finish_step(outcome, Some(why), sources, c.pose_error));
+            }
             let target = self.ctx.knowledge.base_T_targets[self.index];
             self.placed.push((self.step_part(), target));
         }
@@ -740,6 +745,15 @@ impl<'a> Engine<'a> {
                 stop_height: None,
             });
             if c.outcome == StepOutcome::Seated {
+                if let Some((outcome, why)) = self.check_seat(state).await? {
+                    let sources = vec![SEAT_CHECK_FAILED.into()];
+                    let why = format!(
+                        "{why} (released on a force-confirmed seat: {}; after {} insertion \
+                         attempts)",
+                        v.cause, self.step.insertions
+                    );
+                    return Ok(self.finish_step(outcome, Some(why), sources, c.pose_error));
+                }
                 let target = self.ctx.knowledge.base_T_targets[self.index];
                 self.placed.push((self.step_part(), target));
             }
@@ -773,6 +787,63 @@ impl<'a> Engine<'a> {
             v.cause, self.step.insertions
         );
         Ok(self.finish_step(v.outcome, Some(cause), check.sources, check.pose_error))
+    }
+
+    /// With `[seat_check]` on, after a seat's release and retreat: a capture of the fixture
+    /// with the arm out of the camera's view of it, and the placed part measured on it
+    /// ([`seat_check::measure_seat`]). The retreat ends above the fixture, between it and the
+    /// camera, so the arm first goes home (over the feeder, where the next step picks); a
+    /// capture with the arm or a held part still in view is refused, never used. `None` when
+    /// the seat passed (or no check is configured); otherwise the step's outcome and why.
+    async fn check_seat(&mut self, state: State) -> Result<Option<(StepOutcome, String)>, Stop> {
+        let Some(spec) = self.ctx.seat_check else {
+            return Ok(None);
+        };
+        let k = self.ctx.knowledge;
+        let tol = SeatTolerance::of(spec, k, self.index);
+        let mut q = self.joints(state).await?;
+        if arm_in_fixture_view(k, &q, None).is_some() {
+            let joint = self.planner().speeds.joint;
+            let home = self.home;
+            let r = self.cell.robot().move_j(home, joint).await;
+            let clock = self.clock();
+            self.log.motion_done("retreat", clock);
+            r.map_err(|e| Stop::Robot(state, e))?;
+            q = self.joints(state).await?;
+        }
+        let refused = crate::episode::SeatCheckRecord {
+            verdict: crate::episode::SeatCheckVerdict::Refused,
+            offset_mm: None,
+            yaw_mrad: None,
+            support: None,
+            samples: 0,
+            tolerance: [tol.lateral * 1e3, tol.yaw * 1e3],
+            ms: 0.0,
+            true_offset_mm: None,
+        };
+        if let Some(what) = arm_in_fixture_view(k, &q, None) {
+            let why = format!(
+                "seat check refused: the {what} is in the camera's view of the fixture"
+            );
+            self.step.seat_check = Some(refused);
+            return Ok(Some((StepOutcome::Aborted, why)));
+        }
+        let started = std::time::Instant::now();
+        let frame = match self.io().capture_fixture() {
+            Ok(f) => f,
+            Err(e) => {
+                let why = format!("seat check refused: the fixture capture failed: {e}");
+                self.step.seat_check = Some(refused);
+                return Ok(Some((StepOutcome::Aborted, why)));
+            }
+        };
+        let m = seat_check::measure_seat(k, self.ctx.catalog, self.index, &frame);
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        let index = self.index;
+        let truth = (self.io().placed_truth(index)).map(|p| seat_check::true_offset(k, index, &p));
+        self.step.seat_check = Some(seat_check::record(&m, &tol, ms, truth));
+        let (_, why) = seat_check::judge(&m, &tol);
+        Ok(why.map(|w| (StepOutcome::Missed, w)))
     }
 
     /// The rest of the insertion plan with the fingers kept closed: the held part lifted clear

@@ -52,6 +52,7 @@ mod production;
 mod selection;
 mod state;
 mod step;
+pub mod seat_check;
 pub mod view;
 
 pub use activity::Activity;

@@ -52,6 +52,8 @@ pub(super) struct StepState {
     pub force: Option<super::insertion::ForceVerdict>,
     /// What the last force-guided insertion decided, for the record.
     pub force_record: Option<crate::episode::ForceRecord>,
+    /// The seat check by camera of this step's placed part, for the record.
+    pub seat_check: Option<crate::episode::SeatCheckRecord>,
 }
 
 /// Detections closer than this (table plane) to a missed pick count as the same part, metres.
@@ -88,6 +90,7 @@ impl StepState {
             confidence: None,
             force: None,
             force_record: None,
+            seat_check: None,
         }
     }
 
@@ -115,6 +118,7 @@ impl StepState {
             confidence: self.confidence,
             sim_time_s: now - self.start,
             force: self.force_record,
+            seat_check: self.seat_check,
         }
     }
 }

@@ -27,7 +27,7 @@ pub const AWAY_HEIGHT: f64 = 0.05;
 /// The arm at joints `q` as spheres along its links' axes (table frame), by link name: the
 /// links, the gripper, and a held part as a sphere of radius `held` around the TCP.
 #[allow(non_snake_case)]
-fn spheres(
+pub(super) fn spheres(
     k: &CellKnowledge,
     q: &Joints,
     held: Option<f64>,
@@ -106,7 +106,7 @@ pub fn arm_near_feeder(k: &CellKnowledge, q: &Joints, held: Option<f64>) -> Opti
 /// the table plane inside the rectangle around `center` with half sizes `half`: the sphere
 /// then stands between the camera and that rectangle. The shadow's radius is the sphere's
 /// scaled by the distance ratio, over the cosine of the ray's tilt (an ellipse's long axis).
-fn shadow_hits(
+pub(super) fn shadow_hits(
     camera: &Point3<f64>,
     p: &Point3<f64>,
     r: f64,

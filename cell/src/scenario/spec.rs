@@ -42,6 +42,11 @@ pub struct ScenarioSpec {
     /// miss; absent, insertions are position-controlled as before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_insertion: Option<ForceInsertionSpec>,
+    /// Seat verification by camera (`[seat_check]`): present, every seat is checked after the
+    /// release and retreat on a capture of the fixture (the placed part's outline aligned
+    /// from its target pose); absent (the default), no capture is taken and nothing changes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seat_check: Option<SeatCheckSpec>,
     /// How the orchestrator moves the arm between stops (`[motion]`); absent, every move stops
     /// at its target as before.
     #[serde(default, skip_serializing_if = "MotionSpec::is_default")]
@@ -114,6 +119,43 @@ pub struct ForceInsertionSpec {
     /// attempt (0 = no search): lift clear, step sideways within the capture band, descend.
     #[serde(default = "default_search_points")]
     pub search_points: u32,
+}
+
+/// Seat verification by camera (`[seat_check]`), the same in simulation and production: after a
+/// seated verdict, the release and the retreat, the camera captures the fixture (with the arm
+/// out of its view) and the placed part's outline is aligned from its target pose; the seat
+/// passes when the measured offset is within the tolerances with enough of the part's own
+/// edges found.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SeatCheckSpec {
+    /// Largest measured lateral offset (across the insertion axis) of a passing seat, metres;
+    /// absent: each step's `tolerances.lateral`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateral: Option<f64>,
+    /// Largest measured turn about the insertion axis of a passing seat, radians; absent: each
+    /// step's `tolerances.tilt`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yaw: Option<f64>,
+    /// Least share (0–1) of the part's own outline samples (those not on an edge of what was
+    /// there before it: the nest's pocket, the receiving part) that must find an image edge
+    /// within a pixel; below it the part is "not visible" and the check does not pass.
+    #[serde(default = "default_seat_min_support")]
+    pub min_support: f64,
+}
+
+fn default_seat_min_support() -> f64 {
+    0.6
+}
+
+impl Default for SeatCheckSpec {
+    fn default() -> Self {
+        Self {
+            lateral: None,
+            yaw: None,
+            min_support: default_seat_min_support(),
+        }
+    }
 }
 
 /// The most spiral probes an insertion attempt may make.

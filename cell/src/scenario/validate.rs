@@ -80,6 +80,25 @@ fn force_insertion(spec: &ScenarioSpec, f: &super::ForceInsertionSpec, issues: &
     }
 }
 
+/// Checks `[seat_check]`: tolerances finite and positive, a support share in (0, 1].
+fn seat_check(c: &super::SeatCheckSpec, issues: &mut Issues) {
+    let key = |k: &str| root().key("seat_check").key(k);
+    for (name, value) in [("lateral", c.lateral), ("yaw", c.yaw)] {
+        if let Some(v) = value
+            && !(v.is_finite() && v > 0.0)
+        {
+            issues.push((key(name), format!("{name} must be positive, got {v}")));
+        }
+    }
+    let s = c.min_support;
+    if !(s.is_finite() && s > 0.0 && s <= 1.0) {
+        issues.push((
+            key("min_support"),
+            format!("min_support must be a share above 0 and at most 1, got {s}"),
+        ));
+    }
+}
+
 /// Checks `[motion] blend_radius`: finite, not negative, and at most half of the shortest
 /// segment it blends. With the planner's clearance height `c` and slow distance `s`, a blended
 /// lift rises `c + r` and a blended descent comes down `c + r - s` (the corners are raised by
@@ -210,6 +229,9 @@ pub fn validate(spec: &ScenarioSpec, dir: &Path) -> (Option<Catalog>, Option<UrA
     }
     if let Some(f) = &spec.force_insertion {
         force_insertion(spec, f, &mut issues);
+    }
+    if let Some(c) = &spec.seat_check {
+        seat_check(c, &mut issues);
     }
     blend_radius(spec.motion.blend_radius, &mut issues);
     perception_time(spec.motion.perception_time, &mut issues);

@@ -89,6 +89,9 @@ pub struct CellModel {
     pub home: Joints,
     /// Render and physics models of the feeder's parts (dropped placement, rendered captures).
     pub part_models: Vec<PartModel>,
+    /// Render model of the fixture (a seat check's view of the nest); `None` when the catalog
+    /// part has none.
+    pub fixture_model: Option<PartModel>,
     /// The camera's centre rays over the feeder window, computed by the first rendered capture
     /// and shared by every episode's.
     feeder_rays: OnceLock<Option<CentreRays>>,
@@ -133,6 +136,9 @@ impl CellModel {
         let names: Vec<String> = spec.feeder.parts.keys().cloned().collect();
         let part_models =
             PartModel::from_catalog(catalog, &names).map_err(|e| CellError::Drop(e.to_string()))?;
+        let fixture_model = PartModel::from_catalog(catalog, &[spec.fixture.part.clone()])
+            .ok()
+            .and_then(|mut m| m.pop());
         Ok(Arc::new(Self {
             spec: spec.clone(),
             steps: steps.to_vec(),
@@ -143,6 +149,7 @@ impl CellModel {
             kinematics,
             home,
             part_models,
+            fixture_model,
             feeder_rays: OnceLock::new(),
         }))
     }
