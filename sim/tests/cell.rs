@@ -439,6 +439,74 @@ fn shaking_replaces_and_refill_restores_the_feeder() {
     assert!(cell.feeder_parts().iter().any(|p| p.instance > 12));
 }
 
+/// The arm's last motion replays on the clock: a joint move's trace starts where the arm was
+/// when it started and ends at its target when the clock does; a shake started mid-move
+/// (`shake_from`) lets the parts rest that much earlier than one started at its end, and is
+/// never dated before the move began nor after now.
+#[tokio::test]
+async fn a_motion_replays_on_the_clock_and_a_shake_can_start_during_it() {
+    let m = model(&zero_noise(), Scorer::Analytic);
+    let shake_time = m.spec.feeder.shake_time;
+    let mut cell = SimCell::new(m.clone(), 9, 0).unwrap();
+    assert!(cell.last_motion_trace(0.002).is_empty());
+    let from = cell.joints_now();
+    let mut to = from;
+    to[0] += 0.6;
+    to[1] -= 0.2;
+    let t0 = cell.clock();
+    let motion = robots::robot::JointMotion {
+        speed: 1.0,
+        acceleration: 2.0,
+    };
+    cell.move_j(to, motion).await.unwrap();
+    let end = cell.clock();
+    let trace = cell.last_motion_trace(0.002);
+    assert_eq!(trace.first().unwrap(), &(t0, from));
+    let (t_last, q_last) = trace.last().unwrap();
+    assert!((t_last - end).abs() < 1e-12);
+    assert!(q_last.iter().zip(&to).all(|(a, b)| (a - b).abs() < 1e-12));
+    // Even steps no longer than asked, the lead joint never faster than the move's speed.
+    for w in trace.windows(2) {
+        let dt = w[1].0 - w[0].0;
+        assert!(dt > 0.0 && dt <= 0.002 + 1e-12);
+        assert!((w[1].1[0] - w[0].1[0]).abs() <= motion.speed * dt + 1e-9);
+    }
+    // A straight line ends at its pose as well.
+    let tcp = cell.tcp_pose_now();
+    let up = Translation3::new(0.0, 0.0, 0.02) * tcp;
+    cell.move_l(
+        up,
+        LinearMotion {
+            speed: 0.1,
+            acceleration: 0.5,
+        },
+    )
+    .await
+    .unwrap();
+    let (_, q) = *cell.last_motion_trace(0.002).last().unwrap();
+    let reached = m.kinematics.forward_tcp(&q);
+    assert!((reached.translation.vector - up.translation.vector).norm() < 1e-6);
+    // Mid-move against at the end.
+    let mut early = SimCell::new(m.clone(), 9, 0).unwrap();
+    let mut late = SimCell::new(m, 9, 0).unwrap();
+    for c in [&mut early, &mut late] {
+        c.move_j(to, motion).await.unwrap();
+    }
+    let mid = t0 + 0.4 * (end - t0);
+    early.shake_from(mid).unwrap();
+    late.shake().unwrap();
+    assert!((early.feeder_rest_at() - (mid + shake_time)).abs() < 1e-12);
+    assert!((late.feeder_rest_at() - (end + shake_time)).abs() < 1e-12);
+    // Clamped to the move: not before it began, not after now.
+    let mut c = SimCell::new(model(&zero_noise(), Scorer::Analytic), 9, 0).unwrap();
+    c.move_j(to, motion).await.unwrap();
+    c.shake_from(t0 - 5.0).unwrap();
+    assert!((c.feeder_rest_at() - (t0 + shake_time)).abs() < 1e-12);
+    c.shake_from(end + 5.0).unwrap();
+    let expected = (t0 + shake_time).max(end) + shake_time;
+    assert!((c.feeder_rest_at() - expected).abs() < 1e-12);
+}
+
 /// `cell.gripper.actuation_time` is the gripper's full-stroke time: at 0.5 s instead of the
 /// default 0.25 s, the same seed gives the same outcomes and the episode takes exactly 0.25 s
 /// longer per stroke the fingers travelled on the simulated clock (an open or close of part of

@@ -62,6 +62,22 @@ pub trait CellIo: Send {
     /// Starts a feeder shake so parts come to rest anew; the feeder runs on its own and the next
     /// [`CellIo::capture`] waits until the parts are at rest.
     fn shake_feeder(&mut self) -> Result<(), CellIoError>;
+    /// Starts a feeder shake as [`CellIo::shake_feeder`], dated `t` on the cell's clock: an
+    /// instant during the arm's last motion, from [`CellIo::last_motion_trace`]. A cell that
+    /// ran that motion to its end before the engine regained control (the in-process
+    /// simulation) starts the shake at that instant, as an engine watching the motion would
+    /// have; any other cell starts it now.
+    fn shake_feeder_at(&mut self, _t: f64) -> Result<(), CellIoError> {
+        self.shake_feeder()
+    }
+    /// The arm's joints along its last motion, (cell clock, joints) at most `step` seconds
+    /// apart from its start to its end, where the cell ran that motion to its end before the
+    /// engine regained control (the in-process simulation: the planned trajectory as the cell
+    /// timed it); `None` for a cell whose arm reports its joints as it moves (read them from
+    /// the robot).
+    fn last_motion_trace(&self, _step: f64) -> Option<Vec<(f64, robots::kinematics::Joints)>> {
+        None
+    }
     /// Whether a part is between the closed fingers; `None` when the cell has no grasp sensor
     /// (the grasp is then assumed to hold and the insertion check decides).
     fn part_in_gripper(&mut self) -> Option<bool>;

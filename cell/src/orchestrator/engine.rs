@@ -11,7 +11,7 @@ use sim::cell::geometry::PartGeometry;
 
 use super::cell_io::{CellIo, InsertionCheck, Workcell};
 use super::context::EpisodeContext;
-use super::events::EventLog;
+use super::events::{EventLog, ShakeStart};
 use super::geometry::CellKnowledge;
 use super::insertion;
 use super::planning::{Motion, NamedMotion, Planner, Speeds, grasped_offset};
@@ -19,7 +19,7 @@ use super::seat_check::{self, SEAT_CHECK_FAILED, SeatTolerance, arm_in_fixture_v
 use super::selection::{Rejection, Selection, UnposedObstacle, select};
 use super::state::State;
 use super::step::StepState;
-use super::view::{arm_in_feeder_view, arm_near_feeder};
+use super::view::{AWAY_HEIGHT, GRIPPER_RADIUS, arm_in_feeder_view, arm_near_feeder};
 use crate::episode::{
     EpisodeRecord, GRASP_MISSED, PERCEPTION_MISSED, PoseError, RECORD_VERSION, StepOutcome,
 };
@@ -32,6 +32,25 @@ pub const FEEDER_EXHAUSTED: &str = "feeder.parts";
 pub const CAMERA_SAW_NOTHING: &str = "camera.view";
 /// Error-budget name of a step given up after `max_shakes` shakes left no usable instance.
 pub const FEEDER_SHAKE_BOUND: &str = "feeder.max_shakes";
+
+/// Step between the samples of a motion's trajectory searched for the first instant the arm is
+/// clear of the feeder, s (the controller's period).
+const SHAKE_TRACE_STEP: f64 = 0.002;
+
+/// Margin above [`AWAY_HEIGHT`] plus the gripper's (or held part's) radius that the TCP rises
+/// to when a shake finds it near the feeder, metres.
+const CLEAR_MARGIN: f64 = 0.01;
+
+/// A feeder shake decided and waiting for the arm and any held part to clear the feeder.
+#[derive(Debug, Clone, Copy)]
+struct PendingShake {
+    /// The step whose parts it shakes up.
+    for_step: usize,
+    /// Cell clock when it was decided.
+    since: f64,
+    /// What was near the feeder then.
+    near: Option<&'static str>,
+}
 
 /// A frame of the feeder taken and perceived for a later step while the arm worked elsewhere
 /// (`[motion] overlap`).
@@ -92,9 +111,12 @@ pub(super) struct Engine<'a> {
     ahead: Option<Ahead>,
     /// What became of the last overlapped capture, for the event log.
     ahead_note: String,
-    /// With overlap on, a shake for the next step decided after the pick and held back until
-    /// the arm is away from the feeder.
-    shake_pending: bool,
+    /// A shake decided (for the next step after a pick, or for this one) and held back until
+    /// the arm and the held part are away from the feeder; it starts at the first instant of a
+    /// motion at which they are.
+    shake_pending: Option<PendingShake>,
+    /// What became of the pending shake started during the last motion, if one was.
+    shake_result: Option<Result<(), String>>,
 }
 
 impl<'a> Engine<'a> {
@@ -121,7 +143,8 @@ impl<'a> Engine<'a> {
             deferred_lift: None,
             ahead: None,
             ahead_note: String::new(),
-            shake_pending: false,
+            shake_pending: None,
+            shake_result: None,
         }
     }
 
@@ -196,10 +219,10 @@ impl<'a> Engine<'a> {
     async fn run_state(&mut self, state: State) -> Result<State, Stop> {
         match state {
             State::Home => self.home(state).await,
-            State::Capture => Ok(self.capture()),
+            State::Capture => self.capture(state).await,
             State::Perceive => Ok(self.perceive()),
             State::Select => self.select(state).await,
-            State::Shake => Ok(self.shake()),
+            State::Shake => self.shake(state).await,
             State::PlanPick => self.plan_pick(state).await,
             State::Pick => self.pick(state).await,
             State::VerifyGrasp => Ok(self.verify_grasp()),
@@ -235,31 +258,39 @@ impl<'a> Engine<'a> {
 
     /// Take a camera frame (the cell waits for the feeder to settle). With overlap on, a frame
     /// taken and perceived for this step during the last insertion is used instead.
-    fn capture(&mut self) -> State {
+    async fn capture(&mut self, state: State) -> Result<State, Stop> {
         if self.ahead.as_ref().is_some_and(|a| a.step == self.index) {
             self.step.frame = None;
             self.step.excluded.clear();
             self.ahead_note = "the frame taken during the last insertion".into();
-            return State::Perceive;
+            return Ok(State::Perceive);
         }
         // A frame taken for an earlier step is stale.
         if self.ahead.as_ref().is_some_and(|a| a.step < self.index) {
             self.ahead = None;
         }
-        // A shake held back while the arm was near the feeder starts now, counted against
-        // this step (the capture waits for it).
-        if std::mem::take(&mut self.shake_pending) && self.io().shake_feeder().is_ok() {
-            self.step.shakes += 1;
+        // A shake for this step still held back (the arm never left the feeder since it was
+        // decided) starts now, away from the feeder; the capture waits for it.
+        if self.shake_pending.is_some_and(|p| p.for_step < self.index) {
+            self.shake_pending = None;
+        }
+        if self.shake_pending.is_some()
+            && let Err(why) = self.shake_away(state).await?
+        {
+            tracing::warn!(
+                episode = self.ctx.episode,
+                "held-back shake not started: {why}"
+            );
         }
         match self.io().capture() {
             Ok(f) => {
                 self.step.frame = Some(f);
                 self.step.excluded.clear();
-                State::Perceive
+                Ok(State::Perceive)
             }
             Err(e) => {
                 self.last_reason = e.to_string();
-                self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None)
+                Ok(self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None))
             }
         }
     }
@@ -283,22 +314,14 @@ impl<'a> Engine<'a> {
         if !self.ctx.settings.overlap || next >= self.steps() {
             return Ok(());
         }
-        // Where the arm is now: both checks below read the same pose.
-        let q = self.joints(state).await?;
-        if self.shake_pending {
-            match arm_near_feeder(self.ctx.knowledge, &q, self.held_radius()) {
-                Some(what) => {
-                    self.ahead_note = format!("shake held back: the {what} is near the feeder");
-                    return Ok(());
-                }
-                None => {
-                    self.shake_pending = false;
-                    if self.io().shake_feeder().is_ok() {
-                        self.shakes_ahead += 1;
-                    }
-                }
-            }
+        // A shake still waiting for the arm to leave the feeder will move the parts.
+        if let Some(p) = self.shake_pending {
+            let what = p.near.unwrap_or("arm");
+            self.ahead_note = format!("shake held back: the {what} is near the feeder");
+            return Ok(());
         }
+        // Where the arm is now: the check below reads the same pose.
+        let q = self.joints(state).await?;
         if self.io().feeder_at_rest() != Some(true) {
             self.ahead_note = "no capture ahead: the feeder is still settling".into();
             return Ok(());
@@ -469,18 +492,159 @@ impl<'a> Engine<'a> {
         })
     }
 
-    /// Shake the feeder so parts come to rest anew.
-    fn shake(&mut self) -> State {
+    /// Shake the feeder so parts come to rest anew, never with the arm or a held part near it:
+    /// an arm that is (after a missed grasp it stands just above the feeder) first rises
+    /// clear, and the shake starts the instant it is.
+    async fn shake(&mut self, state: State) -> Result<State, Stop> {
         // The parts move: a frame taken ahead no longer shows them.
         self.ahead = None;
-        match self.io().shake_feeder() {
+        let since = self.clock();
+        self.shake_pending = Some(PendingShake {
+            for_step: self.index,
+            since,
+            near: None,
+        });
+        match self.shake_away(state).await? {
             Ok(()) => {
-                self.step.shakes += 1;
                 self.step.missed_at.clear();
-                State::Capture
+                Ok(State::Capture)
             }
-            Err(e) => self.finish_step(StepOutcome::Aborted, Some(e.to_string()), vec![], None),
+            Err(e) => {
+                self.shake_pending = None;
+                Ok(self.finish_step(StepOutcome::Aborted, Some(e), vec![], None))
+            }
         }
+    }
+
+    /// Starts the pending shake ([`Self::shake_pending`]) now if the arm and any held part are
+    /// away from the feeder; otherwise raises the TCP straight up until they are (then, if
+    /// still not, goes home), the shake starting at the first instant of that motion at which
+    /// they are clear. `Err` with why when the arm could not be brought clear or the feeder
+    /// failed.
+    async fn shake_away(&mut self, state: State) -> Result<Result<(), String>, Stop> {
+        let Some(mut pending) = self.shake_pending else {
+            return Ok(Ok(()));
+        };
+        let k = self.ctx.knowledge;
+        let held = self.held_radius();
+        let q = self.joints(state).await?;
+        let Some(near) = arm_near_feeder(k, &q, held) else {
+            let now = self.clock();
+            return Ok(self.start_shake(now, q, "rest", 0.0, false));
+        };
+        if pending.near.is_none() {
+            pending.near = Some(near);
+            self.shake_pending = Some(pending);
+        }
+        // Straight up until the gripper (or the held part) clears the height at which a shake
+        // could reach it.
+        let robot = self.cell.robot();
+        let tcp = robot.tcp_pose().await.map_err(|e| Stop::Robot(state, e))?;
+        let speeds = Speeds::within(robot.limits(), 0.01);
+        let base_T_table = k.geometry.base_T_table;
+        let table_T_tcp = base_T_table.inverse() * tcp;
+        let clear = AWAY_HEIGHT + GRIPPER_RADIUS.max(held.unwrap_or(0.0)) + CLEAR_MARGIN;
+        let rise = (clear - table_T_tcp.translation.z).max(0.0);
+        let up = base_T_table * Translation3::new(0.0, 0.0, rise) * table_T_tcp;
+        let moves = [
+            ("clear the feeder", Motion::MoveL(up, speeds.fast)),
+            ("home", Motion::MoveJ(self.home, speeds.joint)),
+        ];
+        self.shake_result = None;
+        for m in moves {
+            self.execute(state, std::slice::from_ref(&m)).await?;
+            if let Some(r) = self.shake_result.take() {
+                return Ok(r);
+            }
+        }
+        let what = self.shake_pending.and_then(|p| p.near).unwrap_or("arm");
+        Ok(Err(format!(
+            "no shake: the {what} stays near the feeder even at home"
+        )))
+    }
+
+    /// After an arm motion that started at `t0` on the cell's clock (named `motion`): starts
+    /// the pending shake at the first instant of it at which the arm and any held part are
+    /// away from the feeder ([`arm_near_feeder`]). Where the cell can replay the motion
+    /// ([`CellIo::last_motion_trace`], the simulation), its trajectory is searched every
+    /// [`SHAKE_TRACE_STEP`] and the shake dated at that instant, mid-motion; otherwise the
+    /// arm's reported joints at the motion's end decide, and the shake starts then.
+    async fn shake_when_clear(&mut self, state: State, motion: &str, t0: f64) -> Result<(), Stop> {
+        if self.shake_pending.is_none() {
+            return Ok(());
+        }
+        let k = self.ctx.knowledge;
+        let held = self.held_radius();
+        let trace = self
+            .io()
+            .last_motion_trace(SHAKE_TRACE_STEP)
+            .filter(|t| t.first().is_some_and(|(t, _)| *t >= t0 - 1e-9));
+        let clear = match trace {
+            Some(trace) => trace
+                .into_iter()
+                .find(|(_, q)| arm_near_feeder(k, q, held).is_none())
+                .map(|(t, q)| (t, q, true)),
+            None => {
+                let q = self.joints(state).await?;
+                let now = self.clock();
+                arm_near_feeder(k, &q, held)
+                    .is_none()
+                    .then_some((now, q, false))
+            }
+        };
+        if let Some((t, q, mid)) = clear {
+            let r = self.start_shake(t, q, motion, t - t0, mid);
+            if let Err(e) = &r {
+                tracing::warn!(episode = self.ctx.episode, "shake failed: {e}");
+            }
+            self.shake_result = Some(r);
+        }
+        Ok(())
+    }
+
+    /// Starts the pending shake at `at` on the cell's clock with the arm at `q` (`mid`: dated
+    /// during the last motion, [`CellIo::shake_feeder_at`]), counts it against its step and
+    /// records it in the events.
+    fn start_shake(
+        &mut self,
+        at: f64,
+        q: Joints,
+        motion: &str,
+        into: f64,
+        mid: bool,
+    ) -> Result<(), String> {
+        let Some(p) = self.shake_pending.take() else {
+            return Ok(());
+        };
+        let r = if mid {
+            self.io().shake_feeder_at(at)
+        } else {
+            self.io().shake_feeder()
+        };
+        if let Err(e) = r {
+            return Err(e.to_string());
+        }
+        if p.for_step == self.index {
+            self.step.shakes += 1;
+        } else {
+            self.shakes_ahead += 1;
+        }
+        // The parts move: a frame taken ahead for that step no longer shows them.
+        if self.ahead.as_ref().is_some_and(|a| a.step == p.for_step) {
+            self.ahead = None;
+        }
+        let shake = ShakeStart {
+            for_step: p.for_step,
+            t_s: at,
+            joints: q,
+            held_radius_m: self.held_radius(),
+            motion: motion.to_string(),
+            into_motion_s: into,
+            held_back_s: at - p.since,
+            waited_for: p.near.map(str::to_string),
+        };
+        self.log.shake_started(shake);
+        Ok(())
     }
 
     /// Plan the pick of the chosen instance; an unplannable instance is excluded.
@@ -938,12 +1102,15 @@ impl<'a> Engine<'a> {
             &c.settings.selection,
         );
         if ahead.chosen.is_none() {
-            if self.ctx.settings.overlap {
-                // Held back until the arm is away from the feeder.
-                self.shake_pending = true;
-            } else if self.io().shake_feeder().is_ok() {
-                self.shakes_ahead += 1;
-            }
+            // Held back until the arm and the held part are away from the feeder: it starts at
+            // the first instant of a later motion at which they are.
+            let since = self.clock();
+            let near = arm_near_feeder(self.ctx.knowledge, here, self.held_radius());
+            self.shake_pending = Some(PendingShake {
+                for_step: next,
+                since,
+                near,
+            });
         }
     }
 
@@ -1012,6 +1179,7 @@ impl<'a> Engine<'a> {
                 continue;
             }
             next += 1;
+            let t0 = self.clock();
             let robot = self.cell.robot();
             let r = match m {
                 Motion::MoveJ(q, s) => robot.move_j(*q, *s).await,
@@ -1034,6 +1202,9 @@ impl<'a> Engine<'a> {
                     "motion failed: {e}"
                 );
                 return Err(Stop::Robot(state, e));
+            }
+            if matches!(m, Motion::MoveJ(..) | Motion::MoveL(..)) {
+                self.shake_when_clear(state, name, t0).await?;
             }
         }
         Ok(())
@@ -1088,6 +1259,8 @@ impl<'a> Engine<'a> {
             );
             return Ok(None);
         }
+        let t0 = self.clock();
+        let robot = self.cell.robot();
         let r = robot.move_path(path).await;
         let clock = self.clock();
         // One span, the transit's: the path is its joint move with the corners rounded.
@@ -1098,6 +1271,7 @@ impl<'a> Engine<'a> {
             .0;
         self.log.motion_done(name, clock);
         r.map_err(|e| Stop::Robot(state, e))?;
+        self.shake_when_clear(state, name, t0).await?;
         Ok(Some(n))
     }
 

@@ -32,6 +32,57 @@ pub struct Event {
     /// otherwise, and in event files from before traces were kept).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wrench_trace: Option<WrenchTrace>,
+    /// The feeder shakes started in the state this transition leaves (absent when none, and
+    /// in event files from before shakes were recorded).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub shakes: Vec<ShakeStart>,
+}
+
+/// A feeder shake as the engine started it: when, where the arm was, and why it waited. A
+/// shake starts only with the arm and any held part away from the feeder
+/// (`orchestrator::view::arm_near_feeder`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShakeStart {
+    /// The step whose parts it shakes up (this one after no usable instance was found, or the
+    /// next one when decided right after a pick).
+    pub for_step: usize,
+    /// Cell clock when the shake started, s.
+    pub t_s: f64,
+    /// The arm's joints then (rad): the planned trajectory's sample at that instant in the
+    /// simulated cell, the arm's reported joints on a controller.
+    pub joints: [f64; 6],
+    /// Radius of the held part's bounding sphere about the TCP the check counted, m (absent:
+    /// empty fingers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_radius_m: Option<f64>,
+    /// The motion it started during (or after), by its waypoint name.
+    pub motion: String,
+    /// Seconds into that motion: mid-motion from the motion's sampled trajectory, or the
+    /// motion's whole duration when it started after it.
+    pub into_motion_s: f64,
+    /// Seconds from the decision to shake to its start.
+    pub held_back_s: f64,
+    /// What was near the feeder when the shake was decided (absent: nothing, it started at
+    /// once).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub waited_for: Option<String>,
+}
+
+impl ShakeStart {
+    /// The shake in words, for the log.
+    pub fn describe(&self) -> String {
+        let wait = match &self.waited_for {
+            Some(what) => format!(
+                ", held back {:.3} s while the {what} was near the feeder",
+                self.held_back_s
+            ),
+            None => String::new(),
+        };
+        format!(
+            "shake for step {} started at {:.3} s, {:.3} s into the {}{wait}",
+            self.for_step, self.t_s, self.into_motion_s, self.motion
+        )
+    }
 }
 
 /// A force-guided insertion's wrist readings along its guarded descents, in the insertion frame,
@@ -46,8 +97,13 @@ pub struct WrenchTrace {
     /// First contact at most this high above seated reads as seated, mm.
     pub seat_band_mm: f64,
     /// First contact at least this high above seated reads as missed on the rim, mm (jammed
-    /// between the two).
+    /// between the two, but within [`Self::landings_mm`]).
     pub rim_mm: f64,
+    /// Bands (low, high) of heights above seated, mm, where a part beyond the capture band
+    /// lands on what is in place: first contact within one reads as missed too. Empty in
+    /// events from before them.
+    #[serde(default)]
+    pub landings_mm: Vec<[f64; 2]>,
     /// The readings, descent by descent, each in time order.
     pub samples: Vec<WrenchSample>,
 }
@@ -76,6 +132,8 @@ pub struct EventLog {
     /// (index of the event that will close the state it ran in, simulated time, activity) at
     /// the end of each motion, in order.
     motions: Vec<(usize, f64, Activity)>,
+    /// Shakes started since the last transition, for the next one.
+    shakes: Vec<ShakeStart>,
 }
 
 impl EventLog {
@@ -86,6 +144,7 @@ impl EventLog {
             start: Instant::now(),
             events: Vec::new(),
             motions: Vec::new(),
+            shakes: Vec::new(),
         }
     }
 
@@ -109,7 +168,15 @@ impl EventLog {
             wall_time_s: self.start.elapsed().as_secs_f64(),
             detail,
             wrench_trace: None,
+            shakes: std::mem::take(&mut self.shakes),
         });
+    }
+
+    /// Records a feeder shake started in the state now running (kept on the transition that
+    /// leaves it).
+    pub fn shake_started(&mut self, shake: ShakeStart) {
+        tracing::debug!(episode = self.episode, "{}", shake.describe());
+        self.shakes.push(shake);
     }
 
     /// Attaches a force-guided insertion's wrench trace to the last event recorded.

@@ -59,7 +59,7 @@ pub use activity::Activity;
 pub use cell_io::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, SplitCell, Workcell};
 pub use context::{EpisodeContext, EpisodeSettings, Setup};
 pub use engine::{FEEDER_EXHAUSTED, FEEDER_SHAKE_BOUND};
-pub use events::{Event, EventLog, WrenchSample, WrenchTrace};
+pub use events::{Event, EventLog, ShakeStart, WrenchSample, WrenchTrace};
 pub use geometry::{CellKnowledge, KnowledgeError, top_down};
 pub use planning::{
     Motion, Plan, PlanError, Planner, PlanningConfig, SearchConfig, Speeds, grasped_offset,

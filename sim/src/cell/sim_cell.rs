@@ -25,7 +25,7 @@ use super::insertion::{
     InsertionCase, InsertionCause, InsertionResult, Mating, ReceiverPart, Scorer, Verdict,
 };
 use super::model::CellModel;
-use super::motion::{move_j_time, move_l_time};
+use super::motion::{Profile, move_j_profile, move_l_profile, move_l_time};
 use super::noise::{EpisodeStreams, ErrorBudget, ErrorSource, gauss3, true_camera_pose};
 use super::wrench::{GRIP_SLIP_FORCE, HELD_CONTACT_STIFFNESS};
 use crate::config::{Destination, Placement};
@@ -43,6 +43,29 @@ const GUARD_SAMPLES: usize = 400;
 const GUARD_TRACE_SAMPLES: usize = 64;
 /// Further even steps of the trace from first touch to the stop (the press).
 const GUARD_TRACE_PRESS_SAMPLES: usize = 16;
+
+/// The arm's last motion as the cell ran it, kept to replay its joints over the clock
+/// ([`SimCell::last_motion_trace`]).
+#[derive(Debug, Clone)]
+enum LastMotion {
+    /// A synchronised joint move from `from` to `to`, started at `start` on the clock.
+    Joint {
+        from: Joints,
+        to: Joints,
+        start: f64,
+        profile: Profile,
+    },
+    /// A straight TCP line from `from` (at joints `from_q`) to `to`, started at `start`.
+    Linear {
+        from_q: Joints,
+        from: Isometry3<f64>,
+        to: Isometry3<f64>,
+        start: f64,
+        profile: Profile,
+    },
+    /// A blended path, its joints every controller period (clock time, joints), from its start.
+    Sampled(Vec<(f64, Joints)>),
+}
 
 /// A move a controller is about to run, for [`SimCell::check_controller_move`].
 #[derive(Debug, Clone, Copy)]
@@ -168,6 +191,8 @@ pub struct SimCell {
     gripper_travel: f64,
     /// Clock time at which the parts of the last shake are at rest again.
     feeder_rest_at: f64,
+    /// The arm's last joint move, straight line or blended path, to replay its joints.
+    last_motion: Option<LastMotion>,
     /// Whether captures are rendered images (learned perception) or the true scene.
     renders_captures: bool,
     /// The feeder window's last render, reused where the feeder did not change.
@@ -216,6 +241,7 @@ impl SimCell {
             gripper_actuations: 0,
             gripper_travel: 0.0,
             feeder_rest_at: 0.0,
+            last_motion: None,
             renders_captures: false,
             feeder_renderer: IncrementalRenderer::new(),
             scorer_failure: None,
@@ -403,14 +429,28 @@ impl SimCell {
     /// which the arm may go on working elsewhere; the camera and the fingers wait for the parts
     /// to rest ([`Self::wait_for_feeder`]).
     pub fn shake(&mut self) -> Result<(), CellError> {
+        self.shake_from(self.clock)
+    }
+
+    /// Shakes the feeder as [`Self::shake`] does, the shake having started at `t` on the clock:
+    /// an instant during the arm's last motion, which the cell ran to its end before the caller
+    /// could act (the orchestrator starts a shake mid-transit, at the first instant the arm is
+    /// clear of the feeder, [`Self::last_motion_trace`]). `t` is taken no later than now and no
+    /// earlier than that motion's start; the parts settle `shake_time` after it.
+    pub fn shake_from(&mut self, t: f64) -> Result<(), CellError> {
+        let earliest = self.last_motion_start().unwrap_or(self.clock);
+        let t = if t.is_finite() {
+            t.clamp(earliest.min(self.clock), self.clock)
+        } else {
+            self.clock
+        };
         let wanted: Vec<(String, u32)> = self
             .feeder
             .iter()
             .map(|p| (p.part.clone(), p.instance))
             .collect();
         self.feeder = self.place(&wanted, &[])?;
-        self.feeder_rest_at =
-            self.feeder_rest_at.max(self.clock) + self.model.spec.feeder.shake_time;
+        self.feeder_rest_at = self.feeder_rest_at.max(t) + self.model.spec.feeder.shake_time;
         self.shakes += 1;
         Ok(())
     }
@@ -715,7 +755,14 @@ impl SimCell {
         let poses = self.joint_path(&target);
         self.begin_motion();
         self.check_clearance(&poses)?;
-        self.clock += move_j_time(&self.q, &target, &motion, &self.model.spec.limits);
+        let profile = move_j_profile(&self.q, &target, &motion, &self.model.spec.limits);
+        self.last_motion = Some(LastMotion::Joint {
+            from: self.q,
+            to: target,
+            start: self.clock,
+            profile,
+        });
+        self.clock += profile.duration();
         self.q = target;
         self.end_motion();
         Ok(())
@@ -733,7 +780,15 @@ impl SimCell {
         let (poses, q) = self.linear_path(&base_T_tcp)?;
         self.begin_motion();
         self.check_clearance(&poses)?;
-        self.clock += move_l_time(&start, &base_T_tcp, &motion, &self.model.spec.limits);
+        let profile = move_l_profile(&start, &base_T_tcp, &motion, &self.model.spec.limits);
+        self.last_motion = Some(LastMotion::Linear {
+            from_q: self.q,
+            from: start,
+            to: base_T_tcp,
+            start: self.clock,
+            profile,
+        });
+        self.clock += profile.duration();
         self.q = q;
         self.end_motion();
         Ok(())
@@ -749,18 +804,81 @@ impl SimCell {
         let moves = waypoint_moves(path);
         self.check_controller_path(&moves)?;
         let mut arm = self.controller_arm();
-        let run = execute_path(&mut arm, &moves, CONTROLLER_PERIOD, |_| {
+        let start = self.clock;
+        let mut trace = vec![(start, self.q)];
+        let run = execute_path(&mut arm, &moves, CONTROLLER_PERIOD, |c| {
+            trace.push((start + c.t, c.state.q));
             Ok::<_, ArmError>(())
         })
         .map_err(|e| RobotError::Rejected {
             detail: format!("blended path: {e}"),
         })?;
+        self.last_motion = Some(LastMotion::Sampled(trace));
         // A blend URScript would skip (`run.warnings`) is skipped here too: the arm stops at
         // that via-point, as the controller's does.
         self.clock += run.duration;
         self.q = run.q;
         self.end_motion();
         Ok(())
+    }
+
+    /// When the arm's last joint move, straight line or blended path started, on the clock.
+    fn last_motion_start(&self) -> Option<f64> {
+        match self.last_motion.as_ref()? {
+            LastMotion::Joint { start, .. } | LastMotion::Linear { start, .. } => Some(*start),
+            LastMotion::Sampled(trace) => trace.first().map(|(t, _)| *t),
+        }
+    }
+
+    /// The arm's joints along its last joint move, straight line or blended path, as the cell
+    /// ran it: (clock time, joints) from its start to its end, both included, every `step`
+    /// seconds (a blended path every controller period, 2 ms, whatever `step`); empty before
+    /// any motion. The commanded joints, as the arm reports them (the repeatability error is
+    /// the TCP's, not the joints').
+    pub fn last_motion_trace(&self, step: f64) -> Vec<(f64, Joints)> {
+        let step = if step.is_finite() && step > 0.0 {
+            step
+        } else {
+            CONTROLLER_PERIOD
+        };
+        let times = |start: f64, profile: Profile| {
+            let total = profile.duration();
+            let n = (total / step).ceil().max(1.0) as usize;
+            (0..=n).map(move |k| {
+                let t = (k as f64 * step).min(total);
+                (start + t, profile.fraction(t))
+            })
+        };
+        match self.last_motion.as_ref() {
+            None => Vec::new(),
+            Some(LastMotion::Sampled(trace)) => trace.clone(),
+            Some(LastMotion::Joint {
+                from,
+                to,
+                start,
+                profile,
+            }) => times(*start, *profile)
+                .map(|(t, s)| (t, std::array::from_fn(|i| from[i] + s * (to[i] - from[i]))))
+                .collect(),
+            Some(LastMotion::Linear {
+                from_q,
+                from,
+                to,
+                start,
+                profile,
+            }) => {
+                let mut q = *from_q;
+                times(*start, *profile)
+                    .map(|(t, s)| {
+                        let pose = from.lerp_slerp(to, s);
+                        if let Ok(sol) = self.model.kinematics.inverse_nearest(&pose, &q) {
+                            q = sol.joints;
+                        }
+                        (t, q)
+                    })
+                    .collect()
+            }
+        }
     }
 
     /// The virtual UR's kinematic arm model for this cell, at its joints: the cell's kinematics
