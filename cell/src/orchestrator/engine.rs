@@ -834,13 +834,27 @@ impl<'a> Engine<'a> {
         self.capture_ahead(state).await?;
         let k = self.ctx.knowledge;
         let s = &k.steps[self.index];
+        let capture = s.clearance / 2.0 + s.lead_in;
+        let held = self.step.selection.as_ref();
+        let landings = match held.and_then(|sel| k.part(&sel.detection.part)) {
+            Some(g) => insertion::rim_landings(
+                g,
+                &k.base_T_targets[self.index],
+                &k.base_T_insertions[self.index],
+                &self.placed_shapes(),
+                (capture, s.lead_in),
+                spec.seat_band,
+            ),
+            None => insertion::RimLandings::default(),
+        };
         let geometry = insertion::InsertionGeometry {
             seated,
             base_T_ins: k.base_T_insertions[self.index],
             engagement: plan.engagement,
-            capture: s.clearance / 2.0 + s.lead_in,
+            capture,
             lead_in: s.lead_in,
             slow: self.planner().speeds.slow,
+            landings,
         };
         let r = insertion::force_insert(self.cell.robot(), &geometry, spec).await;
         let clock = self.clock();
@@ -1005,8 +1019,30 @@ impl<'a> Engine<'a> {
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let index = self.index;
         let truth = (self.io().placed_truth(index)).map(|p| seat_check::true_offset(k, index, &p));
-        self.step.seat_check = Some(seat_check::record(&m, &tol, ms, truth));
+        let rec = seat_check::record(&m, &tol, ms, truth);
+        self.step.seat_check = Some(rec);
         let (_, why) = seat_check::judge(&m, &tol);
+        let note = match (&m, &why) {
+            (Ok(m), None) => format!(
+                "seat check passed: {:.3} mm, {:+.1} mrad, {:.0} % of {} own outline samples",
+                m.offset.norm() * 1e3,
+                m.yaw * 1e3,
+                100.0 * m.support,
+                m.samples
+            ),
+            (_, Some(w)) => format!("seat check: {w}"),
+            (Err(_), None) => String::new(),
+        };
+        self.ahead_note = [std::mem::take(&mut self.ahead_note), note]
+            .into_iter()
+            .filter(|t| !t.is_empty())
+            .collect::<Vec<_>>()
+            .join("; ");
+        // A part its receiver hides by construction (no outline of its own at its target) is
+        // recorded not visible and keeps its seated verdict: no capture could show it.
+        if m.as_ref().is_err_and(|n| n.by_geometry) {
+            return Ok(None);
+        }
         Ok(why.map(|w| (StepOutcome::Missed, w)))
     }
 

@@ -57,13 +57,16 @@ pub struct SeatTolerance {
 }
 
 impl SeatTolerance {
-    /// The tolerances of step `step` under `spec`: its values, or else the step's own
-    /// `tolerances.lateral` and `tolerances.tilt`.
+    /// The tolerances of step `step` under `spec`: its values, the lateral one by default the
+    /// step's own `tolerances.lateral` plus the check's allowance
+    /// ([`crate::scenario::SEAT_CHECK_ALLOWANCE`]).
     pub fn of(spec: &SeatCheckSpec, k: &CellKnowledge, step: usize) -> Self {
         let t = &k.steps[step].tolerances;
         Self {
-            lateral: spec.lateral.unwrap_or(t.lateral),
-            yaw: spec.yaw.unwrap_or(t.tilt),
+            lateral: spec
+                .lateral
+                .unwrap_or(t.lateral + crate::scenario::SEAT_CHECK_ALLOWANCE),
+            yaw: spec.yaw,
             min_support: spec.min_support,
         }
     }
@@ -91,6 +94,11 @@ pub struct NotSeen {
     pub samples: usize,
     /// The fit's support, if one converged.
     pub support: Option<f64>,
+    /// Whether the part's geometry alone hides it: at its target its outline has fewer than
+    /// [`MIN_OWN_SAMPLES`] samples off the edges of what was there before it, so no image
+    /// could show it (a part inside a receiver's cavity); otherwise it had edges of its own to
+    /// show and the image did not show them.
+    pub by_geometry: bool,
 }
 
 /// The fixture's footprint on the table with the margin: centre and half sizes (table frame),
@@ -277,6 +285,7 @@ pub fn measure_seat(
         why,
         samples: 0,
         support: None,
+        by_geometry: false,
     };
     let s = k
         .steps
@@ -382,6 +391,7 @@ pub fn measure_seat(
             ),
             samples,
             support: None,
+            by_geometry: true,
         });
     }
     let patch = GreyPatch::cut(&image.pixels, image.origin, b).with_hidden(|y, x, row| {
@@ -389,18 +399,35 @@ pub fn measure_seat(
             *v = shared.get(x + i as i64, y);
         }
     });
-    let aligner = ContourAligner::new(camera_T_ins, ContourConfig::default());
     let view = ContourView {
         outline: &outline,
         stable: &seated,
         camera,
         patch: &patch,
     };
-    let Some(fit) = aligner.align(view, start) else {
+    // Coarse to fine as the aligner's own rounds, each on the part's own samples only
+    // (`screen` skips the hidden ones): the shared edges lie a clearance off the part's
+    // outline, or its height's parallax off it, and would pull the fit towards them.
+    let mut fit = None;
+    let mut from = start;
+    for reach in ContourConfig::default().search_px {
+        let config = ContourConfig {
+            search_px: [reach; 3],
+            ..ContourConfig::default()
+        };
+        let Some(f) = ContourAligner::new(camera_T_ins, config).screen(view, from) else {
+            fit = None;
+            break;
+        };
+        from = (f.x, f.y, f.yaw);
+        fit = Some(f);
+    }
+    let Some(fit) = fit else {
         return Err(NotSeen {
-            why: "too few outline samples found an image edge".into(),
+            why: "too few of its own outline samples found an image edge".into(),
             samples,
             support: None,
+            by_geometry: false,
         });
     };
     let samples = own(&(camera_T_ins * seated.table_T_part(fit.x, fit.y, fit.yaw)));

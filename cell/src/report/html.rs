@@ -189,6 +189,7 @@ pub fn render_html(
     }
     h.push_str("</table>\n");
     h.push_str(&super::force::force_section(&recs));
+    h.push_str(&super::seat::seat_section(&recs));
     plot(
         &mut h,
         &mut files,

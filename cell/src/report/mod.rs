@@ -8,6 +8,7 @@ pub mod force;
 pub mod html;
 pub mod pictures;
 pub mod plots;
+pub mod seat;
 pub mod timeline;
 pub mod wrench;
 

@@ -83,7 +83,7 @@ fn force_insertion(spec: &ScenarioSpec, f: &super::ForceInsertionSpec, issues: &
 /// Checks `[seat_check]`: tolerances finite and positive, a support share in (0, 1].
 fn seat_check(c: &super::SeatCheckSpec, issues: &mut Issues) {
     let key = |k: &str| root().key("seat_check").key(k);
-    for (name, value) in [("lateral", c.lateral), ("yaw", c.yaw)] {
+    for (name, value) in [("lateral", c.lateral), ("yaw", Some(c.yaw))] {
         if let Some(v) = value
             && !(v.is_finite() && v > 0.0)
         {
