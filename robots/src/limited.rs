@@ -78,7 +78,10 @@ impl From<ArmError> for PathCheck {
 /// the TCP's via-points) and 0 at the last via-point; then the blended motion as the virtual UR's
 /// arm model runs it ([`execute_path`]), every [`PATH_SAMPLE_PERIOD`]: joints in range, every
 /// joint's speed and acceleration within the limits, the TCP in the workspace box, and the TCP
-/// speed within `max_tcp_speed` while only tool lines move it.
+/// speed within `max_tcp_speed` while only tool lines move it. Everything it refuses but an empty
+/// path is a [`RobotError::LimitViolation`] (the arm model's refusals and unreachable via-points
+/// as [`LimitViolation::PathRefused`]), so a caller can tell a refused path, which never moved
+/// the arm and may run stop by stop, from a failed one.
 pub fn check_path(
     limits: &Limits,
     kinematics: &UrKinematics,
@@ -126,7 +129,12 @@ pub fn check_path(
                     acceleration: w.acceleration,
                 };
                 limits.check_move_l(&pose, &motion)?;
-                near = kinematics.inverse_nearest(&pose, &near)?.joints;
+                near = kinematics
+                    .inverse_nearest(&pose, &near)
+                    .map_err(|e| LimitViolation::PathRefused {
+                        detail: format!("a via-point is unreachable: {e}"),
+                    })?
+                    .joints;
             }
         }
     }
@@ -198,9 +206,10 @@ pub fn check_path(
     match run {
         Ok(_) => Ok(()),
         Err(PathCheck::Limit(v)) => Err(v.into()),
-        Err(PathCheck::Arm(e)) => Err(RobotError::Rejected {
-            detail: format!("blended path: {e}"),
-        }),
+        Err(PathCheck::Arm(e)) => Err(LimitViolation::PathRefused {
+            detail: e.to_string(),
+        }
+        .into()),
     }
 }
 

@@ -161,6 +161,13 @@ pub enum LimitViolation {
         /// Limit (rad/s²).
         max: f64,
     },
+    /// A blended path the arm model refuses to run (a via-point it cannot reach, a motion it
+    /// cannot execute exactly): checked like a limit, before anything moves.
+    #[error("the arm model refuses the blended path: {detail}")]
+    PathRefused {
+        /// The arm model's reason.
+        detail: String,
+    },
     /// A blended path's via-point radius over half of a segment it blends (or non-zero at the
     /// path's end, where nothing follows to blend into).
     #[error(
@@ -198,11 +205,11 @@ fn outside(value: f64, min: f64, max: f64) -> f64 {
 }
 
 impl LimitViolation {
-    /// By how much the limit is exceeded, in the quantity's SI unit (NaN for non-finite input,
-    /// the requested value for a non-positive one).
+    /// By how much the limit is exceeded, in the quantity's SI unit (NaN for non-finite input
+    /// and for a path the arm model refuses, the requested value for a non-positive one).
     pub fn excess(&self) -> f64 {
         match *self {
-            Self::NonFinite { .. } => f64::NAN,
+            Self::NonFinite { .. } | Self::PathRefused { .. } => f64::NAN,
             Self::OutsideWorkspace {
                 value, min, max, ..
             } => outside(value, min, max),

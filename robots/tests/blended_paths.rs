@@ -283,3 +283,34 @@ fn a_via_point_outside_the_limits_is_refused() {
     ));
     assert!(check_path(&limits, &kinematics, &START, &[]).is_err());
 }
+
+#[test]
+fn a_path_the_arm_model_cannot_run_is_refused_as_a_limit_violation() {
+    // A via-point inside a (wide) workspace box but out of the arm's reach: refused before
+    // anything moves, as a limit violation (the orchestrator then moves stop by stop), not as a
+    // failed motion.
+    let kinematics = UrKinematics::ur5e();
+    let wide = Limits {
+        workspace: WorkspaceBox {
+            min: [-5.0, -5.0, -5.0],
+            max: [5.0, 5.0, 5.0],
+        },
+        ..limits()
+    };
+    let mut path = lift_transit_approach(&kinematics, 0.0);
+    let start = kinematics.forward_tcp(&START);
+    path[2] = Waypoint::linear(
+        shifted(&start, 2.0, 0.0, 0.0),
+        LinearMotion {
+            speed: 0.25,
+            acceleration: 1.2,
+        },
+        0.0,
+    );
+    match check_path(&wide, &kinematics, &START, &path) {
+        Err(RobotError::LimitViolation(LimitViolation::PathRefused { detail })) => {
+            assert!(detail.contains("unreachable"), "{detail}")
+        }
+        other => panic!("{other:?}"),
+    }
+}

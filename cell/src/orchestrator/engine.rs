@@ -5,7 +5,6 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
 use robots::kinematics::Joints;
-use robots::limited::check_path;
 use robots::robot::{RobotError, Waypoint};
 use sim::cell::geometry::PartGeometry;
 
@@ -1234,9 +1233,11 @@ impl<'a> Engine<'a> {
 
     /// With blending on (`[motion] blend_radius`), the leading run of fast arm moves of
     /// `motions` (joint moves and straight lines at the fast speed; never the slow segments
-    /// into a grasp or an insertion) as one blended path, when there are two or more and the
-    /// path passes the limit check ([`robots::limited::check_path`]: a refused one runs stop
-    /// by stop). `Some(n)` when it ran the first `n` motions.
+    /// into a grasp or an insertion) as one blended path, when there are two or more. The
+    /// robot's limit check is the only one ([`robots::limited::Limited`] runs
+    /// [`robots::limited::check_path`], sampled every millisecond): a path it refuses with a
+    /// [`RobotError::LimitViolation`] never moved the arm and runs stop by stop. `Some(n)` when
+    /// it ran the first `n` motions.
     async fn try_blend(
         &mut self,
         state: State,
@@ -1270,10 +1271,9 @@ impl<'a> Engine<'a> {
                 }
             })
             .collect();
-        let from = self.joints(state).await?;
-        let kinematics = &self.ctx.knowledge.kinematics;
-        let robot = self.cell.robot();
-        if let Err(e) = check_path(robot.limits(), kinematics, &from, &path) {
+        let t0 = self.clock();
+        let r = self.cell.robot().move_path(path).await;
+        if let Err(RobotError::LimitViolation(e)) = &r {
             tracing::debug!(
                 episode = self.ctx.episode,
                 waypoint = motions[0].0,
@@ -1281,9 +1281,6 @@ impl<'a> Engine<'a> {
             );
             return Ok(None);
         }
-        let t0 = self.clock();
-        let robot = self.cell.robot();
-        let r = robot.move_path(path).await;
         let clock = self.clock();
         // One span, the transit's: the path is its joint move with the corners rounded.
         let name = motions[..n]

@@ -810,8 +810,11 @@ impl SimCell {
             trace.push((start + c.t, c.state.q));
             Ok::<_, ArmError>(())
         })
-        .map_err(|e| RobotError::Rejected {
-            detail: format!("blended path: {e}"),
+        .map_err(|e| {
+            // Refused before anything moved, as `Limited`'s check refuses it.
+            RobotError::LimitViolation(robots::limits::LimitViolation::PathRefused {
+                detail: e.to_string(),
+            })
         })?;
         self.last_motion = Some(LastMotion::Sampled(trace));
         // A blend URScript would skip (`run.warnings`) is skipped here too: the arm stops at
