@@ -398,6 +398,7 @@ fn every_guide_has_its_commands_test() {
         "assembly-sequence.md",
         "regress.md",
         "scale.md",
+        "seat-verification.md",
     ];
     for guide in markdown_under(&repo().join("docs/guides")) {
         let name = guide.file_name().expect("a file").to_string_lossy();
@@ -451,6 +452,11 @@ fn regress_guide_commands_run() {
 #[test]
 fn scale_guide_commands_run() {
     assert!(run_page("docs/guides/scale.md") > 0);
+}
+
+#[test]
+fn seat_verification_guide_commands_run() {
+    assert!(run_page("docs/guides/seat-verification.md") > 0);
 }
 
 #[test]

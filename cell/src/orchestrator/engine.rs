@@ -966,9 +966,13 @@ impl<'a> Engine<'a> {
         let tol = SeatTolerance::of(spec, k, self.index);
         let mut q = self.joints(state).await?;
         if arm_in_fixture_view(k, &q, None).is_some() {
+            // Sideways at the retreat's height, towards the feeder (where the next step picks),
+            // to the first pose out of view, a joint move as the planner's transits; home when
+            // none is.
             let joint = self.planner().speeds.joint;
-            let home = self.home;
-            let r = self.cell.robot().move_j(home, joint).await;
+            let tcp = (self.cell.robot().tcp_pose().await).map_err(|e| Stop::Robot(state, e))?;
+            let to = seat_check::pose_out_of_view(k, &tcp, &q).map_or(self.home, |(_, q)| q);
+            let r = self.cell.robot().move_j(to, joint).await;
             let clock = self.clock();
             self.log.motion_done("retreat", clock);
             r.map_err(|e| Stop::Robot(state, e))?;

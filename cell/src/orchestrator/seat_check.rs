@@ -147,6 +147,32 @@ pub fn arm_in_fixture_view(
         .map(|(name, _, _)| name)
 }
 
+/// Sideways steps tried from the retreat towards the feeder, metres.
+const ASIDE_STEPS: [f64; 8] = [0.03, 0.045, 0.06, 0.08, 0.1, 0.12, 0.15, 0.2];
+
+/// A TCP pose at the height of `base_T_tcp` (the retreat above the fixture), moved sideways
+/// towards the feeder's centre by the first of [`ASIDE_STEPS`] whose inverse kinematics (nearest
+/// `q`) puts the arm out of the camera's view of the fixture, with those joints; `None` when
+/// none does.
+#[allow(non_snake_case)]
+pub fn pose_out_of_view(
+    k: &CellKnowledge,
+    base_T_tcp: &Isometry3<f64>,
+    q: &Joints,
+) -> Option<(Isometry3<f64>, Joints)> {
+    let f = k.spec.feeder.center;
+    let feeder = k.geometry.base_T_table * Point3::new(f[0], f[1], 0.0);
+    let d = (feeder.coords - base_T_tcp.translation.vector).xy();
+    let dir = d.try_normalize(1e-9)?;
+    ASIDE_STEPS.iter().find_map(|step| {
+        let pose = nalgebra::Translation3::new(dir.x * step, dir.y * step, 0.0) * base_T_tcp;
+        let s = k.kinematics.inverse_nearest(&pose, q).ok()?;
+        arm_in_fixture_view(k, &s.joints, None)
+            .is_none()
+            .then_some((pose, s.joints))
+    })
+}
+
 /// A boolean mask over a box of sensor pixels.
 struct Mask {
     x0: i64,

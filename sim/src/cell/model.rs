@@ -136,9 +136,10 @@ impl CellModel {
         let names: Vec<String> = spec.feeder.parts.keys().cloned().collect();
         let part_models =
             PartModel::from_catalog(catalog, &names).map_err(|e| CellError::Drop(e.to_string()))?;
-        let fixture_model = PartModel::from_catalog(catalog, &[spec.fixture.part.clone()])
-            .ok()
-            .and_then(|mut m| m.pop());
+        let fixture_model =
+            PartModel::from_catalog(catalog, std::slice::from_ref(&spec.fixture.part))
+                .ok()
+                .and_then(|mut m| m.pop());
         Ok(Arc::new(Self {
             spec: spec.clone(),
             steps: steps.to_vec(),
