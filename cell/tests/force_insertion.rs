@@ -13,7 +13,7 @@ use sim::cell::insertion::{InsertionCause, Verdict};
 
 use cell::episode::StepOutcome;
 use cell::harness::{SimSetup, run_sim_episode};
-use cell::orchestrator::insertion::{InsertionGeometry, force_insert};
+use cell::orchestrator::insertion::{InsertionGeometry, force_insert, rim_landings};
 use cell::orchestrator::{Motion, Planner, Speeds, grasped_offset};
 use cell::scenario::ForceInsertionSpec;
 use support::load_variant;
@@ -93,13 +93,22 @@ fn holding_a_shell(
         panic!("the insert is a straight move")
     };
     let s = &k.steps[0];
+    let capture = s.clearance / 2.0 + s.lead_in;
     let geometry = InsertionGeometry {
         seated,
         base_T_ins: k.base_T_insertions[0],
         engagement: plan.engagement,
-        capture: s.clearance / 2.0 + s.lead_in,
+        capture,
         lead_in: s.lead_in,
         slow,
+        landings: rim_landings(
+            k.part("main_shell").unwrap(),
+            &k.base_T_targets[0],
+            &k.base_T_insertions[0],
+            &[(fixture, k.geometry.base_T_fixture)],
+            (capture, s.lead_in),
+            ForceInsertionSpec::default().seat_band,
+        ),
     };
     (cell, plan.motions[..at].to_vec(), geometry)
 }
@@ -486,6 +495,15 @@ fn force_verdicts_agree_with_the_contact_engine_on_boundary_insertions() {
         a.all
     );
     assert_eq!(a.all.engine_seating, 60, "{:#?}", a.disagreements);
+    // The top shell's rim misses land below its engagement depth and still read missed.
+    let (_, top) = a.steps.iter().find(|(p, _)| p == "top_shell").unwrap();
+    assert!(top.confusion[2][2] > 0, "{top:?}");
+    assert_eq!(top.confusion[2][1], 0, "no rim miss reads jammed: {top:?}");
+    assert_eq!(
+        top.confusion.iter().flatten().sum::<usize>(),
+        top.samples,
+        "{top:?}"
+    );
     let (seated, unseated) = (
         a.all.seated_stop_max.unwrap(),
         a.all.unseated_stop_min.unwrap(),
@@ -633,5 +651,79 @@ fn replay_plots_the_wrench_trace_of_each_force_guided_insertion() {
         for text in ["seat band 0.200 mm", "stop at 10.0 N", "planned descent"] {
             assert!(svg.contains(text), "{name}: {text} missing");
         }
+    }
+}
+
+/// On the top shell a miss lands below the engagement depth: offset across its open sides it
+/// comes down onto what the main shell holds 1.35 mm above seated, and along its skirts onto the
+/// main shell's rim 2.49 mm up, both under the 2.69 mm at which the engagement depth's rim
+/// begins. Rapier calls them missed, and so do force and depth, through the sensor's ±4 N
+/// either way; a part tilted beyond its jam angle stops inside and reads jammed.
+#[test]
+fn a_top_shell_rim_miss_below_its_engagement_depth_reads_missed_and_a_jam_jammed() {
+    use cell::orchestrator::insertion::agreement::step_rims;
+    use cell::orchestrator::insertion::verdict_at;
+    use nalgebra::Vector2;
+    use sim::cell::geometry::CellGeometry;
+    use sim::cell::insertion::agreement::StepGeometry;
+    use sim::cell::insertion::{InsertionCase, Scorer};
+
+    let setup = setup("top_shell_rims", "");
+    let spec = &setup.scenario().spec;
+    let force = spec.force_insertion.unwrap();
+    let geometry =
+        CellGeometry::new(&spec.cell, &spec.assembly, &setup.scenario().catalog).unwrap();
+    let i = spec
+        .assembly
+        .iter()
+        .position(|s| s.part == "top_shell")
+        .unwrap();
+    let step = StepGeometry::nominal(&geometry, &spec.assembly, i).unwrap();
+    let rims = step_rims(&step, &force);
+    let rapier = Scorer::from_name("rapier").unwrap().build().unwrap();
+    let m = &step.mating;
+    let push = |lateral: Vector2<f64>, tilt: f64, toward: Vector2<f64>| {
+        let case = InsertionCase {
+            mating: m,
+            held: step.held,
+            receivers: &step.receivers,
+            ins_T_part: m.pose_with_error(lateral, 0.0, 0.0, tilt, toward),
+        };
+        rapier.score(&case).unwrap().result
+    };
+    let noise = 4.0 / force.contact_stiffness;
+    let x = Vector2::x();
+    for lateral in [
+        Vector2::new(0.0, 1.2),
+        Vector2::new(0.0, -1.2),
+        Vector2::new(1.2, 0.0),
+    ] {
+        let r = push(lateral * m.capture(), 0.0, x);
+        assert_eq!(r.verdict, Verdict::Missed, "{lateral:?}: {r:?}");
+        let stop = r.end.height;
+        assert!(
+            stop < rims.0,
+            "{lateral:?}: lands at {stop}, below the rim {}",
+            rims.0
+        );
+        for h in [stop - noise, stop, stop + noise] {
+            assert_eq!(
+                verdict_at(h, (rims.0, &rims.1), &force),
+                StepOutcome::Missed,
+                "{lateral:?}: first contact {h} against {:?}",
+                rims.1
+            );
+        }
+    }
+    // Tilted 50 mrad, beyond its 35 mrad jam angle, centred: it wedges half a millimetre up.
+    let r = push(Vector2::zeros(), 0.05, x);
+    assert_eq!(r.verdict, Verdict::Jammed, "{r:?}");
+    for h in [r.end.height - noise, r.end.height + noise] {
+        assert_eq!(
+            verdict_at(h, (rims.0, &rims.1), &force),
+            StepOutcome::Jammed,
+            "first contact {h} against {:?}",
+            rims.1
+        );
     }
 }

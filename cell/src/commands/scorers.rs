@@ -306,31 +306,82 @@ fn force_verdicts(
             spec.seat_band * 1e6
         );
     }
+    let mm = |v: f64| format!("{:.3}", v * 1e3);
+    for ((part, c), (rim, landings)) in a.steps.iter().zip(&a.rims) {
+        let bands: Vec<String> = landings
+            .bands
+            .iter()
+            .map(|b| format!("{}–{}", mm(b[0]), mm(b[1])))
+            .collect();
+        println!(
+            "{part}: missed from {} mm above seated (the rim) and where a part beyond the capture \
+             band lands: {} mm",
+            mm(*rim),
+            if bands.is_empty() {
+                "nowhere".to_string()
+            } else {
+                bands.join(", ")
+            }
+        );
+        let n = &c.confusion;
+        println!(
+            "  {t} → read from {t}'s stop: seated {} / {} / {}, jammed {} / {} / {}, missed {} / \
+             {} / {} (read seated / jammed / missed)",
+            n[0][0], n[0][1], n[0][2], n[1][0], n[1][1], n[1][2], n[2][0], n[2][1], n[2][2]
+        );
+    }
     println!("{} insertions in {elapsed:.1} s", a.all.samples);
     let word = |o: cell::episode::StepOutcome| format!("{o:?}").to_lowercase();
-    if !a.disagreements.is_empty() {
+    // The engine's own signature first (do force and depth tell its outcomes apart?), then
+    // what the simulated cell's stop adds (its scorer's disagreement with the engine).
+    for (from_engine, title) in [
+        (true, format!("read from {t}'s stop")),
+        (
+            false,
+            "read from the cell's stop (where only that differs)".to_string(),
+        ),
+    ] {
+        let cases: Vec<_> = a
+            .disagreements
+            .iter()
+            .filter(|c| {
+                if from_engine {
+                    c.engine != c.truth
+                } else {
+                    c.engine == c.truth && c.cell != c.truth
+                }
+            })
+            .collect();
+        if cases.is_empty() {
+            continue;
+        }
         println!(
-            "\n{} cases where a force verdict differs from {t} (stops µm above seated; noise N){}:",
-            a.disagreements.len(),
-            if a.disagreements.len() > SHOWN_CASES {
+            "\n{} verdicts {title} differ from {t} (stops µm above seated, noise N along the \
+             axis){}:",
+            cases.len(),
+            if cases.len() > SHOWN_CASES {
                 format!("; the first {SHOWN_CASES}")
             } else {
                 String::new()
             }
         );
-        for c in a.disagreements.iter().take(SHOWN_CASES) {
+        for c in cases.iter().take(SHOWN_CASES) {
+            let (stop, read) = if from_engine {
+                (c.truth_stop, c.engine)
+            } else {
+                (c.cell_stop, c.cell)
+            };
             println!(
-                "  step {} sample {}: start {}\n    {t} {} stop {:+.1}; force from {t}'s stop \
-                 {}; cell stop {:+.1} → {}; noise {:+.2}",
-                c.step + 1,
+                "  {} sample {}: {t} {} stopping at {:+.1}, read {} at {:+.1} (noise {:+.2}); \
+                 start {}",
+                a.steps[c.step].0,
                 c.sample,
-                pose(&c.start),
                 word(c.truth),
                 c.truth_stop * 1e6,
-                word(c.engine),
-                c.cell_stop * 1e6,
-                word(c.cell),
-                c.noise_n
+                word(read),
+                stop * 1e6 + c.noise_n / spec.contact_stiffness * 1e6,
+                c.noise_n,
+                pose(&c.start),
             );
         }
     }

@@ -833,13 +833,27 @@ impl<'a> Engine<'a> {
         self.capture_ahead(state).await?;
         let k = self.ctx.knowledge;
         let s = &k.steps[self.index];
+        let capture = s.clearance / 2.0 + s.lead_in;
+        let held = self.step.selection.as_ref();
+        let landings = match held.and_then(|sel| k.part(&sel.detection.part)) {
+            Some(g) => insertion::rim_landings(
+                g,
+                &k.base_T_targets[self.index],
+                &k.base_T_insertions[self.index],
+                &self.placed_shapes(),
+                (capture, s.lead_in),
+                spec.seat_band,
+            ),
+            None => insertion::RimLandings::default(),
+        };
         let geometry = insertion::InsertionGeometry {
             seated,
             base_T_ins: k.base_T_insertions[self.index],
             engagement: plan.engagement,
-            capture: s.clearance / 2.0 + s.lead_in,
+            capture,
             lead_in: s.lead_in,
             slow: self.planner().speeds.slow,
+            landings,
         };
         let r = insertion::force_insert(self.cell.robot(), &geometry, spec).await;
         let clock = self.clock();

@@ -7,8 +7,11 @@
 //!    where the wrist feels [`ForceInsertionSpec::contact_force`] against the motion.
 //! 3. [`classify`] tells the outcome from force and depth: no contact at all is a miss with
 //!    nothing under the tool; first contact (the stop, less the press's compliance) within
-//!    [`ForceInsertionSpec::seat_band`] of seated is a seat; at the receiver's top (within half
-//!    the lead-in of the engagement depth) a miss on the rim; in between a jam.
+//!    [`ForceInsertionSpec::seat_band`] of seated is a seat; where a part beyond the capture
+//!    band lands on what is in place ([`RimLandings`], swept from the parts' shapes: the
+//!    receiver's rim, or a lower face where the receiver is narrower than the held part), or at
+//!    the receiver's top (within half the lead-in of the engagement depth), a miss on the rim;
+//!    anywhere else in between a jam.
 //! 4. A miss on the rim or a jam starts a bounded spiral search within the capture band: lift
 //!    clear, step sideways to the next point (rings of radius k × capture band, 8k points each),
 //!    descend again; a seat, or a descent that meets nothing, ends it.
@@ -21,6 +24,9 @@
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use robots::robot::{ContactOutcome, ContactSample, LinearMotion, Robot, RobotError};
+use sim::cell::geometry::PartGeometry;
+pub use sim::cell::insertion::landing::RimLandings;
+use sim::cell::insertion::landing::Sweep;
 
 use super::events::{WrenchSample, WrenchTrace};
 use crate::episode::StepOutcome;
@@ -39,7 +45,7 @@ pub const TRACE_BUDGET: usize = 360;
 const TRACE_PER_PROBE_MIN: usize = 8;
 
 /// The geometry of one insertion, in the base frame.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 #[allow(non_snake_case)]
 pub struct InsertionGeometry {
     /// The planned TCP pose with the part seated.
@@ -54,6 +60,38 @@ pub struct InsertionGeometry {
     pub lead_in: f64,
     /// Speed and acceleration of the lifts and side steps between probes.
     pub slow: LinearMotion,
+    /// Where a part beyond the capture band lands ([`rim_landings`]): first contact there is a
+    /// miss on the rim.
+    pub landings: RimLandings,
+}
+
+/// Where the held part `held`, seated at `base_T_part`, lands when it comes down beyond the
+/// capture band (`capture`) onto the parts in place (`placed`, each at its pose; base frame):
+/// the held part swept rigid and level down beside its target in every direction, just beyond
+/// the band to twice it, against the convex pieces of what is in place
+/// ([`sim::cell::insertion::landing`]). Landings at or below `seat_band` above seated are not
+/// rims; each landing is widened by half the lead-in either side (the rim's own tolerance:
+/// tilt, the sensor's ±4 N, the chamfer's height).
+#[allow(non_snake_case)]
+pub fn rim_landings(
+    held: &PartGeometry,
+    base_T_part: &Isometry3<f64>,
+    base_T_ins: &Isometry3<f64>,
+    placed: &[(&PartGeometry, Isometry3<f64>)],
+    (capture, lead_in): (f64, f64),
+    seat_band: f64,
+) -> RimLandings {
+    let ins_T_base = base_T_ins.inverse();
+    let receivers: Vec<(&PartGeometry, Isometry3<f64>)> =
+        placed.iter().map(|(g, t)| (*g, ins_T_base * t)).collect();
+    let sweep = Sweep::new(held, &(ins_T_base * base_T_part), &receivers);
+    RimLandings::of(&sweep, capture, seat_band, rim_tolerance(lead_in))
+}
+
+/// How far a first contact may lie from where a rim was swept and still read as that rim, metres:
+/// half the lead-in.
+pub fn rim_tolerance(lead_in: f64) -> f64 {
+    lead_in / 2.0
 }
 
 impl InsertionGeometry {
@@ -145,9 +183,10 @@ pub struct ForceVerdict {
     pub force_n: f64,
 }
 
-/// First contact at least this high above seated reads as a miss on the receiver's rim, metres.
+/// First contact at least this high above seated reads as a miss on the receiver's rim, metres
+/// (lower landings: [`InsertionGeometry::landings`]).
 fn rim_height(geometry: &InsertionGeometry) -> f64 {
-    geometry.engagement - geometry.lead_in / 2.0
+    geometry.engagement - rim_tolerance(geometry.lead_in)
 }
 
 /// A guarded move's readings in the insertion frame, at most `keep` of them (evenly spread,
@@ -214,8 +253,9 @@ impl ForceVerdict {
 
 /// Reads a guarded descent: no contact is a miss with nothing under the tool; otherwise the
 /// height of first contact above seated (the stop's height less `force / contact_stiffness`)
-/// says seated (within `seat_band`), missed on the rim (within half the lead-in of the
-/// engagement depth, or above it) or jammed (in between). Returns the outcome and the height.
+/// says seated (within `seat_band`), missed on the rim (where a part beyond the capture band
+/// lands, or within half the lead-in of the engagement depth, or above it) or jammed (anywhere
+/// else). Returns the outcome and the height.
 pub fn classify(
     outcome: &ContactOutcome,
     geometry: &InsertionGeometry,
@@ -228,16 +268,22 @@ pub fn classify(
         return (StepOutcome::Missed, stop);
     }
     let height = stop + outcome.force_along(&out).max(0.0) / spec.contact_stiffness;
-    (verdict_at(height, rim_height(geometry), spec), height)
+    let rims = (rim_height(geometry), &geometry.landings);
+    (verdict_at(height, rims, spec), height)
 }
 
 /// The verdict of a first contact `height` above seated (metres): seated within
-/// [`ForceInsertionSpec::seat_band`], missed on the rim at or above `rim` (the engagement depth
-/// less half the lead-in), jammed in between.
-pub fn verdict_at(height: f64, rim: f64, spec: &ForceInsertionSpec) -> StepOutcome {
+/// [`ForceInsertionSpec::seat_band`]; missed on the rim at or above `rim` (the engagement depth
+/// less half the lead-in) or within one of `landings` (where a part beyond the capture band
+/// lands); jammed anywhere else (stopped inside the receiver, short of its seat).
+pub fn verdict_at(
+    height: f64,
+    (rim, landings): (f64, &RimLandings),
+    spec: &ForceInsertionSpec,
+) -> StepOutcome {
     if height <= spec.seat_band {
         StepOutcome::Seated
-    } else if height >= rim {
+    } else if height >= rim || landings.contains(height) {
         StepOutcome::Missed
     } else {
         StepOutcome::Jammed
@@ -410,6 +456,12 @@ pub async fn force_insert(
         contact_stiffness_n_per_m: spec.contact_stiffness,
         seat_band_mm: spec.seat_band * 1e3,
         rim_mm: rim_height(geometry) * 1e3,
+        landings_mm: geometry
+            .landings
+            .bands
+            .iter()
+            .map(|b| [b[0] * 1e3, b[1] * 1e3])
+            .collect(),
         samples: probes.iter().flat_map(|p| p.samples.clone()).collect(),
     };
     Ok(ForceVerdict {
@@ -433,7 +485,9 @@ pub mod agreement {
     use sim::cell::insertion::agreement::{StepGeometry, boundary_case};
     use sim::cell::insertion::{InsertionScorer, PoseError, ScorerError, Verdict};
 
-    use super::verdict_at;
+    use nalgebra::{Isometry3, Translation3};
+
+    use super::{RimLandings, rim_landings, rim_tolerance, verdict_at};
     use crate::episode::StepOutcome;
     use crate::scenario::ForceInsertionSpec;
 
@@ -482,6 +536,19 @@ pub mod agreement {
         /// The lowest stop above seated of a part the truth did not seat, metres (the seat
         /// band must lie below it).
         pub unseated_stop_min: Option<f64>,
+        /// Verdicts from the contact engine's stop against the truth: `[truth][read]`, each
+        /// indexed seated, jammed, missed.
+        pub confusion: [[usize; 3]; 3],
+    }
+
+    /// The index of a verdict in [`ForceCounts::confusion`] (seated, jammed, missed; aborted
+    /// never occurs here and counts as missed).
+    pub fn confusion_index(o: StepOutcome) -> usize {
+        match o {
+            StepOutcome::Seated => 0,
+            StepOutcome::Jammed => 1,
+            StepOutcome::Missed | StepOutcome::Aborted => 2,
+        }
     }
 
     impl ForceCounts {
@@ -493,6 +560,7 @@ pub mod agreement {
             self.engine_outcome += usize::from(c.engine == c.truth);
             self.cell_seating += usize::from(seated(c.cell) == seated(c.truth));
             self.cell_outcome += usize::from(c.cell == c.truth);
+            self.confusion[confusion_index(c.truth)][confusion_index(c.engine)] += 1;
             if seated(c.truth) {
                 self.seated_stop_max = Some(
                     self.seated_stop_max
@@ -522,6 +590,10 @@ pub mod agreement {
         pub cell: String,
         /// Per step: its part and counts.
         pub steps: Vec<(String, ForceCounts)>,
+        /// Per step: first contact at least this high above seated reads as a miss (the
+        /// engagement depth less half the lead-in), metres, and the bands where a part beyond
+        /// the capture band lands, which read as misses too.
+        pub rims: Vec<(f64, RimLandings)>,
         /// All steps together.
         pub all: ForceCounts,
         /// The cases where either force verdict differs from the truth.
@@ -536,14 +608,37 @@ pub mod agreement {
         }
     }
 
+    /// A step's rims as production reads them ([`rim_landings`] for the parts in place, seated
+    /// nominally, as planned): first contact at least this high above seated is a miss (the
+    /// mating's engagement depth less half its lead-in), and so is first contact within the
+    /// bands where a part beyond the capture band lands.
+    pub fn step_rims(step: &StepGeometry<'_>, spec: &ForceInsertionSpec) -> (f64, RimLandings) {
+        let m = &step.mating;
+        let ins_T_d = m.destination_T_insertion.inverse();
+        let placed: Vec<_> = step
+            .receivers
+            .iter()
+            .map(|r| (r.geometry, ins_T_d * r.destination_T_part))
+            .collect();
+        let seated = Isometry3::from_parts(Translation3::identity(), m.ins_R_seat);
+        let landings = rim_landings(
+            step.held,
+            &seated,
+            &Isometry3::identity(),
+            &placed,
+            (m.capture(), m.lead_in),
+            spec.seat_band,
+        );
+        (m.engagement - rim_tolerance(m.lead_in), landings)
+    }
+
     /// Draws `samples` misalignments around the capture boundary (as `cell scorers` does, the
     /// same seed the same draws), scores each with `truth`, and reads each as the force-guided
     /// strategy does: first contact where the part stops (the contact engine's stop, and the
     /// simulated cell's, which is where `cell`, the scenario's scorer, stops it: the analytic
     /// capture model's end height, or a contact engine's push, the same call as `truth`'s when
     /// they are one engine), read back through the UR5e sensor's noise at the contact
-    /// stiffness, against the seat band and the rim (the mating's engagement depth less half
-    /// its lead-in).
+    /// stiffness, against the seat band and the rims ([`step_rims`]).
     pub fn force_agreement(
         steps: &[StepGeometry<'_>],
         samples: usize,
@@ -553,11 +648,11 @@ pub mod agreement {
         spec: &ForceInsertionSpec,
     ) -> Result<ForceAgreement, ScorerError> {
         let samples = if steps.is_empty() { 0 } else { samples };
+        let rims: Vec<(f64, RimLandings)> = steps.par_iter().map(|s| step_rims(s, spec)).collect();
         let cases: Vec<ForceCase> = (0..samples)
             .into_par_iter()
             .map(|k| {
                 let (i, case) = boundary_case(steps, seed, k);
-                let s = &steps[i];
                 let scored = truth.score(&case)?.result;
                 let cell_stop = if cell.name() == truth.name() {
                     scored.end.height
@@ -567,9 +662,14 @@ pub mod agreement {
                 // The reading's error along the axis, in N: a fresh bias and noise per case.
                 let noise_n = FtNoise::ur5e(seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
                     .sample()[2];
-                let rim = s.mating.engagement - s.mating.lead_in / 2.0;
-                let read =
-                    |stop: f64| verdict_at(stop + noise_n / spec.contact_stiffness, rim, spec);
+                let (rim, landings) = &rims[i];
+                let read = |stop: f64| {
+                    verdict_at(
+                        stop + noise_n / spec.contact_stiffness,
+                        (*rim, landings),
+                        spec,
+                    )
+                };
                 Ok(ForceCase {
                     step: i,
                     sample: k,
@@ -590,6 +690,7 @@ pub mod agreement {
                 .iter()
                 .map(|s| (s.mating.part.clone(), ForceCounts::default()))
                 .collect(),
+            rims,
             all: ForceCounts::default(),
             disagreements: Vec::new(),
         };
@@ -619,6 +720,7 @@ mod tests {
                 speed: 0.02,
                 acceleration: 1.2,
             },
+            landings: RimLandings::default(),
         }
     }
 
@@ -654,6 +756,34 @@ mod tests {
         let (o, h) = classify(&stop(-spec.overtravel, 0.5, false), &g, &spec);
         assert_eq!(o, StepOutcome::Missed);
         assert!(h < 0.0);
+    }
+
+    #[test]
+    fn a_rim_miss_below_the_engagement_depth_is_missed_and_a_stop_between_rims_jammed() {
+        // A top shell: 2.74 mm of engagement, and beyond its capture band it lands on the main
+        // shell's rim 2.25–2.54 mm up or, across its open sides, on what the shell holds
+        // 1.30–1.40 mm up (the bands `cell scorers --force-verdicts` prints for it).
+        let spec = ForceInsertionSpec::default();
+        let mut g = geometry();
+        g.engagement = 0.00274;
+        g.landings = RimLandings {
+            bands: vec![[0.0013, 0.0014], [0.00225, 0.00254]],
+        };
+        let k = spec.contact_stiffness;
+        let read =
+            |h: f64, g: &InsertionGeometry| classify(&stop(h - 10.0 / k, 10.0, true), g, &spec).0;
+        // On the lower rim, 1.35 mm up: a miss, not a jam (the rim at the engagement depth
+        // alone, 2.69 mm, called it jammed).
+        assert_eq!(read(0.00135, &g), StepOutcome::Missed);
+        assert_eq!(read(0.0025, &g), StepOutcome::Missed);
+        assert_eq!(read(0.0028, &g), StepOutcome::Missed);
+        // Between the rims, and below the lower one: stuck inside the receiver.
+        assert_eq!(read(0.0019, &g), StepOutcome::Jammed);
+        assert_eq!(read(0.0006, &g), StepOutcome::Jammed);
+        assert_eq!(read(0.00005, &g), StepOutcome::Seated);
+        // Without landings only the engagement depth's rim remains.
+        g.landings = RimLandings::default();
+        assert_eq!(read(0.00135, &g), StepOutcome::Jammed);
     }
 
     #[test]

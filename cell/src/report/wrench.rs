@@ -186,6 +186,7 @@ mod tests {
             contact_stiffness_n_per_m: 2e5,
             seat_band_mm: 0.05,
             rim_mm: 1.95,
+            landings_mm: vec![],
             samples: vec![
                 sample(0, 0.0, 3.0, 0.0),
                 sample(0, 0.05, 2.0, 0.0),

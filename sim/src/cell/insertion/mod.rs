@@ -17,6 +17,7 @@ pub mod analytic;
 pub mod contact;
 mod error;
 pub mod felt;
+pub mod landing;
 mod mating;
 pub mod mujoco;
 mod outcome;
