@@ -212,6 +212,17 @@ impl CellIo for SimCellIo {
         self.lock().shake_feeder()
     }
 
+    /// The simulated cell behind the virtual controller keeps each controller motion as its
+    /// arm model stepped it, so a shake is dated mid-motion as in process (a side channel of
+    /// the simulation, as the audit is: a real controller's cell reads the reported joints).
+    fn shake_feeder_at(&mut self, t: f64) -> Result<(), CellIoError> {
+        self.lock().shake_feeder_at(t)
+    }
+
+    fn last_motion_trace(&self, step: f64) -> Option<Vec<(f64, robots::kinematics::Joints)>> {
+        CellIo::last_motion_trace(&*self.lock(), step)
+    }
+
     fn part_in_gripper(&mut self) -> Option<bool> {
         self.lock().part_in_gripper()
     }

@@ -41,6 +41,9 @@ pub struct SimArm {
     guarded_stop: bool,
     /// The contact wrench last read from the cell: the sensor's value while the cell is busy.
     last_wrench: Cell<[f64; 6]>,
+    /// The motion in progress as stepped: (seconds since it started, joints) every period,
+    /// handed to the cell when it ends (its replay, `SimCell::last_motion_trace`).
+    steps: Vec<(f64, Joints)>,
 }
 
 impl SimArm {
@@ -60,6 +63,7 @@ impl SimArm {
             actuation_time,
             guarded_stop: false,
             last_wrench: Cell::new([0.0; 6]),
+            steps: Vec::new(),
         }
     }
 
@@ -125,6 +129,7 @@ impl ArmModel for SimArm {
         self.guarded_stop = false;
         self.elapsed = 0.0;
         self.was_moving = self.arm.is_moving();
+        self.steps = vec![(0.0, self.arm.state().q)];
         if !self.was_moving && matches!(cmd, ArmCommand::MoveJ { .. } | ArmCommand::MoveL { .. }) {
             // A move to where the arm already is still ends a motion in the cell (as in
             // process: repeatability is drawn and a held part settles).
@@ -138,14 +143,18 @@ impl ArmModel for SimArm {
         let result = self.arm.step(dt, speed_fraction);
         if self.was_moving {
             self.elapsed += dt;
+            self.steps.push((self.elapsed, self.arm.state().q));
         }
         let moving = self.arm.is_moving();
         if self.was_moving && !moving {
             let q = self.arm.state().q;
+            let steps = std::mem::take(&mut self.steps);
             if std::mem::take(&mut self.guarded_stop) {
                 lock(&self.cell).set_joints_after_guarded_stop(q, self.elapsed);
             } else {
-                lock(&self.cell).set_joints_after_motion(q, self.elapsed);
+                let mut c = lock(&self.cell);
+                c.record_controller_motion(steps);
+                c.set_joints_after_motion(q, self.elapsed);
             }
             self.elapsed = 0.0;
         }
@@ -188,6 +197,7 @@ impl ArmModel for SimArm {
         self.guarded_stop = false;
         self.elapsed = 0.0;
         self.was_moving = self.arm.is_moving();
+        self.steps = vec![(0.0, self.arm.state().q)];
         if !self.was_moving {
             let q = self.arm.state().q;
             lock(&self.cell).set_joints_after_motion(q, 0.0);

@@ -1463,6 +1463,17 @@ impl SimCell {
 
     /// Moves the arm to joints `q` at once without timing or checks (used by the virtual
     /// controller's arm model, which times the motion itself).
+    /// The controller's motion that is ending, as its arm model stepped it: (seconds since it
+    /// started, joints) every control period, kept as the last motion
+    /// ([`Self::last_motion_trace`]) from the clock now, where it started. Call before
+    /// [`Self::set_joints_after_motion`] moves the clock on.
+    pub(crate) fn record_controller_motion(&mut self, steps: Vec<(f64, Joints)>) {
+        let start = self.clock;
+        self.last_motion = Some(LastMotion::Sampled(
+            steps.into_iter().map(|(t, q)| (start + t, q)).collect(),
+        ));
+    }
+
     pub(crate) fn set_joints_after_motion(&mut self, q: Joints, elapsed: f64) {
         self.begin_motion();
         self.q = q;
