@@ -13,8 +13,8 @@ use rand_chacha::ChaCha8Rng;
 use cell::episode::SeatCheckVerdict;
 use cell::harness::{SimSetup, run_sim_episode};
 use cell::orchestrator::seat_check::{
-    NotSeen, SeatMeasurement, SeatTolerance, arm_in_fixture_view, judge, measure_seat,
-    pose_out_of_view,
+    NotSeen, SeatMeasurement, SeatTolerance, arm_in_fixture_view, hidden_by_construction, judge,
+    measure_seat, pose_out_of_view,
 };
 use cell::scenario::SeatCheckSpec;
 use perception::{Frame, FrameContent, FrameImage};
@@ -148,6 +148,12 @@ fn an_empty_nest_is_not_visible_and_a_part_inside_its_receiver_cannot_be_seen() 
         assert!(n.by_geometry && n.samples < 12, "{n:?}");
         assert!(why.unwrap().contains("samples of its own"));
     }
+    // Known before any capture, from the calibrated camera: the mold only.
+    let (k, catalog) = (&setup.engine.knowledge, &setup.engine.scenario.catalog);
+    let hidden: Vec<bool> = (0..3)
+        .map(|step| hidden_by_construction(k, catalog, step).is_some())
+        .collect();
+    assert_eq!(hidden, [false, true, false]);
 }
 
 #[test]
@@ -207,6 +213,8 @@ async fn episodes_check_every_seat_and_measure_it_within_the_allowance() {
             if s.part == "insert_mold" {
                 assert_eq!(c.verdict, SeatCheckVerdict::NotVisible, "{c:?}");
                 assert_eq!(c.samples, 0);
+                // Decided before any capture: none is taken.
+                assert_eq!(c.ms, 0.0);
                 continue;
             }
             assert_eq!(c.verdict, SeatCheckVerdict::Passed, "{}: {c:?}", s.part);

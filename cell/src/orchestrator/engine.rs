@@ -978,6 +978,22 @@ impl<'a> Engine<'a> {
         };
         let k = self.ctx.knowledge;
         let tol = SeatTolerance::of(spec, k, self.index);
+        // A part its receiver hides by construction (no outline of its own at its target) is
+        // recorded not visible and keeps its seated verdict: no capture could show it, so none
+        // is taken and the arm does not move for one.
+        if let Some(n) = seat_check::hidden_by_construction(k, self.ctx.catalog, self.index) {
+            let m = Err(n);
+            self.step.seat_check = Some(seat_check::record(&m, &tol, 0.0, None));
+            if let (_, Some(why)) = seat_check::judge(&m, &tol) {
+                let note = format!("seat check: {why}");
+                self.ahead_note = [std::mem::take(&mut self.ahead_note), note]
+                    .into_iter()
+                    .filter(|t| !t.is_empty())
+                    .collect::<Vec<_>>()
+                    .join("; ");
+            }
+            return Ok(None);
+        }
         let mut q = self.joints(state).await?;
         if arm_in_fixture_view(k, &q, None).is_some() {
             // Sideways at the retreat's height, towards the feeder (where the next step picks),
@@ -1041,8 +1057,8 @@ impl<'a> Engine<'a> {
             .filter(|t| !t.is_empty())
             .collect::<Vec<_>>()
             .join("; ");
-        // A part its receiver hides by construction (no outline of its own at its target) is
-        // recorded not visible and keeps its seated verdict: no capture could show it.
+        // Seen by the true camera as the calibrated one does (checked above), but should the
+        // frame's camera differ: still no capture could show it.
         if m.as_ref().is_err_and(|n| n.by_geometry) {
             return Ok(None);
         }

@@ -317,9 +317,6 @@ pub fn measure_seat(
         .steps
         .get(step)
         .ok_or_else(|| unseen(format!("no step {step}")))?;
-    let FrameContent::Image(image) = &frame.content else {
-        return Err(unseen("the frame holds no pixels".into()));
-    };
     let part = k
         .part(&s.part)
         .ok_or_else(|| unseen(format!("no shape of part {}", s.part)))?;
@@ -370,27 +367,9 @@ pub fn measure_seat(
         (hi.x - lo.x + 2.0 * PATCH_MARGIN_PX).ceil() as i64,
         (hi.y - lo.y + 2.0 * PATCH_MARGIN_PX).ceil() as i64,
     ];
-    let (ox, oy) = (i64::from(image.origin[0]), i64::from(image.origin[1]));
-    if b[0] < ox
-        || b[1] < oy
-        || b[0] + b[2] > ox + i64::from(image.width())
-        || b[1] + b[3] > oy + i64::from(image.height())
-    {
-        return Err(unseen(format!(
-            "the captured pixels ({} × {} at sensor ({ox}, {oy})) do not cover the part's target \
-             ({} × {} at ({}, {}))",
-            image.width(),
-            image.height(),
-            b[2],
-            b[3],
-            b[0],
-            b[1]
-        )));
-    }
     // The edges of what was there before the part: the fixture and the earlier steps' parts.
     let mut shared = Mask::new(b);
-    let base_T_camera = frame.base_T_camera;
-    let camera_T_base = base_T_camera.inverse();
+    let camera_T_base = frame.base_T_camera.inverse();
     if let Some(f) = k.part(&k.geometry.fixture_part) {
         let pose = camera_T_base * k.geometry.base_T_fixture;
         mark_edges(&mut shared, &f.mesh, camera, &pose, SHARED_EDGE_PX);
@@ -419,6 +398,26 @@ pub fn measure_seat(
             support: None,
             by_geometry: true,
         });
+    }
+    let FrameContent::Image(image) = &frame.content else {
+        return Err(unseen("the frame holds no pixels".into()));
+    };
+    let (ox, oy) = (i64::from(image.origin[0]), i64::from(image.origin[1]));
+    if b[0] < ox
+        || b[1] < oy
+        || b[0] + b[2] > ox + i64::from(image.width())
+        || b[1] + b[3] > oy + i64::from(image.height())
+    {
+        return Err(unseen(format!(
+            "the captured pixels ({} × {} at sensor ({ox}, {oy})) do not cover the part's target \
+             ({} × {} at ({}, {}))",
+            image.width(),
+            image.height(),
+            b[2],
+            b[3],
+            b[0],
+            b[1]
+        )));
     }
     let patch = GreyPatch::cut(&image.pixels, image.origin, b).with_hidden(|y, x, row| {
         for (i, v) in row.iter_mut().enumerate() {
@@ -463,6 +462,24 @@ pub fn measure_seat(
         support: fit.support,
         samples,
     })
+}
+
+/// Whether the part of step `step` is hidden by construction, seen by the calibrated camera:
+/// its outline at its target has fewer than [`MIN_OWN_SAMPLES`] samples off the edges of what
+/// was there before it, so no capture could show it (decided before any capture is taken).
+pub fn hidden_by_construction(
+    k: &CellKnowledge,
+    catalog: &Catalog,
+    step: usize,
+) -> Option<NotSeen> {
+    let frame = Frame {
+        camera: k.spec.camera.intrinsics,
+        base_T_camera: k.geometry.base_T_camera_nominal,
+        content: FrameContent::Simulated(Vec::new()),
+    };
+    measure_seat(k, catalog, step, &frame)
+        .err()
+        .filter(|n| n.by_geometry)
 }
 
 /// The verdict on a measurement against `tol`, with the reason a check that did not pass

@@ -79,7 +79,8 @@ pub fn seat_rows(records: &[&EpisodeRecord]) -> Vec<SeatRow> {
             if let Some(support) = c.support {
                 values[i][1].push(support);
             }
-            if c.verdict != SeatCheckVerdict::Refused {
+            // Refused checks and parts hidden by construction take no capture.
+            if c.ms > 0.0 {
                 values[i][3].push(c.ms);
             }
         }
