@@ -127,8 +127,6 @@ pub struct SeatCheckRecord {
     pub samples: u32,
     /// The lateral and yaw tolerances applied, millimetres and milliradians.
     pub tolerance: [f64; 2],
-    /// Wall-clock milliseconds of the capture and the alignment.
-    pub ms: f64,
     /// The true lateral offset of the placed part across the insertion axis (simulation only),
     /// millimetres.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -983,7 +983,7 @@ impl<'a> Engine<'a> {
         // is taken and the arm does not move for one.
         if let Some(n) = seat_check::hidden_by_construction(k, self.ctx.catalog, self.index) {
             let m = Err(n);
-            self.step.seat_check = Some(seat_check::record(&m, &tol, 0.0, None));
+            self.step.seat_check = Some(seat_check::record(&m, &tol, None));
             if let (_, Some(why)) = seat_check::judge(&m, &tol) {
                 let note = format!("seat check: {why}");
                 self.ahead_note = [std::mem::take(&mut self.ahead_note), note]
@@ -1015,7 +1015,6 @@ impl<'a> Engine<'a> {
             support: None,
             samples: 0,
             tolerance: [tol.lateral * 1e3, tol.yaw * 1e3],
-            ms: 0.0,
             true_offset_mm: None,
         };
         if let Some(what) = arm_in_fixture_view(k, &q, None) {
@@ -1038,18 +1037,19 @@ impl<'a> Engine<'a> {
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let index = self.index;
         let truth = (self.io().placed_truth(index)).map(|p| seat_check::true_offset(k, index, &p));
-        let rec = seat_check::record(&m, &tol, ms, truth);
+        let rec = seat_check::record(&m, &tol, truth);
         self.step.seat_check = Some(rec);
         let (_, why) = seat_check::judge(&m, &tol);
         let note = match (&m, &why) {
             (Ok(m), None) => format!(
-                "seat check passed: {:.3} mm, {:+.1} mrad, {:.0} % of {} own outline samples",
+                "seat check passed: {:.3} mm, {:+.1} mrad, {:.0} % of {} own outline samples \
+                 (capture and alignment in {ms:.1} ms)",
                 m.offset.norm() * 1e3,
                 m.yaw * 1e3,
                 100.0 * m.support,
                 m.samples
             ),
-            (_, Some(w)) => format!("seat check: {w}"),
+            (_, Some(w)) => format!("seat check: {w} (capture and alignment in {ms:.1} ms)"),
             (Err(_), None) => String::new(),
         };
         self.ahead_note = [std::mem::take(&mut self.ahead_note), note]

@@ -540,12 +540,11 @@ pub fn judge(
     }
 }
 
-/// The record of a check: its verdict on `m` against `tol`, `ms` of wall time, and the part's
-/// true offset where the simulator knows it.
+/// The record of a check: its verdict on `m` against `tol`, and the part's true offset where
+/// the simulator knows it.
 pub fn record(
     m: &Result<SeatMeasurement, NotSeen>,
     tol: &SeatTolerance,
-    ms: f64,
     true_offset: Option<Vector2<f64>>,
 ) -> SeatCheckRecord {
     let (verdict, _) = judge(m, tol);
@@ -565,7 +564,6 @@ pub fn record(
         support,
         samples: samples as u32,
         tolerance: [tol.lateral * 1e3, tol.yaw * 1e3],
-        ms,
         true_offset_mm: true_offset.map(|o| [o.x * 1e3, o.y * 1e3]),
     }
 }

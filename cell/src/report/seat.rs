@@ -34,14 +34,12 @@ pub struct SeatRow {
     pub support: Option<Distribution>,
     /// Measured against true lateral offset (simulation only), µm.
     pub error_um: Option<Distribution>,
-    /// Wall-clock milliseconds per check (capture and alignment).
-    pub ms: Option<Distribution>,
 }
 
 /// The rows of `records`' seat checks, by step index (empty when no step was checked).
 pub fn seat_rows(records: &[&EpisodeRecord]) -> Vec<SeatRow> {
     let mut rows: Vec<SeatRow> = Vec::new();
-    let mut values: Vec<[Vec<f64>; 4]> = Vec::new();
+    let mut values: Vec<[Vec<f64>; 3]> = Vec::new();
     for r in records {
         for (i, s) in r.steps.iter().enumerate() {
             let Some(c) = s.seat_check else { continue };
@@ -57,7 +55,6 @@ pub fn seat_rows(records: &[&EpisodeRecord]) -> Vec<SeatRow> {
                     offset_mm: None,
                     support: None,
                     error_um: None,
-                    ms: None,
                 });
                 values.push(Default::default());
             }
@@ -79,17 +76,12 @@ pub fn seat_rows(records: &[&EpisodeRecord]) -> Vec<SeatRow> {
             if let Some(support) = c.support {
                 values[i][1].push(support);
             }
-            // Refused checks and parts hidden by construction take no capture.
-            if c.ms > 0.0 {
-                values[i][3].push(c.ms);
-            }
         }
     }
-    for (row, [offset, support, error, ms]) in rows.iter_mut().zip(values) {
+    for (row, [offset, support, error]) in rows.iter_mut().zip(values) {
         row.offset_mm = Distribution::of(&offset);
         row.support = Distribution::of(&support);
         row.error_um = Distribution::of(&error);
-        row.ms = Distribution::of(&ms);
     }
     rows.retain(|r| r.checked > 0);
     rows
@@ -110,7 +102,7 @@ pub fn seat_section(records: &[&EpisodeRecord]) -> String {
          keeps its seat. <i>error</i>: measured against the true offset (simulation \
          only).</p>\n<table><tr><th class=l>step</th><th>checked</th><th>passed</th>\
          <th>failed</th><th>not visible</th><th>refused</th><th>offset p50 / max (mm)</th>\
-         <th>support p50 / min</th><th>error mean / max (µm)</th><th>ms p50</th></tr>\n",
+         <th>support p50 / min</th><th>error mean / max (µm)</th></tr>\n",
     );
     let dash = || "–".to_string();
     for r in &rows {
@@ -123,11 +115,10 @@ pub fn seat_section(records: &[&EpisodeRecord]) -> String {
         let error = r
             .error_um
             .map_or_else(dash, |d| format!("{:.1} / {:.1}", d.mean, d.max));
-        let ms = r.ms.map_or_else(dash, |d| format!("{:.0}", d.p50));
         let _ = writeln!(
             h,
             "<tr><td class=l>{}: {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{offset}</td><td>{support}</td><td>{error}</td><td>{ms}</td></tr>",
+             <td>{offset}</td><td>{support}</td><td>{error}</td></tr>",
             r.index,
             escape(&r.part),
             r.checked,
@@ -173,7 +164,6 @@ mod tests {
             support: offset.map(|_| 0.9),
             samples: 100,
             tolerance: [0.16, 35.0],
-            ms: 100.0,
             true_offset_mm: offset.map(|_| [0.0, 0.0]),
         }
     }
