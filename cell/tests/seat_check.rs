@@ -327,3 +327,58 @@ fn bad_seat_check_values_are_refused_at_their_line_and_column() {
         "{err}"
     );
 }
+
+/// Production reads the fixture through the camera source a production run uses: full-sensor
+/// images (here recorded files, the fixture window pasted into a flat grey sensor image) read by
+/// `ProductionCellIo`, whose `capture_fixture` is its camera capture; the check passes the seated
+/// shell and fails the one beside its seat.
+#[test]
+fn production_checks_the_fixture_in_full_sensor_images_from_its_camera_source() {
+    use cell::orchestrator::{CellIo, ProductionCellIo, open_camera};
+    let setup = setup("seat_production", "", "");
+    let k = &setup.engine.knowledge;
+    let camera = setup.model.spec.camera.intrinsics;
+    let dir = tempfile::tempdir().unwrap();
+    for (name, off) in [
+        ("a_seated.png", Isometry3::identity()),
+        ("b_beside.png", lateral(3e-4, 0.0)),
+    ] {
+        let frame = frame_of(&setup, &[(0, off)], 3);
+        let FrameContent::Image(window) = frame.content else {
+            panic!("a rendered window")
+        };
+        let mut full = image::GrayImage::from_pixel(camera.width, camera.height, image::Luma([90]));
+        image::imageops::replace(
+            &mut full,
+            &window.pixels.to_luma8(),
+            i64::from(window.origin[0]),
+            i64::from(window.origin[1]),
+        );
+        full.save(dir.path().join(name)).unwrap();
+    }
+    let scenario = setup.engine.scenario.clone();
+    let source = open_camera(
+        &scenario,
+        &cell::camera::CameraSpec::Files(dir.path().to_path_buf()),
+    )
+    .unwrap();
+    let mut io = ProductionCellIo::new(scenario, source, std::time::Duration::from_secs(5));
+    let tol = SeatTolerance::of(&SeatCheckSpec::default(), k, 0);
+    let catalog = &setup.engine.scenario.catalog;
+    let mut verdicts = Vec::new();
+    for _ in 0..2 {
+        let frame = io.capture_fixture().unwrap();
+        let FrameContent::Image(image) = &frame.content else {
+            panic!("pixels")
+        };
+        assert_eq!(image.origin, [0, 0], "the full sensor");
+        let m = measure_seat(k, catalog, 0, &frame);
+        verdicts.push(judge(&m, &tol).0);
+    }
+    assert_eq!(
+        verdicts,
+        [SeatCheckVerdict::Passed, SeatCheckVerdict::Failed]
+    );
+    // Production knows no true pose.
+    assert_eq!(io.placed_truth(0), None);
+}
