@@ -382,3 +382,29 @@ fn production_checks_the_fixture_in_full_sensor_images_from_its_camera_source() 
     // Production knows no true pose.
     assert_eq!(io.placed_truth(0), None);
 }
+
+/// A check that does not pass stops the step and says why: with a tolerance no measurement
+/// meets (10 µm), the first seat fails with the offset measured and the tolerance, blamed on the
+/// seat check, and the episode ends there.
+#[tokio::test]
+async fn a_failed_check_stops_the_step_and_says_why() {
+    let setup = setup("seat_fails", "lateral = 0.00001", "");
+    let out = run_sim_episode(&setup, 0).await.unwrap();
+    let r = &out.record;
+    assert!(!r.success);
+    assert_eq!(r.steps.len(), 1, "{r:?}");
+    let s = &r.steps[0];
+    assert_eq!(s.outcome, cell::episode::StepOutcome::Missed);
+    assert_eq!(s.sources, ["seat_check"]);
+    let c = s.seat_check.unwrap();
+    assert_eq!(c.verdict, SeatCheckVerdict::Failed);
+    let [x, y] = c.offset_mm.unwrap();
+    let cause = s.cause.as_deref().unwrap();
+    for words in [
+        "the seat check measured the placed part lateral offset".to_string(),
+        format!("{:.3} mm", x.hypot(y)),
+        "beyond the 0.010 mm tolerance".to_string(),
+    ] {
+        assert!(cause.contains(&words), "{cause}");
+    }
+}

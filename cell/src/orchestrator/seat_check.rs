@@ -90,10 +90,8 @@ pub struct SeatMeasurement {
 pub struct NotSeen {
     /// Why, in words.
     pub why: String,
-    /// The own outline samples at the target, and the support found if a fit ran.
+    /// How many of its outline samples at the target were its own.
     pub samples: usize,
-    /// The fit's support, if one converged.
-    pub support: Option<f64>,
     /// Whether the part's geometry alone hides it: at its target its outline has fewer than
     /// [`MIN_OWN_SAMPLES`] samples off the edges of what was there before it, so no image
     /// could show it (a part inside a receiver's cavity); otherwise it had edges of its own to
@@ -310,7 +308,6 @@ pub fn measure_seat(
     let unseen = |why: String| NotSeen {
         why,
         samples: 0,
-        support: None,
         by_geometry: false,
     };
     let s = k
@@ -395,7 +392,6 @@ pub fn measure_seat(
                  {MIN_OWN_SAMPLES} needed): the rest lie on edges of what was there before it"
             ),
             samples,
-            support: None,
             by_geometry: true,
         });
     }
@@ -451,7 +447,6 @@ pub fn measure_seat(
         return Err(NotSeen {
             why: "too few of its own outline samples found an image edge".into(),
             samples,
-            support: None,
             by_geometry: false,
         });
     };
@@ -555,7 +550,7 @@ pub fn record(
             Some(m.support),
             m.samples,
         ),
-        Err(n) => (None, None, n.support, n.samples),
+        Err(n) => (None, None, None, n.samples),
     };
     SeatCheckRecord {
         verdict,
