@@ -307,16 +307,16 @@ fn force_verdicts(
         );
     }
     let mm = |v: f64| format!("{:.3}", v * 1e3);
-    for ((part, c), (rim, landings)) in a.steps.iter().zip(&a.rims) {
-        let bands: Vec<String> = landings
+    for ((part, c), rims) in a.steps.iter().zip(&a.rims) {
+        let bands: Vec<String> = rims
             .bands
             .iter()
             .map(|b| format!("{}–{}", mm(b[0]), mm(b[1])))
             .collect();
         println!(
-            "{part}: missed from {} mm above seated (the rim) and where a part beyond the capture \
-             band lands: {} mm",
-            mm(*rim),
+            "{part}: missed from {} mm above seated (the receiver's top) and where a part beyond \
+             the capture band lands: {} mm",
+            mm(rims.rim),
             if bands.is_empty() {
                 "nowhere".to_string()
             } else {

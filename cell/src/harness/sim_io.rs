@@ -12,11 +12,16 @@ use sim::cell::SimCell;
 
 use super::SimulatedCamera;
 use super::audit;
-use super::verdict::check_of;
+use super::verdict::{blamed, check_of};
 use crate::camera::{CameraError, CameraSource, DEFAULT_CAPTURE_TIMEOUT};
-use crate::episode::StepOutcome;
+use crate::episode::{PoseError, StepOutcome};
 use crate::orchestrator::{CellIo, CellIoError, InsertionCheck, PerceptionAudit, Workcell};
 use perception::{DetectedPart, Frame, FrameContent, FrameImage, TruePart};
+
+/// How far above its receiver's top a held part that never came down into its target still
+/// counts as over it, metres: a part stopped on the rim rests there, lifted by at most the slip
+/// up the fingers the engine allows for (half the planner's clearance height).
+const OVER_TARGET: f64 = crate::scenario::PLANNER_CLEARANCE_HEIGHT / 2.0;
 
 /// The verdict when the insertion scorer failed: the step is aborted with the engine's reason,
 /// never judged as if the part had been released elsewhere.
@@ -115,14 +120,24 @@ impl CellIo for SimCell {
         }
         Some(match self.held_insertion() {
             Some(r) => check_of(&r),
-            // Held but never came down into the target: it stopped on whatever it met first.
-            None => InsertionCheck {
-                outcome: StepOutcome::Missed,
-                cause: Some("the part did not enter the target".into()),
-                sources: vec![],
-                pose_error: None,
-                stop_height: None,
-            },
+            // Held but never came down into the target: it stopped on whatever it met first,
+            // its lateral error blamed as a missed insertion's when it is over the target.
+            None => {
+                let over = self.held_budget(OVER_TARGET);
+                InsertionCheck {
+                    outcome: StepOutcome::Missed,
+                    cause: Some("the part did not enter the target".into()),
+                    sources: over.as_ref().map(|(_, b)| blamed(b)).unwrap_or_default(),
+                    pose_error: over.map(|(e, _)| PoseError {
+                        dx_mm: e.lateral.x * 1e3,
+                        dy_mm: e.lateral.y * 1e3,
+                        depth_mm: e.height * 1e3,
+                        tilt_deg: e.tilt.to_degrees(),
+                        yaw_deg: e.yaw.to_degrees(),
+                    }),
+                    stop_height: None,
+                }
+            }
         })
     }
 

@@ -3,7 +3,7 @@
 
 use sim::cell::ReleaseReport;
 use sim::cell::insertion::{InsertionCause, Verdict};
-use sim::cell::noise::ErrorSource;
+use sim::cell::noise::{ErrorBudget, ErrorSource};
 
 use crate::episode::{PoseError, StepOutcome};
 use crate::orchestrator::InsertionCheck;
@@ -51,6 +51,21 @@ fn cause_text(c: &InsertionCause) -> Option<String> {
     })
 }
 
+/// Share of a lateral error along which a source must lie to be blamed for it.
+const BLAME_SHARE: f64 = 0.2;
+
+/// The error sources a lateral error is blamed on: each with at least a fifth of it along the
+/// error, the largest share first.
+pub fn blamed(budget: &ErrorBudget) -> Vec<String> {
+    let mut shares = budget.shares.clone();
+    shares.sort_by(|a, b| b.1.total_cmp(&a.1));
+    shares
+        .iter()
+        .filter(|(_, s)| *s >= BLAME_SHARE)
+        .map(|(s, _)| source_name(*s).to_string())
+        .collect()
+}
+
 /// What a release (or held-insertion) report of the simulated cell says, in the engine's terms.
 pub fn check_of(r: &ReleaseReport) -> InsertionCheck {
     let outcome = match r.verdict {
@@ -69,13 +84,7 @@ pub fn check_of(r: &ReleaseReport) -> InsertionCheck {
     } else if outcome != StepOutcome::Seated
         && let Some(b) = &r.budget
     {
-        let mut shares = b.shares.clone();
-        shares.sort_by(|a, b| b.1.total_cmp(&a.1));
-        sources = shares
-            .iter()
-            .filter(|(_, s)| *s >= 0.2)
-            .map(|(s, _)| source_name(*s).to_string())
-            .collect();
+        sources = blamed(b);
     }
     let pose_error = r.insertion.as_ref().map(|i| PoseError {
         dx_mm: i.start.lateral.x * 1e3,

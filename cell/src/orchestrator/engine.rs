@@ -835,16 +835,19 @@ impl<'a> Engine<'a> {
         let s = &k.steps[self.index];
         let capture = s.clearance / 2.0 + s.lead_in;
         let held = self.step.selection.as_ref();
-        let landings = match held.and_then(|sel| k.part(&sel.detection.part)) {
+        let rims = match held.and_then(|sel| k.part(&sel.detection.part)) {
             Some(g) => insertion::rim_landings(
                 g,
                 &k.base_T_targets[self.index],
                 &k.base_T_insertions[self.index],
-                &self.placed_shapes(),
+                &self.destination_first(),
                 (capture, s.lead_in),
                 spec.seat_band,
             ),
-            None => insertion::RimLandings::default(),
+            None => insertion::RimLandings::at_engagement(
+                plan.engagement,
+                insertion::rim_tolerance(s.lead_in),
+            ),
         };
         let geometry = insertion::InsertionGeometry {
             seated,
@@ -853,9 +856,19 @@ impl<'a> Engine<'a> {
             capture,
             lead_in: s.lead_in,
             slow: self.planner().speeds.slow,
-            landings,
+            rims,
         };
-        let r = insertion::force_insert(self.cell.robot(), &geometry, spec).await;
+        let r = match insertion::planned_descent(self.cell.robot(), &geometry, spec).await {
+            Ok(first) => {
+                if self.step.insertions == 1 {
+                    // The lateral error no search or retry has offset yet, as the simulated
+                    // cell knows it (production: nothing), for the budget of a step given up.
+                    self.step.planned_truth = self.io().seating_check();
+                }
+                insertion::search_and_confirm(self.cell.robot(), &geometry, spec, first).await
+            }
+            Err(e) => Err(e),
+        };
         let clock = self.clock();
         self.log.motion_done("insert", clock);
         self.step.force = Some(r.map_err(|e| Stop::Robot(state, e))?);
@@ -963,7 +976,14 @@ impl<'a> Engine<'a> {
             "{} after {} insertion attempts; not released: the part stays in the fingers",
             v.cause, self.step.insertions
         );
-        Ok(self.finish_step(v.outcome, Some(cause), check.sources, check.pose_error))
+        // Blamed as a plain cell's missed insertion is, on the sources of the lateral error
+        // the search could not recover: the planned descent's, before the spiral's and the
+        // retries' offsets (the last probe's error is mostly those offsets).
+        let (sources, pose_error) = match self.step.planned_truth.take() {
+            Some(t) if !t.sources.is_empty() => (t.sources, t.pose_error),
+            _ => (check.sources, check.pose_error),
+        };
+        Ok(self.finish_step(v.outcome, Some(cause), sources, pose_error))
     }
 
     /// With `[seat_check]` on, after a seat's release and retreat: a capture of the fixture
@@ -1348,6 +1368,19 @@ impl<'a> Engine<'a> {
             .iter()
             .filter_map(|(name, pose)| Some((k.part(name)?, *pose)));
         fixture.into_iter().chain(placed).collect()
+    }
+
+    /// The parts in place ([`Self::placed_shapes`]) with what this step's part goes into first.
+    fn destination_first(&self) -> Vec<(&'a PartGeometry, Isometry3<f64>)> {
+        let mut placed = self.placed_shapes();
+        let step = &self.ctx.knowledge.steps[self.index];
+        if let Some(name) = sim::cell::geometry::destination_part(step)
+            && let Some(i) = placed.iter().rposition(|(g, _)| g.name == name)
+        {
+            let d = placed.remove(i);
+            placed.insert(0, d);
+        }
+        placed
     }
 
     async fn joints(&mut self, state: State) -> Result<Joints, Stop> {

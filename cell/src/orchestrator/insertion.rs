@@ -60,13 +60,14 @@ pub struct InsertionGeometry {
     pub lead_in: f64,
     /// Speed and acceleration of the lifts and side steps between probes.
     pub slow: LinearMotion,
-    /// Where a part beyond the capture band lands ([`rim_landings`]): first contact there is a
-    /// miss on the rim.
-    pub landings: RimLandings,
+    /// Where first contact reads as a miss on a rim ([`rim_landings`]): at the top of what the
+    /// part goes into, or where a part beyond the capture band lands.
+    pub rims: RimLandings,
 }
 
 /// Where the held part `held`, seated at `base_T_part`, lands when it comes down beyond the
-/// capture band (`capture`) onto the parts in place (`placed`, each at its pose; base frame):
+/// capture band (`capture`) onto the parts in place (`placed`, each at its pose, what it goes
+/// into first; base frame), and the top of what it goes into (its engagement depth):
 /// the held part swept rigid and level down beside its target in every direction, just beyond
 /// the band to twice it, against the convex pieces of what is in place
 /// ([`sim::cell::insertion::landing`]). Landings at or below `seat_band` above seated are not
@@ -183,12 +184,6 @@ pub struct ForceVerdict {
     pub force_n: f64,
 }
 
-/// First contact at least this high above seated reads as a miss on the receiver's rim, metres
-/// (lower landings: [`InsertionGeometry::landings`]).
-fn rim_height(geometry: &InsertionGeometry) -> f64 {
-    geometry.engagement - rim_tolerance(geometry.lead_in)
-}
-
 /// A guarded move's readings in the insertion frame, at most `keep` of them (evenly spread,
 /// the first and the last, the stop, always kept).
 pub fn trace_samples(
@@ -268,22 +263,17 @@ pub fn classify(
         return (StepOutcome::Missed, stop);
     }
     let height = stop + outcome.force_along(&out).max(0.0) / spec.contact_stiffness;
-    let rims = (rim_height(geometry), &geometry.landings);
-    (verdict_at(height, rims, spec), height)
+    (verdict_at(height, &geometry.rims, spec), height)
 }
 
 /// The verdict of a first contact `height` above seated (metres): seated within
-/// [`ForceInsertionSpec::seat_band`]; missed on the rim at or above `rim` (the engagement depth
-/// less half the lead-in) or within one of `landings` (where a part beyond the capture band
-/// lands); jammed anywhere else (stopped inside the receiver, short of its seat).
-pub fn verdict_at(
-    height: f64,
-    (rim, landings): (f64, &RimLandings),
-    spec: &ForceInsertionSpec,
-) -> StepOutcome {
+/// [`ForceInsertionSpec::seat_band`]; missed on a rim ([`RimLandings::contains`]: at or above
+/// the receiver's top less half the lead-in, or where a part beyond the capture band lands);
+/// jammed anywhere else (stopped inside the receiver, short of its seat).
+pub fn verdict_at(height: f64, rims: &RimLandings, spec: &ForceInsertionSpec) -> StepOutcome {
     if height <= spec.seat_band {
         StepOutcome::Seated
-    } else if height >= rim || landings.contains(height) {
+    } else if rims.contains(height) {
         StepOutcome::Missed
     } else {
         StepOutcome::Jammed
@@ -377,7 +367,29 @@ pub async fn force_insert(
     geometry: &InsertionGeometry,
     spec: &ForceInsertionSpec,
 ) -> Result<ForceVerdict, RobotError> {
-    let mut probes = vec![descend(robot, geometry, spec, [0.0, 0.0], 0).await?];
+    let first = planned_descent(robot, geometry, spec).await?;
+    search_and_confirm(robot, geometry, spec, first).await
+}
+
+/// The planned guarded descent straight down onto the seat, the first of [`force_insert`]
+/// (a caller that wants to look at the cell between the two runs them apart).
+pub async fn planned_descent(
+    robot: &mut dyn Robot,
+    geometry: &InsertionGeometry,
+    spec: &ForceInsertionSpec,
+) -> Result<Probe, RobotError> {
+    descend(robot, geometry, spec, [0.0, 0.0], 0).await
+}
+
+/// The rest of [`force_insert`] after its planned descent `first`: the spiral search after a
+/// miss on the rim or a jam, and the seat confirmation.
+pub async fn search_and_confirm(
+    robot: &mut dyn Robot,
+    geometry: &InsertionGeometry,
+    spec: &ForceInsertionSpec,
+    first: Probe,
+) -> Result<ForceVerdict, RobotError> {
+    let mut probes = vec![first];
     let lift = geometry.engagement + (PROBE_LIFT_LEAD_INS * geometry.lead_in).max(MIN_PROBE_LIFT);
     let mut search = spiral(geometry.capture, spec.search_points).into_iter();
     loop {
@@ -455,9 +467,9 @@ pub async fn force_insert(
         contact_force_n: spec.contact_force,
         contact_stiffness_n_per_m: spec.contact_stiffness,
         seat_band_mm: spec.seat_band * 1e3,
-        rim_mm: rim_height(geometry) * 1e3,
+        rim_mm: geometry.rims.rim * 1e3,
         landings_mm: geometry
-            .landings
+            .rims
             .bands
             .iter()
             .map(|b| [b[0] * 1e3, b[1] * 1e3])
@@ -487,7 +499,7 @@ pub mod agreement {
 
     use nalgebra::{Isometry3, Translation3};
 
-    use super::{RimLandings, rim_landings, rim_tolerance, verdict_at};
+    use super::{RimLandings, rim_landings, verdict_at};
     use crate::episode::StepOutcome;
     use crate::scenario::ForceInsertionSpec;
 
@@ -590,10 +602,8 @@ pub mod agreement {
         pub cell: String,
         /// Per step: its part and counts.
         pub steps: Vec<(String, ForceCounts)>,
-        /// Per step: first contact at least this high above seated reads as a miss (the
-        /// engagement depth less half the lead-in), metres, and the bands where a part beyond
-        /// the capture band lands, which read as misses too.
-        pub rims: Vec<(f64, RimLandings)>,
+        /// Per step: where first contact reads as a miss ([`step_rims`]).
+        pub rims: Vec<RimLandings>,
         /// All steps together.
         pub all: ForceCounts,
         /// The cases where either force verdict differs from the truth.
@@ -609,10 +619,10 @@ pub mod agreement {
     }
 
     /// A step's rims as production reads them ([`rim_landings`] for the parts in place, seated
-    /// nominally, as planned): first contact at least this high above seated is a miss (the
-    /// mating's engagement depth less half its lead-in), and so is first contact within the
-    /// bands where a part beyond the capture band lands.
-    pub fn step_rims(step: &StepGeometry<'_>, spec: &ForceInsertionSpec) -> (f64, RimLandings) {
+    /// nominally, as planned): first contact at or above the receiver's top less half the
+    /// lead-in is a miss, and so is first contact within the bands where a part beyond the
+    /// capture band lands.
+    pub fn step_rims(step: &StepGeometry<'_>, spec: &ForceInsertionSpec) -> RimLandings {
         let m = &step.mating;
         let ins_T_d = m.destination_T_insertion.inverse();
         let placed: Vec<_> = step
@@ -621,15 +631,14 @@ pub mod agreement {
             .map(|r| (r.geometry, ins_T_d * r.destination_T_part))
             .collect();
         let seated = Isometry3::from_parts(Translation3::identity(), m.ins_R_seat);
-        let landings = rim_landings(
+        rim_landings(
             step.held,
             &seated,
             &Isometry3::identity(),
             &placed,
             (m.capture(), m.lead_in),
             spec.seat_band,
-        );
-        (m.engagement - rim_tolerance(m.lead_in), landings)
+        )
     }
 
     /// Draws `samples` misalignments around the capture boundary (as `cell scorers` does, the
@@ -648,7 +657,7 @@ pub mod agreement {
         spec: &ForceInsertionSpec,
     ) -> Result<ForceAgreement, ScorerError> {
         let samples = if steps.is_empty() { 0 } else { samples };
-        let rims: Vec<(f64, RimLandings)> = steps.par_iter().map(|s| step_rims(s, spec)).collect();
+        let rims: Vec<RimLandings> = steps.par_iter().map(|s| step_rims(s, spec)).collect();
         let cases: Vec<ForceCase> = (0..samples)
             .into_par_iter()
             .map(|k| {
@@ -662,14 +671,8 @@ pub mod agreement {
                 // The reading's error along the axis, in N: a fresh bias and noise per case.
                 let noise_n = FtNoise::ur5e(seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
                     .sample()[2];
-                let (rim, landings) = &rims[i];
-                let read = |stop: f64| {
-                    verdict_at(
-                        stop + noise_n / spec.contact_stiffness,
-                        (*rim, landings),
-                        spec,
-                    )
-                };
+                let read =
+                    |stop: f64| verdict_at(stop + noise_n / spec.contact_stiffness, &rims[i], spec);
                 Ok(ForceCase {
                     step: i,
                     sample: k,
@@ -720,7 +723,7 @@ mod tests {
                 speed: 0.02,
                 acceleration: 1.2,
             },
-            landings: RimLandings::default(),
+            rims: RimLandings::at_engagement(0.002, 0.00005),
         }
     }
 
@@ -766,7 +769,8 @@ mod tests {
         let spec = ForceInsertionSpec::default();
         let mut g = geometry();
         g.engagement = 0.00274;
-        g.landings = RimLandings {
+        g.rims = RimLandings {
+            rim: 0.00269,
             bands: vec![[0.0013, 0.0014], [0.00225, 0.00254]],
         };
         let k = spec.contact_stiffness;
@@ -782,7 +786,7 @@ mod tests {
         assert_eq!(read(0.0006, &g), StepOutcome::Jammed);
         assert_eq!(read(0.00005, &g), StepOutcome::Seated);
         // Without landings only the engagement depth's rim remains.
-        g.landings = RimLandings::default();
+        g.rims = RimLandings::at_engagement(0.00274, 0.00005);
         assert_eq!(read(0.00135, &g), StepOutcome::Jammed);
     }
 

@@ -54,6 +54,10 @@ pub(super) struct StepState {
     pub force_record: Option<crate::episode::ForceRecord>,
     /// The seat check by camera of this step's placed part, for the record.
     pub seat_check: Option<crate::episode::SeatCheckRecord>,
+    /// What the cell knew of the part after the first force-guided insertion's planned descent,
+    /// before any search or retry offset it (simulation only): the error budget of a step given
+    /// up after the search.
+    pub planned_truth: Option<super::cell_io::InsertionCheck>,
 }
 
 /// Detections closer than this (table plane) to a missed pick count as the same part, metres.
@@ -91,6 +95,7 @@ impl StepState {
             force: None,
             force_record: None,
             seat_check: None,
+            planned_truth: None,
         }
     }
 

@@ -22,7 +22,8 @@ use super::feeder::{self, FeederPart};
 use super::gripper::{self, Grasp, GraspCandidate, GraspFailure};
 use super::insertion::felt::{FeltKey, FeltStop, FeltStops};
 use super::insertion::{
-    InsertionCase, InsertionCause, InsertionResult, Mating, ReceiverPart, Scorer, Verdict,
+    InsertionCase, InsertionCause, InsertionResult, Mating, PoseError, ReceiverPart, Scorer,
+    Verdict,
 };
 use super::model::CellModel;
 use super::motion::{Profile, move_j_profile, move_l_profile, move_l_time};
@@ -715,7 +716,7 @@ impl SimCell {
                 f,
             );
         }
-        let budget = self.budget(&base_T_ins, &tcp, &result);
+        let budget = self.budget(&base_T_ins, &tcp, result.start.lateral);
         let base_T_part = base_T_ins * result.ins_T_part;
         if let Some(h) = self.held.as_mut() {
             h.part.tcp_T_part = tcp.inverse() * base_T_part;
@@ -723,12 +724,26 @@ impl SimCell {
         }
     }
 
-    /// Splits the start lateral error into the named sources.
+    /// The held part's true pose error against its target where it is now, and that lateral
+    /// error split into the error sources (as an insertion's budget), while it is over its
+    /// target: within reach laterally, and at most `above` over the receiver's top (a part
+    /// stopped on the rim never came down into its target, and no insertion scored it).
+    #[allow(non_snake_case)]
+    pub fn held_budget(&self, above: f64) -> Option<(PoseError, ErrorBudget)> {
+        let tcp = self.true_tcp();
+        let (_, base_T_ins, mating) = self.insertion_at(&tcp, above)?;
+        let held = self.held.as_ref()?;
+        let e = mating.pose_error(&(base_T_ins.inverse() * tcp * held.part.tcp_T_part));
+        let budget = self.budget(&base_T_ins, &tcp, e.lateral);
+        Some((e, budget))
+    }
+
+    /// Splits the start lateral error `lateral` (insertion frame) into the named sources.
     fn budget(
         &self,
         base_T_ins: &Isometry3<f64>,
         base_T_tcp: &Isometry3<f64>,
-        result: &InsertionResult,
+        lateral: Vector2<f64>,
     ) -> ErrorBudget {
         let ins_R_base = base_T_ins.rotation.inverse();
         let to_ins = |v_tcp: &Vector3<f64>| {
@@ -745,7 +760,7 @@ impl SimCell {
             ));
             named.push((ErrorSource::GraspResidual, to_ins(&h.errors.residual)));
         }
-        ErrorBudget::new(named, result.start.lateral)
+        ErrorBudget::new(named, lateral)
     }
 
     /// Runs a joint move now (the `Robot::move_j` body). The cell's limits are not checked here:

@@ -90,11 +90,13 @@ impl Difference {
 /// A held part's rigid shape against what is in place, in the step's insertion frame.
 pub struct Sweep {
     differences: Vec<Difference>,
+    /// How far above seated the held part first reaches the top of what it goes into, metres.
+    engagement: f64,
 }
 
 impl Sweep {
-    /// The held part seated at `ins_T_held` against `receivers` (each part at its pose), all in
-    /// the insertion frame (z out of the hole).
+    /// The held part seated at `ins_T_held` against `receivers` (each part at its pose; the
+    /// first is what it goes into), all in the insertion frame (z out of the hole).
     #[allow(non_snake_case)]
     pub fn new(
         held: &PartGeometry,
@@ -107,6 +109,21 @@ impl Sweep {
             .iter()
             .map(|p| p.iter().map(|v| ins_T_held * v).collect())
             .collect();
+        let bottom = held
+            .mesh
+            .vertices
+            .iter()
+            .map(|v| (ins_T_held * v).z)
+            .fold(f64::INFINITY, f64::min);
+        let engagement = receivers.first().map_or(0.0, |(g, t)| {
+            let top = g
+                .mesh
+                .vertices
+                .iter()
+                .map(|v| (t * v).z)
+                .fold(f64::NEG_INFINITY, f64::max);
+            (top - bottom).max(0.0)
+        });
         let mut differences = Vec::new();
         for (g, ins_T_part) in receivers {
             for q in &g.pieces.pieces {
@@ -116,7 +133,16 @@ impl Sweep {
                 }
             }
         }
-        Self { differences }
+        Self {
+            differences,
+            engagement,
+        }
+    }
+
+    /// How far above seated the held part first reaches the top of what it goes into (the
+    /// first receiver), metres: its engagement depth, as [`super::Mating`] measures it.
+    pub fn engagement(&self) -> f64 {
+        self.engagement
     }
 
     /// How far above seated the held part, level and moved sideways by `offset` (insertion
@@ -130,19 +156,33 @@ impl Sweep {
     }
 }
 
-/// The heights above seated at which a part beyond the capture band lands, merged into bands.
+/// Where first contact reads as a miss on a rim: at or above the top of what the part goes
+/// into, and at the heights at which a part beyond the capture band lands, merged into bands.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct RimLandings {
+    /// First contact at least this high above seated is on the receiver's top: its engagement
+    /// depth less the tolerance, metres.
+    pub rim: f64,
     /// Bands `[low, high]` of landing heights above seated, metres, lowest first; each is
     /// widened by the tolerance it was made with.
     pub bands: Vec<[f64; 2]>,
 }
 
 impl RimLandings {
+    /// Only the receiver's top: first contact at least `tolerance` below `engagement` (metres
+    /// above seated) is a miss.
+    pub fn at_engagement(engagement: f64, tolerance: f64) -> Self {
+        Self {
+            rim: engagement - tolerance,
+            bands: Vec::new(),
+        }
+    }
+
     /// Sweeps the held part down at offsets just beyond `capture` to twice it, in every
     /// direction ([`Sweep::landing`]), and merges the landing heights above `seated` (a part
     /// that comes down that far is not on a rim) into bands, each widened by `tolerance` on
-    /// either side; bands that then overlap are one.
+    /// either side; bands that then overlap are one. The receiver's top is its engagement
+    /// depth ([`Sweep::engagement`]) less `tolerance`.
     pub fn of(sweep: &Sweep, capture: f64, seated: f64, tolerance: f64) -> Self {
         let mut heights: Vec<f64> = (0..DIRECTIONS)
             .flat_map(|k| {
@@ -163,17 +203,21 @@ impl RimLandings {
                 _ => bands.push([lo, hi]),
             }
         }
-        Self { bands }
+        Self {
+            rim: sweep.engagement - tolerance,
+            bands,
+        }
     }
 
-    /// Whether first contact `height` above seated is where a part beyond the band lands.
+    /// Whether first contact `height` above seated reads as a miss on a rim: at or above the
+    /// receiver's top, or where a part beyond the band lands.
     pub fn contains(&self, height: f64) -> bool {
-        self.bands.iter().any(|b| (b[0]..=b[1]).contains(&height))
+        height >= self.rim || self.bands.iter().any(|b| (b[0]..=b[1]).contains(&height))
     }
 
-    /// The highest landing (the top of the highest band), if any.
-    pub fn top(&self) -> Option<f64> {
-        self.bands.last().map(|b| b[1])
+    /// The lowest height above seated at which first contact reads as a miss, metres.
+    pub fn lowest(&self) -> f64 {
+        self.bands.first().map_or(self.rim, |b| b[0].min(self.rim))
     }
 }
 
@@ -244,14 +288,16 @@ mod tests {
         assert_eq!(at(5.0, 0.0), None);
 
         // Beyond a 0.15 mm band, every direction: the two rims, each ±0.05 mm.
+        assert!((sweep.engagement() - 1.5e-3).abs() < 1e-9);
         let rims = RimLandings::of(&sweep, 1.5e-4, 2e-4, 5e-5);
+        assert!((rims.rim - 1.45e-3).abs() < 1e-9);
+        assert!((rims.lowest() - 0.95e-3).abs() < 1e-9);
         assert_eq!(rims.bands.len(), 2, "{:?}", rims.bands);
         for (band, mm) in rims.bands.iter().zip([1.0, 1.5]) {
             assert!((band[0] - (mm - 0.05) * 1e-3).abs() < 1e-9, "{band:?}");
             assert!((band[1] - (mm + 0.05) * 1e-3).abs() < 1e-9, "{band:?}");
         }
-        assert!(rims.contains(1.02e-3) && rims.contains(1.47e-3));
+        assert!(rims.contains(1.02e-3) && rims.contains(1.47e-3) && rims.contains(3e-3));
         assert!(!rims.contains(1.25e-3) && !rims.contains(0.5e-3));
-        assert!((rims.top().unwrap() - 1.55e-3).abs() < 1e-9);
     }
 }
