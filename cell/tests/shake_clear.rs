@@ -24,8 +24,14 @@ use support::load_variant;
 const EPISODES: u32 = 8;
 
 fn nominal(tag: &str) -> SimSetup {
+    variant(tag, |t| t)
+}
+
+/// The nominal scenario with `edit` applied to its text.
+fn variant(tag: &str, edit: impl Fn(String) -> String) -> SimSetup {
     let text = std::fs::read_to_string(support::nominal()).unwrap();
-    SimSetup::new(load_variant(tag, &text).unwrap()).unwrap()
+    let edited = edit(text.clone());
+    SimSetup::new(load_variant(tag, &edited).unwrap()).unwrap()
 }
 
 /// The simulated cell with its motion replay withheld: the engine then reads the arm's joints
@@ -115,48 +121,56 @@ fn shakes(events: &[Event]) -> impl Iterator<Item = (usize, &ShakeStart)> {
         .flat_map(|(i, e)| e.shakes.iter().map(move |s| (i, s)))
 }
 
-#[tokio::test]
+/// Every shake the feeder saw in `r` is in its events, started within the state the event
+/// closes, with the arm's recorded pose then clear of the feeder.
 #[allow(non_snake_case)]
-async fn a_shake_never_starts_near_the_feeder_and_a_held_back_one_starts_mid_transit() {
-    let setup = nominal("shake_clear_near");
+fn check_clear(setup: &SimSetup, r: &Run, episode: u32) {
     let k = &setup.engine.knowledge;
     let f = &k.spec.feeder;
     let table_T_base = k.geometry.base_T_table.inverse();
+    assert_eq!(
+        shakes(&r.events).count() as u32,
+        r.feeder_shakes,
+        "episode {episode}: every shake the feeder saw is in the events"
+    );
+    for (i, s) in shakes(&r.events) {
+        // Started within the state the event closes.
+        let (entered, left) = (r.events[i - 1].sim_time_s, r.events[i].sim_time_s);
+        assert!(
+            s.t_s >= entered - 1e-9 && s.t_s <= left + 1e-9,
+            "episode {episode}: {s:?} outside [{entered}, {left}]"
+        );
+        // The arm's recorded pose then: no link, the gripper nor the held part near the
+        // feeder, and the fingertips either beside the feeder's rectangle or above the
+        // height a shake throws parts to, with the gripper's (or part's) radius.
+        assert_eq!(
+            arm_near_feeder(k, &s.joints, s.held_radius_m),
+            None,
+            "episode {episode}: {}",
+            s.describe()
+        );
+        let tcp =
+            table_T_base * Point3::from(k.kinematics.forward_tcp(&s.joints).translation.vector);
+        let reach = GRIPPER_RADIUS.max(s.held_radius_m.unwrap_or(0.0));
+        let beside = (tcp.x - f.center[0]).abs() > 0.5 * f.size[0] + reach
+            || (tcp.y - f.center[1]).abs() > 0.5 * f.size[1] + reach;
+        assert!(
+            beside || tcp.z - reach >= AWAY_HEIGHT,
+            "episode {episode}: fingertips at {tcp:?} within the feeder's clearance: {}",
+            s.describe()
+        );
+    }
+}
+
+#[tokio::test]
+async fn a_shake_never_starts_near_the_feeder_and_a_held_back_one_starts_mid_transit() {
+    let setup = nominal("shake_clear_near");
     let (mut held_back, mut mid_transit) = (0, 0);
     for episode in 0..EPISODES {
         let r = run(&setup, episode, true).await;
-        // Every shake the feeder saw is in the events.
-        assert_eq!(
-            shakes(&r.events).count() as u32,
-            r.feeder_shakes,
-            "episode {episode}"
-        );
+        check_clear(&setup, &r, episode);
         for (i, s) in shakes(&r.events) {
-            // Started within the state the event closes.
-            let (entered, left) = (r.events[i - 1].sim_time_s, r.events[i].sim_time_s);
-            assert!(
-                s.t_s >= entered - 1e-9 && s.t_s <= left + 1e-9,
-                "episode {episode}: {s:?} outside [{entered}, {left}]"
-            );
-            // The arm's recorded pose then: no link, the gripper nor the held part near the
-            // feeder, and the fingertips either beside the feeder's rectangle or above the
-            // height a shake throws parts to, with the gripper's (or part's) radius.
-            assert_eq!(
-                arm_near_feeder(k, &s.joints, s.held_radius_m),
-                None,
-                "episode {episode}: {}",
-                s.describe()
-            );
-            let tcp =
-                table_T_base * Point3::from(k.kinematics.forward_tcp(&s.joints).translation.vector);
-            let reach = GRIPPER_RADIUS.max(s.held_radius_m.unwrap_or(0.0));
-            let beside = (tcp.x - f.center[0]).abs() > 0.5 * f.size[0] + reach
-                || (tcp.y - f.center[1]).abs() > 0.5 * f.size[1] + reach;
-            assert!(
-                beside || tcp.z - reach >= AWAY_HEIGHT,
-                "episode {episode}: fingertips at {tcp:?} within the feeder's clearance: {}",
-                s.describe()
-            );
+            let left = r.events[i].sim_time_s;
             if s.waited_for.is_some() {
                 held_back += 1;
                 assert!(s.held_back_s > 0.0, "episode {episode}: {}", s.describe());
@@ -217,5 +231,44 @@ async fn a_mid_transit_shake_saves_time_against_one_held_to_the_moves_end() {
         mid_total < end_total - 0.05 * compared as f64,
         "mid-transit {mid_total} s against held to the move's end {end_total} s over {compared} \
          episodes"
+    );
+}
+
+#[tokio::test]
+async fn after_a_missed_grasp_the_arm_rises_clear_before_the_feeder_shakes() {
+    // One part of each kind and a calibration error wider than the fingers' margin: a grasp
+    // misses, the arm backs 10 mm up over the feeder, and with the only part excluded the step
+    // shakes the feeder. The arm first rises clear; the shake starts during that rise.
+    let setup = variant("shake_clear_missed", |t| {
+        let edited = t
+            .replace(
+                "parts = { main_shell = 4, insert_mold = 4, top_shell = 4 }",
+                "parts = { main_shell = 1, insert_mold = 1, top_shell = 1 }",
+            )
+            .replace(
+                "calibration_translation = 0.00002",
+                "calibration_translation = 0.004",
+            );
+        assert!(
+            edited.contains("main_shell = 1,") && edited.contains("translation = 0.004"),
+            "the nominal scenario's lines changed"
+        );
+        edited
+    });
+    let mut risen = 0;
+    for episode in 0..4 {
+        let r = run(&setup, episode, true).await;
+        check_clear(&setup, &r, episode);
+        for (i, s) in shakes(&r.events) {
+            if s.motion == "clear the feeder" {
+                assert_eq!(r.events[i].from, cell::orchestrator::State::Shake);
+                assert!(s.waited_for.is_some(), "{}", s.describe());
+                risen += 1;
+            }
+        }
+    }
+    assert!(
+        risen > 0,
+        "no shake after a missed grasp waited for the arm to rise"
     );
 }
