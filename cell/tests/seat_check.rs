@@ -169,12 +169,17 @@ fn a_capture_with_the_arm_over_the_fixture_is_refused_and_home_is_clear() {
     );
     let q = k.kinematics.inverse_nearest(&above, &home).unwrap().joints;
     assert!(arm_in_fixture_view(k, &q, None).is_some());
-    // Sideways towards the feeder at that height, the arm leaves the view.
+    // Sideways at that height, the arm leaves the view.
     let (aside, q_aside) = pose_out_of_view(k, &above, &q).expect("a pose out of view");
     let moved = aside.translation.vector - above.translation.vector;
     println!("aside by {:.3} m", moved.norm());
     assert!(moved.z.abs() < 1e-12 && moved.norm() <= 0.2, "{moved}");
     assert_eq!(arm_in_fixture_view(k, &q_aside, None), None);
+    // Nor in the feeder's, where the next step's capture is taken from there.
+    assert_eq!(
+        cell::orchestrator::view::arm_in_feeder_view(k, &q_aside, None),
+        None
+    );
     // Over the feeder, the arm is out of the fixture's view but in the feeder's.
     let feeder = k.spec.feeder.center;
     let over_feeder = Isometry3::from_parts(

@@ -989,8 +989,9 @@ impl<'a> Engine<'a> {
     /// With `[seat_check]` on, after a seat's release and retreat: a capture of the fixture
     /// with the arm out of the camera's view of it, and the placed part measured on it
     /// ([`seat_check::measure_seat`]). The retreat ends above the fixture, between it and the
-    /// camera, so the arm first goes home (over the feeder, where the next step picks); a
-    /// capture with the arm or a held part still in view is refused, never used. `None` when
+    /// camera, so the arm first moves aside out of the camera's views of the fixture and the
+    /// feeder ([`seat_check::pose_out_of_view`]; home when no pose is); a capture with the arm
+    /// or a held part still in view is refused, never used. `None` when
     /// the seat passed (or no check is configured); otherwise the step's outcome and why.
     async fn check_seat(&mut self, state: State) -> Result<Option<(StepOutcome, String)>, Stop> {
         let Some(spec) = self.ctx.seat_check else {
@@ -1016,9 +1017,8 @@ impl<'a> Engine<'a> {
         }
         let mut q = self.joints(state).await?;
         if arm_in_fixture_view(k, &q, None).is_some() {
-            // Sideways at the retreat's height, towards the feeder (where the next step picks),
-            // to the first pose out of view, a joint move as the planner's transits; home when
-            // none is.
+            // Sideways at the retreat's height to the nearest pose out of the views of the
+            // fixture and the feeder, a joint move as the planner's transits; home when none is.
             let joint = self.planner().speeds.joint;
             let tcp = (self.cell.robot().tcp_pose().await).map_err(|e| Stop::Robot(state, e))?;
             let to = seat_check::pose_out_of_view(k, &tcp, &q).map_or(self.home, |(_, q)| q);

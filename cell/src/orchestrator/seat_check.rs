@@ -22,7 +22,7 @@ use perception::{Camera, Frame, FrameContent};
 use robots::kinematics::Joints;
 
 use super::geometry::CellKnowledge;
-use super::view::{shadow_hits, spheres};
+use super::view::{arm_in_feeder_view, shadow_hits, spheres};
 use crate::episode::{SeatCheckRecord, SeatCheckVerdict};
 use crate::scenario::SeatCheckSpec;
 
@@ -145,13 +145,17 @@ pub fn arm_in_fixture_view(
         .map(|(name, _, _)| name)
 }
 
-/// Sideways steps tried from the retreat towards the feeder, metres.
+/// Sideways steps tried from the retreat, metres.
 const ASIDE_STEPS: [f64; 8] = [0.03, 0.045, 0.06, 0.08, 0.1, 0.12, 0.15, 0.2];
 
-/// A TCP pose at the height of `base_T_tcp` (the retreat above the fixture), moved sideways
-/// towards the feeder's centre by the first of [`ASIDE_STEPS`] whose inverse kinematics (nearest
-/// `q`) puts the arm out of the camera's view of the fixture, with those joints; `None` when
-/// none does.
+/// Directions tried at each step, turned from the one towards the feeder, degrees.
+const ASIDE_TURNS: [f64; 8] = [0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0];
+
+/// A TCP pose at the height of `base_T_tcp` (the retreat above the fixture), moved sideways by
+/// the shortest of [`ASIDE_STEPS`] (towards the feeder's centre first, then turned from it by
+/// [`ASIDE_TURNS`]) whose inverse kinematics (nearest `q`) puts the arm out of the camera's view
+/// of the fixture and of the feeder (the next step's capture is taken there), with those
+/// joints; `None` when none does.
 #[allow(non_snake_case)]
 pub fn pose_out_of_view(
     k: &CellKnowledge,
@@ -161,13 +165,16 @@ pub fn pose_out_of_view(
     let f = k.spec.feeder.center;
     let feeder = k.geometry.base_T_table * Point3::new(f[0], f[1], 0.0);
     let d = (feeder.coords - base_T_tcp.translation.vector).xy();
-    let dir = d.try_normalize(1e-9)?;
+    let towards = d.try_normalize(1e-9)?;
     ASIDE_STEPS.iter().find_map(|step| {
-        let pose = nalgebra::Translation3::new(dir.x * step, dir.y * step, 0.0) * base_T_tcp;
-        let s = k.kinematics.inverse_nearest(&pose, q).ok()?;
-        arm_in_fixture_view(k, &s.joints, None)
-            .is_none()
+        ASIDE_TURNS.iter().find_map(|turn| {
+            let dir = nalgebra::Rotation2::new(turn.to_radians()) * towards;
+            let pose = nalgebra::Translation3::new(dir.x * step, dir.y * step, 0.0) * base_T_tcp;
+            let s = k.kinematics.inverse_nearest(&pose, q).ok()?;
+            (arm_in_fixture_view(k, &s.joints, None).is_none()
+                && arm_in_feeder_view(k, &s.joints, None).is_none())
             .then_some((pose, s.joints))
+        })
     })
 }
 
