@@ -153,9 +153,9 @@ const ASIDE_TURNS: [f64; 8] = [0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180
 
 /// A TCP pose at the height of `base_T_tcp` (the retreat above the fixture), moved sideways by
 /// the shortest of [`ASIDE_STEPS`] (towards the feeder's centre first, then turned from it by
-/// [`ASIDE_TURNS`]) whose inverse kinematics (nearest `q`) puts the arm out of the camera's view
-/// of the fixture and of the feeder (the next step's capture is taken there), with those
-/// joints; `None` when none does.
+/// [`ASIDE_TURNS`]) within the workspace limits whose inverse kinematics (nearest `q`) puts the
+/// arm out of the camera's view of the fixture and of the feeder (the next step's capture is
+/// taken there), with those joints; `None` when none does.
 #[allow(non_snake_case)]
 pub fn pose_out_of_view(
     k: &CellKnowledge,
@@ -170,6 +170,9 @@ pub fn pose_out_of_view(
         ASIDE_TURNS.iter().find_map(|turn| {
             let dir = nalgebra::Rotation2::new(turn.to_radians()) * towards;
             let pose = nalgebra::Translation3::new(dir.x * step, dir.y * step, 0.0) * base_T_tcp;
+            if !k.spec.limits.workspace.contains(&pose.translation.vector) {
+                return None;
+            }
             let s = k.kinematics.inverse_nearest(&pose, q).ok()?;
             (arm_in_fixture_view(k, &s.joints, None).is_none()
                 && arm_in_feeder_view(k, &s.joints, None).is_none())
