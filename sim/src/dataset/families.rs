@@ -71,19 +71,40 @@ pub struct LightFamily {
     pub warmth: Range,
     /// Sky (ambient) radiance.
     pub ambient: Range,
+    /// Share of the images (0–1) lit instead by one hard key light well off the vertical in a
+    /// dim room (a spot lamp or a window): flat metal tops mirror the dim room and come out dark,
+    /// shadows are long and sharp, and the parts' glints meter the exposure down.
+    pub key_probability: f64,
+    /// The key light's angle from the vertical through the parts, degrees.
+    pub key_angle: Range,
+    /// The key light's distance from the parts, m.
+    pub key_distance: Range,
+    /// Irradiance the key gives the parts facing it (its intensity is this times its distance
+    /// squared).
+    pub key_irradiance: Range,
+    /// Radius of the key light's sphere, m.
+    pub key_size: Range,
+    /// The dim room under the key: sky radiance as a share of the key's irradiance.
+    pub key_ambient: Range,
 }
 
 impl Default for LightFamily {
     fn default() -> Self {
         Self {
             enabled: false,
-            count: Range::new(1.0, 4.0),
-            height: Range::new(0.4, 2.5),
-            radius: Range::new(0.0, 1.5),
-            irradiance: Range::new(0.4, 2.8),
+            count: Range::new(1.0, 3.0),
+            height: Range::new(0.8, 1.8),
+            radius: Range::new(0.0, 0.9),
+            irradiance: Range::new(0.2, 5.0),
             size: Range::new(0.0, 0.2),
             warmth: Range::new(-1.0, 1.0),
-            ambient: Range::new(0.01, 0.25),
+            ambient: Range::new(0.03, 0.15),
+            key_probability: 0.25,
+            key_angle: Range::new(35.0, 65.0),
+            key_distance: Range::new(0.8, 2.5),
+            key_irradiance: Range::new(1.5, 3.5),
+            key_size: Range::new(0.0, 0.03),
+            key_ambient: Range::new(0.004, 0.02),
         }
     }
 }
@@ -370,7 +391,7 @@ impl Families {
             &self.distractors,
             &self.sensor,
         );
-        let ranges: [(&str, Range, f64, f64); 34] = [
+        let ranges: [(&str, Range, f64, f64); 40] = [
             ("lights.count", l.count, 0.0, 8.0),
             ("lights.height", l.height, 0.05, 100.0),
             ("lights.radius", l.radius, 0.0, 100.0),
@@ -378,6 +399,17 @@ impl Families {
             ("lights.size", l.size, 0.0, 1.0),
             ("lights.warmth", l.warmth, -2.0, 2.0),
             ("lights.ambient", l.ambient, 0.0, inf),
+            (
+                "lights.key_probability",
+                Range::new(l.key_probability, l.key_probability),
+                0.0,
+                1.0,
+            ),
+            ("lights.key_angle", l.key_angle, 0.0, 89.0),
+            ("lights.key_distance", l.key_distance, 0.05, 100.0),
+            ("lights.key_irradiance", l.key_irradiance, 0.0, inf),
+            ("lights.key_size", l.key_size, 0.0, 1.0),
+            ("lights.key_ambient", l.key_ambient, 0.0, inf),
             ("plating.brightness", p.brightness, 0.0, inf),
             ("plating.roughness", p.roughness, 0.02, 1.0),
             ("plating.anisotropy", p.anisotropy, 0.0, 1.0),
@@ -490,9 +522,18 @@ fn parts_centre(scene: &SampledScene, focus: Option<usize>) -> Point3<f64> {
     Point3::new(sum.x / n, sum.y / n, 0.0)
 }
 
+/// A colour temperature shift `w` (−1 warm … 1 cool) applied to a grey level.
+fn warmed(level: f64, w: f64) -> [f64; 3] {
+    [level * (1.0 - 0.25 * w), level, level * (1.0 + 0.25 * w)]
+}
+
 impl LightFamily {
     fn apply(&self, scene: &mut SampledScene, focus: Option<usize>, rng: &mut impl Rng) {
         let centre = parts_centre(scene, focus);
+        if self.key_probability > 0.0 && rng.random_bool(self.key_probability.min(1.0)) {
+            self.apply_key(scene, centre, rng);
+            return;
+        }
         let n = self.count.sample(rng).round().max(0.0) as usize;
         let share = 1.0 / n.max(1) as f64;
         scene.render.lights = (0..n)
@@ -506,14 +547,37 @@ impl LightFamily {
                 let i = e * (position - centre).norm_squared();
                 PointLight {
                     position,
-                    intensity: [i * (1.0 - 0.25 * w), i, i * (1.0 + 0.25 * w)],
+                    intensity: warmed(i, w),
                     radius: self.size.sample(rng),
                 }
             })
             .collect();
         let sky = self.ambient.sample(rng);
         let w = self.warmth.sample(rng);
-        scene.render.ambient = [sky * (1.0 - 0.25 * w), sky, sky * (1.0 + 0.25 * w)];
+        scene.render.ambient = warmed(sky, w);
+    }
+
+    /// The hard regime: one small key light `key_angle` off the vertical through `centre`,
+    /// `key_distance` away, and a dim sky.
+    fn apply_key(&self, scene: &mut SampledScene, centre: Point3<f64>, rng: &mut impl Rng) {
+        let theta = self.key_angle.sample(rng).to_radians();
+        let d = self.key_distance.sample(rng);
+        let phi = rng.random_range(0.0..std::f64::consts::TAU);
+        let position = centre
+            + Vector3::new(
+                d * theta.sin() * phi.cos(),
+                d * theta.sin() * phi.sin(),
+                d * theta.cos(),
+            );
+        let e = self.key_irradiance.sample(rng);
+        let w = self.warmth.sample(rng);
+        scene.render.lights = vec![PointLight {
+            position,
+            intensity: warmed(e * d * d, w),
+            radius: self.key_size.sample(rng),
+        }];
+        let sky = e * self.key_ambient.sample(rng);
+        scene.render.ambient = warmed(sky, self.warmth.sample(rng));
     }
 }
 
@@ -758,6 +822,87 @@ mod tests {
         let e = Families::from_list("lights,glare").unwrap_err().to_string();
         assert!(e.starts_with("glare: no randomisation family"), "{e}");
         assert!(Families::all().validate().is_ok());
+    }
+
+    /// A scene of one part at (10, 20) mm and nothing to render: what the light family draws
+    /// around.
+    fn one_part() -> SampledScene {
+        SampledScene {
+            parts: vec![crate::scene::PlacedPart {
+                model: 0,
+                table_T_part: Isometry3::translation(0.01, 0.02, 0.003),
+            }],
+            render: RenderScene::new(Vec::new(), None, None, Vec::new(), [0.1; 3]),
+            table_T_camera: Isometry3::identity(),
+            sensor: crate::render::SensorModel::default(),
+            overexposure: 1.0,
+        }
+    }
+
+    #[test]
+    fn the_key_light_is_one_hard_light_off_the_vertical_in_a_dim_room() {
+        let family = LightFamily {
+            enabled: true,
+            key_probability: 1.0,
+            ..LightFamily::default()
+        };
+        let centre = Point3::new(0.01, 0.02, 0.0);
+        let inside = |r: Range, x: f64| (r.lo - 1e-9..=r.hi + 1e-9).contains(&x);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..200 {
+            let mut scene = one_part();
+            family.apply(&mut scene, None, &mut rng);
+            let [light] = scene.render.lights[..] else {
+                panic!("{} lights", scene.render.lights.len());
+            };
+            let d = light.position - centre;
+            let angle = (d.z / d.norm()).acos().to_degrees();
+            assert!(inside(family.key_angle, angle), "{angle}°");
+            assert!(inside(family.key_distance, d.norm()), "{} m", d.norm());
+            assert!(inside(family.key_size, light.radius), "{}", light.radius);
+            let e = light.intensity[1] / d.norm_squared();
+            assert!(inside(family.key_irradiance, e), "irradiance {e}");
+            let dim = scene.render.ambient[1] / e;
+            assert!(inside(family.key_ambient, dim), "sky / key {dim}");
+        }
+    }
+
+    #[test]
+    fn the_key_light_lights_its_share_of_the_images_and_the_soft_lights_the_rest() {
+        // A key of a size no soft light has, to tell the two apart.
+        let family = LightFamily {
+            enabled: true,
+            key_size: Range::new(0.5, 0.5),
+            ..LightFamily::default()
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let (mut keys, mut several) = (0, 0);
+        for _ in 0..400 {
+            let mut scene = one_part();
+            family.apply(&mut scene, None, &mut rng);
+            let lights = &scene.render.lights;
+            if lights.iter().any(|l| l.radius == 0.5) {
+                assert_eq!(lights.len(), 1);
+                keys += 1;
+            } else {
+                assert!(lights.iter().all(|l| l.radius <= family.size.hi));
+                several += usize::from(lights.len() > 1);
+            }
+        }
+        let share = keys as f64 / 400.0;
+        assert!((share - family.key_probability).abs() < 0.06, "{share}");
+        assert!(several > 100, "{several} soft draws with several lights");
+    }
+
+    #[test]
+    fn key_light_options_out_of_their_domain_are_refused_by_name() {
+        let mut f = Families::all();
+        f.lights.key_probability = 1.5;
+        let e = f.validate().unwrap_err();
+        assert_eq!(e.key, "lights.key_probability");
+        f.lights.key_probability = 0.3;
+        f.lights.key_angle = Range::new(40.0, 95.0);
+        assert_eq!(f.validate().unwrap_err().key, "lights.key_angle");
     }
 
     #[test]

@@ -64,8 +64,11 @@ pub struct RoomRanges {
     pub panels: Range,
     /// Side of a panel (each side drawn).
     pub panel_size: Range,
-    /// Radiance of a panel.
+    /// Radiance of a panel (its brightness, drawn per panel).
     pub panel_radiance: Range,
+    /// Colour temperature of a panel, drawn per panel: −1 warm (about 3 000 K) … 1 cool (about
+    /// 8 000 K), as multipliers (1 − 0.25 w, 1, 1 + 0.25 w) of its radiance.
+    pub panel_warmth: Range,
     /// Horizontal distance of a panel's centre from the cell, along x and along y.
     pub panel_offset: Range,
     /// Half size of the table top around the feeder plate.
@@ -97,6 +100,7 @@ impl Default for RoomRanges {
             panels: Range::new(1.0, 6.0),
             panel_size: Range::new(0.3, 1.2),
             panel_radiance: Range::new(1.0, 5.0),
+            panel_warmth: Range::new(-1.0, 0.6),
             panel_offset: Range::new(-2.0, 2.0),
             table_half: Range::new(0.3, 0.8),
             mount: true,
@@ -178,7 +182,7 @@ impl LookOptions {
         let inf = f64::INFINITY;
         let r = &self.room;
         let a = &self.area_lights;
-        let ranges: [(&str, Range, f64, f64); 23] = [
+        let ranges: [(&str, Range, f64, f64); 24] = [
             ("room.half_size", r.half_size, 0.3, 100.0),
             ("room.table_height", r.table_height, 0.0, 10.0),
             ("room.ceiling", r.ceiling, 0.2, 100.0),
@@ -189,6 +193,7 @@ impl LookOptions {
             ("room.panels", r.panels, 0.0, 32.0),
             ("room.panel_size", r.panel_size, 0.0, 10.0),
             ("room.panel_radiance", r.panel_radiance, 0.0, inf),
+            ("room.panel_warmth", r.panel_warmth, -2.0, 2.0),
             ("room.panel_offset", r.panel_offset, -100.0, 100.0),
             ("room.table_half", r.table_half, 0.0, 100.0),
             ("room.mount_size", r.mount_size, 0.0, 0.5),
@@ -370,7 +375,7 @@ impl LookOptions {
         let ceiling_radiance = [r.ceiling_radiance.sample(rng); 3];
         let floor_radiance = [r.floor.sample(rng); 3];
         let n_panels = r.panels.sample(rng).round().max(0.0) as usize;
-        let panels = (0..n_panels)
+        let mut panels: Vec<CeilingPanel> = (0..n_panels)
             .map(|_| {
                 let l = r.panel_radiance.sample(rng);
                 CeilingPanel {
@@ -394,6 +399,13 @@ impl LookOptions {
             }
         });
         let table_half = r.table_half.sample(rng);
+        // The panels' colours last, so that the room's other draws stay those drawn before
+        // panels had colours.
+        for panel in &mut panels {
+            let w = r.panel_warmth.sample(rng);
+            let l = panel.radiance[1];
+            panel.radiance = [l * (1.0 - 0.25 * w), l, l * (1.0 + 0.25 * w)];
+        }
         let mut room = Room {
             eye,
             half_size,
@@ -451,4 +463,51 @@ fn albedos(scene: &SampledScene) -> ((f64, f64), [f64; 3]) {
         .table
         .map_or([0.3; 3], |t| t.appearance.base_color);
     (board, table)
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::SeedableRng;
+
+    use super::*;
+
+    fn inside(r: Range, x: f64) -> bool {
+        (r.lo - 1e-9..=r.hi + 1e-9).contains(&x)
+    }
+
+    #[test]
+    fn panels_are_drawn_in_colour_and_brightness_within_their_ranges() {
+        let look = LookOptions::default();
+        let r = &look.room;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let (mut warm, mut cool, mut seen) = (0, 0, Vec::new());
+        for _ in 0..40 {
+            let room = look.draw_room(
+                Point3::new(0.0, 0.0, 0.005),
+                Point3::new(0.0, 0.0, 1.6),
+                &[],
+                (0.78, 0.035),
+                [0.3; 3],
+                0.0,
+                &mut rng,
+            );
+            for p in &room.panels {
+                let [red, green, blue] = p.radiance;
+                assert!(inside(r.panel_radiance, green), "{green}");
+                // Red and blue move against each other by the drawn warmth w:
+                // red = (1 − w / 4) green, blue = (1 + w / 4) green.
+                let w = 4.0 * (1.0 - red / green);
+                assert!(inside(r.panel_warmth, w), "warmth {w}");
+                assert!((blue / green - (1.0 + 0.25 * w)).abs() < 1e-12);
+                warm += usize::from(w < -0.5);
+                cool += usize::from(w > 0.3);
+                seen.push(green);
+            }
+        }
+        assert!(warm > 5 && cool > 5, "{warm} warm, {cool} cool panels");
+        let (lo, hi) = seen
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(l, h), g| (l.min(*g), h.max(*g)));
+        assert!(lo < 1.5 && hi > 4.5, "panel radiance {lo}–{hi}");
+    }
 }
