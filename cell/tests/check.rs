@@ -227,3 +227,46 @@ fn a_negative_gripper_actuation_time_is_rejected_at_its_line() {
         "{stderr}"
     );
 }
+
+/// The cell's contact force limit: above the arm's protective stop it is refused where it
+/// stands; below a force-guided insertion's `contact_force` it refuses that, naming both.
+#[test]
+fn a_contact_force_beyond_the_cells_limit_is_located() {
+    let with_limit = |max: &str| {
+        nominal_text().replacen(
+            "max_joint_acceleration = 6.0",
+            &format!("max_joint_acceleration = 6.0\nmax_contact_force = {max}"),
+            1,
+        ) + "\n[force_insertion]\ncontact_force = 12.0\n"
+    };
+    let text = with_limit("200.0");
+    let path = variant("force_limit", &text);
+    let err = Scenario::load(&path).unwrap_err();
+    std::fs::remove_file(&path).ok();
+    let p = &err.0[0];
+    assert_eq!(
+        p.key.as_deref(),
+        Some("cell.limits.max_contact_force"),
+        "{err}"
+    );
+    assert_eq!(p.line, line_of(&text, "max_contact_force = 200.0"), "{err}");
+    assert!(p.message.contains("protective stop"), "{err}");
+
+    let text = with_limit("10.0");
+    let path = variant("force_over", &text);
+    let err = Scenario::load(&path).unwrap_err();
+    std::fs::remove_file(&path).ok();
+    let p = &err.0[0];
+    assert_eq!(
+        p.key.as_deref(),
+        Some("force_insertion.contact_force"),
+        "{err}"
+    );
+    assert_eq!(p.line, line_of(&text, "contact_force = 12.0"), "{err}");
+    assert!(p.message.contains("max_contact_force (10 N)"), "{err}");
+
+    let path = variant("force_ok", &with_limit("20.0"));
+    let loaded = Scenario::load(&path);
+    std::fs::remove_file(&path).ok();
+    assert_eq!(loaded.unwrap().spec.cell.limits.max_contact_force, 20.0);
+}

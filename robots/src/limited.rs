@@ -6,7 +6,8 @@
 //! along its curved joint-space path (sampled from the measured joints to the target) against the
 //! workspace box; a linear move for the target in the box (convex, so the straight line stays
 //! inside) and the TCP speed and acceleration; a guarded move (`move_until_contact`) as a linear
-//! move, and its force limit positive and at most [`MAX_CONTACT_FORCE`]. A blended path
+//! move, and its force limit positive and at most the cell's `max_contact_force` (itself at most
+//! [`MAX_CONTACT_FORCE`]). A blended path
 //! ([`Robot::move_path`]) is checked by [`check_path`]: every via-point as the move to it, every
 //! blend radius at most half of either segment it blends, and the blended motion itself, run on
 //! the virtual UR's arm model and sampled every millisecond, for joint range, speed and
@@ -29,8 +30,10 @@ use crate::virtual_ur::path::{PathCycle, execute_path, via_points, waypoint_move
 /// default safety limit), which would stop it first.
 pub const MAX_CONTACT_FORCE: f64 = crate::virtual_ur::force::PROTECTIVE_STOP_FORCE;
 
-/// Checks a guarded move's force limit: finite, positive, at most [`MAX_CONTACT_FORCE`].
-pub fn check_contact_force(force_limit: f64) -> Result<(), LimitViolation> {
+/// Checks a guarded move's force limit: finite, positive, at most `max` (the cell's
+/// `max_contact_force`) and at most [`MAX_CONTACT_FORCE`].
+pub fn check_contact_force(force_limit: f64, max: f64) -> Result<(), LimitViolation> {
+    let max = max.min(MAX_CONTACT_FORCE);
     if !force_limit.is_finite() {
         return Err(LimitViolation::NonFinite {
             what: "contact force limit",
@@ -42,10 +45,10 @@ pub fn check_contact_force(force_limit: f64) -> Result<(), LimitViolation> {
             value: force_limit,
         });
     }
-    if force_limit > MAX_CONTACT_FORCE {
+    if force_limit > max {
         return Err(LimitViolation::ContactForce {
             requested: force_limit,
-            max: MAX_CONTACT_FORCE,
+            max,
         });
     }
     Ok(())
@@ -322,7 +325,7 @@ impl<R: Robot> Robot for Limited<R> {
         force_limit: f64,
     ) -> RobotFuture<'_, ContactOutcome> {
         Box::pin(async move {
-            check_contact_force(force_limit)?;
+            check_contact_force(force_limit, self.limits.max_contact_force)?;
             self.limits.check_move_l(&base_T_tcp, &motion)?;
             self.inner
                 .move_until_contact(base_T_tcp, motion, force_limit)

@@ -62,6 +62,15 @@ pub struct Limits {
     /// Joint position limits (rad); ±2π when omitted.
     #[serde(default)]
     pub joint_positions: JointLimits,
+    /// Largest force limit a guarded move may ask for (N): what the cell's parts and fixture
+    /// may take; the arm's own protective stop force (150 N) when omitted, and never above it.
+    #[serde(default = "default_max_contact_force")]
+    pub max_contact_force: f64,
+}
+
+/// The arm's protective stop force: a guarded move never asks for more.
+fn default_max_contact_force() -> f64 {
+    crate::virtual_ur::force::PROTECTIVE_STOP_FORCE
 }
 
 impl Default for Limits {
@@ -79,6 +88,7 @@ impl Default for Limits {
             max_joint_speed: PI,
             max_joint_acceleration: 2.0 * PI,
             joint_positions: JointLimits::default(),
+            max_contact_force: default_max_contact_force(),
         }
     }
 }
@@ -115,7 +125,7 @@ pub enum LimitViolation {
         /// The requested value.
         value: f64,
     },
-    /// A guarded move's force limit over the largest the arm allows.
+    /// A guarded move's force limit over the cell's (or the arm's protective stop).
     #[error("contact force limit {requested:.1} N exceeds the limit {max:.1} N")]
     ContactForce {
         /// Requested (N).
@@ -287,6 +297,15 @@ impl Limits {
             if !(value.is_finite() && value > 0.0) {
                 return bad(field, format!("{value} is not a positive finite number"));
             }
+        }
+        let (force, stop) = (self.max_contact_force, default_max_contact_force());
+        if !(force.is_finite() && force > 0.0 && force <= stop) {
+            return bad(
+                "max_contact_force",
+                format!(
+                    "must be positive and at most the arm's protective stop force ({stop} N), got {force} N"
+                ),
+            );
         }
         let j = &self.joint_positions;
         for i in 0..6 {

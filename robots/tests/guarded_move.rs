@@ -3,6 +3,7 @@
 
 use nalgebra::{Isometry3, Translation3};
 use robots::kinematics::UrKinematics;
+use robots::limits::LimitViolation;
 use robots::robot::{JointMotion, LinearMotion, Robot, RobotError};
 use robots::ur_robot::{UrRobot, UrRobotConfig};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
@@ -35,6 +36,8 @@ async fn a_guarded_move_stops_on_the_table_within_a_millimetre_and_reports_the_f
         ..UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e())
     };
     config.limits.workspace.min[2] = -0.02;
+    // What this cell's parts may take: below the arm's own 150 N protective stop.
+    config.limits.max_contact_force = 30.0;
     let mut robot = UrRobot::connect(config).await.unwrap();
     robot
         .move_j(
@@ -75,15 +78,22 @@ async fn a_guarded_move_stops_on_the_table_within_a_millimetre_and_reports_the_f
     assert!(!up.contact, "{up:?}");
     assert!((up.stopped_at.translation.z - 0.004).abs() < 1e-6, "{up:?}");
 
-    // A force limit beyond the arm's protective stop never leaves the client; one that reaches
-    // the program unchecked is refused there, and the arm does not move.
+    // A force limit beyond the cell's limit, or the arm's protective stop, never leaves the
+    // client; one that reaches the program unchecked is refused there, and the arm does not move.
     let before = robot.tcp_pose().await.unwrap();
-    assert!(matches!(
-        robot
-            .move_until_contact(above_table(-0.005), CONTACT, 200.0)
-            .await,
-        Err(RobotError::LimitViolation(_))
-    ));
+    for (asked, max) in [(40.0, 30.0), (200.0, 30.0)] {
+        let refused = robot
+            .move_until_contact(above_table(-0.005), CONTACT, asked)
+            .await;
+        assert!(
+            matches!(
+                &refused,
+                Err(RobotError::LimitViolation(LimitViolation::ContactForce { requested, max: m }))
+                    if *requested == asked && *m == max
+            ),
+            "{refused:?}"
+        );
+    }
     let refused = robot
         .inner_mut()
         .move_until_contact(above_table(-0.005), CONTACT, f64::NAN)

@@ -17,6 +17,7 @@ fn cell_limits() -> Limits {
         max_joint_speed: 1.0,
         max_joint_acceleration: 2.0,
         joint_positions: JointLimits::default(),
+        max_contact_force: 50.0,
     }
 }
 
@@ -229,4 +230,37 @@ fn violations_convert_into_robot_errors() {
     .into();
     assert!(matches!(err, RobotError::LimitViolation(_)));
     assert!(err.to_string().contains("exceeds the limit"), "{err}");
+}
+
+/// The cell's contact force limit: positive and at most the arm's protective stop force, and a
+/// guarded move's force limit is checked against it.
+#[test]
+fn the_contact_force_limit_is_the_cells_and_never_above_the_protective_stop() {
+    use robots::limited::{MAX_CONTACT_FORCE, check_contact_force};
+    let limits = cell_limits();
+    limits.validate().unwrap();
+    check_contact_force(50.0, limits.max_contact_force).unwrap();
+    assert_eq!(
+        check_contact_force(50.5, limits.max_contact_force),
+        Err(LimitViolation::ContactForce {
+            requested: 50.5,
+            max: 50.0
+        })
+    );
+    // A cell limit above the arm's own stop is capped by it.
+    assert!(matches!(
+        check_contact_force(151.0, 1.0e3),
+        Err(LimitViolation::ContactForce { max, .. }) if max == MAX_CONTACT_FORCE
+    ));
+    for bad in [0.0, -1.0, f64::NAN, MAX_CONTACT_FORCE + 1.0] {
+        let refused = Limits {
+            max_contact_force: bad,
+            ..cell_limits()
+        }
+        .validate()
+        .unwrap_err();
+        assert_eq!(refused.field, "max_contact_force", "{bad}: {refused:?}");
+    }
+    // Omitted in a file: the protective stop force.
+    assert_eq!(Limits::default().max_contact_force, MAX_CONTACT_FORCE);
 }

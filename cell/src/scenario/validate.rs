@@ -34,7 +34,7 @@ fn non_negative(issues: &mut Issues, path: KeyPath, value: f64, what: &str) {
 fn force_insertion(spec: &ScenarioSpec, f: &super::ForceInsertionSpec, issues: &mut Issues) {
     use robots::virtual_ur::force::UR5E_FORCE_PRECISION;
     let key = |k: &str| root().key("force_insertion").key(k);
-    let max_force = robots::limited::MAX_CONTACT_FORCE;
+    let max_force = spec.cell.limits.max_contact_force;
     if !(f.contact_force.is_finite()
         && f.contact_force > UR5E_FORCE_PRECISION
         && f.contact_force <= max_force)
@@ -43,7 +43,7 @@ fn force_insertion(spec: &ScenarioSpec, f: &super::ForceInsertionSpec, issues: &
             key("contact_force"),
             format!(
                 "contact_force must be above the wrist sensor's precision ({UR5E_FORCE_PRECISION} N) \
-                 and at most {max_force} N, got {}",
+                 and at most cell.limits.max_contact_force ({max_force} N), got {}",
                 f.contact_force
             ),
         ));
