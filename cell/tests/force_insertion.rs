@@ -412,6 +412,24 @@ async fn force_guided_nominal_episodes_assemble_and_log_their_readings() {
             }
         }
     }
+    // The rims were swept once per step, for all five episodes, and a cold sweep reads the
+    // same: the last episode again on a fresh set-up records the same steps and traces.
+    let rims = &setup.engine.rims;
+    assert_eq!((rims.swept(), rims.lookups()), (3, 15));
+    let warm = run_sim_episode(&setup, 4).await.unwrap();
+    let fresh = SimSetup::new(setup.scenario().clone()).unwrap();
+    let cold = run_sim_episode(&fresh, 4).await.unwrap();
+    assert_eq!(fresh.engine.rims.swept(), 3);
+    assert_eq!(warm.record.steps, cold.record.steps);
+    let traces = |o: &cell::orchestrator::EpisodeOutput| -> Vec<_> {
+        o.events
+            .events()
+            .iter()
+            .filter_map(|e| e.wrench_trace.clone())
+            .collect()
+    };
+    assert_eq!(traces(&warm), traces(&cold));
+    assert!(traces(&warm).iter().all(|t| !t.landings_mm.is_empty()));
     // An event file from before traces were kept still loads, without one.
     let old: cell::orchestrator::Event = serde_json::from_str(
         r#"{"episode":0,"step":0,"from":"insert","to":"verify","sim_time_s":3.2,"wall_time_s":0.1,"detail":"force-guided: ..."}"#,
@@ -648,9 +666,25 @@ fn replay_plots_the_wrench_trace_of_each_force_guided_insertion() {
         let name = format!("episode-000000-step-{step}-insertion-1-wrench.svg");
         assert!(t.contains(&name), "{t}");
         let svg = std::fs::read_to_string(dir.join("pictures").join(&name)).unwrap();
-        for text in ["seat band 0.200 mm", "stop at 10.0 N", "planned descent"] {
+        for text in [
+            "seat band 0.200 mm",
+            "top of the receiver from",
+            "miss lands here",
+            "stop at 10.0 N",
+            "planned descent",
+        ] {
             assert!(svg.contains(text), "{name}: {text} missing");
         }
+        // The legend's heights are the event's own landing bands.
+        let trace = events
+            .lines()
+            .filter_map(|l| serde_json::from_str::<cell::orchestrator::Event>(l).ok())
+            .filter(|e| e.step == Some(step))
+            .find_map(|e| e.wrench_trace)
+            .unwrap();
+        let first = trace.landings_mm[0];
+        let band = format!("{:.3}–{:.3}", first[0], first[1]);
+        assert!(svg.contains(&band), "{name}: {band} missing");
     }
 }
 

@@ -8,6 +8,7 @@ use perception::part::Catalog;
 use robots::kinematics::Joints;
 
 use super::geometry::{CellKnowledge, KnowledgeError};
+use super::insertion::RimCache;
 use super::planning::PlanningConfig;
 use super::selection::SelectionConfig;
 use super::state::Timeouts;
@@ -58,6 +59,9 @@ pub struct Setup {
     pub knowledge: Arc<CellKnowledge>,
     /// Policies.
     pub settings: EpisodeSettings,
+    /// Force-guided insertion's rim landings, swept once per step and receiver state for all
+    /// the episodes (clones of the set-up share them).
+    pub rims: Arc<RimCache>,
 }
 
 impl Setup {
@@ -74,6 +78,7 @@ impl Setup {
             scenario,
             knowledge,
             settings,
+            rims: Arc::default(),
         })
     }
 
@@ -91,6 +96,7 @@ impl Setup {
             max_insertion_attempts: spec.policy.max_insertion_attempts.max(1),
             force: spec.force_insertion.as_ref(),
             seat_check: spec.seat_check.as_ref(),
+            rims: &self.rims,
         }
     }
 }
@@ -118,4 +124,6 @@ pub struct EpisodeContext<'a> {
     pub force: Option<&'a crate::scenario::ForceInsertionSpec>,
     /// Seat verification by camera, when the scenario enables it (`[seat_check]`).
     pub seat_check: Option<&'a crate::scenario::SeatCheckSpec>,
+    /// Force-guided insertion's rim landings, shared by the scenario's episodes.
+    pub rims: &'a RimCache,
 }

@@ -836,7 +836,7 @@ impl<'a> Engine<'a> {
         let capture = s.clearance / 2.0 + s.lead_in;
         let held = self.step.selection.as_ref();
         let rims = match held.and_then(|sel| k.part(&sel.detection.part)) {
-            Some(g) => insertion::rim_landings(
+            Some(g) => self.ctx.rims.landings(
                 g,
                 &k.base_T_targets[self.index],
                 &k.base_T_insertions[self.index],

@@ -22,6 +22,10 @@
 //! lateral offset) within `policy.max_insertion_attempts`, and never releases a part that was
 //! not confirmed seated.
 
+use std::collections::HashMap;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use nalgebra::{Isometry3, Translation3, Vector3};
 use robots::robot::{ContactOutcome, ContactSample, LinearMotion, Robot, RobotError};
 use sim::cell::geometry::PartGeometry;
@@ -87,6 +91,127 @@ pub fn rim_landings(
         placed.iter().map(|(g, t)| (*g, ins_T_base * t)).collect();
     let sweep = Sweep::new(held, &(ins_T_base * base_T_part), &receivers);
     RimLandings::of(&sweep, capture, seat_band, rim_tolerance(lead_in))
+}
+
+/// [`rim_landings`] computed once per step and receiver state and reused: by the step's
+/// insertion attempts (each with its spiral probes), and by every episode of a scenario that
+/// reaches the same step with the same parts in place (they are placed at their nominal poses,
+/// so every episode that gets there sees the same state). One sweep costs 5–25 ms in release;
+/// a lookup costs the key's comparison.
+///
+/// The key is everything the sweep reads, exactly (names, the bits of every pose and length),
+/// so a reused value is the value the sweep would return.
+#[derive(Debug, Default)]
+pub struct RimCache {
+    entries: Mutex<HashMap<RimKey, RimLandings>>,
+    lookups: AtomicUsize,
+}
+
+/// What [`rim_landings`] reads: the part names (held first, then the parts in place in order),
+/// and the bits of the poses and lengths.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct RimKey {
+    names: Vec<String>,
+    bits: Vec<u64>,
+}
+
+impl RimKey {
+    #[allow(non_snake_case)]
+    fn new(
+        held: &PartGeometry,
+        base_T_part: &Isometry3<f64>,
+        base_T_ins: &Isometry3<f64>,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+        (capture, lead_in): (f64, f64),
+        seat_band: f64,
+    ) -> Self {
+        fn pose(bits: &mut Vec<u64>, t: &Isometry3<f64>) {
+            let q = t.rotation.coords;
+            bits.extend(
+                t.translation
+                    .vector
+                    .iter()
+                    .chain(q.iter())
+                    .map(|v| v.to_bits()),
+            );
+        }
+        let mut bits = Vec::with_capacity(7 * (2 + placed.len()) + 3);
+        pose(&mut bits, base_T_part);
+        pose(&mut bits, base_T_ins);
+        for (_, t) in placed {
+            pose(&mut bits, t);
+        }
+        bits.extend([capture, lead_in, seat_band].map(f64::to_bits));
+        let names = std::iter::once(&held.name)
+            .chain(placed.iter().map(|(g, _)| &g.name))
+            .cloned()
+            .collect();
+        Self { names, bits }
+    }
+}
+
+impl RimCache {
+    /// [`rim_landings`] of these arguments: swept the first time they are asked for, the
+    /// same value again after that.
+    #[allow(non_snake_case)]
+    pub fn landings(
+        &self,
+        held: &PartGeometry,
+        base_T_part: &Isometry3<f64>,
+        base_T_ins: &Isometry3<f64>,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+        capture_lead_in: (f64, f64),
+        seat_band: f64,
+    ) -> RimLandings {
+        self.lookups.fetch_add(1, Ordering::Relaxed);
+        let key = RimKey::new(
+            held,
+            base_T_part,
+            base_T_ins,
+            placed,
+            capture_lead_in,
+            seat_band,
+        );
+        if let Some(r) = self.lock().get(&key) {
+            return r.clone();
+        }
+        // Swept outside the lock: episodes on other threads looking up other steps do not
+        // wait; two that miss the same key at once both sweep it, to the same value.
+        let start = std::time::Instant::now();
+        let rims = rim_landings(
+            held,
+            base_T_part,
+            base_T_ins,
+            placed,
+            capture_lead_in,
+            seat_band,
+        );
+        tracing::debug!(
+            part = %held.name,
+            in_place = placed.len(),
+            "rim landings swept in {:.1} ms",
+            start.elapsed().as_secs_f64() * 1e3
+        );
+        self.lock().entry(key).or_insert(rims).clone()
+    }
+
+    /// How many distinct steps and receiver states have been swept.
+    pub fn swept(&self) -> usize {
+        self.lock().len()
+    }
+
+    /// How many times rim landings have been asked for.
+    pub fn lookups(&self) -> usize {
+        self.lookups.load(Ordering::Relaxed)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<RimKey, RimLandings>> {
+        // A sweep never panics while holding the lock (it runs outside it), so a poisoned map
+        // is still whole.
+        self.entries
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
 }
 
 /// How far a first contact may lie from where a rim was swept and still read as that rim, metres:
