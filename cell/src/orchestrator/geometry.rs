@@ -193,6 +193,57 @@ impl CellKnowledge {
         d
     }
 
+    /// An upper bound on how far any point of the gripper (fingers, palm) or the held part lies
+    /// from any joint axis of the arm, metres: the arm's link lengths and offsets, the TCP
+    /// offset and [`Self::gripper_reach`]. A joint move's points travel at most this far per
+    /// radian of summed joint travel.
+    pub fn arm_reach(&self, held: Option<(&PartGeometry, &Isometry3<f64>)>) -> f64 {
+        let d = &self.dh;
+        [d.d1, d.a2, d.a3, d.d4, d.d5, d.d6]
+            .iter()
+            .map(|v| v.abs())
+            .sum::<f64>()
+            + self.spec.gripper.tcp_offset.abs()
+            + self.gripper_reach(held)
+    }
+
+    /// How far from the TCP any point of the gripper (fingers at full stroke, palm) or the held
+    /// part (`tcp_T_part`) lies, metres.
+    #[allow(non_snake_case)]
+    pub fn gripper_reach(&self, held: Option<(&PartGeometry, &Isometry3<f64>)>) -> f64 {
+        let g = &self.spec.gripper;
+        // The palm box spans up to finger_length + 0.04 above the fingertips, ±0.02 across.
+        let gripper = (g.finger_length + 0.04)
+            .hypot(0.02)
+            .hypot(g.stroke / 2.0 + g.finger_thickness)
+            .max(
+                g.finger_length
+                    .hypot(g.stroke / 2.0 + g.finger_thickness)
+                    .hypot(g.finger_width),
+            );
+        held.map_or(gripper, |(p, tcp_T_part)| {
+            p.mesh
+                .vertices
+                .iter()
+                .map(|v| (tcp_T_part * v).coords.norm())
+                .fold(gripper, f64::max)
+        })
+    }
+
+    /// The highest point above the table (table z) of `shapes` at their poses (base frame),
+    /// from their meshes; `None` when there are none.
+    #[allow(non_snake_case)]
+    pub fn highest_top(&self, shapes: &[(&PartGeometry, Isometry3<f64>)]) -> Option<f64> {
+        let table_T_base = self.geometry.base_T_table.inverse();
+        shapes
+            .iter()
+            .flat_map(|(g, t)| {
+                let table_T_part = table_T_base * t;
+                g.mesh.vertices.iter().map(move |v| (table_T_part * v).z)
+            })
+            .reduce(f64::max)
+    }
+
     /// Lowest height above the table (table z) of the fingertips and the held part at a TCP pose.
     #[allow(non_snake_case)]
     pub fn lowest_height(

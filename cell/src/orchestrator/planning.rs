@@ -178,6 +178,24 @@ fn raised(pose: &Isometry3<f64>, h: f64) -> Isometry3<f64> {
     Translation3::new(0.0, 0.0, h) * pose
 }
 
+/// The finest step of the clearance search along a motion: how far any point of the gripper or
+/// held part moves between two checks where the clearance is within this of the margin, metres.
+/// The clearance between checks is at least the margin less this.
+const CLEARANCE_RESOLUTION: f64 = 1e-5;
+
+/// Rounding allowed on the margin, metres: a fast descent ends exactly `slow_distance` above
+/// what it goes into, which the distance query returns to within this.
+const MARGIN_ROUNDING: f64 = 1e-6;
+
+/// A motion's TCP path, for [`Planner::check_clear`].
+#[derive(Clone, Copy)]
+enum TcpPath<'p> {
+    /// A joint move: the joints interpolated linearly.
+    Joint(&'p Joints, &'p Joints),
+    /// A straight-line move: translation interpolated linearly, rotation by slerp.
+    Line(&'p Isometry3<f64>, &'p Isometry3<f64>),
+}
+
 /// The way down to just above a goal ([`Planner::down_to`]): its motions and the joints at
 /// the pose just above the goal and at the higher pose the arm returns to.
 struct Descent {
@@ -286,15 +304,70 @@ impl Planner<'_> {
                     distance_mm: low * 1e3,
                 });
             }
-            for (g, base_T_obstacle) in placed {
-                let d = k.gripper_distance(&tcp, held, g.hull.as_ref(), base_T_obstacle);
-                if d < self.config.transit_margin {
+        }
+        self.check_clear(waypoint, TcpPath::Joint(from, to), held, placed, false)
+    }
+
+    /// Checks that the gripper (fingers at full stroke, palm) and the held part keep
+    /// `transit_margin` from every shape in `placed` along the whole of `path`, not only at
+    /// samples: from each checked point the search advances as far as no point of them can
+    /// close the clearance left above the margin (a bound on their speed along the path:
+    /// [`CellKnowledge::arm_reach`] per radian of a joint move, the line's length plus its turn
+    /// times [`CellKnowledge::gripper_reach`] for a straight line), and at least
+    /// [`CLEARANCE_RESOLUTION`]. `leaving`: a shape already within the margin where the path
+    /// starts (the part just released, on a retreat) is not checked.
+    fn check_clear(
+        &self,
+        waypoint: &'static str,
+        path: TcpPath<'_>,
+        held: Option<Held<'_>>,
+        placed: &Placed<'_>,
+        leaving: bool,
+    ) -> Result<(), PlanError> {
+        let k = self.knowledge;
+        let margin = self.config.transit_margin;
+        let tcp_at = |s: f64| match path {
+            TcpPath::Joint(a, b) => {
+                let q: Joints = std::array::from_fn(|j| a[j] + s * (b[j] - a[j]));
+                k.kinematics.forward_tcp(&q)
+            }
+            TcpPath::Line(a, b) => a.lerp_slerp(b, s),
+        };
+        let rate = match path {
+            TcpPath::Joint(a, b) => {
+                (0..6).map(|j| (b[j] - a[j]).abs()).sum::<f64>() * k.arm_reach(held)
+            }
+            TcpPath::Line(a, b) => {
+                (b.translation.vector - a.translation.vector).norm()
+                    + a.rotation.angle_to(&b.rotation) * k.gripper_reach(held)
+            }
+        };
+        let start = tcp_at(0.0);
+        for (g, base_T_obstacle) in placed {
+            let clearance = |tcp: &Isometry3<f64>| {
+                k.gripper_distance(tcp, held, g.hull.as_ref(), base_T_obstacle)
+            };
+            if leaving && clearance(&start) < margin {
+                continue;
+            }
+            let mut s = 0.0;
+            loop {
+                let d = clearance(&tcp_at(s));
+                if d < margin - MARGIN_ROUNDING {
                     return Err(PlanError::Collision {
                         waypoint,
-                        what: format!("gripper or held part too close to {}", g.name),
+                        what: format!(
+                            "gripper or held part within the {:.1} mm transit margin of {}",
+                            margin * 1e3,
+                            g.name
+                        ),
                         distance_mm: d * 1e3,
                     });
                 }
+                if s >= 1.0 || rate <= 0.0 {
+                    break;
+                }
+                s = (s + (d - margin).max(CLEARANCE_RESOLUTION) / rate).min(1.0);
             }
         }
         Ok(())
@@ -358,6 +431,7 @@ impl Planner<'_> {
                     vec![(to_via, Motion::MoveJ(at_pre, s.joint))]
                 } else {
                     self.check_transit(to_via, start, &q_via, held, placed)?;
+                    self.check_clear(to_pre, TcpPath::Line(via, &pre), held, placed, false)?;
                     vec![
                         (to_via, Motion::MoveJ(q_via, s.joint)),
                         (to_pre, Motion::MoveL(pre, s.fast)),
@@ -392,10 +466,19 @@ impl Planner<'_> {
         feeder: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<Plan, PlanError> {
         let c = &self.config;
+        let k = self.knowledge;
         let grasp = selection.base_T_grasp;
-        // Raised by the blend radius (0 unless blending): a blended corner cuts it by at most
-        // that much.
-        let approach = raised(&grasp, c.clearance_height + c.blend_radius);
+        // The part as it will hang in the fingers.
+        let tcp_T_held = grasped_offset(&selection.tcp_T_part);
+        let held = k.part(&selection.detection.part).map(|g| (g, &tcp_T_held));
+        // High enough that the held part's lowest point (or the fingertips) clears the highest
+        // placed part by the margin and the slow distance, as the transfer above the target
+        // does; raised by the blend radius (0 unless blending): a blended corner cuts it by at
+        // most that much.
+        let over_placed = k.highest_top(placed).map_or(0.0, |top| {
+            top + c.transit_margin + c.slow_distance - k.lowest_height(&grasp, held)
+        });
+        let approach = raised(&grasp, c.clearance_height.max(over_placed) + c.blend_radius);
         let pre = raised(&grasp, c.slow_distance);
         let s = &self.speeds;
         let Descent {
@@ -417,6 +500,7 @@ impl Planner<'_> {
         }
         let q_grasp = self.ik("grasp", &grasp, &q_pre)?;
         self.check_arm("grasp", &q_grasp)?;
+        self.check_clear("lift", TcpPath::Line(&grasp, &approach), held, placed, true)?;
         motions.extend([
             ("grasp", Motion::MoveL(grasp, s.slow)),
             ("close", Motion::Close),
@@ -474,6 +558,14 @@ impl Planner<'_> {
         )?;
         let q_insert = self.ik("insert", &insert, &q_pre)?;
         self.check_arm("insert", &q_insert)?;
+        // The fingers leave the released part (not in `placed`) and the receiver they straddle.
+        self.check_clear(
+            "retreat",
+            TcpPath::Line(&insert, &transfer),
+            None,
+            placed,
+            true,
+        )?;
         motions.extend([
             ("insert", Motion::MoveL(insert, s.slow)),
             ("release", Motion::Open(opening)),
