@@ -1038,9 +1038,8 @@ impl<'a> Engine<'a> {
             true_offset_mm: None,
         };
         if let Some(what) = arm_in_fixture_view(k, &q, None) {
-            let why = format!(
-                "seat check refused: the {what} is in the camera's view of the fixture"
-            );
+            let why =
+                format!("seat check refused: the {what} is in the camera's view of the fixture");
             self.step.seat_check = Some(refused);
             return Ok(Some((StepOutcome::Aborted, why)));
         }

@@ -49,10 +49,10 @@ mod geometry;
 pub mod insertion;
 mod planning;
 mod production;
+pub mod seat_check;
 mod selection;
 mod state;
 mod step;
-pub mod seat_check;
 pub mod view;
 
 pub use activity::Activity;
