@@ -22,7 +22,7 @@ use perception::{Camera, Frame, FrameContent};
 use robots::kinematics::Joints;
 
 use super::geometry::CellKnowledge;
-use super::view::{arm_in_feeder_view, shadow_hits, spheres};
+use super::view::{arm_in_feeder_view, arm_in_view_of};
 use crate::episode::{SeatCheckRecord, SeatCheckVerdict};
 use crate::scenario::SeatCheckSpec;
 
@@ -130,19 +130,12 @@ fn fixture_rect(k: &CellKnowledge) -> ([f64; 2], [f64; 2]) {
 /// ([`super::view::arm_in_feeder_view`]): capsules around the links from the joints and the
 /// planning kinematics, against the pyramid from the calibrated camera to the fixture's
 /// footprint with a margin.
-#[allow(non_snake_case)]
 pub fn arm_in_fixture_view(
     k: &CellKnowledge,
     q: &Joints,
     held: Option<f64>,
 ) -> Option<&'static str> {
-    let table_T_base = k.geometry.base_T_table.inverse();
-    let camera = table_T_base * Point3::from(k.geometry.base_T_camera_nominal.translation.vector);
-    let (center, half) = fixture_rect(k);
-    spheres(k, q, held)
-        .into_iter()
-        .find(|(_, p, r)| shadow_hits(&camera, p, *r, center, half))
-        .map(|(name, _, _)| name)
+    arm_in_view_of(k, q, held, fixture_rect(k))
 }
 
 /// Sideways steps tried from the retreat, metres.

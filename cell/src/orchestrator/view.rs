@@ -72,15 +72,26 @@ fn feeder_rect(k: &CellKnowledge) -> ([f64; 2], [f64; 2]) {
 /// The first part of the arm (or the held part) found in the camera's view of the feeder at
 /// joints `q`, by name; `None` when the view is clear. `held` is the radius of a held part's
 /// bounding sphere around the TCP, metres.
-#[allow(non_snake_case)]
 pub fn arm_in_feeder_view(
     k: &CellKnowledge,
     q: &Joints,
     held: Option<f64>,
 ) -> Option<&'static str> {
+    arm_in_view_of(k, q, held, feeder_rect(k))
+}
+
+/// The first part of the arm (or the held part) at joints `q` that shades the table rectangle
+/// `(centre, half size)` (table frame, metres) from the calibrated camera, by name; `None` when
+/// the camera sees all of it.
+#[allow(non_snake_case)]
+pub(super) fn arm_in_view_of(
+    k: &CellKnowledge,
+    q: &Joints,
+    held: Option<f64>,
+    (center, half): ([f64; 2], [f64; 2]),
+) -> Option<&'static str> {
     let table_T_base = k.geometry.base_T_table.inverse();
     let camera = table_T_base * Point3::from(k.geometry.base_T_camera_nominal.translation.vector);
-    let (center, half) = feeder_rect(k);
     spheres(k, q, held)
         .into_iter()
         .find(|(_, p, r)| shadow_hits(&camera, p, *r, center, half))
