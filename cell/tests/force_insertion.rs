@@ -330,6 +330,7 @@ async fn the_engine_never_releases_a_part_whose_seat_was_not_confirmed() {
     let setup = SimSetup::new(load_variant("refuse_noisy", &text).unwrap()).unwrap();
     let mut refused = 0;
     for episode in 0..12 {
+        // The cell is inspected after the episode, so it is built here, not by the harness.
         let mut cell = setup
             .model
             .limited(setup.sim_cell(episode).unwrap())
@@ -779,20 +780,7 @@ async fn a_step_given_up_after_the_search_is_blamed_on_the_error_that_put_it_off
     let setup = SimSetup::new(load_variant("blame_given_up", &text).unwrap()).unwrap();
     let mut given_up = 0;
     for episode in 0..6 {
-        let mut cell = setup
-            .model
-            .limited(setup.sim_cell(episode).unwrap())
-            .unwrap();
-        let mut perception = setup
-            .perception
-            .for_episode(setup.scenario(), episode)
-            .unwrap();
-        let out = cell::orchestrator::run_episode(
-            setup.engine.context(episode),
-            &mut cell,
-            &mut perception,
-        )
-        .await;
+        let out = run_sim_episode(&setup, episode).await.unwrap();
         for s in &out.record.steps {
             let cause = s.cause.clone().unwrap_or_default();
             if !cause.contains("not released") {
