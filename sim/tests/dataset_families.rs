@@ -242,3 +242,39 @@ fn a_hard_key_light_leaves_metal_tops_dark_where_the_soft_lights_do_not() {
         100.0 * d_soft
     );
 }
+
+#[test]
+fn under_the_room_look_the_key_light_dims_the_room_and_leaves_metal_tops_dark() {
+    // With `--environment room` the room replaces the key regime's dim sky: its ceiling panels
+    // would light the metal tops the key leaves dark. Under the key the room's lights are off
+    // (dimmed to the key's sky), so the hard regime keeps its dark tops in the room too.
+    let tmp = tempfile::tempdir().unwrap();
+    let models = support::usbc_models();
+    let run = |name: &str, key: f64| {
+        let out = tmp.path().join(name);
+        let mut cfg = tiny(out.clone());
+        cfg.crops_train = 0;
+        cfg.feeder_test = 4;
+        cfg.families = Families::from_list("lights").unwrap();
+        cfg.families.lights.key_probability = key;
+        cfg.look = Some(sim::dataset::LookOptions::default());
+        generate(&cfg, &models).unwrap();
+        metal_greys(&out, &models)
+    };
+    let (hard, soft) = (run("key", 1.0), run("soft", 0.0));
+    assert!(hard.len() >= 10 && soft.len() >= 10, "{hard:?} {soft:?}");
+    let dark = |g: &[f64]| g.iter().filter(|g| **g < 40.0).count() as f64 / g.len() as f64;
+    let median = |g: &[f64]| {
+        let mut g = g.to_vec();
+        g.sort_by(f64::total_cmp);
+        g[g.len() / 2]
+    };
+    let (d_hard, d_soft) = (dark(&hard), dark(&soft));
+    assert!(
+        d_hard >= 0.2 && d_hard >= 4.0 * d_soft && median(&hard) < 0.5 * median(&soft),
+        "metal parts below grey 40 in the room: {:.0} % under the key light ({hard:.0?}), \
+         {:.0} % under the soft lights ({soft:.0?})",
+        100.0 * d_hard,
+        100.0 * d_soft
+    );
+}

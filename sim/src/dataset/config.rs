@@ -254,10 +254,12 @@ pub(crate) fn apply_families(
 }
 
 /// Dresses `scene` in the configured look, if any, from the look stream of item (tag, index),
-/// with the run's shared rooms (baked on first use, once per seed and look).
+/// with the run's shared rooms (baked on first use, once per seed and look), its room dimmed to
+/// `key_sky` when the lights family drew its key regime ([`FamilyDraw::key_sky`]).
 pub(crate) fn apply_look(
     cfg: &DatasetConfig,
     scene: &mut crate::scene::SampledScene,
+    key_sky: Option<f64>,
     tag: u64,
     index: u64,
 ) {
@@ -270,7 +272,7 @@ pub(crate) fn apply_look(
         tag + LOOK_TAG,
         index,
     ));
-    look.apply(scene, pool.as_deref().map(Vec::as_slice), &mut rng);
+    look.apply(scene, pool.as_deref().map(Vec::as_slice), key_sky, &mut rng);
 }
 
 /// The shared rooms of a run's seed, look and randomisation, baked once.

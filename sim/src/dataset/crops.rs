@@ -174,7 +174,7 @@ pub(crate) fn write_crop_group(
             tag + 50_000,
             index as u64,
         );
-        apply_look(cfg, &mut scene, tag + 50_000, index as u64);
+        apply_look(cfg, &mut scene, draw.key_sky, tag + 50_000, index as u64);
         let camera_T_table = scene.table_T_camera.inverse();
         let part_centre = Point3::from(scene.parts[target].table_T_part.translation.vector);
         let c = cfg

@@ -256,22 +256,33 @@ impl Default for DistractorFamily {
     }
 }
 
-/// Sensor: wider gain, blur and noise than the randomisation's, and a white balance error.
+/// Sensor: wider gain, blur and noise than the randomisation's, and a white balance error. Per
+/// image one of two regimes: a clean one (`clean_probability` of the images: a camera at its
+/// base gain, whose noise is below 8-bit quantisation) and a noisy one (the other images:
+/// raised gain, read and shot noise up to several codes).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SensorFamily {
     /// Whether the family is on.
     pub enabled: bool,
-    /// Analogue gain.
+    /// Analogue gain (noisy regime).
     pub gain: Range,
-    /// Gaussian blur sigma, px.
+    /// Gaussian blur sigma, px (both regimes: optics, not the sensor).
     pub blur_sigma: Range,
-    /// Read noise standard deviation (full scale 1).
+    /// Read noise standard deviation (full scale 1; noisy regime).
     pub read_noise: Range,
-    /// Shot noise variance per unit signal.
+    /// Shot noise variance per unit signal (noisy regime).
     pub shot_noise: Range,
-    /// White balance multipliers of red and of blue relative to green.
+    /// White balance multipliers of red and of blue relative to green (both regimes).
     pub white_balance: Range,
+    /// Share of the images (0–1) taken in the clean regime.
+    pub clean_probability: f64,
+    /// Analogue gain of the clean regime (about base gain).
+    pub clean_gain: Range,
+    /// Read noise of the clean regime (full scale 1).
+    pub clean_read_noise: Range,
+    /// Shot noise variance per unit signal of the clean regime (1 / full-well electrons).
+    pub clean_shot_noise: Range,
 }
 
 impl Default for SensorFamily {
@@ -283,6 +294,10 @@ impl Default for SensorFamily {
             read_noise: Range::new(0.0, 0.02),
             shot_noise: Range::new(0.0, 0.005),
             white_balance: Range::new(0.88, 1.12),
+            clean_probability: 0.3,
+            clean_gain: Range::new(1.0, 1.2),
+            clean_read_noise: Range::new(0.0, 0.001),
+            clean_shot_noise: Range::new(0.0, 0.0002),
         }
     }
 }
@@ -297,17 +312,23 @@ pub struct FamilyError {
     pub message: String,
 }
 
-/// What the families drew for an image beyond its scene: the white balance its sensor applies.
+/// What the families drew for an image beyond its scene: the white balance its sensor applies,
+/// and the sky a look's room is dimmed to.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FamilyDraw {
     /// Per-channel white balance (red, green, blue); `[1, 1, 1]` without the sensor family.
     pub white_balance: [f64; 3],
+    /// When the lights family drew its hard key regime: the dim sky's radiance (green) it drew,
+    /// which a look's room is dimmed to (the room's own lights off, lit only by the key's
+    /// spill); `None` otherwise.
+    pub key_sky: Option<f64>,
 }
 
 impl Default for FamilyDraw {
     fn default() -> Self {
         Self {
             white_balance: [1.0; 3],
+            key_sky: None,
         }
     }
 }
@@ -391,7 +412,7 @@ impl Families {
             &self.distractors,
             &self.sensor,
         );
-        let ranges: [(&str, Range, f64, f64); 40] = [
+        let ranges: [(&str, Range, f64, f64); 44] = [
             ("lights.count", l.count, 0.0, 8.0),
             ("lights.height", l.height, 0.05, 100.0),
             ("lights.radius", l.radius, 0.0, 100.0),
@@ -442,6 +463,15 @@ impl Families {
             ("sensor.blur_sigma", s.blur_sigma, 0.0, 10.0),
             ("sensor.read_noise", s.read_noise, 0.0, 1.0),
             ("sensor.shot_noise", s.shot_noise, 0.0, 1.0),
+            (
+                "sensor.clean_probability",
+                Range::new(s.clean_probability, s.clean_probability),
+                0.0,
+                1.0,
+            ),
+            ("sensor.clean_gain", s.clean_gain, 1e-6, inf),
+            ("sensor.clean_read_noise", s.clean_read_noise, 0.0, 1.0),
+            ("sensor.clean_shot_noise", s.clean_shot_noise, 0.0, 1.0),
         ];
         let extra = [("sensor.white_balance", s.white_balance, 1e-3, 1e3)];
         for (key, range, min, max) in ranges.into_iter().chain(extra) {
@@ -467,7 +497,7 @@ impl Families {
         let mut draw = FamilyDraw::default();
         let rng = |k: u64| ChaCha8Rng::seed_from_u64(seed_of(k));
         if self.lights.enabled {
-            self.lights.apply(scene, focus, &mut rng(0));
+            draw.key_sky = self.lights.apply(scene, focus, &mut rng(0));
         }
         if self.plating.enabled {
             self.plating.apply(scene, models, &mut rng(1));
@@ -528,11 +558,16 @@ fn warmed(level: f64, w: f64) -> [f64; 3] {
 }
 
 impl LightFamily {
-    fn apply(&self, scene: &mut SampledScene, focus: Option<usize>, rng: &mut impl Rng) {
+    /// Draws the lights; returns the dim sky's radiance (green) when the key regime was drawn.
+    fn apply(
+        &self,
+        scene: &mut SampledScene,
+        focus: Option<usize>,
+        rng: &mut impl Rng,
+    ) -> Option<f64> {
         let centre = parts_centre(scene, focus);
         if self.key_probability > 0.0 && rng.random_bool(self.key_probability.min(1.0)) {
-            self.apply_key(scene, centre, rng);
-            return;
+            return Some(self.apply_key(scene, centre, rng));
         }
         let n = self.count.sample(rng).round().max(0.0) as usize;
         let share = 1.0 / n.max(1) as f64;
@@ -555,11 +590,12 @@ impl LightFamily {
         let sky = self.ambient.sample(rng);
         let w = self.warmth.sample(rng);
         scene.render.ambient = warmed(sky, w);
+        None
     }
 
     /// The hard regime: one small key light `key_angle` off the vertical through `centre`,
-    /// `key_distance` away, and a dim sky.
-    fn apply_key(&self, scene: &mut SampledScene, centre: Point3<f64>, rng: &mut impl Rng) {
+    /// `key_distance` away, and a dim sky (its green radiance is returned).
+    fn apply_key(&self, scene: &mut SampledScene, centre: Point3<f64>, rng: &mut impl Rng) -> f64 {
         let theta = self.key_angle.sample(rng).to_radians();
         let d = self.key_distance.sample(rng);
         let phi = rng.random_range(0.0..std::f64::consts::TAU);
@@ -578,6 +614,7 @@ impl LightFamily {
         }];
         let sky = e * self.key_ambient.sample(rng);
         scene.render.ambient = warmed(sky, self.warmth.sample(rng));
+        sky
     }
 }
 
@@ -790,11 +827,22 @@ impl DistractorFamily {
 
 impl SensorFamily {
     fn apply(&self, scene: &mut SampledScene, rng: &mut impl Rng) -> [f64; 3] {
+        let clean =
+            self.clean_probability > 0.0 && rng.random_bool(self.clean_probability.min(1.0));
+        let (gain, read, shot) = if clean {
+            (
+                self.clean_gain,
+                self.clean_read_noise,
+                self.clean_shot_noise,
+            )
+        } else {
+            (self.gain, self.read_noise, self.shot_noise)
+        };
         let s = &mut scene.sensor;
-        s.gain = self.gain.sample(rng);
+        s.gain = gain.sample(rng);
         s.blur_sigma = self.blur_sigma.sample(rng);
-        s.read_noise = self.read_noise.sample(rng);
-        s.shot_noise = self.shot_noise.sample(rng);
+        s.read_noise = read.sample(rng);
+        s.shot_noise = shot.sample(rng);
         [
             self.white_balance.sample(rng),
             1.0,
@@ -903,6 +951,100 @@ mod tests {
         f.lights.key_probability = 0.3;
         f.lights.key_angle = Range::new(40.0, 95.0);
         assert_eq!(f.validate().unwrap_err().key, "lights.key_angle");
+    }
+
+    #[test]
+    fn the_sensor_draws_its_clean_regime_in_its_share_of_the_images_and_the_noisy_one_else() {
+        // Clean ranges no noisy draw reaches, to tell the two regimes apart.
+        let family = SensorFamily {
+            enabled: true,
+            clean_gain: Range::new(0.5, 0.6),
+            ..SensorFamily::default()
+        };
+        let inside = |r: Range, x: f64| (r.lo..=r.hi).contains(&x);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let (mut clean, mut loud) = (0, 0);
+        for _ in 0..1000 {
+            let mut scene = one_part();
+            let wb = family.apply(&mut scene, &mut rng);
+            let s = scene.sensor;
+            assert!(inside(family.blur_sigma, s.blur_sigma), "{s:?}");
+            assert!(inside(family.white_balance, wb[0]) && inside(family.white_balance, wb[2]));
+            assert_eq!(wb[1], 1.0);
+            if s.gain < 1.0 {
+                clean += 1;
+                assert!(inside(family.clean_gain, s.gain), "{s:?}");
+                assert!(inside(family.clean_read_noise, s.read_noise), "{s:?}");
+                assert!(inside(family.clean_shot_noise, s.shot_noise), "{s:?}");
+            } else {
+                assert!(inside(family.gain, s.gain), "{s:?}");
+                assert!(inside(family.read_noise, s.read_noise), "{s:?}");
+                assert!(inside(family.shot_noise, s.shot_noise), "{s:?}");
+                loud += usize::from(s.read_noise > 0.01);
+            }
+        }
+        let share = clean as f64 / 1000.0;
+        assert!((share - family.clean_probability).abs() < 0.045, "{share}");
+        // The noisy regime keeps its whole range: half its draws above 0.01 read noise.
+        assert!(
+            loud > 250,
+            "{loud} of {} noisy draws above 0.01",
+            1000 - clean
+        );
+    }
+
+    #[test]
+    fn the_clean_regime_is_a_few_codes_of_noise_at_most_and_the_noisy_one_many() {
+        // At the defaults and mid grey (linear 0.2, sRGB code about 124, where one code is
+        // about 0.0035 linear), the clean regime's worst noise (a camera at base gain, full well
+        // of 5 000 electrons or more) is under 3 codes and it reaches none at all; the noisy
+        // regime's worst is over 20 codes.
+        let f = SensorFamily::default();
+        let sd = |gain: f64, read: f64, shot: f64| gain * (read * read + shot * 0.2).sqrt();
+        let code = 0.0035;
+        let clean = sd(
+            f.clean_gain.hi,
+            f.clean_read_noise.hi,
+            f.clean_shot_noise.hi,
+        );
+        let noisy = sd(f.gain.hi, f.read_noise.hi, f.shot_noise.hi);
+        assert!(clean < 3.0 * code, "clean regime: σ {clean}");
+        assert_eq!(
+            sd(
+                f.clean_gain.lo,
+                f.clean_read_noise.lo,
+                f.clean_shot_noise.lo
+            ),
+            0.0
+        );
+        assert!(noisy > 20.0 * code, "noisy regime: σ {noisy}");
+        assert!(f.clean_probability > 0.0 && f.clean_probability < 0.5);
+        let mut bad = Families::all();
+        bad.sensor.clean_probability = -0.1;
+        assert_eq!(bad.validate().unwrap_err().key, "sensor.clean_probability");
+        bad.sensor.clean_probability = 0.3;
+        bad.sensor.clean_read_noise = Range::new(0.002, 0.001);
+        assert_eq!(bad.validate().unwrap_err().key, "sensor.clean_read_noise");
+    }
+
+    #[test]
+    fn the_key_regime_reports_its_dim_sky_and_the_soft_one_nothing() {
+        let mut family = LightFamily {
+            enabled: true,
+            key_probability: 1.0,
+            ..LightFamily::default()
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        for _ in 0..50 {
+            let mut scene = one_part();
+            let sky = family
+                .apply(&mut scene, None, &mut rng)
+                .expect("a key draw");
+            assert_eq!(sky, scene.render.ambient[1]);
+        }
+        family.key_probability = 0.0;
+        let mut scene = one_part();
+        assert_eq!(family.apply(&mut scene, None, &mut rng), None);
     }
 
     #[test]

@@ -94,7 +94,13 @@ pub(crate) fn write_feeder(
         20 + split.code(),
         index as u64,
     );
-    apply_look(cfg, &mut scene, 20 + split.code(), index as u64);
+    apply_look(
+        cfg,
+        &mut scene,
+        draw.key_sky,
+        20 + split.code(),
+        index as u64,
+    );
     let (lo_p, hi_p) = scene.footprint(models, FEEDER_MARGIN);
     let window = window_covering(&cfg.camera, &scene.table_T_camera, &lo_p, &hi_p)
         .ok_or_else(|| DatasetError::Config(format!("feeder frame {index}: parts not in view")))?;

@@ -239,11 +239,15 @@ impl LookOptions {
     /// Dresses `scene` in the look, drawing from `rng` (a stream of its own): the room as its
     /// environment (one of `pool` when given and the plate is not backlit, else one drawn for
     /// it, seen from the middle of its parts), the area lights appended to its lights, and the
-    /// backlight.
+    /// backlight. With `key_sky` (the lights family's hard key regime and the dim sky it drew),
+    /// the room's lights are off: the room and the area lights are dimmed together so that the
+    /// room's irradiance / π on the table is that sky (never brightened), as the room the key
+    /// lights only by its spill; the draws are those of the undimmed look.
     pub fn apply(
         &self,
         scene: &mut SampledScene,
         pool: Option<&[Arc<Environment>]>,
+        key_sky: Option<f64>,
         rng: &mut impl Rng,
     ) {
         let eye = {
@@ -257,6 +261,7 @@ impl LookOptions {
             scene.render.lights.clear();
         }
         let a = &self.area_lights;
+        let first_area = scene.render.lights.len();
         let count = a.count.sample(rng).round().max(0.0) as usize;
         for _ in 0..count {
             let (su, sv) = (a.size.sample(rng), a.size.sample(rng));
@@ -285,6 +290,7 @@ impl LookOptions {
         if !self.room.enabled {
             return;
         }
+        let dim_to = key_sky.filter(|s| s.is_finite() && *s >= 0.0);
         let pick = pool
             .filter(|p| !p.is_empty())
             .map(|p| p[rng.random_range(0..p.len())].clone());
@@ -305,6 +311,13 @@ impl LookOptions {
                 Arc::new(Environment::from_room(&room))
             }
         });
+        if let (Some(sky), Some(env)) = (dim_to, scene.render.environment.as_mut()) {
+            let k = dimming(env, sky);
+            *env = Arc::new(env.scaled([k; 3]));
+            for light in &mut scene.render.lights[first_area..] {
+                light.intensity = light.intensity.map(|i| i * k);
+            }
+        }
     }
 
     /// The run's shared rooms ([`RoomRanges::pool`] of them), baked from a stream of
@@ -453,6 +466,13 @@ impl LookOptions {
     }
 }
 
+/// The factor (at most 1) that brings `env`'s irradiance / π on the table (normal up, green) to
+/// `sky`.
+fn dimming(env: &Environment, sky: f64) -> f64 {
+    let up = env.irradiance(&Vector3::z())[1];
+    if up > sky && up > 0.0 { sky / up } else { 1.0 }
+}
+
 /// The green albedos of a scene's board print (white, black) and its table's colour.
 fn albedos(scene: &SampledScene) -> ((f64, f64), [f64; 3]) {
     let board = scene.render.board.as_ref().map_or((0.78, 0.035), |b| {
@@ -473,6 +493,89 @@ mod tests {
 
     fn inside(r: Range, x: f64) -> bool {
         (r.lo - 1e-9..=r.hi + 1e-9).contains(&x)
+    }
+
+    /// A scene of two parts lit by one point light, for the look to dress.
+    fn two_parts() -> SampledScene {
+        let part = |x: f64| crate::scene::PlacedPart {
+            model: 0,
+            table_T_part: nalgebra::Isometry3::translation(x, 0.01, 0.003),
+        };
+        let key = PointLight {
+            position: Point3::new(0.8, 0.0, 0.9),
+            intensity: [2.0; 3],
+            radius: 0.01,
+        };
+        SampledScene {
+            parts: vec![part(0.0), part(0.02)],
+            render: crate::render::RenderScene::new(Vec::new(), None, None, vec![key], [0.02; 3]),
+            table_T_camera: nalgebra::Isometry3::translation(0.0, 0.0, 1.6),
+            sensor: crate::render::SensorModel::default(),
+            overexposure: 1.0,
+        }
+    }
+
+    #[test]
+    fn under_the_key_regime_the_room_and_its_area_lights_are_dimmed_to_the_key_sky() {
+        let mut look = LookOptions::default();
+        look.area_lights.count = Range::new(2.0, 2.0);
+        look.room.pool = 0;
+        let dress = |sky: Option<f64>, seed: u64| {
+            let mut scene = two_parts();
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            look.apply(&mut scene, None, sky, &mut rng);
+            scene
+        };
+        let up = Vector3::z();
+        let dirs = [
+            Vector3::new(0.0, 0.0, 1.0),
+            Vector3::new(0.6, 0.0, 0.8),
+            Vector3::new(-0.3, 0.5, 0.81).normalize(),
+            Vector3::new(0.9, 0.1, -0.42).normalize(),
+        ];
+        for seed in 0..6 {
+            let (lit, dim) = (dress(None, seed), dress(Some(0.02), seed));
+            let (e_lit, e_dim) = (
+                lit.render.environment.as_ref().unwrap(),
+                dim.render.environment.as_ref().unwrap(),
+            );
+            let room = e_lit.irradiance(&up)[1];
+            assert!(room > 0.1, "the lit room's irradiance / π {room}");
+            let k = 0.02 / room;
+            assert!(
+                (e_dim.irradiance(&up)[1] - 0.02).abs() < 1e-4,
+                "seed {seed}"
+            );
+            for d in &dirs {
+                for r in [0.0, 0.35, 0.7] {
+                    let (a, b) = (e_lit.specular(d, r), e_dim.specular(d, r));
+                    for c in 0..3 {
+                        assert!(
+                            (b[c] - k * a[c]).abs() <= 1e-5 * (1.0 + a[c]),
+                            "{a:?} {b:?}"
+                        );
+                    }
+                }
+            }
+            // The scene's own light is the key's: untouched. The area lights are the room's:
+            // where they were, dimmed by the same factor.
+            let (l, m) = (&lit.render.lights, &dim.render.lights);
+            assert_eq!(l.len(), m.len());
+            assert!(l.len() > 1, "area lights drawn");
+            assert_eq!(l[0], m[0]);
+            for (a, b) in l.iter().zip(m).skip(1) {
+                assert_eq!(a.position, b.position);
+                for c in 0..3 {
+                    assert!((b.intensity[c] - k * a.intensity[c]).abs() < 1e-12 * a.intensity[c]);
+                }
+            }
+            assert_eq!(lit.render.backlight, dim.render.backlight);
+            // A sky brighter than the room leaves it as it is: never brightened.
+            let bright = dress(Some(100.0), seed);
+            assert_eq!(bright.render.lights, lit.render.lights);
+            let e = bright.render.environment.as_ref().unwrap();
+            assert_eq!(e.irradiance(&up), e_lit.irradiance(&up));
+        }
     }
 
     #[test]

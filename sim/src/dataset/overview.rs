@@ -62,7 +62,13 @@ pub(crate) fn write_overview(
         10 + split.code(),
         index as u64,
     );
-    apply_look(cfg, &mut scene, 10 + split.code(), index as u64);
+    apply_look(
+        cfg,
+        &mut scene,
+        draw.key_sky,
+        10 + split.code(),
+        index as u64,
+    );
     let camera = cfg
         .camera
         .scaled(cfg.overview_scale)

@@ -100,7 +100,7 @@ fn feeder_capture(
     };
     let mut scene = dress_scene(models, parts, &request, &cfg.randomisation, &mut rng)?;
     let draw = apply_families(cfg, &mut scene, models, None, 900, k);
-    apply_look(cfg, &mut scene, 900, k);
+    apply_look(cfg, &mut scene, draw.key_sky, 900, k);
     let (lo, hi) = FEEDER;
     let window = window_covering(
         &cfg.camera,

@@ -330,6 +330,24 @@ impl Environment {
         Self { levels, irradiance }
     }
 
+    /// This environment with every radiance times `k` per channel (the room with its lights
+    /// dimmed): prefiltering is linear, so it is the bake of the scaled radiance function.
+    pub fn scaled(&self, k: [f64; 3]) -> Self {
+        let scale = |m: &LatLong| LatLong {
+            w: m.w,
+            h: m.h,
+            texels: m
+                .texels
+                .iter()
+                .map(|t| [0, 1, 2].map(|c| (t[c] as f64 * k[c]) as f32))
+                .collect(),
+        };
+        Self {
+            levels: self.levels.iter().map(scale).collect(),
+            irradiance: scale(&self.irradiance),
+        }
+    }
+
     /// Prefiltered radiance along unit direction `r` for a lobe of `roughness` (linear between
     /// the two nearest levels).
     pub fn specular(&self, r: &Vector3<f64>, roughness: f64) -> [f64; 3] {
@@ -579,6 +597,45 @@ mod tests {
             let e = env.irradiance(&d);
             assert!((e[1] - 0.5).abs() < 1e-5, "irradiance {e:?}");
         }
+    }
+
+    /// A scaled environment is the bake of the scaled radiance: every level and the irradiance,
+    /// per channel, in a room that is not uniform (a bright patch over a dim sky).
+    #[test]
+    fn a_scaled_environment_is_the_scaled_room_baked() {
+        let f = |d: &Vector3<f64>| {
+            if d.z > 0.8 {
+                [4.0, 3.0, 2.0]
+            } else if d.z > 0.0 {
+                [0.2, 0.25, 0.3]
+            } else {
+                [0.05; 3]
+            }
+        };
+        let k = [0.03, 0.05, 0.5];
+        let dim = Environment::bake(&f).scaled(k);
+        let baked = Environment::bake(&move |d| {
+            let l = f(d);
+            [0, 1, 2].map(|c| l[c] * k[c])
+        });
+        for i in 0..40 {
+            let d = direction((i as f64 * 0.37).fract(), (i as f64 * 0.61).fract()).normalize();
+            for r in [0.0, 0.15, 0.35, 0.7, 1.0] {
+                let (a, b) = (dim.specular(&d, r), baked.specular(&d, r));
+                for c in 0..3 {
+                    assert!(
+                        (a[c] - b[c]).abs() <= 1e-5 * (1.0 + b[c]),
+                        "{r}: {a:?} {b:?}"
+                    );
+                }
+            }
+            let (a, b) = (dim.irradiance(&d), baked.irradiance(&d));
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() <= 1e-5 * (1.0 + b[c]), "{a:?} {b:?}");
+            }
+        }
+        let up = dim.irradiance(&Vector3::z());
+        assert!(up[0] > 0.01 && up[2] > 5.0 * up[1], "{up:?}");
     }
 
     /// White furnace: under a uniform environment of radiance 1, a white Lambertian surface, a
