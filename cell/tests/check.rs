@@ -228,6 +228,37 @@ fn a_negative_gripper_actuation_time_is_rejected_at_its_line() {
     );
 }
 
+/// A gripper width output the controller does not have is refused where it stands; 0 and 1
+/// are accepted.
+#[test]
+fn a_gripper_width_output_the_controller_lacks_is_located() {
+    let with = |value: &str| {
+        nominal_text().replace(
+            "friction = 0.3\n",
+            &format!("friction = 0.3\nwidth_output = {value}\n"),
+        )
+    };
+    for good in [0, 1] {
+        let path = variant("width_output_ok", &with(&good.to_string()));
+        let ok = Scenario::load(&path);
+        std::fs::remove_file(&path).ok();
+        assert_eq!(ok.unwrap().spec.cell.gripper.width_output, Some(good));
+    }
+    let text = with("2");
+    let path = variant("width_output", &text);
+    let err = Scenario::load(&path).unwrap_err();
+    std::fs::remove_file(&path).ok();
+    let p = err
+        .0
+        .iter()
+        .find(|p| p.key.as_deref() == Some("cell.gripper.width_output"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert_eq!(err.0.len(), 1, "{err}");
+    assert_eq!(p.line, line_of(&text, "width_output = 2"), "{err}");
+    assert_eq!(p.column, "width_output = ".len() + 1, "{err}");
+    assert!(p.message.contains("analog outputs 0 and 1"), "{err}");
+}
+
 /// The cell's contact force limit: above the arm's protective stop it is refused where it
 /// stands; below a force-guided insertion's `contact_force` it refuses that, naming both.
 #[test]

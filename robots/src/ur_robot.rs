@@ -38,6 +38,16 @@ pub enum GripperOutput {
     Standard(u8),
 }
 
+/// A gripper whose opening follows a standard analog output (a position input across its
+/// stroke, 0–10 V or 4–20 mA), besides the digital output that closes it on a part.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GripperWidthOutput {
+    /// Standard analog output 0 or 1.
+    pub output: u8,
+    /// Opening at the top of the output's range, metres: the full stroke.
+    pub stroke: f64,
+}
+
 /// Configuration of a [`UrRobot`].
 #[derive(Debug, Clone)]
 pub struct UrRobotConfig {
@@ -74,6 +84,9 @@ pub struct UrRobotConfig {
     /// the output before it reports the gripper command done, so the arm does not move away
     /// from a part the fingers still close on. Finite, 0 to [`MAX_GRIPPER_ACTUATION_S`].
     pub gripper_actuation_s: f64,
+    /// The analog output that sets the fingers' opening; `None`: opening the gripper opens the
+    /// full stroke whatever the width asked.
+    pub gripper_width: Option<GripperWidthOutput>,
 }
 
 /// Longest gripper actuation time a [`UrRobotConfig`] accepts (s): the program reads no command
@@ -88,6 +101,17 @@ pub enum UrConfigError {
         "gripper actuation time {0} s is not a finite time from 0 to {MAX_GRIPPER_ACTUATION_S} s"
     )]
     GripperActuation(f64),
+    /// The gripper's width output is not a standard analog output or its stroke not a width.
+    #[error(
+        "gripper width output {output} with a {stroke} m stroke: the output must be standard \
+         analog output 0 or 1 and the stroke a positive width"
+    )]
+    GripperWidth {
+        /// The output asked for.
+        output: u8,
+        /// The stroke given.
+        stroke: f64,
+    },
 }
 
 impl UrRobotConfig {
@@ -109,6 +133,7 @@ impl UrRobotConfig {
             gripper: GripperOutput::Tool(0),
             gripper_close_level: true,
             gripper_actuation_s: 0.25,
+            gripper_width: None,
         }
     }
 
@@ -116,6 +141,11 @@ impl UrRobotConfig {
     pub fn validate(&self) -> Result<(), UrConfigError> {
         if !(0.0..=MAX_GRIPPER_ACTUATION_S).contains(&self.gripper_actuation_s) {
             return Err(UrConfigError::GripperActuation(self.gripper_actuation_s));
+        }
+        if let Some(GripperWidthOutput { output, stroke }) = self.gripper_width
+            && (output > 1 || !(stroke.is_finite() && stroke > 0.0))
+        {
+            return Err(UrConfigError::GripperWidth { output, stroke });
         }
         Ok(())
     }
@@ -160,6 +190,8 @@ pub struct UrRobot {
     dashboard: Option<DashboardClient>,
     next_id: i32,
     heartbeat: tokio::task::JoinHandle<()>,
+    /// The width output's last set-point as a ratio of the stroke, once the program confirmed it.
+    gripper_ratio: Option<f64>,
 }
 
 impl UrRobot {
@@ -299,6 +331,7 @@ impl UrRobot {
             dashboard: Some(dashboard),
             next_id: 0,
             heartbeat,
+            gripper_ratio: None,
         };
         robot.start_program().await?;
         Limited::new(robot, limits, kinematics).map_err(|e| RobotError::Rejected {
@@ -529,12 +562,44 @@ impl UrRobot {
                 L::ERROR_INVALID_WAIT => "program refused the output wait",
                 L::ERROR_INVALID_FORCE => "program refused the contact force limit",
                 L::ERROR_INVALID_PATH => "program refused the path (order, length or radius)",
+                L::ERROR_INVALID_OUTPUT => "program refused the analog output or its value",
                 _ => "program reported an unknown error",
             };
             return Err(RobotError::Rejected {
                 detail: format!("{operation}: {detail}"),
             });
         }
+    }
+
+    /// Sets the gripper's opening set-point to `width` (at most the stroke) on its analog
+    /// output; the program waits the fingers' travel from the last set-point in proportion to
+    /// the full stroke's actuation time (the whole time when it is not known).
+    async fn set_gripper_width(
+        &mut self,
+        out: GripperWidthOutput,
+        width: f64,
+    ) -> Result<(), RobotError> {
+        if !(width.is_finite() && width >= 0.0) {
+            return Err(RobotError::Rejected {
+                detail: format!("finger opening {width} m is not a width"),
+            });
+        }
+        let ratio = (width / out.stroke).min(1.0);
+        let travel = self.gripper_ratio.map_or(1.0, |r| (ratio - r).abs());
+        let mut target = [0.0; 6];
+        target[0] = ratio;
+        let cmd = Command {
+            kind: L::KIND_SET_STANDARD_AO,
+            target,
+            pin: i32::from(out.output),
+            wait: self.config.gripper_actuation_s * travel,
+            ..Command::default()
+        };
+        // Unknown until the program confirms: a failed command leaves the full wait next time.
+        self.gripper_ratio = None;
+        self.run_command(cmd, "gripper width").await?;
+        self.gripper_ratio = Some(ratio);
+        Ok(())
     }
 
     fn set_gripper(&mut self, close: bool) -> RobotFuture<'_, ()> {
@@ -662,12 +727,22 @@ impl Robot for UrRobot {
     }
 
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.set_gripper(false)
+        match self.config.gripper_width {
+            Some(out) => self.open_gripper_to(out.stroke),
+            None => self.set_gripper(false),
+        }
     }
 
-    /// The gripper is one digital output: it opens the full stroke whatever the width.
-    fn open_gripper_to(&mut self, _width: f64) -> RobotFuture<'_, ()> {
-        self.set_gripper(false)
+    /// With a width output ([`UrRobotConfig::gripper_width`]) the set-point goes first, then the
+    /// digital output opens the gripper (already open fingers move to the new set-point); without
+    /// one the gripper opens the full stroke whatever the width.
+    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
+        Box::pin(async move {
+            if let Some(out) = self.config.gripper_width {
+                self.set_gripper_width(out, width).await?;
+            }
+            self.set_gripper(false).await
+        })
     }
 
     fn close_gripper(&mut self) -> RobotFuture<'_, ()> {

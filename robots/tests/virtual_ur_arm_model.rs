@@ -1,8 +1,9 @@
 //! The virtual controller and its arm model: every path that sets a digital output (our
 //! program's gripper command, RTDE input registers, the script port) reaches
-//! `ArmModel::digital_output` once per change; our program waits the configured gripper
-//! actuation time (and refuses a bad one); a `KinematicArm` with a TCP reports and moves that TCP.
-//! Loopback only.
+//! `ArmModel::digital_output` once per change; a gripper width output's set-point reaches
+//! `ArmModel::analog_output`; our program waits the configured gripper actuation time (and
+//! refuses a bad one, or a bad analog output); a `KinematicArm` with a TCP reports and moves that
+//! TCP. Loopback only.
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use robots::kinematics::{Joints, UrKinematics};
@@ -12,7 +13,8 @@ use robots::rtde::client::{ClientConfig, RtdeClient};
 use robots::rtde::state::RuntimeState;
 use robots::rtde::types::Value;
 use robots::ur_robot::{
-    MAX_GRIPPER_ACTUATION_S, UrConfigError, UrRobot, UrRobotConfig, upload_script,
+    GripperWidthOutput, MAX_GRIPPER_ACTUATION_S, UrConfigError, UrRobot, UrRobotConfig,
+    upload_script,
 };
 use robots::virtual_ur::arm::{ArmCommand, ArmError, ArmModel, ArmState, KinematicArm};
 use robots::virtual_ur::{VirtualUr, VirtualUrConfig};
@@ -29,11 +31,14 @@ const STROKE_S: f64 = 0.3;
 const LATENCY_S: f64 = 0.15;
 
 type Log = Arc<Mutex<Vec<(u32, bool)>>>;
+/// Analog output changes: (output, ratio of its range).
+type AnalogLog = Arc<Mutex<Vec<(u32, f64)>>>;
 
 /// A kinematic arm that records output changes and has a gripper on tool output 0.
 struct Recording {
     arm: KinematicArm,
     log: Log,
+    analog: AnalogLog,
     /// Refuse the next motion as a collision.
     collide: Arc<AtomicBool>,
 }
@@ -67,6 +72,9 @@ impl ArmModel for Recording {
     fn digital_output(&mut self, pin: u32, level: bool) {
         self.log.lock().unwrap().push((pin, level));
     }
+    fn analog_output(&mut self, index: u32, ratio: f64) {
+        self.analog.lock().unwrap().push((index, ratio));
+    }
     fn actuation_time(&self, pin: u32) -> f64 {
         if pin == GRIPPER_PIN { STROKE_S } else { 0.0 }
     }
@@ -77,16 +85,23 @@ fn tcp() -> Isometry3<f64> {
 }
 
 async fn start() -> (VirtualUr, Log) {
-    let (vur, log, _) = start_colliding().await;
+    let (vur, log, _, _) = start_recording().await;
     (vur, log)
 }
 
 async fn start_colliding() -> (VirtualUr, Log, Arc<AtomicBool>) {
+    let (vur, log, _, collide) = start_recording().await;
+    (vur, log, collide)
+}
+
+async fn start_recording() -> (VirtualUr, Log, AnalogLog, Arc<AtomicBool>) {
     let log = Log::default();
+    let analog = AnalogLog::default();
     let collide = Arc::new(AtomicBool::new(false));
     let arm = Recording {
         arm: KinematicArm::new(UrKinematics::ur5e().with_tcp(tcp()), Q0),
         log: log.clone(),
+        analog: analog.clone(),
         collide: collide.clone(),
     };
     let config = VirtualUrConfig {
@@ -96,7 +111,7 @@ async fn start_colliding() -> (VirtualUr, Log, Arc<AtomicBool>) {
     let vur = VirtualUr::start_with_arm(config, Box::new(arm))
         .await
         .unwrap();
-    (vur, log, collide)
+    (vur, log, analog, collide)
 }
 
 fn robot_config(vur: &VirtualUr) -> UrRobotConfig {
@@ -207,6 +222,81 @@ async fn the_gripper_command_reaches_the_arm_model_and_waits_the_actuation_time(
     assert_eq!(snap.regs.output_int[L::ERROR_REG], L::ERROR_NONE);
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gripper_width_output_sets_where_the_fingers_open_to() {
+    let (vur, log, analog, _) = start_recording().await;
+    let wait = 0.2;
+    let mut robot = UrRobot::connect(UrRobotConfig {
+        gripper_actuation_s: wait,
+        gripper_width: Some(GripperWidthOutput {
+            output: 1,
+            stroke: 0.014,
+        }),
+        ..robot_config(&vur)
+    })
+    .await
+    .unwrap();
+    let timed_open = async |robot: &mut _, width: f64| {
+        let t0 = vur.controller.snapshot().timestamp;
+        Robot::open_gripper_to(robot, width).await.unwrap();
+        vur.controller.snapshot().timestamp - t0
+    };
+
+    robot.close_gripper().await.unwrap();
+    assert_eq!(taken(&log), [(GRIPPER_PIN, true)]);
+    // The set-point first (its old value unknown: the full stroke's wait), then the output.
+    let took = timed_open(&mut robot, 0.007).await;
+    assert_eq!(std::mem::take(&mut *analog.lock().unwrap()), [(1, 0.5)]);
+    assert_eq!(taken(&log), [(GRIPPER_PIN, false)]);
+    assert!(
+        (2.0 * wait - 1e-9..2.0 * wait + 2.0 * LATENCY_S).contains(&took),
+        "done after {took} s"
+    );
+    // 4–20 mA by default: half the range is 12 mA.
+    assert!((vur.controller.snapshot().io.analog_out[1] - 0.012).abs() < 1e-12);
+    // Open fingers move to a new set-point; the wait is the travel's share of the stroke.
+    let took = timed_open(&mut robot, 0.0105).await;
+    assert_eq!(std::mem::take(&mut *analog.lock().unwrap()), [(1, 0.75)]);
+    assert_eq!(taken(&log), []);
+    assert!(
+        (1.25 * wait - 1e-9..1.25 * wait + 2.0 * LATENCY_S).contains(&took),
+        "done after {took} s"
+    );
+    // Wider than the stroke is the stroke; `open_gripper` opens the full stroke.
+    timed_open(&mut robot, 0.02).await;
+    assert_eq!(std::mem::take(&mut *analog.lock().unwrap()), [(1, 1.0)]);
+    robot.open_gripper_to(0.0).await.unwrap();
+    robot.open_gripper().await.unwrap();
+    assert_eq!(
+        std::mem::take(&mut *analog.lock().unwrap()),
+        [(1, 0.0), (1, 1.0)]
+    );
+    // Not a width: refused before anything is sent.
+    let err = robot.open_gripper_to(f64::NAN).await.unwrap_err();
+    assert!(matches!(err, RobotError::Rejected { .. }), "{err:?}");
+    assert_eq!(std::mem::take(&mut *analog.lock().unwrap()), []);
+    assert_eq!(taken(&log), []);
+}
+
+#[test]
+fn the_gripper_width_output_is_validated() {
+    let mut config = UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e());
+    for (output, stroke, ok) in [
+        (0, 0.014, true),
+        (1, 0.085, true),
+        (2, 0.014, false),
+        (0, 0.0, false),
+        (0, f64::NAN, false),
+    ] {
+        config.gripper_width = Some(GripperWidthOutput { output, stroke });
+        assert_eq!(
+            config.validate().is_ok(),
+            ok,
+            "output {output}, stroke {stroke}"
+        );
+    }
+}
+
 #[test]
 fn the_gripper_actuation_time_is_validated() {
     let mut config = UrRobotConfig::new("127.0.0.1", UrKinematics::ur5e());
@@ -230,7 +320,7 @@ fn the_gripper_actuation_time_is_validated() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_bad_actuation_time_is_refused_by_connect_and_by_the_program() {
+async fn bad_output_commands_are_refused_by_connect_and_by_the_program() {
     let (vur, log) = start().await;
     // The client refuses it before uploading anything.
     let err = UrRobot::connect(UrRobotConfig {
@@ -295,6 +385,31 @@ async fn a_bad_actuation_time_is_refused_by_connect_and_by_the_program() {
     }
     assert_eq!(taken(&log), []);
     assert_eq!(vur.controller.snapshot().io.tool_do, 0);
+
+    // An analog output that does not exist, or a ratio outside 0–1, is refused; the outputs
+    // keep their values.
+    for (id, pin, ratio) in [(4, 2, 0.5), (5, -1, 0.5), (6, 0, 1.5), (7, 1, f64::NAN)] {
+        client.send_inputs(1, &[Value::Int32(id)]).await.unwrap();
+        let mut values = vec![
+            Value::Int32(L::KIND_SET_STANDARD_AO),
+            Value::Int32(pin),
+            Value::Int32(0),
+            Value::Double(ratio),
+        ];
+        values.extend([Value::Double(0.0); 7]);
+        values.extend([Value::Double(0.0), Value::Int32(id)]);
+        client.send_inputs(0, &values).await.unwrap();
+        wait_for("the command to finish", || {
+            register(L::DONE_ID_REG) == Some(i64::from(id))
+        })
+        .await;
+        assert_eq!(
+            register(L::ERROR_REG),
+            Some(i64::from(L::ERROR_INVALID_OUTPUT)),
+            "output {pin}, ratio {ratio}"
+        );
+    }
+    assert_eq!(vur.controller.snapshot().io.analog_out, [0.004; 2]);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -424,6 +424,12 @@ pub struct GripperSpec {
     /// leave room. Absent: the fingers always open the full stroke.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub opening_margin: Option<f64>,
+    /// The controller's standard analog output (0 or 1) that sets where the fingers open to, as
+    /// a ratio of the stroke, for a gripper with a position input; its digital output still
+    /// closes them on the part. Absent: on a controller the fingers open the full stroke, and a
+    /// controller run sets `opening_margin` aside.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width_output: Option<u8>,
 }
 
 /// Default gripper actuation time, s (a small electric parallel gripper).
@@ -437,6 +443,18 @@ impl GripperSpec {
         let max = robots::ur_robot::MAX_GRIPPER_ACTUATION_S;
         (!(t.is_finite() && (0.0..=max).contains(&t)))
             .then(|| format!("actuation_time must be a finite time from 0 to {max} s, got {t}"))
+    }
+
+    /// The gripper as our controller program drives it: the actuation time our program sleeps,
+    /// and the analog output that sets the opening, if the gripper has one.
+    pub fn configure_ur(&self, config: &mut robots::ur_robot::UrRobotConfig) {
+        config.gripper_actuation_s = self.actuation_time;
+        config.gripper_width =
+            self.width_output
+                .map(|output| robots::ur_robot::GripperWidthOutput {
+                    output,
+                    stroke: self.stroke,
+                });
     }
 
     /// How far apart the fingers open to grasp a part `width` across the jaws: the width plus
@@ -562,6 +580,7 @@ mod tests {
             tcp_offset: 0.15,
             actuation_time: 0.25,
             opening_margin: margin,
+            width_output: None,
         }
     }
 

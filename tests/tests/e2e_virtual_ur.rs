@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use cell::episode::StepOutcome;
-use cell::harness::{SimCellIo, connect_sim_over_rtde, keypoint_noise_for, run_sim_episode};
+use cell::harness::{SimCellIo, connect_sim_over_rtde, keypoint_noise_for};
 use cell::orchestrator::{EpisodeOutput, SplitCell, State, run_episode};
 use nalgebra::Isometry3;
 use robots::kinematics::Joints;
@@ -117,19 +117,54 @@ async fn five_episodes_over_rtde_match_the_in_process_run() {
             .remove("opening_margin")
             .expect("the scenario sets an opening margin");
     });
-    for episode in 0..5u32 {
-        let local = run_sim_episode(&setup, episode).await.unwrap().record;
-        let (vur, mut robot, cell) = start(&setup, episode).await;
+    assert_runs_match(&setup, 5).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gripper_width_output_opens_the_fingers_to_the_part_over_rtde_as_in_process() {
+    // A gripper with a position input on analog output 0: a controller run keeps the margin,
+    // and the controller opens the fingers to the same widths as the in-process run.
+    let setup = setup(|doc| {
+        doc["cell"]["gripper"]["width_output"] = toml_edit::value(0);
+    });
+    assert!(setup.scenario().spec.cell.gripper.opening_margin.is_some());
+    assert_runs_match(&setup, 3).await;
+}
+
+/// Runs `episodes` episodes in process and over RTDE and asserts they match: outcomes, true
+/// insertion errors, the simulated clock to a control cycle per move, and the fingers' travel.
+async fn assert_runs_match(setup: &Setup, episodes: u32) {
+    for episode in 0..episodes {
+        let mut local_cell = setup
+            .model
+            .limited(setup.sim_cell(episode).unwrap())
+            .unwrap();
+        let mut perception = keypoint_noise_for(setup.scenario(), episode).unwrap();
+        let local = run_episode(
+            setup.engine.context(episode),
+            &mut local_cell,
+            &mut perception,
+        )
+        .await
+        .record;
+        let local_travel = local_cell.inner().gripper_travel();
+        let (vur, mut robot, cell) = start(setup, episode).await;
         let mut counting = CountingRobot {
             inner: &mut robot,
             moves: 0,
         };
-        let remote = run_over_rtde(&setup, &mut counting, cell, episode)
+        let remote = run_over_rtde(setup, &mut counting, cell.clone(), episode)
             .await
             .record;
         let moves = counting.moves;
         drop(robot);
         drop(vur);
+        let remote_travel = cell.lock().unwrap().gripper_travel();
+        assert!(
+            (remote_travel - local_travel).abs() < 1e-9,
+            "episode {episode}: the fingers travelled {remote_travel} m over RTDE, \
+             {local_travel} m in process"
+        );
         assert_eq!(remote.abort, None, "episode {episode}");
         assert_eq!(
             remote.success, local.success,

@@ -269,7 +269,7 @@ async fn commission_by_hand_eye(
             let mut config = UrRobotConfig::new(host.clone(), knowledge.kinematics.clone());
             config.rtde_port = *port;
             config.limits = cell.limits.clone();
-            config.gripper_actuation_s = cell.gripper.actuation_time;
+            cell.gripper.configure_ur(&mut config);
             // Connected behind `Limited`: every planned pose is checked against the limits.
             let mut robot = UrRobot::connect(config)
                 .await

@@ -69,7 +69,7 @@ pub async fn connect_sim_over_rtde(
     rc.dashboard_port = controller.dashboard_addr().port();
     rc.script_port = controller.script_addr().port();
     rc.limits = setup.scenario().spec.cell.limits.clone();
-    rc.gripper_actuation_s = setup.scenario().spec.cell.gripper.actuation_time;
+    setup.scenario().spec.cell.gripper.configure_ur(&mut rc);
     let robot = UrRobot::connect(rc).await?;
     Ok(SimOverRtde {
         controller,

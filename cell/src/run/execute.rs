@@ -173,17 +173,19 @@ enum Runner<'d> {
     Production(&'d Production, Setup, tokio::runtime::Runtime),
 }
 
-/// The scenario as a controller runs it: our program drives the gripper by one digital output,
-/// which opens the full stroke, so selection and planning must leave the fingers room for the
-/// full stroke (`cell.gripper.opening_margin` is set aside, with a warning). `[motion] overlap`
-/// is set aside too, with a warning: a controller run perceives while the arm stands still (the
-/// engine awaits each command), so there is nothing to overlap yet.
+/// The scenario as a controller runs it: without a width output (`cell.gripper.width_output`)
+/// our program drives the gripper by one digital output, which opens the full stroke, so
+/// selection and planning must leave the fingers room for the full stroke
+/// (`cell.gripper.opening_margin` is set aside, with a warning). `[motion] overlap` is set aside
+/// too, with a warning: a controller run perceives while the arm stands still (the engine awaits
+/// each command), so there is nothing to overlap yet.
 fn full_stroke(scenario: &Scenario) -> Scenario {
     let mut s = scenario.clone();
-    if s.spec.cell.gripper.opening_margin.take().is_some() {
+    let gripper = &mut s.spec.cell.gripper;
+    if gripper.width_output.is_none() && gripper.opening_margin.take().is_some() {
         tracing::warn!(
             "cell.gripper.opening_margin set aside: the controller's gripper output opens the \
-             full stroke"
+             full stroke (set cell.gripper.width_output for a gripper with a position input)"
         );
     }
     if std::mem::take(&mut s.spec.motion.overlap) {
@@ -305,7 +307,7 @@ impl Production {
         let mut config = UrRobotConfig::new(self.host.clone(), setup.knowledge.kinematics.clone());
         config.rtde_port = self.port;
         config.limits = cell.limits.clone();
-        config.gripper_actuation_s = cell.gripper.actuation_time;
+        cell.gripper.configure_ur(&mut config);
         let mut robot = UrRobot::connect(config).await.map_err(robot_err)?;
         force_sensor_preflight(&setup.scenario, robot.inner().force_sensor()).map_err(
             |source| EpisodeError::Preflight {

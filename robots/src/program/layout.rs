@@ -67,6 +67,9 @@ pub const KIND_PATH_ADD_MOVEL: i32 = 8;
 /// Command kind: run the buffered path as one blended `movej`/`movel ..., r=` sequence; done
 /// when the arm rests at its last via-point. The buffer is emptied.
 pub const KIND_PATH_RUN: i32 = 9;
+/// Command kind: set standard analog output `DO_PIN_REG` (0 or 1) to the ratio 0–1 of its range
+/// in the first target register (a gripper's opening set-point), then sleep `DO_WAIT_REG`.
+pub const KIND_SET_STANDARD_AO: i32 = 10;
 
 /// Status: idle / the last command succeeded.
 pub const STATUS_IDLE: i32 = 0;
@@ -96,6 +99,9 @@ pub const ERROR_INVALID_FORCE: i32 = 6;
 /// [`MAX_PATH_POINTS`], running an empty path) or with a blend radius that is negative or not a
 /// number; the arm did not move.
 pub const ERROR_INVALID_PATH: i32 = 7;
+/// Error: an analog output command named no such output (0 or 1) or a ratio outside 0–1 (or not
+/// a number); the output was not changed.
+pub const ERROR_INVALID_OUTPUT: i32 = 8;
 
 /// Most via-points a path may have.
 pub const MAX_PATH_POINTS: usize = 16;
@@ -140,6 +146,7 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("KIND_PATH_ADD_MOVEJ", KIND_PATH_ADD_MOVEJ as f64),
     ("KIND_PATH_ADD_MOVEL", KIND_PATH_ADD_MOVEL as f64),
     ("KIND_PATH_RUN", KIND_PATH_RUN as f64),
+    ("KIND_SET_STANDARD_AO", KIND_SET_STANDARD_AO as f64),
     ("STATUS_IDLE", STATUS_IDLE as f64),
     ("STATUS_BUSY", STATUS_BUSY as f64),
     ("STATUS_FAILED", STATUS_FAILED as f64),
@@ -151,6 +158,7 @@ pub const SCRIPT_CONSTANTS: &[(&str, f64)] = &[
     ("ERROR_INVALID_WAIT", ERROR_INVALID_WAIT as f64),
     ("ERROR_INVALID_FORCE", ERROR_INVALID_FORCE as f64),
     ("ERROR_INVALID_PATH", ERROR_INVALID_PATH as f64),
+    ("ERROR_INVALID_OUTPUT", ERROR_INVALID_OUTPUT as f64),
     ("MAX_PATH_POINTS", MAX_PATH_POINTS as f64),
     ("WATCHDOG_TIMEOUT", WATCHDOG_TIMEOUT_S),
     ("STOP_DECELERATION", STOP_DECELERATION),

@@ -153,6 +153,9 @@ pub trait ArmModel: Send + 'static {
     /// A digital output changed: standard 0–7, configurable 8–15, tool 16–17 (as
     /// `actual_digital_output_bits`). The controller calls it from every path that sets one.
     fn digital_output(&mut self, _pin: u32, _level: bool) {}
+    /// Standard analog output `index` (0 or 1) changed to `ratio` of its range (0–1): a
+    /// gripper's opening set-point, say. The controller calls it from every path that sets one.
+    fn analog_output(&mut self, _index: u32, _ratio: f64) {}
     /// Starts a blended path (replacing the current motion): each segment runs from the previous
     /// via-point (the arm's pose for the first) with its own speed and acceleration, and within
     /// a segment's blend radius of its via-point the next segment starts, so the arm rounds the

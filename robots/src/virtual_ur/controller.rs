@@ -7,7 +7,7 @@ use super::force::{
 };
 use super::programs::{
     CellProgram, Program, ProgramIo, ProgramStep, UrRtdeProgram, notify_output_changes,
-    set_digital_output,
+    set_analog_output, set_digital_output,
 };
 use super::registers::{Payload, Registers, StandardIo};
 use crate::dashboard::{robot_mode_word, safety_status_word};
@@ -1117,7 +1117,10 @@ impl Controller for VirtualController {
                     && let Some(Value::Double(ratio)) =
                         get(["standard_analog_output_0", "standard_analog_output_1"][i])
                 {
-                    io.set_analog_output(i, ratio, domain >> i & 1 == 1);
+                    io.analog_voltage[i] = domain >> i & 1 == 1;
+                    if ratio.is_finite() {
+                        set_analog_output(io, core.arm.as_mut(), i, ratio.clamp(0.0, 1.0));
+                    }
                 }
             }
         }

@@ -67,6 +67,26 @@ pub fn set_digital_output(
     true
 }
 
+/// Sets standard analog output `i` in `io` to `ratio` of its range (in the domain it is in) and
+/// calls [`ArmModel::analog_output`] when its value changed; false if there is no such output or
+/// the ratio is not a number from 0 to 1.
+pub fn set_analog_output(
+    io: &mut StandardIo,
+    arm: &mut dyn ArmModel,
+    i: usize,
+    ratio: f64,
+) -> bool {
+    if i >= 2 || !(0.0..=1.0).contains(&ratio) {
+        return false;
+    }
+    let before = io.analog_out[i];
+    io.set_analog_output(i, ratio, io.analog_voltage[i]);
+    if io.analog_out[i] != before {
+        arm.analog_output(i as u32, ratio);
+    }
+    true
+}
+
 /// Calls [`ArmModel::digital_output`] for every bit that differs between two
 /// `actual_digital_output_bits` words, lowest pin first.
 pub fn notify_output_changes(arm: &mut dyn ArmModel, before: u64, after: u64) {
@@ -352,6 +372,23 @@ impl CellProgram {
                     }
                 } else {
                     Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_UNKNOWN_COMMAND);
+                }
+            }
+            L::KIND_SET_STANDARD_AO => {
+                // Like the script: the wait first, then the output and ratio, all before the
+                // output changes.
+                let ratio = target[0];
+                if !(0.0..=L::MAX_DO_WAIT_S).contains(&wait) {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_INVALID_WAIT);
+                } else if !(0..=1).contains(&pin)
+                    || !set_analog_output(io.io, io.arm, pin as usize, ratio)
+                {
+                    Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_INVALID_OUTPUT);
+                } else if wait > 0.0 {
+                    self.settling = Some((id, wait));
+                    io.regs.output_int[L::STATUS_REG] = L::STATUS_BUSY;
+                } else {
+                    Self::finish(io.regs, id, L::STATUS_IDLE, L::ERROR_NONE);
                 }
             }
             _ => Self::finish(io.regs, id, L::STATUS_FAILED, L::ERROR_UNKNOWN_COMMAND),

@@ -52,6 +52,9 @@ pub struct StandardIo {
     /// Standard analog outputs 0–1 as `standard_analog_output0/1` report them: volts in the
     /// voltage domain (0–10 V), amperes in the current domain (4–20 mA).
     pub analog_out: [f64; 2],
+    /// Whether each standard analog output is in the voltage domain (else current), as the
+    /// last `standard_analog_output_type` set it; a program's `set_standard_analog_out` keeps it.
+    pub analog_voltage: [bool; 2],
 }
 
 impl Default for StandardIo {
@@ -62,6 +65,7 @@ impl Default for StandardIo {
             tool_do: 0,
             speed_slider: 1.0,
             analog_out: [0.004; 2],
+            analog_voltage: [false; 2],
         }
     }
 }
@@ -80,7 +84,18 @@ impl StandardIo {
         if i < 2 && ratio.is_finite() {
             let r = ratio.clamp(0.0, 1.0);
             self.analog_out[i] = if voltage { 10.0 * r } else { 0.004 + 0.016 * r };
+            self.analog_voltage[i] = voltage;
         }
+    }
+
+    /// Analog output `i` as the ratio 0–1 of its domain's range (`None` for no such output).
+    pub fn analog_ratio(&self, i: usize) -> Option<f64> {
+        let v = *self.analog_out.get(i)?;
+        Some(if self.analog_voltage[i] {
+            v / 10.0
+        } else {
+            (v - 0.004) / 0.016
+        })
     }
 
     /// Sets one standard (0–7), configurable (8–15) or tool (16–17) output; false if no such pin.

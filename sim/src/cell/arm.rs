@@ -5,7 +5,8 @@
 //! trapezoidal profiles at the control period, the cell's speed and acceleration limits) and, when
 //! a motion completes, hands the final joints and the elapsed time to the shared [`SimCell`]:
 //! repeatability, insertions and the simulated clock then work exactly as in-process. The gripper
-//! follows the controller's tool digital output through [`SimArm::set_tool_output`].
+//! follows the controller's tool digital output through [`SimArm::set_tool_output`], and its
+//! opening the gripper's analog width output, if it has one ([`SimArm::set_opening_output`]).
 
 use std::cell::Cell;
 use std::sync::{Arc, Mutex, MutexGuard, TryLockError};
@@ -44,6 +45,10 @@ pub struct SimArm {
     /// The motion in progress as stepped: (seconds since it started, joints) every period,
     /// handed to the cell when it ends (its replay, `SimCell::last_motion_trace`).
     steps: Vec<(f64, Joints)>,
+    /// The standard analog output that sets the fingers' opening (`cell.gripper.width_output`).
+    width_output: Option<u32>,
+    /// Where the fingers open to, metres, as that output last set it (the full stroke before).
+    opening_setpoint: Option<f64>,
 }
 
 impl SimArm {
@@ -51,9 +56,14 @@ impl SimArm {
     pub fn new(cell: Arc<Mutex<SimCell>>) -> Self {
         // The cell's kinematics carry its gripper TCP, so `actual_TCP_pose` and `movel`
         // targets are the gripper's, as with the TCP set in a real controller's installation.
-        let (arm, actuation_time) = {
+        let (arm, actuation_time, width_output) = {
             let c = lock(&cell);
-            (c.controller_arm(), c.model().spec.gripper.actuation_time)
+            let gripper = &c.model().spec.gripper;
+            (
+                c.controller_arm(),
+                gripper.actuation_time,
+                gripper.width_output.map(u32::from),
+            )
         };
         Self {
             cell,
@@ -64,6 +74,8 @@ impl SimArm {
             guarded_stop: false,
             last_wrench: Cell::new([0.0; 6]),
             steps: Vec::new(),
+            width_output,
+            opening_setpoint: None,
         }
     }
 
@@ -73,10 +85,30 @@ impl SimArm {
     }
 
     /// The controller's tool digital output changed: pin [`GRIPPER_TOOL_PIN`] high closes the
-    /// gripper, low opens it.
+    /// gripper, low opens it (to the width output's set-point, if one was set).
     pub fn set_tool_output(&mut self, pin: u32, level: bool) {
-        if pin == GRIPPER_TOOL_PIN {
-            lock(&self.cell).set_gripper(level);
+        if pin != GRIPPER_TOOL_PIN {
+            return;
+        }
+        let mut c = lock(&self.cell);
+        match (level, self.opening_setpoint) {
+            (false, Some(width)) => c.open_gripper_to_sync(width),
+            _ => c.set_gripper(level),
+        }
+    }
+
+    /// The controller's standard analog output `index` changed to `ratio` of its range: on the
+    /// gripper's width output it sets where the fingers open to; open empty fingers go there now
+    /// (as `Robot::open_gripper_to` sends them in process), closed ones when they next open.
+    pub fn set_opening_output(&mut self, index: u32, ratio: f64) {
+        if self.width_output != Some(index) {
+            return;
+        }
+        let mut c = lock(&self.cell);
+        let width = ratio * c.model().spec.gripper.stroke;
+        self.opening_setpoint = Some(width);
+        if c.gripper_is_open() {
+            c.send_fingers_to(width);
         }
     }
 }
@@ -213,6 +245,10 @@ impl ArmModel for SimArm {
         if let Some(tool) = pin.checked_sub(TOOL_OUTPUT_BASE) {
             self.set_tool_output(tool, level);
         }
+    }
+
+    fn analog_output(&mut self, index: u32, ratio: f64) {
+        self.set_opening_output(index, ratio);
     }
 
     /// The cell's contact model at the arm's present pose ([`SimCell::contact_wrench_at`]): a

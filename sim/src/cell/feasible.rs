@@ -72,6 +72,14 @@ pub fn check_values(cell: &CellSpec, steps: &[AssemblyStep], noise: &NoiseSpec) 
     if let Some(m) = g.opening_margin {
         non_negative(&mut out, "cell.gripper.opening_margin".into(), m);
     }
+    if let Some(o) = g.width_output
+        && o > 1
+    {
+        out.push((
+            "cell.gripper.width_output".into(),
+            format!("a UR controller has standard analog outputs 0 and 1, got {o}"),
+        ));
+    }
     let f = &cell.feeder;
     for i in 0..2 {
         positive(&mut out, format!("cell.feeder.size[{i}]"), f.size[i]);

@@ -1044,6 +1044,11 @@ impl SimCell {
         self.opening
     }
 
+    /// Whether the gripper is open (its last command opened it).
+    pub fn gripper_is_open(&self) -> bool {
+        self.gripper_open
+    }
+
     /// Opens the gripper the full stroke now; see [`Self::open_gripper_to_sync`].
     pub fn open_gripper_sync(&mut self) {
         self.open_gripper_to_sync(self.model.spec.gripper.stroke);
