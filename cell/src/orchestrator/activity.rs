@@ -49,7 +49,7 @@ impl Activity {
     /// `None` for a name this table does not know.
     pub fn of_motion(waypoint: &str) -> Option<Activity> {
         Some(match waypoint {
-            "approach" | "transfer" => Activity::Transit,
+            "approach" | "transfer" | "rise" => Activity::Transit,
             "pre-grasp" | "grasp" | "pre-insert" => Activity::Approach,
             "open fingers" | "close" => Activity::Grasp,
             "insert" | "release" => Activity::Insertion,

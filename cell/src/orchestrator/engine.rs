@@ -5,9 +5,10 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
 use robots::kinematics::Joints;
-use robots::robot::{RobotError, Waypoint};
+use robots::robot::RobotError;
 use sim::cell::geometry::PartGeometry;
 
+use super::blended;
 use super::cell_io::{CellIo, InsertionCheck, Workcell};
 use super::context::EpisodeContext;
 use super::events::{EventLog, ShakeStart};
@@ -103,6 +104,9 @@ pub(super) struct Engine<'a> {
     abort: Option<String>,
     /// Why the last recovery (shake, retract, insertion retry) was chosen, for the event log.
     last_reason: String,
+    /// Why the last plan runs higher than usual ([`super::planning::Raised`]), for the event
+    /// log.
+    plan_note: String,
     /// With blending on, a pick's lift held back to start the insertion's blended path, and
     /// the joints it ends at (where the insertion is planned from).
     deferred_lift: Option<(NamedMotion, Joints)>,
@@ -139,6 +143,7 @@ impl<'a> Engine<'a> {
             placed: Vec::new(),
             abort: None,
             last_reason: String::new(),
+            plan_note: String::new(),
             deferred_lift: None,
             ahead: None,
             ahead_note: String::new(),
@@ -180,6 +185,8 @@ impl<'a> Engine<'a> {
                         State::Capture | State::Done if state == State::Verify => {
                             std::mem::take(&mut self.ahead_note)
                         }
+                        // A plan raised above a refusal: how high and why.
+                        State::Pick | State::Insert => std::mem::take(&mut self.plan_note),
                         _ => String::new(),
                     };
                     (n, d)
@@ -666,6 +673,10 @@ impl<'a> Engine<'a> {
             .collect();
         match self.planner().pick(&sel, &start, &placed, &feeder) {
             Ok(plan) => {
+                self.plan_note = plan
+                    .raised
+                    .as_ref()
+                    .map_or_else(String::new, |r| format!("pick plan {r}"));
                 self.step.plan = Some(plan);
                 Ok(State::Pick)
             }
@@ -755,19 +766,26 @@ impl<'a> Engine<'a> {
         let tcp_T_part =
             Translation3::new(0.0, 0.0, -self.step.slip) * grasped_offset(&sel.tcp_T_part);
         let correction = self.step.correction;
-        let start = match &self.deferred_lift {
-            Some((_, lifted)) => *lifted,
-            None => self.joints(state).await?,
+        // With blending, the lift held back from the pick leads the insertion's path from here.
+        let now = self.joints(state).await?;
+        let (start, lead) = match self.deferred_lift {
+            Some((lift, lifted)) => (lifted, Some((now, lift))),
+            None => (now, None),
         };
         let placed = self.placed_shapes();
-        match self.planner().insert(
+        match self.planner().insert_after(
             self.index,
             ((g, &tcp_T_part), sel.opening),
             &correction,
             &start,
             &placed,
+            lead.as_ref().map(|(q, m)| (q, m)),
         ) {
             Ok(plan) => {
+                self.plan_note = plan
+                    .raised
+                    .as_ref()
+                    .map_or_else(String::new, |r| format!("insertion plan {r}"));
                 self.step.plan = Some(plan);
                 if self.step.insertions == 0 {
                     self.shake_ahead(&sel, &start);
@@ -1301,29 +1319,10 @@ impl<'a> Engine<'a> {
             return Ok(None);
         }
         let fast = self.planner().speeds.fast.speed;
-        let n = motions
-            .iter()
-            .take_while(|(_, m)| match m {
-                Motion::MoveJ(..) => true,
-                Motion::MoveL(_, s) => s.speed >= fast,
-                _ => false,
-            })
-            .count();
-        if n < 2 {
+        let Some(path) = blended::leading_path(motions, radius, fast) else {
             return Ok(None);
-        }
-        let path: Vec<Waypoint> = motions[..n]
-            .iter()
-            .enumerate()
-            .filter_map(|(i, (_, m))| {
-                let blend = if i + 1 < n { radius } else { 0.0 };
-                match m {
-                    Motion::MoveJ(q, s) => Some(Waypoint::joints(*q, *s, blend)),
-                    Motion::MoveL(p, s) => Some(Waypoint::linear(*p, *s, blend)),
-                    _ => None,
-                }
-            })
-            .collect();
+        };
+        let n = path.len();
         let t0 = self.clock();
         let r = self.cell.robot().move_path(path).await;
         if let Err(RobotError::LimitViolation(e)) = &r {

@@ -41,6 +41,7 @@
 #![allow(non_snake_case)]
 
 mod activity;
+mod blended;
 mod cell_io;
 mod context;
 mod engine;
@@ -62,7 +63,8 @@ pub use engine::{FEEDER_EXHAUSTED, FEEDER_SHAKE_BOUND};
 pub use events::{Event, EventLog, ShakeStart, WrenchSample, WrenchTrace};
 pub use geometry::{CellKnowledge, KnowledgeError, top_down};
 pub use planning::{
-    Motion, Plan, PlanError, Planner, PlanningConfig, SearchConfig, Speeds, grasped_offset,
+    MAX_RAISE, Motion, Plan, PlanError, Planner, PlanningConfig, RAISE_STEP, Raised, SearchConfig,
+    Speeds, grasped_offset,
 };
 pub use production::{
     ProductionCellIo, ProductionError, ProductionOptions, force_sensor_preflight, open_camera,

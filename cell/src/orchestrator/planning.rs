@@ -8,6 +8,13 @@
 //! millimetres of the grasp and of the insertion are slow Cartesian moves. The insertion target is
 //! corrected by the estimated grasp offset: the jaws centre the part along the closing axis (TCP
 //! y), so that component of the pre-grasp estimate is removed; the rest is kept.
+//!
+//! A pick or an insertion whose motions the checks refuse for a clearance is planned again
+//! higher: the arm first rises straight up from where it is, and the via-points above the
+//! grasp or the target rise as much, in [`RAISE_STEP`]s up to [`MAX_RAISE`] or as far as the
+//! workspace limits and the arm's reach allow; the lowest height that passes is kept, with the
+//! refusal that sent it higher ([`Plan::raised`]). The step is given up only when no height
+//! passes. With blending on, the blended path is checked as it will run ([`super::blended`]).
 
 use nalgebra::{Isometry3, Translation3};
 use robots::kinematics::Joints;
@@ -94,10 +101,10 @@ pub enum Motion {
 pub type NamedMotion = (&'static str, Motion);
 
 /// A held part: its shapes and its estimated `tcp_T_part`.
-type Held<'a> = (&'a PartGeometry, &'a Isometry3<f64>);
+pub(super) type Held<'a> = (&'a PartGeometry, &'a Isometry3<f64>);
 
 /// Parts already in place (or lying in the feeder) with their poses in the base frame.
-type Placed<'a> = [(&'a PartGeometry, Isometry3<f64>)];
+pub(super) type Placed<'a> = [(&'a PartGeometry, Isometry3<f64>)];
 
 /// A checked sequence of commands with a name for each.
 #[derive(Debug, Clone, PartialEq)]
@@ -109,7 +116,35 @@ pub struct Plan {
     /// An insertion's engagement depth: how far above seated the held part first meets what
     /// it goes into, metres (0 for a pick).
     pub engagement: f64,
+    /// Set when the plan at its usual heights was refused and this one runs higher.
+    pub raised: Option<Raised>,
 }
+
+/// How much higher than usual a plan runs, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Raised {
+    /// How far the arm rises first and the via-points are raised, metres.
+    pub height: f64,
+    /// What refused the plan at its usual heights.
+    pub refused: PlanError,
+}
+
+impl std::fmt::Display for Raised {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "raised {:.0} mm (the lowest height that passes): at the usual height {}",
+            self.height * 1e3,
+            self.refused
+        )
+    }
+}
+
+/// The step between the heights a refused plan is tried at, metres.
+pub const RAISE_STEP: f64 = 0.005;
+
+/// The most a refused plan is raised, metres.
+pub const MAX_RAISE: f64 = 0.3;
 
 /// Why no plan was found.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -185,7 +220,7 @@ const CLEARANCE_RESOLUTION: f64 = 1e-5;
 
 /// Rounding allowed on the margin, metres: a fast descent ends exactly `slow_distance` above
 /// what it goes into, which the distance query returns to within this.
-const MARGIN_ROUNDING: f64 = 1e-6;
+pub(super) const MARGIN_ROUNDING: f64 = 1e-6;
 
 /// A motion's TCP path, for [`Planner::check_clear`].
 #[derive(Clone, Copy)]
@@ -453,13 +488,100 @@ impl Planner<'_> {
         Err(first_error.expect("ik_solutions is never empty"))
     }
 
+    /// Plans with `plan` at the usual heights (`plan(0.0)`); when a clearance check refuses
+    /// that ([`PlanError::Collision`]), again [`RAISE_STEP`] higher at a time up to
+    /// [`MAX_RAISE`], until a height passes (the plan is marked [`Plan::raised`] with the first
+    /// refusal) or the raised poses leave the workspace limits or the arm's reach. Gives the
+    /// first refusal when no height passes.
+    fn lowest_clear(
+        &self,
+        plan: impl Fn(f64) -> Result<Plan, PlanError>,
+    ) -> Result<Plan, PlanError> {
+        let refused = match plan(0.0) {
+            Ok(p) => return Ok(p),
+            Err(e @ PlanError::Collision { .. }) => e,
+            Err(e) => return Err(e),
+        };
+        let steps = (MAX_RAISE / RAISE_STEP).round() as usize;
+        let mut tried = 0.0;
+        for i in 1..=steps {
+            let height = i as f64 * RAISE_STEP;
+            match plan(height) {
+                Ok(mut p) => {
+                    p.raised = Some(Raised { height, refused });
+                    return Ok(p);
+                }
+                Err(PlanError::Collision { .. }) => tried = height,
+                // Higher poses are outside the workspace or out of reach.
+                Err(_) => break,
+            }
+        }
+        Err(match refused {
+            PlanError::Collision {
+                waypoint,
+                what,
+                distance_mm,
+            } => PlanError::Collision {
+                waypoint,
+                what: if tried > 0.0 {
+                    format!(
+                        "{what}; no plan up to {:.0} mm higher passes either",
+                        tried * 1e3
+                    )
+                } else {
+                    format!("{what}; no higher plan is within the workspace limits and reach")
+                },
+                distance_mm,
+            },
+            e => e,
+        })
+    }
+
+    /// A straight rise by `height` from joints `start` ([`PlanError`] when the raised pose is
+    /// outside the workspace or out of reach, or the way up is not clear): the motion and the
+    /// joints at its top. `None` for a height of 0.
+    fn rise(
+        &self,
+        start: &Joints,
+        height: f64,
+        (held, placed): (Option<Held<'_>>, &Placed<'_>),
+    ) -> Result<Option<(NamedMotion, Joints)>, PlanError> {
+        if height <= 0.0 {
+            return Ok(None);
+        }
+        let k = self.knowledge;
+        let from = k.kinematics.forward_tcp(start);
+        let top = raised(&from, height);
+        let q_top = self.ik("rise", &top, start)?;
+        self.check_arm("rise", &q_top)?;
+        self.check_clear("rise", TcpPath::Line(&from, &top), held, placed, true)?;
+        Ok(Some((
+            ("rise", Motion::MoveL(top, self.speeds.fast)),
+            q_top,
+        )))
+    }
+
     /// The pick of `selection` starting from joints `start`: the fingers opened to the part,
     /// one joint move to just above the grasp when that path is checked clear of the table, the
     /// placed parts and every part in the `feeder` (estimated poses, the one to pick included);
     /// otherwise a joint move to the approach pose and fast straight down. Then slow to the
-    /// grasp, close, lift.
+    /// grasp, close, lift. Refused for a clearance, it is planned higher
+    /// ([`Self::lowest_clear`]): a rise first, a higher approach and lift.
     pub fn pick(
         &self,
+        selection: &Selection,
+        start: &Joints,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+        feeder: &[(&PartGeometry, Isometry3<f64>)],
+    ) -> Result<Plan, PlanError> {
+        self.lowest_clear(|height| self.pick_at(height, selection, start, placed, feeder))
+    }
+
+    /// [`Self::pick`] with the arm rising `height` first and the approach (and lift) that
+    /// much higher.
+    fn pick_at(
+        &self,
+        height: f64,
         selection: &Selection,
         start: &Joints,
         placed: &[(&PartGeometry, Isometry3<f64>)],
@@ -478,21 +600,31 @@ impl Planner<'_> {
         let over_placed = k.highest_top(placed).map_or(0.0, |top| {
             top + c.transit_margin + c.slow_distance - k.lowest_height(&grasp, held)
         });
-        let approach = raised(&grasp, c.clearance_height.max(over_placed) + c.blend_radius);
+        let approach = raised(
+            &grasp,
+            c.clearance_height.max(over_placed) + c.blend_radius + height,
+        );
         let pre = raised(&grasp, c.slow_distance);
         let s = &self.speeds;
+        let rise = self.rise(start, height, (None, placed))?;
+        let from = rise.as_ref().map_or(*start, |(_, q)| *q);
         let Descent {
             mut motions,
             at_pre: q_pre,
             at_via: q_approach,
         } = self.down_to(
             ["approach", "pre-grasp"],
-            start,
+            &from,
             &approach,
             pre,
             (None, placed),
-            |q_pre| self.check_fingers("pre-grasp", (start, q_pre), selection.opening, feeder),
+            |q_pre| self.check_fingers("pre-grasp", (&from, q_pre), selection.opening, feeder),
         )?;
+        if let Some((m, _)) = rise {
+            motions.insert(0, m);
+        }
+        // Blended (when on), the way down runs as one path from `start`.
+        self.check_blended("pre-grasp", start, &motions, None, placed)?;
         // The fingers open to the part (no wider) as the arm leaves; without an opening margin
         // they are open the full stroke already.
         if selection.opening < self.knowledge.gripper().stroke {
@@ -510,20 +642,55 @@ impl Planner<'_> {
             motions,
             end_joints: q_approach,
             engagement: 0.0,
+            raised: None,
         })
     }
 
     /// The insertion of a held part (estimated `tcp_T_part`, released by opening the fingers
     /// `opening` apart) into step `step`'s nominal target moved by `correction` (in the insertion frame: identity for a first attempt), from joints
     /// `start` (the lift pose): joint move to the transfer pose, fast down to the pre-insert
-    /// pose, slow insertion, release, retreat.
+    /// pose, slow insertion, release, retreat. Refused for a clearance, it is planned higher
+    /// ([`Self::lowest_clear`]): a rise first, a higher transfer and retreat.
     #[allow(non_snake_case)]
     pub fn insert(
         &self,
         step: usize,
-        (held, opening): ((&PartGeometry, &Isometry3<f64>), f64),
+        held: ((&PartGeometry, &Isometry3<f64>), f64),
         correction: &Isometry3<f64>,
         start: &Joints,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+    ) -> Result<Plan, PlanError> {
+        self.insert_after(step, held, correction, start, placed, None)
+    }
+
+    /// [`Self::insert`] where the arm first runs `lead` (the pick's lift, held back to start
+    /// the insertion's blended path) from the joints given with it to `start`: with blending
+    /// on, the blended path from there is checked as one.
+    #[allow(non_snake_case)]
+    pub fn insert_after(
+        &self,
+        step: usize,
+        held: ((&PartGeometry, &Isometry3<f64>), f64),
+        correction: &Isometry3<f64>,
+        start: &Joints,
+        placed: &[(&PartGeometry, Isometry3<f64>)],
+        lead: Option<(&Joints, &NamedMotion)>,
+    ) -> Result<Plan, PlanError> {
+        self.lowest_clear(|height| {
+            self.insert_at(height, step, held, correction, (start, lead), placed)
+        })
+    }
+
+    /// [`Self::insert_after`] with the arm rising `height` first and the transfer (and
+    /// retreat) that much higher.
+    #[allow(non_snake_case)]
+    fn insert_at(
+        &self,
+        height: f64,
+        step: usize,
+        (held, opening): ((&PartGeometry, &Isometry3<f64>), f64),
+        correction: &Isometry3<f64>,
+        (start, lead): (&Joints, Option<(&Joints, &NamedMotion)>),
         placed: &[(&PartGeometry, Isometry3<f64>)],
     ) -> Result<Plan, PlanError> {
         let k = self.knowledge;
@@ -536,12 +703,16 @@ impl Planner<'_> {
         let out = base_T_ins.rotation * nalgebra::Vector3::z();
         let along = |h: f64| Translation3::from(out * h) * insert;
         let engagement = engagement_depth(held, &base_T_target, placed);
-        let transfer =
-            along(c.clearance_height.max(engagement + 2.0 * c.slow_distance) + c.blend_radius);
+        let transfer = along(
+            c.clearance_height.max(engagement + 2.0 * c.slow_distance) + c.blend_radius + height,
+        );
         // Slow from before the held part can first touch what it goes into (its engagement
-        // depth, from the shapes) to seated.
-        let pre = along(engagement + c.slow_distance);
+        // depth, from the shapes, and how much lower than estimated the part may truly hang),
+        // to seated; the fast descent keeps the transit margin above it.
+        let pre = along(engagement + k.held_drop(held) + c.slow_distance.max(c.transit_margin));
         let s = &self.speeds;
+        let rise = self.rise(start, height, (Some(held), placed))?;
+        let from = rise.as_ref().map_or(*start, |(_, q)| *q);
         // One joint move straight to the pre-insert pose when that path is checked clear (no
         // stop above the target); otherwise transfer, then straight down.
         let Descent {
@@ -550,12 +721,25 @@ impl Planner<'_> {
             at_via: q_transfer,
         } = self.down_to(
             ["transfer", "pre-insert"],
-            start,
+            &from,
             &transfer,
             pre,
             (Some(held), placed),
             |_| Ok(()),
         )?;
+        if let Some((m, _)) = rise {
+            motions.insert(0, m);
+        }
+        // Blended (when on), the lift held back from the pick and the way down run as one path.
+        match lead {
+            Some((lead_from, lead)) => {
+                let chain: Vec<NamedMotion> = std::iter::once(*lead)
+                    .chain(motions.iter().copied())
+                    .collect();
+                self.check_blended("pre-insert", lead_from, &chain, Some(held), placed)?;
+            }
+            None => self.check_blended("pre-insert", start, &motions, Some(held), placed)?,
+        }
         let q_insert = self.ik("insert", &insert, &q_pre)?;
         self.check_arm("insert", &q_insert)?;
         // The fingers leave the released part (not in `placed`) and the receiver they straddle.
@@ -575,6 +759,7 @@ impl Planner<'_> {
             motions,
             end_joints: q_transfer,
             engagement,
+            raised: None,
         })
     }
 }
@@ -624,6 +809,77 @@ mod tests {
 
     use super::*;
     use crate::scenario::Scenario;
+
+    #[test]
+    fn a_refused_plan_takes_the_lowest_height_that_passes() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
+        let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let knowledge = CellKnowledge::new(&scenario).unwrap_or_else(|e| panic!("{e}"));
+        let config = PlanningConfig::default();
+        let planner = Planner {
+            knowledge: &knowledge,
+            config,
+            speeds: Speeds::within(&knowledge.spec.limits, config.slow_speed),
+        };
+        let refused = |h: f64| PlanError::Collision {
+            waypoint: "transfer",
+            what: format!("at {:.0} mm", h * 1e3),
+            distance_mm: 0.5,
+        };
+        let plan = || Plan {
+            motions: Vec::new(),
+            end_joints: [0.0; 6],
+            engagement: 0.0,
+            raised: None,
+        };
+        // Nothing refused: planned at the usual heights.
+        assert_eq!(planner.lowest_clear(|_| Ok(plan())).unwrap().raised, None);
+        // Clear from 12 mm up: the next step up, 15 mm, with the usual height's refusal.
+        let tried = std::cell::RefCell::new(Vec::new());
+        let p = planner
+            .lowest_clear(|h| {
+                tried.borrow_mut().push(h);
+                if h < 0.012 {
+                    Err(refused(h))
+                } else {
+                    Ok(plan())
+                }
+            })
+            .unwrap();
+        let r = p.raised.expect("raised");
+        assert!((r.height - 0.015).abs() < 1e-12, "{r}");
+        assert_eq!(r.refused, refused(0.0));
+        assert_eq!(tried.borrow().len(), 4, "{:?}", tried.borrow());
+        // Beyond the workspace from 20 mm: given up with the usual height's refusal and how
+        // high it looked.
+        let e = planner
+            .lowest_clear(|h| {
+                if h < 0.02 {
+                    Err(refused(h))
+                } else {
+                    Err(PlanError::Limits {
+                        waypoint: "transfer",
+                        reason: "above the workspace".into(),
+                    })
+                }
+            })
+            .unwrap_err();
+        let PlanError::Collision { what, .. } = e else {
+            panic!("{e}")
+        };
+        assert_eq!(what, "at 0 mm; no plan up to 15 mm higher passes either");
+        // A refusal that is not a clearance is not tried higher.
+        let calls = std::cell::Cell::new(0);
+        let e = planner.lowest_clear(|_| {
+            calls.set(calls.get() + 1);
+            Err(PlanError::Unreachable {
+                waypoint: "insert",
+                reason: "out of reach".into(),
+            })
+        });
+        assert!(matches!(e, Err(PlanError::Unreachable { .. })));
+        assert_eq!(calls.get(), 1);
+    }
 
     #[test]
     fn a_move_whose_nearest_configuration_swings_through_the_table_takes_another() {
