@@ -128,3 +128,140 @@ impl Planner<'_> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use nalgebra::{Isometry3, Translation3, Vector3};
+    use robots::robot::LinearMotion;
+
+    use super::*;
+    use crate::orchestrator::geometry::CellKnowledge;
+    use crate::orchestrator::planning::{PlanningConfig, Speeds};
+    use crate::scenario::Scenario;
+
+    /// An obstacle inside a rounded corner: clear of both straight moves by more than the
+    /// margin, so the moves pass stop by stop and a check at the via-points passes too, but
+    /// 0.5 mm from the blended path as the arm runs it, which is refused.
+    #[test]
+    fn an_obstacle_inside_a_rounded_corner_refuses_the_blended_path() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
+        let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let k = CellKnowledge::new(&scenario).unwrap_or_else(|e| panic!("{e}"));
+        let config = PlanningConfig {
+            blend_radius: 0.02,
+            ..PlanningConfig::default()
+        };
+        let planner = Planner {
+            knowledge: &k,
+            config,
+            speeds: Speeds::within(&k.spec.limits, config.slow_speed),
+        };
+        let fast = LinearMotion {
+            speed: planner.speeds.fast.speed,
+            acceleration: planner.speeds.fast.acceleration,
+        };
+        // Above the fixture, across 80 mm, then 60 mm straight down: an L the blend rounds.
+        let from = k.base_T_targets[0].translation.vector + Vector3::new(-0.08, 0.0, 0.1);
+        let pose = |p: Vector3<f64>| {
+            Isometry3::from_parts(Translation3::from(p), crate::orchestrator::top_down(0.0))
+        };
+        let corner = from + Vector3::new(0.08, 0.0, 0.0);
+        let end = corner - Vector3::new(0.0, 0.0, 0.06);
+        let q_start = k
+            .ik_solutions(&pose(from), &[0.0, -1.57, 1.57, -1.57, -1.57, 0.0])
+            .unwrap()[0];
+        let motions: Vec<NamedMotion> = vec![
+            ("transfer", Motion::MoveL(pose(corner), fast)),
+            ("pre-insert", Motion::MoveL(pose(end), fast)),
+        ];
+        let path = leading_path(&motions, config.blend_radius, fast.speed).unwrap();
+        check_path(&k.spec.limits, &k.kinematics, &q_start, &path)
+            .unwrap_or_else(|e| panic!("the blended path runs: {e}"));
+        // The blended path's samples and the one farthest inside the corner.
+        let mut arm = KinematicArm::new(k.kinematics.clone(), q_start);
+        let mut tcps = Vec::new();
+        execute_path(
+            &mut arm,
+            &waypoint_moves(&path),
+            PATH_SAMPLE_PERIOD,
+            |c: &PathCycle| -> Result<(), ArmError> {
+                tcps.push(k.kinematics.forward_tcp(&c.state.q).translation.vector);
+                Ok(())
+            },
+        )
+        .unwrap();
+        let inside = |p: &Vector3<f64>| (corner.z - p.z).min(corner.x - p.x);
+        let deepest = tcps
+            .iter()
+            .copied()
+            .max_by(|a, b| inside(a).total_cmp(&inside(b)))
+            .unwrap();
+        assert!(
+            inside(&deepest) > 0.004,
+            "the corner is cut by {}",
+            inside(&deepest)
+        );
+        // A part inside the corner, moved out along the corner's diagonal until it comes
+        // 0.5 mm from the blended path.
+        let g = k.part("main_shell").unwrap();
+        let out = Vector3::new(1.0, 0.0, 1.0).normalize();
+        let (lo, hi) = g.aabb;
+        let half = 0.5 * (hi - lo).norm();
+        let at = |t: f64| {
+            Isometry3::translation(
+                deepest.x - out.x * (half + 0.03) + out.x * t,
+                deepest.y,
+                deepest.z - out.z * (half + 0.03) + out.z * t,
+            ) * Isometry3::translation(
+                -0.5 * (lo.x + hi.x),
+                -0.5 * (lo.y + hi.y),
+                -0.5 * (lo.z + hi.z),
+            )
+        };
+        let blended_min = |o: &Isometry3<f64>| {
+            tcps.iter()
+                .map(|p| k.gripper_distance(&pose(*p), None, g.hull.as_ref(), o))
+                .fold(f64::INFINITY, f64::min)
+        };
+        let (mut a, mut b) = (0.0, half + 0.03);
+        assert!(blended_min(&at(a)) > 0.0005 && blended_min(&at(b)) < 0.0005);
+        for _ in 0..40 {
+            let m = 0.5 * (a + b);
+            if blended_min(&at(m)) > 0.0005 {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        let obstacle = at(a);
+        let placed = [(g, obstacle)];
+        // Stop by stop, each straight move keeps the margin.
+        for (p0, p1) in [(pose(from), pose(corner)), (pose(corner), pose(end))] {
+            let line_min = (0..=1000)
+                .map(|i| {
+                    let tcp = p0.lerp_slerp(&p1, i as f64 / 1000.0);
+                    k.gripper_distance(&tcp, None, g.hull.as_ref(), &obstacle)
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(line_min > config.transit_margin, "{line_min}");
+        }
+        let e = planner
+            .check_blended("pre-insert", &q_start, &motions, None, &placed)
+            .expect_err("the blended path passes 0.5 mm from the part");
+        assert!(
+            e.to_string().contains("on the path blended by 20.0 mm"),
+            "{e}"
+        );
+        // Without blending nothing is checked here (the moves are checked on their own).
+        let unblended = Planner {
+            config: PlanningConfig::default(),
+            ..planner
+        };
+        assert_eq!(
+            unblended.check_blended("pre-insert", &q_start, &motions, None, &placed),
+            Ok(())
+        );
+    }
+}
