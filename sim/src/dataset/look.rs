@@ -242,7 +242,8 @@ impl LookOptions {
     /// backlight. With `key_sky` (the lights family's hard key regime and the dim sky it drew),
     /// the room's lights are off: the room and the area lights are dimmed together so that the
     /// room's irradiance / π on the table is that sky (never brightened), as the room the key
-    /// lights only by its spill; the draws are those of the undimmed look.
+    /// lights only by its spill; the draws are those of the undimmed look (a look without a
+    /// room keeps its area lights as drawn).
     pub fn apply(
         &self,
         scene: &mut SampledScene,
