@@ -3,11 +3,13 @@
 //! Prints wall time, CPU time (user + system, Linux) and each part's share of jittering drops.
 //!
 //! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
-//! for the parts of another catalog, `-- rest_time=S` for another rest time in seconds, `-- solver_iterations=N`).
+//! for the parts of another catalog, `-- rest_time=S` for another rest time in seconds, `-- solver_iterations=N`,
+//! `-- one_contact_per_point=0` for every triangle's contacts).
 //! One timed run, not criterion's repeats: a run takes tens of seconds.
 //!
-//! `-- paired rest_time=S` drops each part twice, with the default settings and with the
-//! changed ones, the same orientations in the same order, and counts the drops that came to
+//! `-- paired rest_time=S` drops each part twice, with the default settings (or those changed
+//! by `ref.NAME=VALUE` arguments: `-- paired ref.solver_iterations=24` compares with 24 iterations) and
+//! with the changed ones, the same orientations in the same order, and counts the drops that came to
 //! rest on another face (more than 0.2 rad apart): a paired comparison, far tighter than the
 //! shares' sampling noise.
 
@@ -59,20 +61,13 @@ fn main() {
         drops,
         ..DropSettings::default()
     };
-    if let Some(t) = args.iter().find_map(|a| a.strip_prefix("rest_time=")) {
-        settings.rest_time = t.parse().expect("rest_time=SECONDS");
-    }
-    if let Some(n) = args
-        .iter()
-        .find_map(|a| a.strip_prefix("solver_iterations="))
-    {
-        settings.solver_iterations = n.parse().expect("solver_iterations=N");
-    }
+    apply(&mut settings, &args, "");
     if args.iter().any(|a| a == "paired") {
-        let reference = DropSettings {
+        let mut reference = DropSettings {
             drops,
             ..DropSettings::default()
         };
+        apply(&mut reference, &args, "ref.");
         for (part, mesh) in &parts {
             paired(&part.name, mesh, part.density(), &reference, &settings);
         }
@@ -115,6 +110,27 @@ fn main() {
     );
 }
 
+/// Applies the `PREFIXname=value` arguments to `settings`.
+fn apply(settings: &mut DropSettings, args: &[String], prefix: &str) {
+    let value = |name: &str| {
+        args.iter().find_map(|a| {
+            a.strip_prefix(prefix)?
+                .strip_prefix(name)?
+                .strip_prefix('=')
+        })
+    };
+    let flag = |v: &str| matches!(v, "1" | "true" | "on");
+    if let Some(t) = value("rest_time") {
+        settings.rest_time = t.parse().expect("rest_time=SECONDS");
+    }
+    if let Some(n) = value("solver_iterations") {
+        settings.solver_iterations = n.parse().expect("solver_iterations=N");
+    }
+    if let Some(v) = value("one_contact_per_point") {
+        settings.one_contact_per_point = flag(v);
+    }
+}
+
 /// Every drop's outcome in order, batched as [`stable_poses`] batches them, and the CPU seconds.
 fn outcomes(body: &DropBody, settings: &DropSettings) -> (Vec<DropOutcome>, f64) {
     let cpu = cpu_seconds();
@@ -150,15 +166,40 @@ fn paired(name: &str, mesh: &TriMesh, density: f64, a: &DropSettings, b: &DropSe
         .count();
     let unsettled = |o: &[DropOutcome]| o.iter().filter(|o| !o.settled).count();
     println!(
-        "{name}: {moved} of {} drops rest on another face; {cpu_a:.1} CPU-s (rest {} s, {} \
-         iterations, {} unsettled) against {cpu_b:.1} CPU-s (rest {} s, {} iterations, {} \
-         unsettled)",
+        "{name}: {moved} of {} drops rest on another face; {cpu_a:.1} CPU-s ({}, {} unsettled) \
+         against {cpu_b:.1} CPU-s ({}, {} unsettled)",
         first.len(),
-        a.rest_time,
-        a.solver_iterations,
+        describe(a),
         unsettled(&first),
-        b.rest_time,
-        b.solver_iterations,
+        describe(b),
         unsettled(&second)
     );
+    for (label, out) in [("reference", &first), ("changed", &second)] {
+        let report = sim::stable_poses::cluster(out, mesh, (out.len() / 1000).max(2));
+        let shares: Vec<String> = report
+            .iter()
+            .map(|c| {
+                format!(
+                    "{} {:.2} %",
+                    c.pose.name,
+                    100.0 * c.count as f64 / out.len() as f64
+                )
+            })
+            .collect();
+        println!("  {label}: {}", shares.join(", "));
+    }
+}
+
+/// The settings a paired comparison varies, in words.
+fn describe(s: &DropSettings) -> String {
+    format!(
+        "rest {} s, {} iterations, contacts {}",
+        s.rest_time,
+        s.solver_iterations,
+        if s.one_contact_per_point {
+            "one per point"
+        } else {
+            "per triangle"
+        }
+    )
 }
