@@ -51,9 +51,10 @@ impl Planner<'_> {
     /// shape in `placed` along the blended path of `motions`' leading run of fast moves
     /// ([`leading_path`]) from joints `from`, as the arm will run it: the arm model of
     /// [`check_path`] every [`PATH_SAMPLE_PERIOD`], each sample's TCP by forward kinematics.
-    /// A sample is skipped while the motion since the last checked one (summed joint travel
-    /// times [`super::CellKnowledge::arm_reach`]) cannot have closed the clearance found there
-    /// to the margin, so a path far from everything costs a few distance queries. A shape
+    /// A sample is skipped while the motion since the last checked one (the TCP's travel plus
+    /// its turn times [`super::CellKnowledge::gripper_reach`], sample to sample) cannot have
+    /// closed the clearance found there to the margin, so a path far from everything costs a
+    /// few distance queries. A shape
     /// already within the margin where the path starts (what the fingers leave) is not
     /// checked; nor is a path the limits refuse, which the engine runs stop by stop, each
     /// move checked on its own.
@@ -90,25 +91,34 @@ impl Planner<'_> {
         if run.is_err() {
             return Ok(());
         }
-        let reach = k.arm_reach(held);
+        // The TCP at every sample, and how far any point of the gripper or held part moves from
+        // one sample to the next: at most the TCP's travel plus its turn times their reach.
+        let tcps: Vec<_> = samples
+            .iter()
+            .map(|q| k.kinematics.forward_tcp(q))
+            .collect();
+        let reach = k.gripper_reach(held);
+        let moved: Vec<f64> = tcps
+            .windows(2)
+            .map(|w| {
+                (w[1].translation.vector - w[0].translation.vector).norm()
+                    + w[0].rotation.angle_to(&w[1].rotation) * reach
+            })
+            .collect();
         let margin = self.config.transit_margin;
         for (g, base_T_obstacle) in placed {
-            let clearance = |q: &Joints| {
-                let tcp = k.kinematics.forward_tcp(q);
-                k.gripper_distance(&tcp, held, g.hull.as_ref(), base_T_obstacle)
-            };
-            if clearance(from) < margin {
+            let clearance = |tcp| k.gripper_distance(tcp, held, g.hull.as_ref(), base_T_obstacle);
+            if clearance(&tcps[0]) < margin {
                 continue;
             }
             // How far the gripper and held part may still move before the next check.
             let mut slack = 0.0;
-            for (i, pair) in samples.windows(2).enumerate() {
-                let (a, b) = (&pair[0], &pair[1]);
-                slack -= (0..6).map(|j| (b[j] - a[j]).abs()).sum::<f64>() * reach;
-                if slack > 0.0 && i + 2 < samples.len() {
+            for (i, step) in moved.iter().enumerate() {
+                slack -= step;
+                if slack > 0.0 && i + 1 < moved.len() {
                     continue;
                 }
-                let d = clearance(b);
+                let d = clearance(&tcps[i + 1]);
                 if d < margin - MARGIN_ROUNDING {
                     return Err(PlanError::Collision {
                         waypoint,
