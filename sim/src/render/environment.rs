@@ -76,9 +76,25 @@ pub struct Room {
 impl Room {
     /// Radiance arriving at [`Room::eye`] from unit direction `d`.
     pub fn radiance(&self, d: &Vector3<f64>) -> [f64; 3] {
+        self.radiance_with(self.beam_frame(), d)
+    }
+
+    /// The sine and cosine of the mount's beam azimuth (0 and 1 without a mount) and the beam's
+    /// length, which [`Room::radiance_with`] takes so that a bake computes them once, not per
+    /// direction.
+    fn beam_frame(&self) -> (f64, f64, f64) {
+        let (s, c) = self
+            .mount
+            .as_ref()
+            .map_or((0.0, 1.0), |m| m.beam_azimuth.sin_cos());
+        (s, c, self.half_size[0].hypot(self.half_size[1]) * 2.0)
+    }
+
+    /// [`Room::radiance`] with the beam's [`Room::beam_frame`] given.
+    fn radiance_with(&self, beam: (f64, f64, f64), d: &Vector3<f64>) -> [f64; 3] {
         let o = self.eye;
         if let Some(m) = &self.mount
-            && mount_hit(m, &o, d, self.half_size)
+            && mount_hit(m, &o, d, beam)
         {
             return m.radiance;
         }
@@ -135,8 +151,9 @@ impl Room {
     }
 }
 
-/// Whether the ray from `o` along `d` hits the camera body or its beam.
-fn mount_hit(m: &CameraMount, o: &Point3<f64>, d: &Vector3<f64>, room: [f64; 2]) -> bool {
+/// Whether the ray from `o` along `d` hits the camera body or its beam (`beam`: the sine and
+/// cosine of its azimuth and its length).
+fn mount_hit(m: &CameraMount, o: &Point3<f64>, d: &Vector3<f64>, beam: (f64, f64, f64)) -> bool {
     let c = m.position;
     let e = m.half_extents;
     if ray_box(
@@ -149,12 +166,11 @@ fn mount_hit(m: &CameraMount, o: &Point3<f64>, d: &Vector3<f64>, room: [f64; 2])
     }
     // The beam: a square bar from the body to the wall along its azimuth, tested in the bar's
     // own frame (rotated about z).
-    let (s, co) = m.beam_azimuth.sin_cos();
+    let (s, co, length) = beam;
     let rot = |v: Vector3<f64>| Vector3::new(co * v.x + s * v.y, -s * v.x + co * v.y, v.z);
     let ol = rot(o - c);
     let dl = rot(*d);
     let w = m.beam_half_width;
-    let length = room[0].hypot(room[1]) * 2.0;
     ray_box(
         &Point3::from(ol),
         &dl,
@@ -193,14 +209,30 @@ impl LatLong {
     /// The map of `f` at `w` × `h`, each texel the mean of `ss` × `ss` directions over it.
     fn bake(w: usize, h: usize, ss: usize, f: &(dyn Fn(&Vector3<f64>) -> [f64; 3] + Sync)) -> Self {
         let mut texels = vec![[0f32; 3]; w * h];
+        // The sub-sample directions' azimuths and polar angles, once per column and row (the
+        // values `direction` computes).
+        let columns: Vec<(f64, f64)> = (0..w * ss)
+            .map(|c| {
+                let (i, sx) = (c / ss, c % ss);
+                let phi = (i as f64 + (sx as f64 + 0.5) / ss as f64) / w as f64 * 2.0 * PI;
+                (phi.cos(), phi.sin())
+            })
+            .collect();
+        let rows: Vec<(f64, f64)> = (0..h * ss)
+            .map(|r| {
+                let (j, sy) = (r / ss, r % ss);
+                let theta = (j as f64 + (sy as f64 + 0.5) / ss as f64) / h as f64 * PI;
+                (theta.sin(), theta.cos())
+            })
+            .collect();
         for (k, t) in texels.iter_mut().enumerate() {
             let (i, j) = (k % w, k / w);
             let mut acc = [0.0; 3];
             for sy in 0..ss {
+                let (s, z) = rows[j * ss + sy];
                 for sx in 0..ss {
-                    let u = (i as f64 + (sx as f64 + 0.5) / ss as f64) / w as f64;
-                    let v = (j as f64 + (sy as f64 + 0.5) / ss as f64) / h as f64;
-                    let c = f(&direction(u, v));
+                    let (cp, sp) = columns[i * ss + sx];
+                    let c = f(&Vector3::new(s * cp, s * sp, z));
                     for ch in 0..3 {
                         acc[ch] += c[ch];
                     }
@@ -249,23 +281,47 @@ impl LatLong {
     /// Bilinear lookup along unit direction `d` (wrapping in azimuth, clamped at the poles).
     fn lookup(&self, d: &Vector3<f64>) -> [f64; 3] {
         let (u, v) = lat_long(d);
+        self.lookup_uv(u, v)
+    }
+
+    /// Bilinear lookup at map coordinates (u, v); u wraps (any u ≥ 0 is taken modulo 1).
+    fn lookup_uv(&self, u: f64, v: f64) -> [f64; 3] {
         let x = u * self.w as f64 - 0.5;
         let y = (v * self.h as f64 - 0.5).clamp(0.0, (self.h - 1) as f64);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let i0 = (x0 as i64).rem_euclid(self.w as i64) as usize;
-        let i1 = (i0 + 1) % self.w;
-        let j0 = y0 as usize;
+        let (xi, yi) = (floor(x), floor(y));
+        let (fx, fy) = (x - xi as f64, y - yi as f64);
+        let w = self.w as i64;
+        // u is within [0, 2) here (a direction's, or one shifted by less than a turn).
+        let i0 = if (0..w).contains(&xi) {
+            xi
+        } else if (-w..0).contains(&xi) {
+            xi + w
+        } else if (w..2 * w).contains(&xi) {
+            xi - w
+        } else {
+            xi.rem_euclid(w)
+        } as usize;
+        let i1 = if i0 + 1 == self.w { 0 } else { i0 + 1 };
+        let j0 = yi as usize;
         let j1 = (j0 + 1).min(self.h - 1);
-        let t = |i: usize, j: usize| self.texels[j * self.w + i];
+        let (r0, r1) = (j0 * self.w, j1 * self.w);
+        let (t00, t10) = (self.texels[r0 + i0], self.texels[r0 + i1]);
+        let (t01, t11) = (self.texels[r1 + i0], self.texels[r1 + i1]);
         let mut out = [0.0; 3];
         for (ch, o) in out.iter_mut().enumerate() {
-            let a = t(i0, j0)[ch] as f64 * (1.0 - fx) + t(i1, j0)[ch] as f64 * fx;
-            let b = t(i0, j1)[ch] as f64 * (1.0 - fx) + t(i1, j1)[ch] as f64 * fx;
+            let a = t00[ch] as f64 * (1.0 - fx) + t10[ch] as f64 * fx;
+            let b = t01[ch] as f64 * (1.0 - fx) + t11[ch] as f64 * fx;
             *o = a * (1.0 - fy) + b * fy;
         }
         out
     }
+}
+
+/// ⌊x⌋ as an integer, for |x| well within i64 (NaN gives 0): without SSE4.1 `f64::floor` is a
+/// library call, and the lookups take two each.
+fn floor(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x { i - 1 } else { i }
 }
 
 /// The unit direction at map coordinates (u, v) in [0, 1]².
@@ -277,7 +333,9 @@ fn direction(u: f64, v: f64) -> Vector3<f64> {
 
 /// Map coordinates (u, v) of a unit direction.
 fn lat_long(d: &Vector3<f64>) -> (f64, f64) {
-    let phi = d.y.atan2(d.x).rem_euclid(2.0 * PI);
+    // atan2 is within [-π, π], so this is `rem_euclid(2π)` without its library `fmod` call.
+    let phi = d.y.atan2(d.x);
+    let phi = if phi < 0.0 { phi + 2.0 * PI } else { phi };
     let theta = d.z.clamp(-1.0, 1.0).acos();
     (phi / (2.0 * PI), theta / PI)
 }
@@ -302,7 +360,8 @@ pub struct Environment {
 impl Environment {
     /// Bakes a room.
     pub fn from_room(room: &Room) -> Self {
-        Self::bake(&|d| room.radiance(d))
+        let beam = room.beam_frame();
+        Self::bake(&|d| room.radiance_with(beam, d))
     }
 
     /// A uniform environment of radiance `l` (the analytic case: every level and the irradiance
@@ -359,11 +418,13 @@ impl Environment {
             .min(LEVEL_ROUGHNESS.len() - 2);
         let f = ((rough - LEVEL_ROUGHNESS[k]) / (LEVEL_ROUGHNESS[k + 1] - LEVEL_ROUGHNESS[k]))
             .clamp(0.0, 1.0);
-        let a = self.levels[k].lookup(r);
+        // One direction for both levels: its map coordinates once.
+        let (u, v) = lat_long(r);
+        let a = self.levels[k].lookup_uv(u, v);
         if f <= 0.0 {
             return a;
         }
-        let b = self.levels[k + 1].lookup(r);
+        let b = self.levels[k + 1].lookup_uv(u, v);
         [0, 1, 2].map(|c| a[c] * (1.0 - f) + b[c] * f)
     }
 
@@ -391,6 +452,9 @@ impl Environment {
     }
 }
 
+/// One sample of a prefiltered lobe: map coordinates (u, v), mip level and cosine weight.
+type Tap = (f64, f64, (usize, f64), f64);
+
 /// One level of GGX-prefiltered radiance at `w` × `w/2`, each texel the lobe around its direction
 /// (n = v = r), sampled by filtered importance sampling over `mips`.
 fn prefilter(mips: &[LatLong], roughness: f64, w: usize) -> LatLong {
@@ -414,26 +478,52 @@ fn prefilter(mips: &[LatLong], roughness: f64, w: usize) -> LatLong {
             (h, lod)
         })
         .collect();
-    LatLong::bake(w, w / 2, 1, &|n| {
+    // The lobe's taps around `n`: map coordinates, mip level and cosine weight of each sample.
+    let taps = |n: &Vector3<f64>| -> Vec<Tap> {
         let (t, b) = frame(n);
+        samples
+            .iter()
+            .filter_map(|(h, lod)| {
+                let hw = t * h.x + b * h.y + n * h.z;
+                let l = hw * (2.0 * n.dot(&hw)) - n;
+                let nl = n.dot(&l);
+                (nl > 0.0).then(|| {
+                    let (u, v) = lat_long(&l);
+                    (u, v, mip_level(mips, *lod), nl)
+                })
+            })
+            .collect()
+    };
+    let filter = |taps: &[Tap], du: f64| {
         let mut acc = [0.0; 3];
         let mut wsum = 0.0;
-        for (h, lod) in &samples {
-            let hw = t * h.x + b * h.y + n * h.z;
-            let l = hw * (2.0 * n.dot(&hw)) - n;
-            let nl = n.dot(&l);
-            if nl <= 0.0 {
-                continue;
-            }
-            let c = mip_lookup(mips, &l, *lod);
+        for &(u, v, lod, nl) in taps {
+            let c = mip_lookup(mips, u + du, v, lod);
             for ch in 0..3 {
                 acc[ch] += c[ch] * nl;
             }
             wsum += nl;
         }
         let m = 1.0 / wsum.max(1e-12);
-        acc.map(|x| x * m)
-    })
+        acc.map(|x| (x * m) as f32)
+    };
+    let h = w / 2;
+    let mut texels = Vec::with_capacity(w * h);
+    for j in 0..h {
+        let v = (j as f64 + 0.5) / h as f64;
+        let first = direction(0.5 / w as f64, v);
+        if first.z.abs() < 0.9 {
+            // Away from the poles `frame` turns with the azimuth, so every texel of the row sees
+            // the first one's lobe turned about z: the same taps, shifted in u by i / w.
+            let row = taps(&first);
+            texels.extend((0..w).map(|i| filter(&row, i as f64 / w as f64)));
+        } else {
+            texels.extend(
+                (0..w).map(|i| filter(&taps(&direction((i as f64 + 0.5) / w as f64, v)), 0.0)),
+            );
+        }
+    }
+    LatLong { w, h, texels }
 }
 
 /// Cosine-weighted mean radiance around each direction at `w` × `w/2`, summed over a coarse mip
@@ -474,15 +564,20 @@ fn cosine_filter(mips: &[LatLong], w: usize) -> LatLong {
     })
 }
 
-/// Trilinear lookup in a mip chain at a fractional level.
-fn mip_lookup(mips: &[LatLong], d: &Vector3<f64>, lod: f64) -> [f64; 3] {
-    let k = (lod.floor() as usize).min(mips.len() - 1);
-    let f = lod - k as f64;
-    let a = mips[k].lookup(d);
+/// A fractional mip level as (level, weight of the next level).
+fn mip_level(mips: &[LatLong], lod: f64) -> (usize, f64) {
+    let k = (floor(lod).max(0) as usize).min(mips.len() - 1);
+    (k, lod - k as f64)
+}
+
+/// Trilinear lookup in a mip chain at a fractional level ([`mip_level`]), at map coordinates
+/// (u, v).
+fn mip_lookup(mips: &[LatLong], u: f64, v: f64, (k, f): (usize, f64)) -> [f64; 3] {
+    let a = mips[k].lookup_uv(u, v);
     if f <= 0.0 || k + 1 >= mips.len() {
         return a;
     }
-    let b = mips[k + 1].lookup(d);
+    let b = mips[k + 1].lookup_uv(u, v);
     [0, 1, 2].map(|c| a[c] * (1.0 - f) + b[c] * f)
 }
 
