@@ -286,6 +286,22 @@ impl LatLong {
 
     /// Bilinear lookup at map coordinates (u, v); u wraps (any u ≥ 0 is taken modulo 1).
     fn lookup_uv(&self, u: f64, v: f64) -> [f64; 3] {
+        let (i0, i1, j0, j1, fx, fy) = self.corners(u, v);
+        let (r0, r1) = (j0 * self.w, j1 * self.w);
+        let (t00, t10) = (self.texels[r0 + i0], self.texels[r0 + i1]);
+        let (t01, t11) = (self.texels[r1 + i0], self.texels[r1 + i1]);
+        let mut out = [0.0; 3];
+        for (ch, o) in out.iter_mut().enumerate() {
+            let a = t00[ch] as f64 * (1.0 - fx) + t10[ch] as f64 * fx;
+            let b = t01[ch] as f64 * (1.0 - fx) + t11[ch] as f64 * fx;
+            *o = a * (1.0 - fy) + b * fy;
+        }
+        out
+    }
+
+    /// The texels a bilinear lookup at (u, v) reads, as (column, next column, row, next row) and
+    /// the fractions (fx, fy) of the next ones.
+    fn corners(&self, u: f64, v: f64) -> (usize, usize, usize, usize, f64, f64) {
         let x = u * self.w as f64 - 0.5;
         let y = (v * self.h as f64 - 0.5).clamp(0.0, (self.h - 1) as f64);
         let (xi, yi) = (floor(x), floor(y));
@@ -304,16 +320,7 @@ impl LatLong {
         let i1 = if i0 + 1 == self.w { 0 } else { i0 + 1 };
         let j0 = yi as usize;
         let j1 = (j0 + 1).min(self.h - 1);
-        let (r0, r1) = (j0 * self.w, j1 * self.w);
-        let (t00, t10) = (self.texels[r0 + i0], self.texels[r0 + i1]);
-        let (t01, t11) = (self.texels[r1 + i0], self.texels[r1 + i1]);
-        let mut out = [0.0; 3];
-        for (ch, o) in out.iter_mut().enumerate() {
-            let a = t00[ch] as f64 * (1.0 - fx) + t10[ch] as f64 * fx;
-            let b = t01[ch] as f64 * (1.0 - fx) + t11[ch] as f64 * fx;
-            *o = a * (1.0 - fy) + b * fy;
-        }
-        out
+        (i0, i1, j0, j1, fx, fy)
     }
 }
 
@@ -516,7 +523,10 @@ fn prefilter(mips: &[LatLong], roughness: f64, w: usize) -> LatLong {
             // Away from the poles `frame` turns with the azimuth, so every texel of the row sees
             // the first one's lobe turned about z: the same taps, shifted in u by i / w.
             let row = taps(&first);
-            texels.extend((0..w).map(|i| filter(&row, i as f64 / w as f64)));
+            match RowKernel::new(mips, &row, w) {
+                Some(kernel) => texels.extend(kernel.apply(mips)),
+                None => texels.extend((0..w).map(|i| filter(&row, i as f64 / w as f64))),
+            }
         } else {
             texels.extend(
                 (0..w).map(|i| filter(&taps(&direction((i as f64 + 0.5) / w as f64, v)), 0.0)),
@@ -524,6 +534,116 @@ fn prefilter(mips: &[LatLong], roughness: f64, w: usize) -> LatLong {
         }
     }
     LatLong { w, h, texels }
+}
+
+/// The most kernels a [`RowKernel`] builds for a row (each costs a sort of the lobe's taps).
+const MAX_PHASES: usize = 4;
+
+/// The mip texels one row of a prefiltered level reads, with their weights: the lobe's taps
+/// merged (a narrow lobe's 48 samples fall on a few texels). Texel i of the row reads what
+/// texel i mod `period` reads, turned by whole texels of each mip: its taps are shifted by
+/// i / w in u, a whole number of texels of every mip at least `w / period` wide. Taps on mips
+/// coarser than `w / MAX_PHASES` (a lobe's far tail) are read for each texel instead.
+struct RowKernel {
+    /// Texels of the row.
+    w: usize,
+    /// Texels after which the kernels repeat, turned.
+    period: usize,
+    /// Per phase (texel i mod `period`): (mip, row start, column, weight), merged.
+    phases: Vec<Vec<(usize, usize, usize, f64)>>,
+    /// Taps on coarse mips, their weights normalised.
+    coarse: Vec<Tap>,
+}
+
+impl RowKernel {
+    /// The kernels of a row of `w` texels whose first texel's lobe has taps `taps`; `None` for
+    /// widths that are not powers of two.
+    fn new(mips: &[LatLong], taps: &[Tap], w: usize) -> Option<Self> {
+        if !w.is_power_of_two() || mips.iter().any(|m| !m.w.is_power_of_two()) {
+            return None;
+        }
+        let wsum: f64 = taps.iter().map(|t| t.3).sum();
+        let norm = 1.0 / wsum.max(1e-12);
+        // The narrowest mip a tap reads (the next level's when it blends in).
+        let narrowest = |&(_, _, (k, f), _): &Tap| {
+            let k = if f > 0.0 { k + 1 } else { k };
+            mips[k.min(mips.len() - 1)].w
+        };
+        let least = (w / MAX_PHASES).max(1);
+        let (fine, coarse): (Vec<Tap>, Vec<Tap>) = taps.iter().partition(|t| narrowest(t) >= least);
+        let period = fine
+            .iter()
+            .map(|t| w / narrowest(t).min(w))
+            .max()
+            .unwrap_or(1);
+        let phases = (0..period)
+            .map(|p| {
+                let du = p as f64 / w as f64;
+                let mut e = Vec::with_capacity(fine.len() * 8);
+                for &(u, v, (k, f), nl) in &fine {
+                    let levels: &[(usize, f64)] = if f <= 0.0 || k + 1 >= mips.len() {
+                        &[(k, 1.0)]
+                    } else {
+                        &[(k, 1.0 - f), (k + 1, f)]
+                    };
+                    for &(m, lw) in levels {
+                        let map = &mips[m];
+                        let (i0, i1, j0, j1, fx, fy) = map.corners(u + du, v);
+                        let wt = nl * norm * lw;
+                        for (j, wy) in [(j0, 1.0 - fy), (j1, fy)] {
+                            for (i, wx) in [(i0, 1.0 - fx), (i1, fx)] {
+                                e.push((m, j * map.w, i, wt * wx * wy));
+                            }
+                        }
+                    }
+                }
+                e.sort_unstable_by_key(|&(m, r, i, _)| (m, r, i));
+                let mut merged: Vec<(usize, usize, usize, f64)> = Vec::with_capacity(e.len());
+                for x in e {
+                    match merged.last_mut() {
+                        Some(last) if (last.0, last.1, last.2) == (x.0, x.1, x.2) => last.3 += x.3,
+                        _ => merged.push(x),
+                    }
+                }
+                merged
+            })
+            .collect();
+        let coarse = coarse
+            .into_iter()
+            .map(|(u, v, lod, nl)| (u, v, lod, nl * norm))
+            .collect();
+        Some(Self {
+            w,
+            period,
+            phases,
+            coarse,
+        })
+    }
+
+    /// The row's texels.
+    fn apply<'a>(&'a self, mips: &'a [LatLong]) -> impl Iterator<Item = [f32; 3]> + 'a {
+        (0..self.w).map(move |i| {
+            let (q, p) = (i / self.period, i % self.period);
+            let mut acc = [0.0; 3];
+            for &(m, row, col, wt) in &self.phases[p] {
+                let map = &mips[m];
+                // A turn of q periods is q · period · (mip width / w) whole texels.
+                let shift = q * self.period * map.w / self.w;
+                let t = map.texels[row + (col + shift) % map.w];
+                for ch in 0..3 {
+                    acc[ch] += t[ch] as f64 * wt;
+                }
+            }
+            let du = i as f64 / self.w as f64;
+            for &(u, v, lod, wt) in &self.coarse {
+                let c = mip_lookup(mips, u + du, v, lod);
+                for ch in 0..3 {
+                    acc[ch] += c[ch] * wt;
+                }
+            }
+            acc.map(|x| x as f32)
+        })
+    }
 }
 
 /// Cosine-weighted mean radiance around each direction at `w` × `w/2`, summed over a coarse mip
