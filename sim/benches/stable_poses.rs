@@ -4,7 +4,8 @@
 //!
 //! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
 //! for the parts of another catalog, `-- rest_time=S` for another rest time in seconds, `-- solver_iterations=N`,
-//! `-- one_contact_per_point=0` for every triangle's contacts).
+//! `-- one_contact_per_point=0` for every triangle's contacts, `-- engine=mujoco` for MuJoCo's
+//! drops).
 //! One timed run, not criterion's repeats: a run takes tens of seconds.
 //!
 //! `-- paired rest_time=S` drops each part twice, with the default settings (or those changed
@@ -21,7 +22,9 @@ use std::time::Instant;
 use nalgebra::Vector3;
 use perception::part::{Catalog, PartRole, TriMesh};
 use rayon::prelude::*;
-use sim::stable_poses::{DropBody, DropOutcome, DropSettings, simulate_batch, stable_poses};
+use sim::stable_poses::{
+    DropBody, DropEngine, DropOutcome, DropSettings, simulate_batch, stable_poses_with,
+};
 
 /// CPU seconds this process has used (user + system), from /proc; `None` elsewhere.
 fn cpu_seconds() -> Option<f64> {
@@ -73,11 +76,18 @@ fn main() {
         }
         return;
     }
+    let engine = args
+        .iter()
+        .find_map(|a| a.strip_prefix("engine="))
+        .map_or(DropEngine::Rapier, |e| {
+            DropEngine::from_name(e).expect("engine=rapier or engine=mujoco")
+        });
     let (wall, cpu) = (Instant::now(), cpu_seconds());
     let mut total = 0;
     for (part, mesh) in &parts {
         let start = Instant::now();
-        let report = stable_poses(mesh, part.density(), &settings, None);
+        let report = stable_poses_with(engine, &part.name, mesh, part.density(), &settings, None)
+            .expect("the drops");
         total += report.drops;
         println!(
             "{}: {} drops in {:.1} s, {} still jittering at the {} s limit, mean rest {:.3} s",
