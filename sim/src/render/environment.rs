@@ -362,6 +362,8 @@ pub struct Environment {
     levels: Vec<LatLong>,
     /// Cosine-weighted mean radiance around each normal (irradiance / π).
     irradiance: LatLong,
+    /// The irradiance map's value straight up (the table's and the plate's normal), read once.
+    irradiance_up: [f64; 3],
 }
 
 impl Environment {
@@ -392,8 +394,17 @@ impl Environment {
         for k in 1..LEVEL_ROUGHNESS.len() {
             levels.push(prefilter(&mips, LEVEL_ROUGHNESS[k], LEVEL_WIDTH[k]));
         }
-        let irradiance = cosine_filter(&mips, 16);
-        Self { levels, irradiance }
+        Self::new(levels, cosine_filter(&mips, 16))
+    }
+
+    /// The environment of these levels and irradiance map.
+    fn new(levels: Vec<LatLong>, irradiance: LatLong) -> Self {
+        let irradiance_up = irradiance.lookup(&Vector3::z());
+        Self {
+            levels,
+            irradiance,
+            irradiance_up,
+        }
     }
 
     /// This environment with every radiance times `k` per channel (the room with its lights
@@ -408,10 +419,10 @@ impl Environment {
                 .map(|t| [0, 1, 2].map(|c| (t[c] as f64 * k[c]) as f32))
                 .collect(),
         };
-        Self {
-            levels: self.levels.iter().map(scale).collect(),
-            irradiance: scale(&self.irradiance),
-        }
+        Self::new(
+            self.levels.iter().map(scale).collect(),
+            scale(&self.irradiance),
+        )
     }
 
     /// Prefiltered radiance along unit direction `r` for a lobe of `roughness` (linear between
@@ -437,6 +448,9 @@ impl Environment {
 
     /// Cosine-weighted mean radiance over the hemisphere around unit normal `n` (irradiance / π).
     pub fn irradiance(&self, n: &Vector3<f64>) -> [f64; 3] {
+        if n.x == 0.0 && n.y == 0.0 && n.z == 1.0 {
+            return self.irradiance_up;
+        }
         self.irradiance.lookup(n)
     }
 
@@ -579,7 +593,8 @@ impl RowKernel {
         let phases = (0..period)
             .map(|p| {
                 let du = p as f64 / w as f64;
-                let mut e = Vec::with_capacity(fine.len() * 8);
+                // (mip << 40 | texel index, weight): one integer key to sort on.
+                let mut e: Vec<(u64, f64)> = Vec::with_capacity(fine.len() * 8);
                 for &(u, v, (k, f), nl) in &fine {
                     let levels: &[(usize, f64)] = if f <= 0.0 || k + 1 >= mips.len() {
                         &[(k, 1.0)]
@@ -592,20 +607,27 @@ impl RowKernel {
                         let wt = nl * norm * lw;
                         for (j, wy) in [(j0, 1.0 - fy), (j1, fy)] {
                             for (i, wx) in [(i0, 1.0 - fx), (i1, fx)] {
-                                e.push((m, j * map.w, i, wt * wx * wy));
+                                e.push((((m as u64) << 40) | (j * map.w + i) as u64, wt * wx * wy));
                             }
                         }
                     }
                 }
-                e.sort_unstable_by_key(|&(m, r, i, _)| (m, r, i));
-                let mut merged: Vec<(usize, usize, usize, f64)> = Vec::with_capacity(e.len());
+                e.sort_unstable_by_key(|x| x.0);
+                let mut merged: Vec<(u64, f64)> = Vec::with_capacity(e.len());
                 for x in e {
                     match merged.last_mut() {
-                        Some(last) if (last.0, last.1, last.2) == (x.0, x.1, x.2) => last.3 += x.3,
+                        Some(last) if last.0 == x.0 => last.1 += x.1,
                         _ => merged.push(x),
                     }
                 }
                 merged
+                    .into_iter()
+                    .map(|(key, wt)| {
+                        let (m, k) = ((key >> 40) as usize, (key & ((1 << 40) - 1)) as usize);
+                        let w = mips[m].w;
+                        (m, k - k % w, k % w, wt)
+                    })
+                    .collect()
             })
             .collect();
         let coarse = coarse
