@@ -214,6 +214,9 @@ impl UrRobot {
 impl Drop for UrRobot {
     fn drop(&mut self) {
         self.heartbeat.abort();
+        // The heartbeat task's clone of the client may outlive this robot for a moment; the
+        // link must not see the controller close meanwhile and warn of a failed link.
+        self.rtde.close();
     }
 }
 

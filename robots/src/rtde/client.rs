@@ -336,6 +336,13 @@ impl Drop for RtdeClient {
 }
 
 impl RtdeClient {
+    /// Stops the background link now, even while other holders (a heartbeat task) still keep
+    /// this client: an owner that is done with the controller closes it so, and the link does
+    /// not report the controller's own shutdown as a failure to reconnect from.
+    pub fn close(&self) {
+        self.task.abort();
+    }
+
     /// Connects, negotiates and starts streaming; the link is then kept up in the background.
     pub async fn connect(config: ClientConfig) -> Result<RtdeClient, ClientError> {
         let session = establish(&config).await?;
