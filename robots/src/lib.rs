@@ -5,6 +5,7 @@ pub mod kinematics;
 pub mod limited;
 pub mod limits;
 pub mod motion;
+pub mod observed;
 pub mod program;
 pub mod robot;
 pub mod rtde;
