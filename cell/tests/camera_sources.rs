@@ -367,79 +367,8 @@ mod safety {
         CellIo, CellIoError, InsertionCheck, ProductionCellIo, SplitCell, State, run_episode,
     };
     use cell::scenario::Scenario;
-    use nalgebra::Isometry3;
     use perception::{Frame, FrameContent};
-    use robots::kinematics::Joints;
-    use robots::limits::Limits;
-    use robots::robot::{
-        ContactOutcome, JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus, Wrench,
-    };
-
-    /// Counts every command that moves the arm or the fingers.
-    struct CountingRobot<'a> {
-        inner: &'a mut dyn Robot,
-        motions: Arc<AtomicUsize>,
-    }
-
-    #[allow(non_snake_case)]
-    impl Robot for CountingRobot<'_> {
-        fn limits(&self) -> &Limits {
-            self.inner.limits()
-        }
-        fn joints(&mut self) -> RobotFuture<'_, Joints> {
-            self.inner.joints()
-        }
-        fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
-            self.inner.tcp_pose()
-        }
-        fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner.move_j(target, motion)
-        }
-        fn move_l(
-            &mut self,
-            base_T_tcp: Isometry3<f64>,
-            motion: LinearMotion,
-        ) -> RobotFuture<'_, ()> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner.move_l(base_T_tcp, motion)
-        }
-        fn move_path(&mut self, path: Vec<robots::robot::Waypoint>) -> RobotFuture<'_, ()> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner.move_path(path)
-        }
-        fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner.open_gripper()
-        }
-        fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner.open_gripper_to(width)
-        }
-        fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner.close_gripper()
-        }
-        fn stop(&mut self) -> RobotFuture<'_, ()> {
-            self.inner.stop()
-        }
-        fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
-            self.inner.status()
-        }
-        fn move_until_contact(
-            &mut self,
-            base_T_tcp: Isometry3<f64>,
-            motion: LinearMotion,
-            force_limit: f64,
-        ) -> RobotFuture<'_, ContactOutcome> {
-            self.motions.fetch_add(1, Ordering::SeqCst);
-            self.inner
-                .move_until_contact(base_T_tcp, motion, force_limit)
-        }
-        fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
-            self.inner.wrench()
-        }
-    }
+    use robots::observed::{Command, Observed};
 
     /// The production side channels, noting how many motions the arm had made when each
     /// capture was asked for.
@@ -483,10 +412,13 @@ mod safety {
             .await
             .unwrap();
         let motions = Arc::new(AtomicUsize::new(0));
-        let mut robot = CountingRobot {
-            inner: &mut s.robot,
-            motions: motions.clone(),
-        };
+        // Counts every command that moves the arm or the fingers.
+        let counted = motions.clone();
+        let mut robot = Observed::new(&mut s.robot, move |c: &Command<'_>| {
+            if c.moves_arm() || c.moves_fingers() {
+                counted.fetch_add(1, Ordering::SeqCst);
+            }
+        });
         let mut io = Watched {
             inner: ProductionCellIo::new(
                 setup.scenario().clone(),

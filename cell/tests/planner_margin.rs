@@ -28,10 +28,8 @@ use nalgebra::{Isometry3, Point3};
 use perception::{DetectedPart, Frame, PartPerception, Perceived, PerceptionError};
 use robots::kinematics::Joints;
 use robots::limited::Limited;
-use robots::limits::Limits;
-use robots::robot::{
-    ContactOutcome, JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus, Waypoint, Wrench,
-};
+use robots::observed::{Command, Observed, Observer};
+use robots::robot::{ContactOutcome, Robot, RobotFuture};
 use sim::cell::SimCell;
 use sim::cell::geometry::PartGeometry;
 
@@ -58,10 +56,10 @@ struct Segment {
     placed: usize,
 }
 
-/// What perception reported last, shared with [`Measured`].
+/// What perception reported last, shared with [`Measurer`].
 type Seen = Arc<Mutex<Vec<DetectedPart>>>;
 
-/// Perception that keeps its last detections for [`Measured`].
+/// Perception that keeps its last detections for [`Measurer`].
 struct Recording<'a> {
     inner: &'a mut dyn PartPerception,
     seen: Seen,
@@ -79,8 +77,10 @@ impl PartPerception for Recording<'_> {
 type Obstacles<'a> = Vec<(&'a PartGeometry, Isometry3<f64>, String)>;
 
 /// The simulated cell with every fast motion's clearance measured after it ran.
-struct Measured {
-    cell: Limited<SimCell>,
+struct Measured(Observed<Limited<SimCell>, Measurer>);
+
+/// Measures each fast motion of the simulated cell after it ran.
+struct Measurer {
     /// The planner's transit margin, metres.
     margin: f64,
     knowledge: Arc<CellKnowledge>,
@@ -89,10 +89,12 @@ struct Measured {
     /// The held part as the planner estimates it: its name and `tcp_T_part` (the detection
     /// nearest the last grasp, with [`grasped_offset`]).
     estimate: Option<(String, Isometry3<f64>)>,
+    /// Whether the fingers held a part when the last command was passed on.
+    holding: bool,
     segments: Vec<Segment>,
 }
 
-impl Measured {
+impl Measurer {
     /// The smallest clearance along `trace` of the gripper and `held` to `obstacles`, and the
     /// obstacle there; obstacles within the margin at the start are left out.
     fn along(
@@ -158,10 +160,9 @@ impl Measured {
         (min, at.map_or_else(String::new, |i| obstacles[i].2.clone()))
     }
 
-    /// Measures the motion the cell just ran.
-    fn measure(&mut self, kind: &'static str) {
+    /// Measures the motion `sim` just ran.
+    fn measure(&mut self, sim: &SimCell, kind: &'static str) {
         let k = self.knowledge.clone();
-        let sim = self.cell.inner();
         let trace = sim.last_motion_trace(5e-4);
         if trace.is_empty() {
             return;
@@ -198,32 +199,27 @@ impl Measured {
     }
 }
 
-impl Robot for Measured {
-    fn limits(&self) -> &Limits {
-        self.cell.limits()
+impl Observer<Limited<SimCell>> for Measurer {
+    fn before(&mut self, cell: &Limited<SimCell>, _command: &Command<'_>) {
+        self.holding = cell.inner().held().is_some();
     }
-    fn joints(&mut self) -> RobotFuture<'_, Joints> {
-        self.cell.joints()
-    }
-    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
-        self.cell.tcp_pose()
-    }
-    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            self.cell.move_j(target, motion).await?;
-            self.measure("move_j");
-            Ok(())
-        })
-    }
+
     #[allow(non_snake_case)]
-    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let holding = self.cell.inner().held().is_some();
-            self.cell.move_l(base_T_tcp, motion).await?;
+    fn after<'a>(
+        &'a mut self,
+        cell: &'a mut Limited<SimCell>,
+        command: &'a Command<'a>,
+        _contact: Option<&'a ContactOutcome>,
+    ) -> RobotFuture<'a, ()> {
+        match *command {
+            Command::MoveJ { .. } | Command::MovePath { .. } => {
+                self.measure(cell.inner(), command.name())
+            }
             // The slow final segments into a grasp or an insertion are meant to touch.
-            if motion.speed > self.slow_speed + 1e-12 {
-                self.measure("move_l");
-            } else if !holding {
+            Command::MoveL { motion, .. } if motion.speed > self.slow_speed + 1e-12 => {
+                self.measure(cell.inner(), "move_l")
+            }
+            Command::MoveL { base_T_tcp, .. } if !self.holding => {
                 // Down to a grasp: the planner's estimate of the part it will hold is the
                 // detection under the fingers.
                 let seen = self.seen.lock().unwrap();
@@ -242,52 +238,18 @@ impl Robot for Measured {
                     )
                 });
             }
-            Ok(())
-        })
-    }
-    fn move_path(&mut self, path: Vec<Waypoint>) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            self.cell.move_path(path).await?;
-            self.measure("move_path");
-            Ok(())
-        })
-    }
-    fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.cell.open_gripper()
-    }
-    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
-        self.cell.open_gripper_to(width)
-    }
-    fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.cell.close_gripper()
-    }
-    fn stop(&mut self) -> RobotFuture<'_, ()> {
-        self.cell.stop()
-    }
-    fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
-        self.cell.status()
-    }
-    #[allow(non_snake_case)]
-    fn move_until_contact(
-        &mut self,
-        base_T_tcp: Isometry3<f64>,
-        motion: LinearMotion,
-        force_limit: f64,
-    ) -> RobotFuture<'_, ContactOutcome> {
-        self.cell
-            .move_until_contact(base_T_tcp, motion, force_limit)
-    }
-    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
-        self.cell.wrench()
+            _ => {}
+        }
+        Box::pin(std::future::ready(Ok(())))
     }
 }
 
 impl Workcell for Measured {
     fn robot(&mut self) -> &mut dyn Robot {
-        self
+        &mut self.0
     }
     fn io(&mut self) -> &mut dyn CellIo {
-        self.cell.inner_mut()
+        self.0.inner_mut().inner_mut()
     }
 }
 
@@ -302,15 +264,18 @@ async fn episode(setup: &SimSetup, episode: u32) -> (Vec<Segment>, bool, Vec<Str
         .limited(setup.sim_cell(episode).unwrap())
         .unwrap();
     let seen = Seen::default();
-    let mut cell = Measured {
+    let mut cell = Measured(Observed::new(
         cell,
-        margin: setup.engine.settings.planning.transit_margin,
-        knowledge: setup.engine.knowledge.clone(),
-        slow_speed: setup.engine.settings.planning.slow_speed,
-        seen: seen.clone(),
-        estimate: None,
-        segments: Vec::new(),
-    };
+        Measurer {
+            margin: setup.engine.settings.planning.transit_margin,
+            knowledge: setup.engine.knowledge.clone(),
+            slow_speed: setup.engine.settings.planning.slow_speed,
+            seen: seen.clone(),
+            estimate: None,
+            holding: false,
+            segments: Vec::new(),
+        },
+    ));
     let mut perception = Recording {
         inner: &mut perception,
         seen,
@@ -322,7 +287,8 @@ async fn episode(setup: &SimSetup, episode: u32) -> (Vec<Segment>, bool, Vec<Str
         .iter()
         .map(|e| e.detail.clone())
         .collect();
-    (cell.segments, out.record.success, details)
+    let (_, measurer) = cell.0.into_parts();
+    (measurer.segments, out.record.success, details)
 }
 
 fn setup(path: &str) -> SimSetup {

@@ -21,10 +21,9 @@ use perception::{Camera, FrameImage};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
-use robots::kinematics::Joints;
-use robots::limits::Limits;
-use robots::motion::{JointMotion, LinearMotion};
-use robots::robot::{ContactOutcome, Robot, RobotFuture, RobotStatus, Wrench};
+use robots::motion::LinearMotion;
+use robots::observed::{Command, Observed, Observer};
+use robots::robot::{ContactOutcome, Robot, RobotFuture};
 use sim::render::{RenderOutput, RenderSettings, TagBoard, Window, render, window_covering};
 use sim::scene::{BoardView, Randomisation};
 use sim::scene::{board_render_settings, sample_board_view};
@@ -320,12 +319,14 @@ impl SimWorld {
         seed: u64,
     ) -> (SimHoldingArm<R>, SimHandEyeCamera) {
         let held: HeldPose = Arc::new(Mutex::new(None));
-        let arm = SimHoldingArm {
+        let arm = Observed::new(
             robot,
-            held: held.clone(),
-            repeatability: self.scenario.spec.noise.robot_repeatability,
-            rng: ChaCha8Rng::seed_from_u64(seed ^ ARM_STREAM),
-        };
+            HeldBoard {
+                held: held.clone(),
+                repeatability: self.scenario.spec.noise.robot_repeatability,
+                rng: ChaCha8Rng::seed_from_u64(seed ^ ARM_STREAM),
+            },
+        );
         let camera = SimHandEyeCamera {
             // The same draw of lights, print wear and sensor as the touch method's camera for
             // this seed, so the two methods are compared on the same world.
@@ -342,15 +343,18 @@ impl SimWorld {
 
 /// The simulated arm of a hand-eye calibration: the robot, and where the board it carries truly
 /// is after each move (the commanded pose off by the arm's repeatability, which the robot's
-/// reading does not show).
-pub struct SimHoldingArm<R> {
-    robot: R,
+/// reading does not show), kept by its [`HeldBoard`] observer.
+pub type SimHoldingArm<R> = Observed<R, HeldBoard>;
+
+/// Where the board a hand-eye calibration's arm carries truly is: after each arm motion, the
+/// pose the arm settled at off by its repeatability.
+pub struct HeldBoard {
     held: HeldPose,
     repeatability: f64,
     rng: ChaCha8Rng,
 }
 
-impl<R: Robot> SimHoldingArm<R> {
+impl HeldBoard {
     /// Where the TCP truly is when the arm reports `reading`.
     fn settle(&mut self, reading: Isometry3<f64>) {
         let r = self.repeatability;
@@ -370,86 +374,27 @@ impl<R: Robot> SimHoldingArm<R> {
     }
 }
 
-impl<R: Robot> Robot for SimHoldingArm<R> {
-    fn limits(&self) -> &Limits {
-        self.robot.limits()
-    }
-
-    fn joints(&mut self) -> RobotFuture<'_, Joints> {
-        self.robot.joints()
-    }
-
-    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
-        self.robot.tcp_pose()
-    }
-
-    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            self.robot.move_j(target, motion).await?;
-            let reading = self.robot.tcp_pose().await?;
-            self.settle(reading);
-            Ok(())
-        })
-    }
-
-    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            self.robot.move_l(base_T_tcp, motion).await?;
-            self.settle(base_T_tcp);
-            Ok(())
-        })
-    }
-
-    /// The arm settles at the path's end as after a joint move: the held target's reading
-    /// is taken from where the arm rests.
-    fn move_path(&mut self, path: Vec<robots::robot::Waypoint>) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            self.robot.move_path(path).await?;
-            let reading = self.robot.tcp_pose().await?;
-            self.settle(reading);
-            Ok(())
-        })
-    }
-
-    fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.robot.open_gripper()
-    }
-
-    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
-        self.robot.open_gripper_to(width)
-    }
-
-    fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.robot.close_gripper()
-    }
-
-    fn stop(&mut self) -> RobotFuture<'_, ()> {
-        self.robot.stop()
-    }
-
+impl<R: Robot> Observer<R> for HeldBoard {
+    /// The arm settles after each motion: at the commanded pose after a linear move, where it
+    /// stopped after a guarded move, and where it reads after a joint move or a blended path
+    /// (the held target's reading is taken from where the arm rests).
     #[allow(non_snake_case)]
-    fn move_until_contact(
-        &mut self,
-        base_T_tcp: Isometry3<f64>,
-        motion: LinearMotion,
-        force_limit: f64,
-    ) -> RobotFuture<'_, ContactOutcome> {
+    fn after<'a>(
+        &'a mut self,
+        robot: &'a mut R,
+        command: &'a Command<'a>,
+        contact: Option<&'a ContactOutcome>,
+    ) -> RobotFuture<'a, ()> {
         Box::pin(async move {
-            let outcome = self
-                .robot
-                .move_until_contact(base_T_tcp, motion, force_limit)
-                .await?;
-            self.settle(outcome.stopped_at);
-            Ok(outcome)
+            let reading = match (command, contact) {
+                (Command::MoveJ { .. } | Command::MovePath { .. }, _) => robot.tcp_pose().await?,
+                (Command::MoveL { base_T_tcp, .. }, _) => *base_T_tcp,
+                (Command::MoveUntilContact { .. }, Some(outcome)) => outcome.stopped_at,
+                _ => return Ok(()),
+            };
+            self.settle(reading);
+            Ok(())
         })
-    }
-
-    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
-        self.robot.wrench()
-    }
-
-    fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
-        self.robot.status()
     }
 }
 
