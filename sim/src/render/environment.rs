@@ -819,6 +819,97 @@ mod tests {
         }
     }
 
+    /// The prefilter's shortcuts (a row's taps shared and merged into kernels) give what
+    /// filtering every texel on its own gives, in a room with sharp panels and a mount.
+    #[test]
+    fn the_row_kernels_filter_as_each_texel_alone() {
+        let room = Room {
+            eye: Point3::new(0.01, -0.02, 0.005),
+            half_size: [2.0, 3.0],
+            floor: -0.9,
+            ceiling: 2.5,
+            walls: [[0.2; 3], [0.3, 0.2, 0.1], [0.4; 3], [0.5; 3]],
+            ceiling_radiance: [0.1; 3],
+            floor_radiance: [0.05; 3],
+            table_half: 0.5,
+            table_radiance: [0.07; 3],
+            plate_half: 0.1,
+            plate_radiance: [0.6; 3],
+            panels: vec![
+                CeilingPanel {
+                    centre: [0.3, 0.1],
+                    size: [0.6, 0.3],
+                    radiance: [5.0, 4.0, 3.0],
+                },
+                CeilingPanel {
+                    centre: [-1.0, 1.5],
+                    size: [0.2, 1.2],
+                    radiance: [2.0; 3],
+                },
+            ],
+            mount: Some(CameraMount {
+                position: Point3::new(0.1, 0.0, 1.5),
+                half_extents: [0.04, 0.04, 0.06],
+                beam_azimuth: 1.0,
+                beam_half_width: 0.02,
+                radiance: [0.01; 3],
+            }),
+        };
+        let base = LatLong::bake(LEVEL_WIDTH[0], LEVEL_WIDTH[0] / 2, 2, &|d| room.radiance(d));
+        let mut mips = vec![base];
+        while mips.last().is_some_and(|m| m.h > 1) {
+            let next = mips
+                .last()
+                .map(LatLong::half)
+                .unwrap_or_else(|| mips[0].clone());
+            mips.push(next);
+        }
+        let base_texel = 4.0 * PI / (mips[0].w * mips[0].h) as f64;
+        for k in 1..LEVEL_ROUGHNESS.len() {
+            let (r, w) = (LEVEL_ROUGHNESS[k], LEVEL_WIDTH[k]);
+            let fast = prefilter(&mips, r, w);
+            let a2 = (r * r).max(1e-4).powi(2);
+            // Every texel alone: its own frame, its own 48 directions.
+            let slow = LatLong::bake(w, w / 2, 1, &|n| {
+                let (t, b) = frame(n);
+                let (mut acc, mut wsum) = ([0.0; 3], 0.0);
+                for i in 0..PREFILTER_SAMPLES {
+                    let (u1, u2) = hammersley(i, PREFILTER_SAMPLES);
+                    let cos_t = ((1.0 - u1) / (1.0 + (a2 - 1.0) * u1)).sqrt();
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    let phi = 2.0 * PI * u2;
+                    let h = Vector3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+                    let dd = cos_t * cos_t * (a2 - 1.0) + 1.0;
+                    let pdf = a2 / (PI * dd * dd) / 4.0;
+                    let lod = (0.5 * (1.0 / (PREFILTER_SAMPLES as f64 * pdf) / base_texel).log2()
+                        + 1.0)
+                        .clamp(0.0, (mips.len() - 1) as f64);
+                    let hw = t * h.x + b * h.y + n * h.z;
+                    let l = hw * (2.0 * n.dot(&hw)) - n;
+                    let nl = n.dot(&l);
+                    if nl <= 0.0 {
+                        continue;
+                    }
+                    let (u, v) = lat_long(&l);
+                    let c = mip_lookup(&mips, u, v, mip_level(&mips, lod));
+                    for ch in 0..3 {
+                        acc[ch] += c[ch] * nl;
+                    }
+                    wsum += nl;
+                }
+                acc.map(|x| x / wsum)
+            });
+            for (i, (a, b)) in fast.texels.iter().zip(&slow.texels).enumerate() {
+                for c in 0..3 {
+                    assert!(
+                        (a[c] - b[c]).abs() <= 1e-5 * (1.0 + b[c].abs()),
+                        "level {k}, texel {i}: {a:?} against {b:?}"
+                    );
+                }
+            }
+        }
+    }
+
     /// A uniform environment stays uniform through every prefiltered level and the irradiance.
     #[test]
     fn a_uniform_environment_is_uniform_at_every_level() {
