@@ -12,13 +12,9 @@ use std::time::Duration;
 use cell::episode::StepOutcome;
 use cell::harness::{SimCellIo, connect_sim_over_rtde, keypoint_noise_for};
 use cell::orchestrator::{EpisodeOutput, SplitCell, State, run_episode};
-use nalgebra::Isometry3;
-use robots::kinematics::Joints;
 use robots::limited::Limited;
-use robots::limits::Limits;
-use robots::robot::{
-    ContactOutcome, JointMotion, LinearMotion, Robot, RobotFuture, RobotStatus, Wrench,
-};
+use robots::observed::{Command, Observed};
+use robots::robot::Robot;
 use robots::ur_robot::UrRobot;
 use robots::virtual_ur::VirtualUr;
 use sim::cell::SimCell;
@@ -42,65 +38,6 @@ async fn run_over_rtde(
     let mut perception = keypoint_noise_for(setup.scenario(), episode).unwrap();
     let mut cell = SplitCell { robot, io: &mut io };
     run_episode(setup.engine.context(episode), &mut cell, &mut perception).await
-}
-
-/// A robot that counts the moves it passes on.
-struct CountingRobot<'a> {
-    inner: &'a mut Limited<UrRobot>,
-    moves: usize,
-}
-
-#[allow(non_snake_case)]
-impl Robot for CountingRobot<'_> {
-    fn limits(&self) -> &Limits {
-        self.inner.limits()
-    }
-    fn joints(&mut self) -> RobotFuture<'_, Joints> {
-        self.inner.joints()
-    }
-    fn tcp_pose(&mut self) -> RobotFuture<'_, Isometry3<f64>> {
-        self.inner.tcp_pose()
-    }
-    fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
-        self.moves += 1;
-        self.inner.move_j(target, motion)
-    }
-    fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
-        self.moves += 1;
-        self.inner.move_l(base_T_tcp, motion)
-    }
-    fn move_path(&mut self, path: Vec<robots::robot::Waypoint>) -> RobotFuture<'_, ()> {
-        self.moves += 1;
-        self.inner.move_path(path)
-    }
-    fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.inner.open_gripper()
-    }
-    fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
-        self.inner.open_gripper_to(width)
-    }
-    fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
-        self.inner.close_gripper()
-    }
-    fn stop(&mut self) -> RobotFuture<'_, ()> {
-        self.inner.stop()
-    }
-    fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
-        self.inner.status()
-    }
-    fn move_until_contact(
-        &mut self,
-        base_T_tcp: Isometry3<f64>,
-        motion: LinearMotion,
-        force_limit: f64,
-    ) -> RobotFuture<'_, ContactOutcome> {
-        self.moves += 1;
-        self.inner
-            .move_until_contact(base_T_tcp, motion, force_limit)
-    }
-    fn wrench(&mut self) -> RobotFuture<'_, Wrench> {
-        self.inner.wrench()
-    }
 }
 
 /// The virtual controller's control period.
@@ -149,14 +86,15 @@ async fn assert_runs_match(setup: &Setup, episodes: u32) {
         .record;
         let local_travel = local_cell.inner().gripper_travel();
         let (vur, mut robot, cell) = start(setup, episode).await;
-        let mut counting = CountingRobot {
-            inner: &mut robot,
-            moves: 0,
-        };
+        // The arm's moves passed on to the controller, counted.
+        let mut moves = 0usize;
+        let mut counting = Observed::new(&mut robot, |c: &Command<'_>| {
+            moves += usize::from(c.moves_arm());
+        });
         let remote = run_over_rtde(setup, &mut counting, cell.clone(), episode)
             .await
             .record;
-        let moves = counting.moves;
+        drop(counting);
         drop(robot);
         drop(vur);
         let remote_travel = cell.lock().unwrap().gripper_travel();
