@@ -94,7 +94,6 @@ async fn assert_runs_match(setup: &Setup, episodes: u32) {
         let remote = run_over_rtde(setup, &mut counting, cell.clone(), episode)
             .await
             .record;
-        drop(counting);
         drop(robot);
         drop(vur);
         let remote_travel = cell.lock().unwrap().gripper_travel();
