@@ -14,7 +14,7 @@ use nalgebra::Isometry3;
 use crate::kinematics::Joints;
 use crate::limits::Limits;
 use crate::motion::{JointMotion, LinearMotion};
-use crate::robot::{ContactOutcome, Robot, RobotFuture, RobotStatus, Waypoint, Wrench};
+use crate::robot::{ContactOutcome, Robot, RobotError, RobotFuture, RobotStatus, Waypoint, Wrench};
 
 /// A command an [`Observed`] robot passes on, as its [`Observer`] sees it: the arguments of
 /// the [`Robot`] method of the same name.
@@ -165,6 +165,38 @@ impl<R: Robot, O: Observer<R>> Observed<R, O> {
     }
 }
 
+impl<R: Robot, O: Observer<R>> Observed<R, O> {
+    /// Shows `command` to the observer, passes it on, and shows the observer its success.
+    async fn pass_on(&mut self, command: Command<'_>) -> Result<(), RobotError> {
+        self.observer.before(&self.robot, &command);
+        send(&mut self.robot, &command).await?;
+        self.observer.after(&mut self.robot, &command, None).await
+    }
+}
+
+/// Sends `command` to `robot` (a guarded move's outcome is dropped).
+fn send<'r, R: Robot>(robot: &'r mut R, command: &Command<'_>) -> RobotFuture<'r, ()> {
+    match *command {
+        Command::MoveJ { target, motion } => robot.move_j(target, motion),
+        Command::MoveL { base_T_tcp, motion } => robot.move_l(base_T_tcp, motion),
+        Command::MovePath { path } => robot.move_path(path.to_vec()),
+        Command::MoveUntilContact {
+            base_T_tcp,
+            motion,
+            force_limit,
+        } => Box::pin(async move {
+            robot
+                .move_until_contact(base_T_tcp, motion, force_limit)
+                .await
+                .map(drop)
+        }),
+        Command::OpenGripper => robot.open_gripper(),
+        Command::OpenGripperTo { width } => robot.open_gripper_to(width),
+        Command::CloseGripper => robot.close_gripper(),
+        Command::Stop => robot.stop(),
+    }
+}
+
 impl<R: Robot, O: Observer<R>> Robot for Observed<R, O> {
     fn limits(&self) -> &Limits {
         self.robot.limits()
@@ -179,68 +211,33 @@ impl<R: Robot, O: Observer<R>> Robot for Observed<R, O> {
     }
 
     fn move_j(&mut self, target: Joints, motion: JointMotion) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let command = Command::MoveJ { target, motion };
-            self.observer.before(&self.robot, &command);
-            self.robot.move_j(target, motion).await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(self.pass_on(Command::MoveJ { target, motion }))
     }
 
     #[allow(non_snake_case)]
     fn move_l(&mut self, base_T_tcp: Isometry3<f64>, motion: LinearMotion) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let command = Command::MoveL { base_T_tcp, motion };
-            self.observer.before(&self.robot, &command);
-            self.robot.move_l(base_T_tcp, motion).await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(self.pass_on(Command::MoveL { base_T_tcp, motion }))
     }
 
+    /// The robot takes a copy of the path; the observer sees the via-points before and after.
     fn move_path(&mut self, path: Vec<Waypoint>) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            // The robot takes the path; the observer sees the same via-points after it ran.
-            let command = Command::MovePath { path: &path };
-            self.observer.before(&self.robot, &command);
-            self.robot.move_path(path.clone()).await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(async move { self.pass_on(Command::MovePath { path: &path }).await })
     }
 
     fn open_gripper(&mut self) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let command = Command::OpenGripper;
-            self.observer.before(&self.robot, &command);
-            self.robot.open_gripper().await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(self.pass_on(Command::OpenGripper))
     }
 
     fn open_gripper_to(&mut self, width: f64) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let command = Command::OpenGripperTo { width };
-            self.observer.before(&self.robot, &command);
-            self.robot.open_gripper_to(width).await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(self.pass_on(Command::OpenGripperTo { width }))
     }
 
     fn close_gripper(&mut self) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let command = Command::CloseGripper;
-            self.observer.before(&self.robot, &command);
-            self.robot.close_gripper().await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(self.pass_on(Command::CloseGripper))
     }
 
     fn stop(&mut self) -> RobotFuture<'_, ()> {
-        Box::pin(async move {
-            let command = Command::Stop;
-            self.observer.before(&self.robot, &command);
-            self.robot.stop().await?;
-            self.observer.after(&mut self.robot, &command, None).await
-        })
+        Box::pin(self.pass_on(Command::Stop))
     }
 
     fn status(&mut self) -> RobotFuture<'_, RobotStatus> {
@@ -282,7 +279,6 @@ mod tests {
     use super::*;
     use crate::kinematics::UrKinematics;
     use crate::limited::Limited;
-    use crate::robot::RobotError;
     use crate::ur_robot::{UrRobot, UrRobotConfig};
     use crate::virtual_ur::{VirtualUr, VirtualUrConfig};
     use nalgebra::Translation3;
