@@ -283,18 +283,39 @@ pub struct DropBody {
 }
 
 impl DropBody {
-    /// Prepares a mesh (metres, part frame) of the given density for dropping.
+    /// Prepares a mesh (metres, part frame) of the given density for dropping, its contact hull
+    /// simplified within [`HULL_TOLERANCE`] when it has more than [`SIMPLIFY_HULL_ABOVE`]
+    /// triangles ([`contact_hull`]).
     pub fn new(mesh: &TriMesh, density: f64) -> Self {
+        Self::with_hull_tolerance(mesh, density, HULL_TOLERANCE)
+    }
+
+    /// [`Self::new`] with the contact hull simplified within `tolerance` metres (0: the full
+    /// hull); the mass properties are the full mesh's either way.
+    pub fn with_hull_tolerance(mesh: &TriMesh, density: f64, tolerance: f64) -> Self {
         let verts: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
         let mass = union_mass(mesh, density, &verts);
         let (lo, hi) = mesh.aabb();
+        let full = parry3d_f64::transformation::convex_hull(&verts);
+        let (facets, hull) = if tolerance > 0.0 && full.1.len() > SIMPLIFY_HULL_ABOVE {
+            let facets = contact_hull(&full.0, tolerance);
+            let hull = SharedShape::convex_hull(&facets.0);
+            (facets, hull)
+        } else {
+            (full, SharedShape::convex_hull(&verts))
+        };
         Self {
-            facets: parry3d_f64::transformation::convex_hull(&verts),
-            hull: SharedShape::convex_hull(&verts),
+            facets,
+            hull,
             mass,
             mesh: mesh.clone(),
             diameter: (hi - lo).norm(),
         }
+    }
+
+    /// Vertices and triangles of the hull the part touches the table with.
+    pub fn contact_hull_size(&self) -> (usize, usize) {
+        (self.facets.0.len(), self.facets.1.len())
     }
 
     /// The convex hull it collides by as a solid, `None` when the mesh spans no volume.
@@ -311,6 +332,104 @@ impl DropBody {
     pub fn mass_and_com(&self) -> (f64, Point3<f64>) {
         let c = self.mass.local_com;
         (self.mass.mass(), Point3::new(c.x, c.y, c.z))
+    }
+}
+
+/// Hulls of more triangles than this are simplified for the drops ([`contact_hull`]); the
+/// USB-C parts' hulls have 28 to 36 and are dropped as they are.
+pub const SIMPLIFY_HULL_ABOVE: usize = 1000;
+
+/// How far, metres, a hull vertex may lie outside the simplified contact hull's face planes:
+/// 0.01 mm, the chordal tolerance STEP parts are tessellated to, so the simplified hull is as
+/// near the CAD surface as the tessellation is.
+pub const HULL_TOLERANCE: f64 = 1e-5;
+
+/// A convex hull of `points` (metres) with vertices among theirs and every point within
+/// `tolerance` of each of its face planes, as few as a tolerance-stopped quickhull finds: start
+/// from the points extreme along 26 directions, then round after round add, for each face, the
+/// point farthest outside it if that is more than `tolerance`, until none is.
+///
+/// A part rests on a face of its hull: on a face of this one, its true lowest point lies at most
+/// `tolerance` below it, so rest heights move by at most `tolerance` and a curved surface's
+/// thousands of facets become the few that chordal error allows. Each round costs points ×
+/// faces; a round's points are the ones outside the last round's hull, and a last pass over all
+/// of them confirms the bound.
+pub fn contact_hull(
+    points: &[parry3d_f64::math::Vector],
+    tolerance: f64,
+) -> (Vec<parry3d_f64::math::Vector>, Vec<[u32; 3]>) {
+    use parry3d_f64::math::Vector as V;
+    let hull_of = |chosen: &[usize]| {
+        let pts: Vec<V> = chosen.iter().map(|&i| points[i]).collect();
+        parry3d_f64::transformation::convex_hull(&pts)
+    };
+    let mut chosen: Vec<usize> = Vec::new();
+    for x in -1..=1 {
+        for y in -1..=1 {
+            for z in -1..=1 {
+                if (x, y, z) == (0, 0, 0) {
+                    continue;
+                }
+                let d = V::new(f64::from(x), f64::from(y), f64::from(z));
+                let best = (0..points.len())
+                    .max_by(|&a, &b| points[a].dot(d).total_cmp(&points[b].dot(d)));
+                if let Some(i) = best.filter(|i| !chosen.contains(i)) {
+                    chosen.push(i);
+                }
+            }
+        }
+    }
+    let mut candidates: Vec<usize> = (0..points.len()).collect();
+    let mut confirming = false;
+    loop {
+        let (verts, faces) = hull_of(&chosen);
+        if faces.is_empty() {
+            return parry3d_f64::transformation::convex_hull(points);
+        }
+        let planes: Vec<(V, f64)> = faces
+            .iter()
+            .filter_map(|f| {
+                let [a, b, c] = f.map(|i| verts[i as usize]);
+                let n = (b - a).cross(c - a);
+                let len = n.length();
+                (len > 0.0).then(|| (n / len, (n / len).dot(a)))
+            })
+            .collect();
+        // Per face, the farthest point outside it by more than the tolerance.
+        let mut farthest: Vec<Option<(f64, usize)>> = vec![None; planes.len()];
+        let mut outside = Vec::new();
+        for &i in &candidates {
+            let p = points[i];
+            let (face, distance) = planes
+                .iter()
+                .enumerate()
+                .map(|(f, (n, d))| (f, n.dot(p) - d))
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap_or((0, 0.0));
+            if distance > tolerance {
+                outside.push(i);
+                if farthest[face].is_none_or(|(best, _)| distance > best) {
+                    farthest[face] = Some((distance, i));
+                }
+            }
+        }
+        let added: Vec<usize> = farthest.into_iter().flatten().map(|(_, i)| i).collect();
+        if added.is_empty() {
+            if confirming {
+                return (verts, faces);
+            }
+            confirming = true;
+            candidates = (0..points.len()).collect();
+            continue;
+        }
+        confirming = false;
+        chosen.extend(
+            added
+                .iter()
+                .filter(|i| !chosen.contains(i))
+                .collect::<Vec<_>>(),
+        );
+        candidates = outside;
     }
 }
 
@@ -637,6 +756,88 @@ mod tests {
             DropBody::new(&part, 1000.0).mass,
             MassProperties::from_trimesh(1000.0, &verts, &part.triangles)
         );
+    }
+
+    /// A closed cylinder of `segments` sides around z, 10 mm across and 6 mm tall.
+    fn cylinder(segments: u32) -> TriMesh {
+        let mut vertices = Vec::new();
+        for z in [-0.003, 0.003] {
+            for k in 0..segments {
+                let a = std::f64::consts::TAU * f64::from(k) / f64::from(segments);
+                vertices.push(Point3::new(0.005 * a.cos(), 0.005 * a.sin(), z));
+            }
+        }
+        vertices.push(Point3::new(0.0, 0.0, -0.003));
+        vertices.push(Point3::new(0.0, 0.0, 0.003));
+        let n = segments;
+        let mut triangles = Vec::new();
+        for k in 0..n {
+            let next = (k + 1) % n;
+            triangles.push([2 * n, next, k]);
+            triangles.push([2 * n + 1, n + k, n + next]);
+            triangles.push([k, next, n + next]);
+            triangles.push([k, n + next, n + k]);
+        }
+        TriMesh::new(vertices, triangles)
+    }
+
+    /// A cylinder of 2 000 sides (a hull of 8 000 triangles) is dropped on a hull of a few
+    /// hundred, whose vertices are the part's, with every part vertex within the tolerance of
+    /// its face planes and its rest height in any orientation within the tolerance of the
+    /// part's; the mass stays the full mesh's.
+    #[test]
+    fn a_fine_hull_is_simplified_within_the_tolerance() {
+        let mesh = cylinder(2000);
+        let body = DropBody::new(&mesh, 1000.0);
+        let verts: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
+        let full = parry3d_f64::transformation::convex_hull(&verts);
+        assert!(full.1.len() > 7000, "{} hull triangles", full.1.len());
+        let (v, f) = body.contact_hull_size();
+        // A 5 mm radius within 0.01 mm takes about 50 sides: 100 vertices, 200 triangles.
+        assert!(v < 160 && f < 320, "{v} vertices, {f} triangles");
+        let (hv, hf) = &body.facets;
+        for p in hv {
+            assert!(verts.contains(p), "{p:?} is no vertex of the part");
+        }
+        let worst = hf
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| hv[i as usize]);
+                let n = (b - a).cross(c - a).normalize();
+                verts.iter().map(|p| n.dot(*p - a)).fold(f64::MIN, f64::max)
+            })
+            .fold(f64::MIN, f64::max);
+        assert!(worst <= HULL_TOLERANCE, "a vertex {worst} m outside a face");
+        assert!(worst > 0.5 * HULL_TOLERANCE, "simplified to {worst} m only");
+        let simplified = TriMesh::new(
+            hv.iter().map(|p| Point3::new(p.x, p.y, p.z)).collect(),
+            hf.clone(),
+        );
+        let shift = [0.1, 0.2, 0.3];
+        for i in 0..500 {
+            let r = stratified_rotation(i, shift);
+            let error = geometric_rest_height(&mesh, &r) - geometric_rest_height(&simplified, &r);
+            assert!(
+                (0.0..=HULL_TOLERANCE).contains(&error),
+                "rest height {error} m off in drop {i}"
+            );
+        }
+        assert_eq!(
+            body.mass,
+            MassProperties::from_trimesh(1000.0, &verts, &mesh.triangles)
+        );
+    }
+
+    /// A hull of no more than [`SIMPLIFY_HULL_ABOVE`] triangles (the USB-C parts' have 28 to
+    /// 36) is dropped exactly as it is, and a tolerance of 0 keeps any hull.
+    #[test]
+    fn a_coarse_hull_is_dropped_as_it_is() {
+        for (mesh, tolerance) in [(cylinder(64), HULL_TOLERANCE), (cylinder(400), 0.0)] {
+            let verts: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
+            let full = parry3d_f64::transformation::convex_hull(&verts);
+            let body = DropBody::with_hull_tolerance(&mesh, 1000.0, tolerance);
+            assert_eq!(body.facets, full);
+        }
     }
 
     /// A single body (or bodies that do not overlap) weighs exactly as rapier integrates it.

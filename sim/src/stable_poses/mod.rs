@@ -8,8 +8,8 @@ mod symmetric;
 
 pub use cluster::{CLASS_ANGLE_RAD, LEAN_HEIGHT, PoseClass, cluster, leaning};
 pub use drop::{
-    DropBody, DropOutcome, DropSettings, geometric_rest_height, random_rotation, simulate_batch,
-    stratified_rotation,
+    DropBody, DropOutcome, DropSettings, HULL_TOLERANCE, SIMPLIFY_HULL_ABOVE, contact_hull,
+    geometric_rest_height, random_rotation, simulate_batch, stratified_rotation,
 };
 pub use mujoco::{DropEngine, restitution_dampratio, stable_poses_mujoco, stable_poses_with};
 
