@@ -17,7 +17,8 @@
 //! `-- cylinder=64,4096,25000` drops generated cylinders (10 mm across, 6 mm tall) tessellated
 //! with that many segments (4 triangles per segment) instead of a catalog's parts, and prints
 //! each one's hull size, CPU seconds per drop and the share of drops on a cap and on the side,
-//! with the full hull and with the simplified contact hull (paired: the same orientations).
+//! with the full hull and with the simplified contact hull (paired: the same orientations;
+//! `-- cylinder=N simplified` drops the simplified one only).
 
 #![allow(missing_docs)]
 
@@ -73,7 +74,7 @@ fn main() {
     if let Some(list) = args.iter().find_map(|a| a.strip_prefix("cylinder=")) {
         for n in list.split(',') {
             let segments: usize = n.parse().expect("cylinder=SEGMENTS,...");
-            fine_cylinder(segments, &settings);
+            fine_cylinder(segments, &settings, args.iter().any(|a| a == "simplified"));
         }
         return;
     }
@@ -254,7 +255,7 @@ fn cylinder(segments: usize, radius: f64, height: f64) -> TriMesh {
 /// Drops a cylinder of `segments` sides with its full hull and with the simplified contact
 /// hull ([`DropBody::new`]), the same orientations, and prints hull sizes, CPU per drop, the
 /// drops that rest on another face and the shares.
-fn fine_cylinder(segments: usize, settings: &DropSettings) {
+fn fine_cylinder(segments: usize, settings: &DropSettings, simplified_only: bool) {
     let mesh = cylinder(segments, 0.005, 0.006);
     let axis = |o: &DropOutcome| (o.rotation * Vector3::z()).z.abs();
     let mut runs = Vec::new();
@@ -264,7 +265,10 @@ fn fine_cylinder(segments: usize, settings: &DropSettings) {
             DropBody::with_hull_tolerance(&mesh, 1400.0, 0.0),
         ),
         ("simplified", DropBody::new(&mesh, 1400.0)),
-    ] {
+    ]
+    .into_iter()
+    .skip(usize::from(simplified_only))
+    {
         let (out, cpu) = outcomes(&body, settings);
         let cap = out.iter().filter(|o| axis(o) > 0.99).count();
         let side = out.iter().filter(|o| axis(o) < 0.01).count();
@@ -280,6 +284,9 @@ fn fine_cylinder(segments: usize, settings: &DropSettings) {
             100.0 * side as f64 / out.len() as f64,
         );
         runs.push(out);
+    }
+    if runs.len() < 2 {
+        return;
     }
     let moved = runs[0]
         .iter()
