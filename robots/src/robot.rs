@@ -12,6 +12,8 @@
 //! Implementations do not check limits themselves: every construction site wraps its robot in
 //! [`crate::limited::Limited`], which checks each target against the [`Limits`] before it is
 //! passed on and fails with [`RobotError::LimitViolation`] instead of moving.
+//! A rig that only watches the commands (counts motions, records where the arm went) wraps its
+//! robot in [`crate::observed::Observed`] instead of writing out the trait again.
 
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
