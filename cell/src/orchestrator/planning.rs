@@ -810,17 +810,27 @@ mod tests {
     use super::*;
     use crate::scenario::Scenario;
 
-    #[test]
-    fn a_refused_plan_takes_the_lowest_height_that_passes() {
+    /// What the engine knows of the nominal USB-C cell.
+    fn nominal_knowledge() -> std::sync::Arc<CellKnowledge> {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
         let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
-        let knowledge = CellKnowledge::new(&scenario).unwrap_or_else(|e| panic!("{e}"));
+        CellKnowledge::new(&scenario).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// A planner with the default configuration in the cell `knowledge` describes.
+    fn default_planner(knowledge: &CellKnowledge) -> Planner<'_> {
         let config = PlanningConfig::default();
-        let planner = Planner {
-            knowledge: &knowledge,
+        Planner {
+            knowledge,
             config,
             speeds: Speeds::within(&knowledge.spec.limits, config.slow_speed),
-        };
+        }
+    }
+
+    #[test]
+    fn a_refused_plan_takes_the_lowest_height_that_passes() {
+        let knowledge = nominal_knowledge();
+        let planner = default_planner(&knowledge);
         let refused = |h: f64| PlanError::Collision {
             waypoint: "transfer",
             what: format!("at {:.0} mm", h * 1e3),
@@ -883,15 +893,8 @@ mod tests {
 
     #[test]
     fn a_move_whose_nearest_configuration_swings_through_the_table_takes_another() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/usbc_nominal.toml");
-        let scenario = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
-        let knowledge = CellKnowledge::new(&scenario).unwrap_or_else(|e| panic!("{e}"));
-        let config = PlanningConfig::default();
-        let planner = Planner {
-            knowledge: &knowledge,
-            config,
-            speeds: Speeds::within(&knowledge.spec.limits, config.slow_speed),
-        };
+        let knowledge = nominal_knowledge();
+        let planner = default_planner(&knowledge);
         // From a learned-cell episode: the insert mold lifted off the feeder with the last wrist
         // 0.11 rad short of its +2π limit, and the transfer above the shell needs 1.09 rad more.
         // The nearest configuration within the limits turns the shoulder round instead, and
@@ -918,7 +921,10 @@ mod tests {
             knowledge.arm_lowest_height(&nearest) < 0.0,
             "the nearest configuration {nearest:?} should be the one through the table"
         );
-        let pre = raised(&transfer, -config.clearance_height + config.slow_distance);
+        let pre = raised(
+            &transfer,
+            -planner.config.clearance_height + planner.config.slow_distance,
+        );
         let Descent {
             motions,
             at_pre: q_pre,
@@ -935,7 +941,7 @@ mod tests {
             .unwrap_or_else(|e| panic!("no clear transfer: {e}"));
         assert!(!motions.is_empty());
         for q in [q_via, q_pre] {
-            assert!(knowledge.arm_lowest_height(&q) >= config.arm_table_margin);
+            assert!(knowledge.arm_lowest_height(&q) >= planner.config.arm_table_margin);
             let tcp = knowledge.kinematics.forward_tcp(&q);
             let goal = if q == q_via { transfer } else { pre };
             assert!((tcp.translation.vector - goal.translation.vector).norm() < 1e-6);
