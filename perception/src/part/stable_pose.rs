@@ -1,8 +1,8 @@
 //! Stable poses: the ways a part comes to rest on a flat table.
 
+use super::convex_hull;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d_f64::math::Vector3 as HullVector;
-use parry3d_f64::transformation::convex_hull;
 use serde::{Deserialize, Serialize};
 
 use super::TriMesh;
