@@ -197,7 +197,7 @@ fn hull_up_directions(mesh: &TriMesh) -> Vec<Vector3<f64>> {
         .iter()
         .map(crate::convert::vec_from_point)
         .collect();
-    let (verts, tris) = parry3d_f64::transformation::convex_hull(&points);
+    let (verts, tris) = perception::part::convex_hull(&points);
     tris.iter()
         .filter_map(|t| {
             let [a, b, c] = t.map(|i| crate::convert::vector_from_vec(verts[i as usize]));

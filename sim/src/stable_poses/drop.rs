@@ -296,13 +296,18 @@ impl DropBody {
         let verts: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
         let mass = union_mass(mesh, density, &verts);
         let (lo, hi) = mesh.aabb();
-        let full = parry3d_f64::transformation::convex_hull(&verts);
+        // Our hull, not parry's: a finely tessellated cylinder's points on two circles took
+        // parry memory quadratic in them (see perception::part::convex_hull).
+        let full = perception::part::convex_hull(&verts);
         let (facets, hull) = if tolerance > 0.0 && full.1.len() > SIMPLIFY_HULL_ABOVE {
             let facets = contact_hull(&full.0, tolerance);
             let hull = SharedShape::convex_hull(&facets.0);
             (facets, hull)
-        } else {
+        } else if verts.len() <= perception::part::EXACT_HULL_MAX_POINTS {
             (full, SharedShape::convex_hull(&verts))
+        } else {
+            let hull = SharedShape::convex_mesh(full.0.clone(), &full.1);
+            (full, hull)
         };
         Self {
             facets,
@@ -361,7 +366,7 @@ pub fn contact_hull(
     use parry3d_f64::math::Vector as V;
     let hull_of = |chosen: &[usize]| {
         let pts: Vec<V> = chosen.iter().map(|&i| points[i]).collect();
-        parry3d_f64::transformation::convex_hull(&pts)
+        perception::part::convex_hull(&pts)
     };
     let mut chosen: Vec<usize> = Vec::new();
     for x in -1..=1 {
@@ -384,7 +389,7 @@ pub fn contact_hull(
     loop {
         let (verts, faces) = hull_of(&chosen);
         if faces.is_empty() {
-            return parry3d_f64::transformation::convex_hull(points);
+            return perception::part::convex_hull(points);
         }
         let planes: Vec<(V, f64)> = faces
             .iter()
@@ -790,7 +795,7 @@ mod tests {
         let mesh = cylinder(2000);
         let body = DropBody::new(&mesh, 1000.0);
         let verts: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
-        let full = parry3d_f64::transformation::convex_hull(&verts);
+        let full = perception::part::convex_hull(&verts);
         assert!(full.1.len() > 7000, "{} hull triangles", full.1.len());
         let (v, f) = body.contact_hull_size();
         // A 5 mm radius within 0.01 mm takes about 50 sides: 100 vertices, 200 triangles.
@@ -838,6 +843,21 @@ mod tests {
             let body = DropBody::with_hull_tolerance(&mesh, 1000.0, tolerance);
             assert_eq!(body.facets, full);
         }
+    }
+
+    /// A 100 000-triangle cylinder (50 002 points on two circles and the caps' centres) is
+    /// prepared for dropping in bounded memory and time: parry's own hull of its points grew
+    /// past 24 GB before its first drop. Its contact hull is simplified as a coarse one's is.
+    #[test]
+    fn a_100_000_triangle_cylinder_is_prepared_in_bounded_memory() {
+        let mesh = cylinder(25_000);
+        let start = std::time::Instant::now();
+        let body = DropBody::new(&mesh, 1000.0);
+        let spent = start.elapsed().as_secs_f64();
+        let (v, f) = body.contact_hull_size();
+        assert!(v < 160 && f < 320, "{v} vertices, {f} triangles");
+        assert!(body.has_volume());
+        assert!(spent < 30.0, "{spent} s");
     }
 
     /// A single body (or bodies that do not overlap) weighs exactly as rapier integrates it.
