@@ -104,7 +104,7 @@ impl UnposedObstacle {
             .collect();
         Some(Self {
             part: unposed.part.clone(),
-            hull: SharedShape::convex_hull(&points)?,
+            hull: perception::part::convex_hull_shape(&points)?,
         })
     }
 

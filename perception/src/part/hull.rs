@@ -19,6 +19,16 @@ pub const EXACT_HULL_MAX_POINTS: usize = 2048;
 /// a nanometre on a metre-sized part, far under any tolerance a hull is used to.
 pub const HULL_JITTER_REL: f64 = 1e-9;
 
+/// [`convex_hull`] as a solid shape for contact and distance queries (parry's
+/// `SharedShape::convex_hull` in bounded memory); `None` when the points span no volume.
+pub fn convex_hull_shape(points: &[Vector3]) -> Option<parry3d_f64::shape::SharedShape> {
+    let (vertices, triangles) = convex_hull(points);
+    if triangles.is_empty() {
+        return None;
+    }
+    parry3d_f64::shape::SharedShape::convex_mesh(vertices, &triangles)
+}
+
 /// The convex hull of `points` as (vertices, counter-clockwise triangles), vertices among
 /// `points`, in memory linear in their number whatever their degeneracy (see the module);
 /// parry's own result for up to [`EXACT_HULL_MAX_POINTS`] points. Empty when the points span no

@@ -21,7 +21,7 @@ pub use catalog::{
     PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
 };
 pub use error::{MeshAt, PartError};
-pub use hull::{EXACT_HULL_MAX_POINTS, HULL_JITTER_REL, convex_hull};
+pub use hull::{EXACT_HULL_MAX_POINTS, HULL_JITTER_REL, convex_hull, convex_hull_shape};
 pub use keypoints::{farthest_point_sample, sample_surface};
 pub use mass::{UNION_NOISE_REL, UNION_RAYS, UnionMoments, VolumeMoments};
 pub use mesh::{MeshDefect, OpenRegion, TriMesh};

@@ -13,9 +13,9 @@
 //! on the seam where the chamfer meets the wall.
 
 use super::TriMesh;
+use super::hull::convex_hull;
 use nalgebra::Point3;
 use parry3d_f64::math::Vector3;
-use parry3d_f64::transformation::convex_hull;
 
 /// Triangles per hexahedron in a `Solid`-built mesh.
 const HEX_TRIANGLES: usize = 12;

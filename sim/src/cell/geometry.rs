@@ -81,7 +81,7 @@ impl PartGeometry {
         grasps: Vec<Grasp>,
     ) -> Result<Self, CellError> {
         let points: Vec<_> = mesh.vertices.iter().map(vec_from_point).collect();
-        let hull = SharedShape::convex_hull(&points)
+        let hull = perception::part::convex_hull_shape(&points)
             .ok_or_else(|| CellError::DegenerateMesh(name.to_string()))?;
         let pieces = convex_pieces(&mesh);
         let aabb = mesh.aabb();

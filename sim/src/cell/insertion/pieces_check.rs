@@ -23,7 +23,7 @@ pub fn check_pieces(part: &PartGeometry, scorer: &'static str) -> Result<(), Sco
         .iter()
         .map(|piece| {
             let points: Vec<_> = piece.iter().map(vec_from_point).collect();
-            let (vertices, triangles) = parry3d_f64::transformation::convex_hull(&points);
+            let (vertices, triangles) = perception::part::convex_hull(&points);
             triangles
                 .iter()
                 .map(|t| {
