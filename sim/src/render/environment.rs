@@ -381,15 +381,7 @@ impl Environment {
 
     /// Bakes any radiance function of direction (table frame).
     pub fn bake(f: &(dyn Fn(&Vector3<f64>) -> [f64; 3] + Sync)) -> Self {
-        let base = LatLong::bake(LEVEL_WIDTH[0], LEVEL_WIDTH[0] / 2, 2, f);
-        let mut mips = vec![base];
-        while mips.last().is_some_and(|m| m.h > 1) {
-            let next = mips
-                .last()
-                .map(LatLong::half)
-                .unwrap_or_else(|| mips[0].clone());
-            mips.push(next);
-        }
+        let mips = mip_chain(LatLong::bake(LEVEL_WIDTH[0], LEVEL_WIDTH[0] / 2, 2, f));
         let mut levels = vec![mips[0].clone()];
         for k in 1..LEVEL_ROUGHNESS.len() {
             levels.push(prefilter(&mips, LEVEL_ROUGHNESS[k], LEVEL_WIDTH[k]));
@@ -475,6 +467,15 @@ impl Environment {
 
 /// One sample of a prefiltered lobe: map coordinates (u, v), mip level and cosine weight.
 type Tap = (f64, f64, (usize, f64), f64);
+
+/// `base` and its halvings down to one row: the mip levels the prefilter reads.
+fn mip_chain(base: LatLong) -> Vec<LatLong> {
+    let mut mips = vec![base];
+    while let Some(next) = mips.last().filter(|m| m.h > 1).map(LatLong::half) {
+        mips.push(next);
+    }
+    mips
+}
 
 /// One level of GGX-prefiltered radiance at `w` × `w/2`, each texel the lobe around its direction
 /// (n = v = r), sampled by filtered importance sampling over `mips`.
@@ -855,15 +856,9 @@ mod tests {
                 radiance: [0.01; 3],
             }),
         };
-        let base = LatLong::bake(LEVEL_WIDTH[0], LEVEL_WIDTH[0] / 2, 2, &|d| room.radiance(d));
-        let mut mips = vec![base];
-        while mips.last().is_some_and(|m| m.h > 1) {
-            let next = mips
-                .last()
-                .map(LatLong::half)
-                .unwrap_or_else(|| mips[0].clone());
-            mips.push(next);
-        }
+        let mips = mip_chain(LatLong::bake(LEVEL_WIDTH[0], LEVEL_WIDTH[0] / 2, 2, &|d| {
+            room.radiance(d)
+        }));
         let base_texel = 4.0 * PI / (mips[0].w * mips[0].h) as f64;
         for k in 1..LEVEL_ROUGHNESS.len() {
             let (r, w) = (LEVEL_ROUGHNESS[k], LEVEL_WIDTH[k]);
