@@ -179,7 +179,7 @@ enum Runner<'d> {
 /// (`cell.gripper.opening_margin` is set aside, with a warning). `[motion] overlap` is set aside
 /// too, with a warning: a controller run perceives while the arm stands still (the engine awaits
 /// each command), so there is nothing to overlap yet.
-fn full_stroke(scenario: &Scenario) -> Scenario {
+fn as_a_controller_runs_it(scenario: &Scenario) -> Scenario {
     let mut s = scenario.clone();
     let gripper = &mut s.spec.cell.gripper;
     if gripper.width_output.is_none() && gripper.opening_margin.take().is_some() {
@@ -208,13 +208,16 @@ impl<'d> Runner<'d> {
         };
         Ok(match driver {
             Driver::Sim => Runner::Sim(SimSetup::new(scenario.clone())?),
-            Driver::VirtualUr => {
-                Runner::VirtualUr(SimSetup::new(full_stroke(scenario))?, runtime()?)
-            }
+            Driver::VirtualUr => Runner::VirtualUr(
+                SimSetup::new(as_a_controller_runs_it(scenario))?,
+                runtime()?,
+            ),
             // A real controller gets no simulated cell: only the engine's planning model.
-            Driver::Production(p) => {
-                Runner::Production(p, Setup::new(full_stroke(scenario))?, runtime()?)
-            }
+            Driver::Production(p) => Runner::Production(
+                p,
+                Setup::new(as_a_controller_runs_it(scenario))?,
+                runtime()?,
+            ),
         })
     }
 
