@@ -213,34 +213,7 @@ fn a_hard_key_light_leaves_metal_tops_dark_where_the_soft_lights_do_not() {
     // Blender Cycles' hard look (one small key 40–55° off the vertical in a dim room) renders
     // some shells near black: the key light of the lights family must reach that regime, and
     // its soft draws must not.
-    let tmp = tempfile::tempdir().unwrap();
-    let models = support::usbc_models();
-    let run = |name: &str, key: f64| {
-        let out = tmp.path().join(name);
-        let mut cfg = tiny(out.clone());
-        cfg.crops_train = 0;
-        cfg.feeder_test = 4;
-        cfg.families = Families::from_list("lights").unwrap();
-        cfg.families.lights.key_probability = key;
-        generate(&cfg, &models).unwrap();
-        metal_greys(&out, &models)
-    };
-    let (hard, soft) = (run("key", 1.0), run("soft", 0.0));
-    assert!(hard.len() >= 10 && soft.len() >= 10, "{hard:?} {soft:?}");
-    let dark = |g: &[f64]| g.iter().filter(|g| **g < 40.0).count() as f64 / g.len() as f64;
-    let median = |g: &[f64]| {
-        let mut g = g.to_vec();
-        g.sort_by(f64::total_cmp);
-        g[g.len() / 2]
-    };
-    let (d_hard, d_soft) = (dark(&hard), dark(&soft));
-    assert!(
-        d_hard >= 0.2 && d_hard >= 4.0 * d_soft && median(&hard) < 0.5 * median(&soft),
-        "metal parts below grey 40: {:.0} % under the key light ({hard:.0?}), {:.0} % under the \
-         soft lights ({soft:.0?})",
-        100.0 * d_hard,
-        100.0 * d_soft
-    );
+    assert_key_leaves_metal_dark(None, "");
 }
 
 #[test]
@@ -248,6 +221,13 @@ fn under_the_room_look_the_key_light_dims_the_room_and_leaves_metal_tops_dark() 
     // With `--environment room` the room replaces the key regime's dim sky: its ceiling panels
     // would light the metal tops the key leaves dark. Under the key the room's lights are off
     // (dimmed to the key's sky), so the hard regime keeps its dark tops in the room too.
+    assert_key_leaves_metal_dark(Some(sim::dataset::LookOptions::default()), " in the room");
+}
+
+/// Renders 4 feeder frames with the lights family's key light always, then never, under `look`,
+/// and asserts that the key leaves a fifth or more of the metal tops below grey 40, four times
+/// the soft lights' share, at under half their median grey.
+fn assert_key_leaves_metal_dark(look: Option<sim::dataset::LookOptions>, context: &str) {
     let tmp = tempfile::tempdir().unwrap();
     let models = support::usbc_models();
     let run = |name: &str, key: f64| {
@@ -257,7 +237,7 @@ fn under_the_room_look_the_key_light_dims_the_room_and_leaves_metal_tops_dark() 
         cfg.feeder_test = 4;
         cfg.families = Families::from_list("lights").unwrap();
         cfg.families.lights.key_probability = key;
-        cfg.look = Some(sim::dataset::LookOptions::default());
+        cfg.look = look.clone();
         generate(&cfg, &models).unwrap();
         metal_greys(&out, &models)
     };
@@ -272,8 +252,8 @@ fn under_the_room_look_the_key_light_dims_the_room_and_leaves_metal_tops_dark() 
     let (d_hard, d_soft) = (dark(&hard), dark(&soft));
     assert!(
         d_hard >= 0.2 && d_hard >= 4.0 * d_soft && median(&hard) < 0.5 * median(&soft),
-        "metal parts below grey 40 in the room: {:.0} % under the key light ({hard:.0?}), \
-         {:.0} % under the soft lights ({soft:.0?})",
+        "metal parts below grey 40{context}: {:.0} % under the key light ({hard:.0?}), {:.0} % \
+         under the soft lights ({soft:.0?})",
         100.0 * d_hard,
         100.0 * d_soft
     );
