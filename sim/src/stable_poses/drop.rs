@@ -299,16 +299,15 @@ impl DropBody {
         // Our hull, not parry's: a finely tessellated cylinder's points on two circles took
         // parry memory quadratic in them (see perception::part::convex_hull).
         let full = perception::part::convex_hull(&verts);
-        let (facets, hull) = if tolerance > 0.0 && full.1.len() > SIMPLIFY_HULL_ABOVE {
-            let facets = contact_hull(&full.0, tolerance);
-            let hull = SharedShape::convex_hull(&facets.0);
-            (facets, hull)
-        } else if verts.len() <= perception::part::EXACT_HULL_MAX_POINTS {
-            (full, SharedShape::convex_hull(&verts))
+        let facets = if tolerance > 0.0 && full.1.len() > SIMPLIFY_HULL_ABOVE {
+            contact_hull(&full.0, tolerance)
         } else {
-            let hull = SharedShape::convex_mesh(full.0.clone(), &full.1);
-            (full, hull)
+            full
         };
+        // The solid from the hull just built (parry's `convex_hull` would build it again).
+        let hull = (!facets.1.is_empty())
+            .then(|| SharedShape::convex_mesh(facets.0.clone(), &facets.1))
+            .flatten();
         Self {
             facets,
             hull,
