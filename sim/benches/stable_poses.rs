@@ -4,7 +4,8 @@
 //!
 //! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
 //! for the parts of another catalog, `-- rest_time=S` for another rest time in seconds, `-- solver_iterations=N`,
-//! `-- one_contact_per_point=0` for every triangle's contacts, `-- engine=mujoco` for MuJoCo's
+//! `-- one_contact_per_point=0` for every triangle's contacts, `-- stop_when_trapped=0` to run
+//! every drop to rest, `-- engine=mujoco` for MuJoCo's
 //! drops).
 //! One timed run, not criterion's repeats: a run takes tens of seconds.
 //!
@@ -152,6 +153,9 @@ fn apply(settings: &mut DropSettings, args: &[String], prefix: &str) {
     if let Some(v) = value("one_contact_per_point") {
         settings.one_contact_per_point = flag(v);
     }
+    if let Some(v) = value("stop_when_trapped") {
+        settings.stop_when_trapped = flag(v);
+    }
 }
 
 /// Every drop's outcome in order, batched as [`stable_poses`] batches them, and the CPU seconds.
@@ -216,13 +220,18 @@ fn paired(name: &str, mesh: &TriMesh, density: f64, a: &DropSettings, b: &DropSe
 /// The settings a paired comparison varies, in words.
 fn describe(s: &DropSettings) -> String {
     format!(
-        "rest {} s, {} iterations, contacts {}",
+        "rest {} s, {} iterations, contacts {}, {}",
         s.rest_time,
         s.solver_iterations,
         if s.one_contact_per_point {
             "one per point"
         } else {
             "per triangle"
+        },
+        if s.stop_when_trapped {
+            "stopped when trapped"
+        } else {
+            "run to rest"
         }
     )
 }

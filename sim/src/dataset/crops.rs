@@ -71,6 +71,7 @@ pub(crate) fn target_leans(part: &PlacedPart, model: &PartModel) -> bool {
         rotation: part.table_T_part.rotation,
         height: part.table_T_part.translation.z,
         settled: true,
+        trapped: false,
         time: 0.0,
     };
     leaning(&[outcome], &model.mesh)[0]

@@ -17,7 +17,8 @@ pub struct PoseClass {
     pub count: usize,
     /// Of those, drops still jittering in place at the time limit.
     pub jittering: usize,
-    /// Largest |physics height − geometric height| over its settled drops, metres.
+    /// Largest |physics height − geometric height| over its drops that came to rest in physics
+    /// (not ended early on their face), metres.
     pub max_height_error: f64,
     /// Largest angle between a member's table normal and the class normal, radians.
     pub spread: f64,
@@ -81,7 +82,7 @@ pub fn cluster(outcomes: &[DropOutcome], mesh: &TriMesh, min_count: usize) -> Ve
             let rest_height = geometric_rest_height(mesh, &rotation);
             let max_height_error = m
                 .iter()
-                .filter(|&&i| on_table[i].settled)
+                .filter(|&&i| on_table[i].settled && !on_table[i].trapped)
                 .map(|&i| {
                     (on_table[i].height - geometric_rest_height(mesh, &on_table[i].rotation)).abs()
                 })

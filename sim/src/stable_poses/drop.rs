@@ -12,6 +12,7 @@ use rapier3d_f64::prelude::{
     RigidBodyBuilder, SharedShape, Vector,
 };
 
+use super::basin::FaceBasins;
 use crate::convert::{
     rot_from_unit_quaternion, unit_quaternion_from_rot, vec_from_point, vec_from_vector,
     vector_from_vec,
@@ -71,6 +72,10 @@ pub struct DropSettings {
     /// moved 12, 41 and 33 of 1 000); shares within 0.25 points but the top shell's upright
     /// (26.5 → 25.4 %) and tilted (7.7 → 8.7 %) ones, both nearer MuJoCo's (24.4, 8.3 %).
     pub one_contact_per_point: bool,
+    /// End a drop, alone on the table, as soon as its energy can no longer carry it off the
+    /// hull face it is on ([`FaceBasins`]): its resting face is then known, and the rest of
+    /// the drop only rocks and slides on it.
+    pub stop_when_trapped: bool,
 }
 
 impl Default for DropSettings {
@@ -90,6 +95,7 @@ impl Default for DropSettings {
             batch: 64,
             crowd: 1,
             one_contact_per_point: true,
+            stop_when_trapped: true,
         }
     }
 }
@@ -104,6 +110,10 @@ pub struct DropOutcome {
     /// False when the drop was still jittering in place at `max_time` (it is classified by its
     /// final resting face all the same; see [`DropSettings::rest_time`]).
     pub settled: bool,
+    /// True when the drop was ended on the face it could no longer leave
+    /// ([`DropSettings::stop_when_trapped`]): its rotation is laid flat on that face and its
+    /// height is the geometric rest height, not physics'.
+    pub trapped: bool,
     /// Simulated seconds until rest.
     pub time: f64,
 }
@@ -122,7 +132,7 @@ pub struct DropOutcome {
 /// feeder's `drop` placement) keep it, see the README's known gaps.
 pub(crate) fn drop_world(dt: f64) -> PhysicsWorld {
     let mut world = PhysicsWorld::new();
-    world.gravity = Vector::Z * -9.81;
+    world.gravity = Vector::Z * -GRAVITY;
     let p = &mut world.integration_parameters;
     p.dt = dt;
     p.length_unit = 1e-3;
@@ -206,6 +216,9 @@ impl PhysicsHooks for OneContactPerPoint {
     }
 }
 
+/// Standard gravity, m/s², of every drop world.
+pub const GRAVITY: f64 = 9.81;
+
 /// Fastest a part dropped for its stable poses may move, m/s: only a sanity bound (a fall from
 /// 0.5 m lands at 3.1 m/s).
 pub const MAX_DROP_SPEED: f64 = 10.0;
@@ -280,6 +293,8 @@ pub struct DropBody {
     pub(crate) mass: MassProperties,
     pub(super) mesh: TriMesh,
     pub(super) diameter: f64,
+    /// The contact hull's faces with their tipping barriers, for ending a drop early.
+    basins: FaceBasins,
 }
 
 impl DropBody {
@@ -308,9 +323,17 @@ impl DropBody {
         let hull = (!facets.1.is_empty())
             .then(|| SharedShape::convex_mesh(facets.0.clone(), &facets.1))
             .flatten();
+        let corners: Vec<Point3<f64>> = facets
+            .0
+            .iter()
+            .map(|v| Point3::new(v.x, v.y, v.z))
+            .collect();
+        let c = mass.local_com;
+        let basins = FaceBasins::new(&corners, &facets.1, &Point3::new(c.x, c.y, c.z));
         Self {
             facets,
             hull,
+            basins,
             mass,
             mesh: mesh.clone(),
             diameter: (hi - lo).norm(),
@@ -661,6 +684,8 @@ pub fn simulate_batch(
     let mut remaining = groups;
     let mut t = 0.0;
     let hooks = OneContactPerPoint::default();
+    // Alone on the table a part's energy decides its face; in a crowd neighbours push it.
+    let trap = settings.stop_when_trapped && crowd == 1;
     while remaining > 0 && t < settings.max_time {
         hooks.reset();
         world.step_with_events(&hooks, &());
@@ -670,6 +695,29 @@ pub fn simulate_batch(
                 continue;
             }
             let pose = pose_of(&world, k);
+            if trap && outcomes[k].is_none() {
+                let rb = &world.bodies[handles[k]];
+                let up = pose.rotation.inverse() * Vector3::z();
+                let energy_height = rb.kinetic_energy() / (rb.mass() * GRAVITY);
+                if let Some(face) = body
+                    .basins
+                    .trapped(&up, rb.center_of_mass().z, energy_height)
+                {
+                    let flat =
+                        UnitQuaternion::rotation_between(&(pose.rotation * face), &-Vector3::z())
+                            .unwrap_or_else(UnitQuaternion::identity)
+                            * pose.rotation;
+                    outcomes[k] = Some(DropOutcome {
+                        rotation: flat,
+                        height: geometric_rest_height(&body.mesh, &flat),
+                        settled: true,
+                        trapped: true,
+                        time: t,
+                    });
+                    restless[group_of(k)] -= 1;
+                    continue;
+                }
+            }
             match clock.tick(k, &pose, settings) {
                 Motion::Moved => {
                     if outcomes[k].take().is_some() {
@@ -681,6 +729,7 @@ pub fn simulate_batch(
                         rotation: pose.rotation,
                         height: pose.translation.z,
                         settled: true,
+                        trapped: false,
                         time: t,
                     });
                     restless[group_of(k)] -= 1;
@@ -715,6 +764,7 @@ pub fn simulate_batch(
                     rotation: unit_quaternion_from_rot(rb.rotation()),
                     height: rb.translation().z,
                     settled: false,
+                    trapped: false,
                     time: t,
                 }
             })

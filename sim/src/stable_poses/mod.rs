@@ -1,11 +1,13 @@
 //! Stable poses from physics, as in the seed's Figure 3: drop a part many times from random
 //! orientations onto a plane, let it rest, and group the rest orientations by resting face.
 
+mod basin;
 mod cluster;
 pub(crate) mod drop;
 mod mujoco;
 mod symmetric;
 
+pub use basin::FaceBasins;
 pub use cluster::{CLASS_ANGLE_RAD, LEAN_HEIGHT, PoseClass, cluster, leaning};
 pub use drop::{
     DropBody, DropOutcome, DropSettings, HULL_TOLERANCE, SIMPLIFY_HULL_ABOVE, contact_hull,
@@ -35,7 +37,7 @@ pub struct StablePoseReport {
     pub mass: f64,
     /// Centre of mass in the part frame, metres.
     pub center_of_mass: nalgebra::Point3<f64>,
-    /// Mean simulated time to rest, seconds.
+    /// Mean simulated time until a drop rested or was trapped on its face, seconds.
     pub mean_rest_time: f64,
 }
 

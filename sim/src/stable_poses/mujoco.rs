@@ -302,6 +302,7 @@ impl DropModel<'_> {
                         rotation: p.rotation,
                         height: p.translation.z,
                         settled: true,
+                        trapped: false,
                         time: t,
                     });
                     remaining -= 1;
@@ -318,6 +319,7 @@ impl DropModel<'_> {
                         rotation: p.rotation,
                         height: p.translation.z,
                         settled: false,
+                        trapped: false,
                         time: t,
                     }
                 })
