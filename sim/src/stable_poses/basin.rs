@@ -16,6 +16,8 @@
 //! face as facets a fraction of a milliradian apart (the seed authors' top shell), and such a
 //! face's facets all rest in the same stable-pose class.
 
+use std::collections::HashMap;
+
 use nalgebra::{Point3, Vector3};
 
 /// Facets whose normals are this close (radians) to a face's first facet belong to that face.
@@ -72,40 +74,53 @@ impl FaceBasins {
                 (n, n.dot(&(a - com)))
             })
             .collect();
-        // Facets join the face of the first facet they share an edge with and lie near.
+        // Facets join the face of a neighbour (sharing an edge) when they lie near its first
+        // facet.
+        let mut by_edge: HashMap<[u32; 2], Vec<usize>> = HashMap::new();
+        for (t, tri) in triangles.iter().enumerate() {
+            for e in edges(tri) {
+                by_edge.entry(e).or_default().push(t);
+            }
+        }
         let mut face_of = vec![usize::MAX; triangles.len()];
-        let mut seeds: Vec<usize> = Vec::new();
+        let mut members: Vec<Vec<usize>> = Vec::new();
         for start in 0..triangles.len() {
             if face_of[start] != usize::MAX {
                 continue;
             }
-            let face = seeds.len();
-            seeds.push(start);
+            let face = members.len();
             face_of[start] = face;
-            let mut stack = vec![start];
-            while let Some(t) = stack.pop() {
-                for (u, f) in face_of.iter_mut().enumerate() {
-                    if *f == usize::MAX
-                        && shares_edge(&triangles[t], &triangles[u])
-                        && facets[u].0.angle(&facets[start].0) < SAME_FACE_RAD
+            let mut group = vec![start];
+            let mut next = 0;
+            while let Some(&t) = group.get(next) {
+                next += 1;
+                for u in edges(&triangles[t]).iter().flat_map(|e| &by_edge[e]) {
+                    if face_of[*u] == usize::MAX
+                        && facets[*u].0.angle(&facets[start].0) < SAME_FACE_RAD
                     {
-                        *f = face;
-                        stack.push(u);
+                        face_of[*u] = face;
+                        group.push(*u);
                     }
                 }
             }
+            members.push(group);
         }
-        let faces = seeds
+        let faces = members
             .iter()
-            .enumerate()
-            .map(|(face, &seed)| {
-                let members: Vec<usize> = (0..triangles.len())
-                    .filter(|&t| face_of[t] == face)
-                    .collect();
-                let barrier = outer_edges(&members, triangles)
-                    .map(|[i, j]| line_distance(com, &vertices[i as usize], &vertices[j as usize]))
+            .map(|group| {
+                // An outer edge borders one facet of the face only.
+                let mut uses: HashMap<[u32; 2], usize> = HashMap::new();
+                for e in group.iter().flat_map(|&t| edges(&triangles[t])) {
+                    *uses.entry(e).or_default() += 1;
+                }
+                let barrier = uses
+                    .iter()
+                    .filter(|(_, n)| **n == 1)
+                    .map(|([i, j], _)| {
+                        line_distance(com, &vertices[*i as usize], &vertices[*j as usize])
+                    })
                     .fold(f64::INFINITY, f64::min);
-                let (normal, rest) = facets[seed];
+                let (normal, rest) = facets[group[0]];
                 Face {
                     normal,
                     rest,
@@ -158,31 +173,12 @@ impl FaceBasins {
     }
 }
 
-/// Whether two triangles share an edge (two vertices).
-fn shares_edge(a: &[u32; 3], b: &[u32; 3]) -> bool {
-    a.iter().filter(|i| b.contains(i)).count() == 2
-}
-
-/// The edges of the triangles `members` used by only one of them: the face's outline.
-fn outer_edges<'a>(
-    members: &'a [usize],
-    triangles: &'a [[u32; 3]],
-) -> impl Iterator<Item = [u32; 2]> + 'a {
-    let edge = |t: usize, k: usize| {
-        let (i, j) = (triangles[t][k], triangles[t][(k + 1) % 3]);
+/// A triangle's three edges, each as its vertex indices in increasing order.
+fn edges(t: &[u32; 3]) -> [[u32; 2]; 3] {
+    [0, 1, 2].map(|k| {
+        let (i, j) = (t[k], t[(k + 1) % 3]);
         [i.min(j), i.max(j)]
-    };
-    members
-        .iter()
-        .flat_map(move |&t| (0..3).map(move |k| edge(t, k)))
-        .filter(move |e| {
-            members
-                .iter()
-                .flat_map(|&t| (0..3).map(move |k| edge(t, k)))
-                .filter(|f| f == e)
-                .count()
-                == 1
-        })
+    })
 }
 
 /// Distance from `p` to the line through `a` and `b`.
