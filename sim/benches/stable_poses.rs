@@ -153,6 +153,9 @@ fn apply(settings: &mut DropSettings, args: &[String], prefix: &str) {
     if let Some(v) = value("one_contact_per_point") {
         settings.one_contact_per_point = flag(v);
     }
+    if let Some(n) = value("batch") {
+        settings.batch = n.parse().expect("batch=N");
+    }
     if let Some(v) = value("stop_when_trapped") {
         settings.stop_when_trapped = flag(v);
     }

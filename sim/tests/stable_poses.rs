@@ -332,12 +332,13 @@ fn a_crowd_dropped_together_settles_differently_and_every_drop_is_counted() {
 
 #[test]
 fn a_drop_ended_on_the_face_it_can_no_longer_leave_would_have_rested_there() {
-    // The same 256 orientations of the main shell, run until they rest and ended once their
-    // energy is below their face's tipping barrier.
+    // The same 200 orientations of the main shell, run until they rest and ended once their
+    // energy is below their face's tipping barrier. Each drop has a world of its own: parts
+    // side by side in one world do not touch, but removing one changes the order the others'
+    // contacts are solved in, and that alone moved 9 of 1 000 of the seed authors' top shells.
     let mesh = main_shell();
     let body = DropBody::new(&mesh, 8500.0);
     let to_rest = DropSettings {
-        drops: 256,
         seed: 6,
         stop_when_trapped: false,
         ..DropSettings::default()
@@ -346,19 +347,23 @@ fn a_drop_ended_on_the_face_it_can_no_longer_leave_would_have_rested_there() {
         stop_when_trapped: true,
         ..to_rest.clone()
     };
-    let a = simulate_batch(&body, &to_rest, 0, 256);
-    let b = simulate_batch(&body, &ended, 0, 256);
+    let alone = |s: &DropSettings| -> Vec<DropOutcome> {
+        (0..200)
+            .flat_map(|i| simulate_batch(&body, s, i, 1))
+            .collect()
+    };
+    let (a, b) = (alone(&to_rest), alone(&ended));
     let up = |o: &DropOutcome| o.rotation.inverse() * Vector3::z();
     let moved = a
         .iter()
         .zip(&b)
         .filter(|(x, y)| up(x).angle(&up(y)) > 0.2)
         .count();
-    assert!(moved <= 1, "{moved} of 256 drops ended on another face");
+    assert_eq!(moved, 0, "{moved} of 200 drops ended on another face");
     let trapped: Vec<&DropOutcome> = b.iter().filter(|o| o.trapped).collect();
     assert!(
-        trapped.len() >= 200,
-        "only {} of 256 trapped",
+        trapped.len() >= 160,
+        "only {} of 200 trapped",
         trapped.len()
     );
     assert!(a.iter().all(|o| !o.trapped));
@@ -367,7 +372,7 @@ fn a_drop_ended_on_the_face_it_can_no_longer_leave_would_have_rested_there() {
         assert!((o.height - geometric_rest_height(&mesh, &o.rotation)).abs() < 1e-12);
     }
     // A trapped drop ends before its rest clock could even start: at least the rest time sooner
-    // on average (measured 0.112 against 0.151 s; the steps saved are the costly ones in contact).
+    // on average (the steps saved are the costly ones, in contact).
     let mean = |o: &[DropOutcome]| o.iter().map(|o| o.time).sum::<f64>() / o.len() as f64;
     assert!(
         mean(&b) < mean(&a) - to_rest.rest_time,

@@ -52,6 +52,8 @@ pub struct FaceBasins {
     /// The face each hull triangle belongs to.
     face_of: Vec<usize>,
     faces: Vec<Face>,
+    /// The hull's corners relative to the centre of mass.
+    corners: Vec<Vector3<f64>>,
 }
 
 impl FaceBasins {
@@ -133,6 +135,7 @@ impl FaceBasins {
             facets,
             face_of,
             faces,
+            corners: vertices.iter().map(|v| v - com).collect(),
         };
         for f in 0..basins.faces.len() {
             basins.faces[f].stable = basins.face_below(&-basins.faces[f].normal) == Some(f);
@@ -156,6 +159,18 @@ impl FaceBasins {
         let barrier = face.barrier - face.rest;
         (face.stable && excess < (TRAP_SHARE * barrier).min(barrier - MIN_MARGIN))
             .then_some(face.normal)
+    }
+
+    /// How far the part's lowest corner lies under the table, metres (0 when none does), with
+    /// `up` and `height` as in [`Self::trapped`]: a soft contact pressed in holds energy that
+    /// the centre of mass's height does not show.
+    pub fn sunk(&self, up: &Vector3<f64>, height: f64) -> f64 {
+        let reach = self
+            .corners
+            .iter()
+            .map(|v| -v.dot(up))
+            .fold(f64::NEG_INFINITY, f64::max);
+        (reach - height).max(0.0)
     }
 
     /// The face the ray from the centre of mass straight down (against `up`) leaves the hull
@@ -231,6 +246,18 @@ mod tests {
         assert!((f.normal + Vector3::z()).norm() < 1e-12);
         assert!((f.rest - 0.001).abs() < 1e-12);
         assert!((f.barrier - (0.003f64.powi(2) + 0.001f64.powi(2)).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_part_pressed_into_the_table_is_sunk_by_its_lowest_corner() {
+        let (v, t) = cuboid([0.005, 0.003, 0.001]);
+        let b = FaceBasins::new(&v, &t, &Point3::origin());
+        assert!((b.sunk(&Vector3::z(), 0.0009) - 1e-4).abs() < 1e-12);
+        assert_eq!(b.sunk(&Vector3::z(), 0.0011), 0.0);
+        // Tilted 10° about x: the lowest edge is 3 sin 10° + 1 cos 10° mm below the centre.
+        let up = nalgebra::Rotation3::from_euler_angles(0.17, 0.0, 0.0).inverse() * Vector3::z();
+        let reach = 0.003 * 0.17f64.sin() + 0.001 * 0.17f64.cos();
+        assert!((b.sunk(&up, reach - 2e-6) - 2e-6).abs() < 1e-12);
     }
 
     #[test]

@@ -137,7 +137,7 @@ pub(crate) fn drop_world(dt: f64) -> PhysicsWorld {
     p.dt = dt;
     p.length_unit = 1e-3;
     p.normalized_max_corrective_velocity = 20.0;
-    p.static_contact_softness.natural_frequency = 400.0;
+    p.static_contact_softness.natural_frequency = CONTACT_HZ;
     p.contact_softness = p.static_contact_softness;
     world
 }
@@ -218,6 +218,12 @@ impl PhysicsHooks for OneContactPerPoint {
 
 /// Standard gravity, m/s², of every drop world.
 pub const GRAVITY: f64 = 9.81;
+
+/// Natural frequency of the drop worlds' contacts, Hz ([`drop_world`]).
+const CONTACT_HZ: f64 = 400.0;
+
+/// [`CONTACT_HZ`] as an angular frequency, rad/s.
+const CONTACT_OMEGA: f64 = std::f64::consts::TAU * CONTACT_HZ;
 
 /// Fastest a part dropped for its stable poses may move, m/s: only a sanity bound (a fall from
 /// 0.5 m lands at 3.1 m/s).
@@ -698,11 +704,13 @@ pub fn simulate_batch(
             if trap && outcomes[k].is_none() {
                 let rb = &world.bodies[handles[k]];
                 let up = pose.rotation.inverse() * Vector3::z();
-                let energy_height = rb.kinetic_energy() / (rb.mass() * GRAVITY);
-                if let Some(face) = body
-                    .basins
-                    .trapped(&up, rb.center_of_mass().z, energy_height)
-                {
+                let height = rb.center_of_mass().z;
+                // A contact pressed in by δ holds ½ m ω² δ² like a spring (rapier's soft
+                // contacts); on landing that is most of the energy, and it comes back.
+                let sunk = CONTACT_OMEGA * body.basins.sunk(&up, height);
+                let energy_height =
+                    rb.kinetic_energy() / (rb.mass() * GRAVITY) + sunk * sunk / (2.0 * GRAVITY);
+                if let Some(face) = body.basins.trapped(&up, height, energy_height) {
                     let flat =
                         UnitQuaternion::rotation_between(&(pose.rotation * face), &-Vector3::z())
                             .unwrap_or_else(UnitQuaternion::identity)
