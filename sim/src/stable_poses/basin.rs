@@ -209,28 +209,8 @@ mod tests {
 
     /// A box of half-sizes `h` centred on the origin, as 12 triangles.
     fn cuboid(h: [f64; 3]) -> (Vec<Point3<f64>>, Vec<[u32; 3]>) {
-        let v: Vec<Point3<f64>> = (0..8)
-            .map(|i| {
-                Point3::new(
-                    if i & 1 == 0 { -h[0] } else { h[0] },
-                    if i & 2 == 0 { -h[1] } else { h[1] },
-                    if i & 4 == 0 { -h[2] } else { h[2] },
-                )
-            })
-            .collect();
-        let quads = [
-            [0, 1, 3, 2],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 3, 7, 6],
-            [0, 2, 6, 4],
-            [1, 3, 7, 5],
-        ];
-        let t = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        (v, t)
+        let m = perception::part::TriMesh::cuboid(2.0 * Vector3::from(h));
+        (m.vertices, m.triangles)
     }
 
     #[test]
