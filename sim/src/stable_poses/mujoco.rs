@@ -18,6 +18,7 @@ use indicatif::ProgressBar;
 use perception::part::TriMesh;
 use rayon::prelude::*;
 
+use super::drop::GRAVITY;
 use super::{DropBody, DropOutcome, DropSettings, StablePoseReport};
 use crate::mujoco::MujocoError;
 
@@ -175,7 +176,7 @@ impl DropModel<'_> {
         let hull = [self.body.mesh.vertices.clone()];
         let mut mjcf = Mjcf::new(Options {
             timestep: self.settings.dt,
-            gravity: Vector3::new(0.0, 0.0, -9.81),
+            gravity: Vector3::new(0.0, 0.0, -GRAVITY),
             friction: self.settings.friction,
             contact_timeconst: 2.0 * self.settings.dt,
             contact_dampratio: self.dampratio,
@@ -232,7 +233,7 @@ impl DropModel<'_> {
         let start = Isometry3::from_parts(Vector3::new(0.0, 0.0, z).into(), rotation);
         let compiled = self.compile(&[start])?;
         let mut data = MjData::new(&compiled.model);
-        let impact = (2.0 * 9.81 * self.settings.drop_height).sqrt();
+        let impact = (2.0 * GRAVITY * self.settings.drop_height).sqrt();
         data.qvel_mut()[2] = -impact;
         let mut rebound = 0.0f64;
         let mut t = 0.0;
