@@ -6,8 +6,8 @@ use std::path::Path;
 use indicatif::ProgressBar;
 use nalgebra::Point3;
 use perception::part::{
-    Catalog, MeshRepairs, PartRole, PartSpec, StablePose, TriMesh, farthest_point_sample,
-    sample_surface,
+    ALIKE_WITHIN_REL, AlikePoses, Catalog, MeshRepairs, PartRole, PartSpec, StablePose, Symmetry,
+    TriMesh, alike_stable_poses, farthest_point_sample, sample_surface,
 };
 use perception::symmetry::symmetry_group;
 use sim::stable_poses::{DropEngine, DropSettings, StablePoseReport, stable_poses_with};
@@ -31,6 +31,8 @@ pub struct PreparedPart {
     pub report: StablePoseReport,
     /// What loading repaired in the mesh file (warn the user about each).
     pub repairs: MeshRepairs,
+    /// Pairs of the report's classes a camera cannot tell apart (warn the user about each).
+    pub alike: Vec<AlikePoses>,
 }
 
 /// Errors of `prepare`.
@@ -104,6 +106,22 @@ fn prepare_loaded(
     report.merge_symmetric_keeping(&symmetry_group(&part.symmetries), |name| {
         part.grasp_for(name).is_some()
     });
+    let poses: Vec<_> = report.classes.iter().map(|c| c.pose.clone()).collect();
+    let tolerance = ALIKE_WITHIN_REL * mesh.extents().max();
+    // Near-symmetries count too: the catalog already says vision confuses those.
+    let declared: Vec<Symmetry> = (part.symmetries.iter())
+        .map(|s| Symmetry {
+            exact: true,
+            ..s.clone()
+        })
+        .collect();
+    let alike = alike_stable_poses(
+        &mesh,
+        report.center_of_mass,
+        &poses,
+        &symmetry_group(&declared),
+        tolerance,
+    );
     Ok(PreparedPart {
         name: part.name.clone(),
         mass: report.mass,
@@ -111,6 +129,7 @@ fn prepare_loaded(
         keypoints: keypoints(&mesh, settings.seed),
         report,
         repairs,
+        alike,
     })
 }
 

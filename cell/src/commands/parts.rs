@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use cell::prepare::prepare_catalog_with;
 use indicatif::{ProgressBar, ProgressStyle};
-use sim::stable_poses::DropSettings;
+use perception::part::AlikePoses;
+use sim::stable_poses::{DropSettings, PoseClass};
 
 /// Subcommands of `cell parts`.
 #[derive(Debug, clap::Subcommand)]
@@ -66,6 +67,33 @@ pub fn run(cmd: PartsCommand) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// What a pair of stable poses that look alike means, and what to do about it.
+fn alike_warning(a: &AlikePoses, classes: &[PoseClass]) -> String {
+    let pose = |i: usize| &classes[i].pose;
+    let (axis, angle) = a
+        .turn
+        .axis_angle()
+        .map_or(([0.0; 3], 0.0), |(axis, angle)| {
+            (axis.into_inner().into(), angle)
+        });
+    format!(
+        "resting as \"{}\" ({:.1} % of drops) and as \"{}\" ({:.1} %) it is the same shape to \
+         {:.3} mm, turned {:.1}° about [{:.3}, {:.3}, {:.3}] (part frame), which is not among its \
+         symmetries: no camera above the table tells these stable poses apart, and a grasp or \
+         insertion planned for one is applied to the other. Declare the turn in `symmetries` if \
+         it is exact, or change the part so the poses differ",
+        pose(a.first).name,
+        100.0 * pose(a.first).probability,
+        pose(a.second).name,
+        100.0 * pose(a.second).probability,
+        a.deviation * 1e3,
+        angle.to_degrees(),
+        axis[0],
+        axis[1],
+        axis[2],
+    )
+}
+
 fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.drops == 0 {
         anyhow::bail!("--drops must be at least 1");
@@ -112,6 +140,9 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
         }
         for n in p.repairs.notes() {
             eprintln!("note: {}: {n}", p.name);
+        }
+        for a in &p.alike {
+            eprintln!("warning: {}: {}", p.name, alike_warning(a, &r.classes));
         }
         let share = |n: usize| 100.0 * n as f64 / r.drops.max(1) as f64;
         println!(

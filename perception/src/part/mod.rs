@@ -1,6 +1,7 @@
 //! Part models: meshes, mass properties, keypoints, symmetries, grasps and stable poses, and the
 //! catalog file that holds them for one part set.
 
+mod alike;
 mod catalog;
 mod error;
 mod hull;
@@ -16,6 +17,7 @@ mod stable_pose;
 mod step_io;
 mod step_kernel;
 
+pub use alike::{ALIKE_WITHIN_REL, AlikePoses, alike_stable_poses};
 pub use catalog::{
     Catalog, Grasp, HoleWeight, MAX_CHORDAL_TOLERANCE_M, MIN_CHORDAL_TOLERANCE_M, Material,
     PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
