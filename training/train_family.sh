@@ -15,6 +15,8 @@
 #   FEEDER_DROP_HALF  half-size (m) of the square the training and test feeder frames' parts
 #                 drop into [cell dataset's 0.015: a heap of USB-C-sized parts]; larger parts or
 #                 more of them want more room (a pile is slow to drop and unlike a shaken feeder)
+#   INIT          a folder with segmenter.pt and keypoints.pt to start both nets from (a further
+#                 training cycle, or a changed catalog of the same family) [none: from scratch]
 #   SCENARIO      a scenario of the family for `cell eval`'s finger-room check [none: not checked]
 #   DATA, OUT     dataset folder [training/data/NAME], model folder [scenarios/models/NAME]
 #   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
@@ -22,7 +24,7 @@
 # Every stage's wall time is printed and appended to OUT/train_family.log. The datasets resume if
 # interrupted; a second run with the same settings reuses them.
 set -euo pipefail
-[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,23p' "$0" >&2; exit 2; }
+[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,25p' "$0" >&2; exit 2; }
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 catalog="$(realpath -e "$1")" || { echo "train_family: no catalog at $1" >&2; exit 2; }
 cd "$root"
@@ -43,13 +45,20 @@ TEST_CROPS="${TEST_CROPS:-300}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
 CELL_FEEDER="${CELL_FEEDER:-100}"
 heap=()
+seg_init=(); kp_init=()
+if [ -n "${INIT:-}" ]; then
+    for net in segmenter keypoints; do
+        [ -f "$INIT/$net.pt" ] || { echo "train_family: INIT=$INIT has no $net.pt" >&2; exit 2; }
+    done
+    seg_init=(--init "$(realpath "$INIT/segmenter.pt")"); kp_init=(--init "$(realpath "$INIT/keypoints.pt")")
+fi
 [ -n "${FEEDER_DROP_HALF:-}" ] && heap=(--feeder-drop-half "$FEEDER_DROP_HALF")
 mkdir -p "$DATA" "$OUT"
 log="$OUT/train_family.log"
 t_all=$(date +%s)
 stage() { echo "== $1 ($(date -u +%H:%M:%S))"; t_stage=$(date +%s); }
 done_stage() { local s=$(( $(date +%s) - t_stage )); echo "   $1: ${s} s" | tee -a "$log"; }
-echo "$(date -u +%FT%TZ) $name from $catalog (parts $parts; gpu $gpu; $MINUTES min per net)" >> "$log"
+echo "$(date -u +%FT%TZ) $name from $catalog (parts $parts; gpu $gpu; $MINUTES min per net${INIT:+; from $INIT})" >> "$log"
 
 stage "datasets of $parts (train seed 1, test seed 2, cell density seed 4)"
 "${cell[@]}" dataset --catalog "$catalog" --out "$DATA/train" --seed 1 --train-crops "$TRAIN_CROPS" \
@@ -66,10 +75,10 @@ mkdir -p "$runs"
 train() { (cd training && "$py" "$@" --train "$DATA/train" --test "$DATA/test" --catalog "$catalog" \
     --dataset-seed 1 --threads "$threads" --max-minutes "$MINUTES" --out "$OUT"); }
 train train_segmenter.py --steps 100000 --batch "$seg_batch" --workers "$seg_workers" --eval-every 500 \
-    --checkpoint "$runs/segmenter.pt" > "$runs/segmenter.log" 2>&1 &
+    --checkpoint "$runs/segmenter.pt" "${seg_init[@]}" > "$runs/segmenter.log" 2>&1 &
 seg=$!
 train train_keypoints.py --epochs 1000 --eval-every 5 --batch "$kp_batch" \
-    --checkpoint "$runs/keypoints.pt" > "$runs/keypoints.log" 2>&1 &
+    --checkpoint "$runs/keypoints.pt" "${kp_init[@]}" > "$runs/keypoints.log" 2>&1 &
 kp=$!
 fail=0
 wait "$seg" || { echo "segmenter training failed: $runs/segmenter.log" >&2; tail -5 "$runs/segmenter.log" >&2; fail=1; }

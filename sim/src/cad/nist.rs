@@ -13,9 +13,12 @@
 //!   bands: 8 mm: hole +18 µm, peg −58 µm, 0.076 mm total clearance; 12 and 16 mm: hole
 //!   +21.5 µm, peg −71.5 µm, 0.093 mm. The square pegs take the same deviations on their widths.
 //! - **Lead-in**: a 0.5 mm × 45° chamfer on every hole's rim; the pegs' ends are square.
-//! - **Length**: 12 mm for every peg, 6 mm of it in its hole. A top-down parallel gripper can only
-//!   insert a peg that stands on its end in the feeder, and a long peg almost never lands so;
-//!   12 mm is the shortest peg that still leaves the fingers 4.5 mm of grip above the plate.
+//! - **Length**: 14 mm for every peg, 6 mm of it in its hole. A top-down parallel gripper can only
+//!   insert a peg that stands on its end in the feeder, and a long peg almost never lands so.
+//!   12 mm would still leave the fingers 4.5 mm of grip above the plate, but it makes the 12 mm
+//!   square peg a near-cube (11.93 × 11.93 × 12 mm): standing and lying it shows the camera the
+//!   same square to 0.07 mm, half a pixel, so no image tells its stable poses apart. At 14 mm
+//!   every square peg's length is 1.9–6.1 mm (14 px or more at the seed's camera) from its width.
 //!
 //! Round pegs are regular 48-gons through their circle and round holes regular 48-gons around
 //! theirs, so the gap is at least the nominal clearance at any turn of the peg (the flats are
@@ -31,7 +34,7 @@ use crate::config::{AssemblyStep, Destination, PoseSpec, Tolerances};
 /// both axes and on the diagonals, where the plate's square cells have their corners).
 pub const CIRCLE_SIDES: usize = 48;
 /// Length of every peg (mm).
-pub const PEG_LENGTH_MM: f64 = 12.0;
+pub const PEG_LENGTH_MM: f64 = 14.0;
 /// Depth of every hole (mm): the peg's engagement when seated.
 pub const HOLE_DEPTH_MM: f64 = 6.0;
 /// Lead-in chamfer on every hole's rim (mm).
