@@ -95,12 +95,7 @@ struct Surface {
 
 impl Surface {
     fn new(mesh: &TriMesh, center_of_mass: Point3<f64>) -> Option<Self> {
-        let vertices = mesh
-            .vertices
-            .iter()
-            .map(|p| DVec3::new(p.x, p.y, p.z))
-            .collect();
-        let parry = ParryMesh::new(vertices, mesh.triangles.clone()).ok()?;
+        let parry = mesh.to_parry()?;
         let centroids = (0..mesh.triangles.len()).map(|i| {
             let [a, b, c] = mesh.triangle(i);
             Point3::from((a.coords + b.coords + c.coords) / 3.0)
@@ -140,12 +135,11 @@ impl Surface {
         let mut worst = 0.0f64;
         for p in points {
             let q = self.centre + turn * p;
-            let proj = self.mesh.project_local_point_with_max_dist(
-                DVec3::new(q.x, q.y, q.z),
-                false,
-                limit,
-            )?;
-            let d = (proj.point - DVec3::new(q.x, q.y, q.z)).length();
+            let q = DVec3::new(q.x, q.y, q.z);
+            let proj = self
+                .mesh
+                .project_local_point_with_max_dist(q, false, limit)?;
+            let d = (proj.point - q).length();
             if d > limit {
                 return None;
             }

@@ -225,6 +225,15 @@ impl TriMesh {
         regions
     }
 
+    /// The mesh as parry's triangle mesh with its BVH, for distance and ray queries; `None` when
+    /// parry refuses it (no triangles, an index out of range).
+    pub fn to_parry(&self) -> Option<parry3d_f64::shape::TriMesh> {
+        let vertices = (self.vertices.iter())
+            .map(|p| parry3d_f64::math::Vector::new(p.x, p.y, p.z))
+            .collect();
+        parry3d_f64::shape::TriMesh::new(vertices, self.triangles.clone()).ok()
+    }
+
     /// Axis-aligned bounding box as (min, max) corners.
     pub fn aabb(&self) -> (Point3<f64>, Point3<f64>) {
         let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));

@@ -39,12 +39,7 @@ impl RenderMesh {
         if mesh.triangles.is_empty() {
             return None;
         }
-        let vertices = mesh
-            .vertices
-            .iter()
-            .map(|p| DVec3::new(p.x, p.y, p.z))
-            .collect();
-        let parry = ParryMesh::new(vertices, mesh.triangles.clone()).ok()?;
+        let parry = mesh.to_parry()?;
         let (lo, hi) = mesh.aabb();
         Some(Self {
             mesh: parry,
