@@ -6,8 +6,8 @@ use std::path::Path;
 use indicatif::ProgressBar;
 use nalgebra::Point3;
 use perception::part::{
-    ALIKE_WITHIN_REL, AlikePoses, Catalog, MeshRepairs, PartRole, PartSpec, StablePose, Symmetry,
-    TriMesh, alike_stable_poses, farthest_point_sample, sample_surface,
+    ALIKE_WITHIN_REL, AlikePoses, Catalog, MeshRepairs, PartRole, PartSpec, StablePose, TriMesh,
+    alike_stable_poses, farthest_point_sample, sample_surface,
 };
 use perception::symmetry::symmetry_group;
 use sim::stable_poses::{DropEngine, DropSettings, StablePoseReport, stable_poses_with};
@@ -108,18 +108,11 @@ fn prepare_loaded(
     });
     let poses: Vec<_> = report.classes.iter().map(|c| c.pose.clone()).collect();
     let tolerance = ALIKE_WITHIN_REL * mesh.extents().max();
-    // Near-symmetries count too: the catalog already says vision confuses those.
-    let declared: Vec<Symmetry> = (part.symmetries.iter())
-        .map(|s| Symmetry {
-            exact: true,
-            ..s.clone()
-        })
-        .collect();
     let alike = alike_stable_poses(
         &mesh,
         report.center_of_mass,
         &poses,
-        &symmetry_group(&declared),
+        &part.symmetries,
         tolerance,
     );
     Ok(PreparedPart {

@@ -11,7 +11,8 @@ use parry3d_f64::math::Vector as DVec3;
 use parry3d_f64::query::PointQuery;
 use parry3d_f64::shape::TriMesh as ParryMesh;
 
-use super::{StablePose, TriMesh, farthest_point_sample};
+use super::{StablePose, Symmetry, TriMesh, farthest_point_sample};
+use crate::symmetry::symmetry_group;
 
 /// Default tolerance of [`alike_stable_poses`], as a share of the part's largest extent: 1 %
 /// is 0.12 mm on a 12 mm part, under a pixel at the seed's camera (about 7 px/mm).
@@ -42,8 +43,8 @@ pub struct AlikePoses {
 }
 
 /// The pairs of `poses` in which the part rests as the same shape within `tolerance` (m),
-/// leaving out pairs that one of `declared` relates (the group of the part's declared
-/// symmetries, near ones included: the ambiguities the catalog already names).
+/// leaving out pairs that the part's declared `symmetries` relate (near ones included: the
+/// ambiguities the catalog already names).
 ///
 /// A match is a turn `g` about the centre of mass with `g · up_first = up_second` that maps the
 /// surface onto itself: the part resting in the first pose is then the part resting in the
@@ -52,9 +53,16 @@ pub fn alike_stable_poses(
     mesh: &TriMesh,
     center_of_mass: Point3<f64>,
     poses: &[StablePose],
-    declared: &[UnitQuaternion<f64>],
+    symmetries: &[Symmetry],
     tolerance: f64,
 ) -> Vec<AlikePoses> {
+    let as_exact: Vec<Symmetry> = (symmetries.iter())
+        .map(|s| Symmetry {
+            exact: true,
+            ..s.clone()
+        })
+        .collect();
+    let declared = symmetry_group(&as_exact);
     let Some(surface) = Surface::new(mesh, center_of_mass) else {
         return Vec::new();
     };
