@@ -45,6 +45,7 @@ TEST_CROPS="${TEST_CROPS:-300}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
 CELL_FEEDER="${CELL_FEEDER:-100}"
 heap=()
+[ -n "${FEEDER_DROP_HALF:-}" ] && heap=(--feeder-drop-half "$FEEDER_DROP_HALF")
 seg_init=(); kp_init=()
 if [ -n "${INIT:-}" ]; then
     for net in segmenter keypoints; do
@@ -52,7 +53,6 @@ if [ -n "${INIT:-}" ]; then
     done
     seg_init=(--init "$(realpath "$INIT/segmenter.pt")"); kp_init=(--init "$(realpath "$INIT/keypoints.pt")")
 fi
-[ -n "${FEEDER_DROP_HALF:-}" ] && heap=(--feeder-drop-half "$FEEDER_DROP_HALF")
 mkdir -p "$DATA" "$OUT"
 log="$OUT/train_family.log"
 t_all=$(date +%s)
