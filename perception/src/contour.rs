@@ -258,6 +258,12 @@ impl Silhouette {
             lo = lo.inf(&p.coords);
             hi = hi.sup(&p.coords);
         }
+        // Sized in floating point first: a wild pose's pixels overflow integers.
+        let span = hi - lo;
+        let side = Self::MAX_SIDE as f64;
+        if !(span.x < side && span.y < side && lo.x.abs() < 1e9 && lo.y.abs() < 1e9) {
+            return None;
+        }
         let (x0, y0) = (lo.x.floor() as i64 - 3, lo.y.floor() as i64 - 3);
         let width = (hi.x.ceil() as i64 + 4 - x0) as usize;
         let height = (hi.y.ceil() as i64 + 4 - y0) as usize;
@@ -423,14 +429,13 @@ impl GreyPatch {
     /// Bilinear grey level at a sensor pixel, or `None` outside the patch.
     fn sample(&self, p: Point2<f64>) -> Option<f32> {
         let (u, v) = (p.x - self.origin[0], p.y - self.origin[1]);
-        if !(u >= 0.0 && v >= 0.0) {
+        // Bounds in floating point: a wild pose projects to coordinates that no integer holds
+        // (a cast saturates, and one more would wrap).
+        if !(u >= 0.0 && v >= 0.0 && u + 1.0 < self.width as f64 && v + 1.0 < self.height as f64) {
             return None;
         }
         // Truncation is the floor here (both are non-negative), without a libm call.
         let (j, i) = (u as usize, v as usize);
-        if j + 1 >= self.width || i + 1 >= self.height {
-            return None;
-        }
         let (fu, fv) = ((u - j as f64) as f32, (v - i as f64) as f32);
         let at = |i: usize, j: usize| self.values[i * self.width + j];
         let top = at(i, j) * (1.0 - fu) + at(i, j + 1) * fu;
@@ -694,6 +699,36 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
 
     use super::*;
+
+    #[test]
+    fn a_patch_samples_nothing_outside_it_however_far() {
+        let image = DynamicImage::ImageLuma8(GrayImage::from_pixel(8, 6, Luma([255])));
+        let patch = GreyPatch::cut(&image, [100, 200], [100, 200, 8, 6]);
+        assert_eq!(patch.sample(Point2::new(103.5, 202.5)), Some(1.0));
+        // The last pixel centre that has a right and a lower neighbour, and just beyond it.
+        assert_eq!(patch.sample(Point2::new(106.99, 204.99)), Some(1.0));
+        assert_eq!(patch.sample(Point2::new(107.0, 203.0)), None);
+        assert_eq!(patch.sample(Point2::new(103.0, 205.0)), None);
+        // A wild pose's projections: these once saturated a cast and wrapped an index.
+        for far in [1e30, f64::INFINITY, -1e30, f64::NAN, 1.8e19, 9.3e18] {
+            assert_eq!(patch.sample(Point2::new(far, 203.0)), None, "{far}");
+            assert_eq!(patch.sample(Point2::new(103.0, far)), None, "{far}");
+        }
+    }
+
+    #[test]
+    fn a_silhouette_far_off_the_sensor_is_not_rasterised() {
+        let triangle =
+            |a: Point2<f64>| [a, a + Vector2::new(20.0, 0.0), a + Vector2::new(0.0, 20.0)];
+        let raster =
+            |corners: [Point2<f64>; 3]| Silhouette::rasterise(&corners, &[[0, 1, 2]], &[true]);
+        let near = raster(triangle(Point2::new(500.0, 300.0))).expect("an ordinary triangle");
+        assert!(near.cells.iter().filter(|c| **c).count() > 150);
+        for far in [1e30, -1e30, 9.3e18, f64::INFINITY, f64::NAN] {
+            assert!(raster(triangle(Point2::new(far, 300.0))).is_none(), "{far}");
+            assert!(raster(triangle(Point2::new(300.0, far))).is_none(), "{far}");
+        }
+    }
 
     /// A 9 × 5 × 3 mm box lying on its largest face, seen from 1.5 m straight above by the
     /// seed's camera: a bright rectangle on a dark table, drawn with exact area coverage
