@@ -17,7 +17,7 @@
 use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
 use perception::contour::PartOutline;
 use perception::contour::{ContourAligner, ContourConfig, ContourView, FinalEdge, GreyPatch};
-use perception::part::{Catalog, Material, StablePose, TriMesh};
+use perception::part::{Catalog, StablePose, TriMesh};
 use perception::{Camera, Frame, FrameContent};
 use robots::kinematics::Joints;
 
@@ -290,15 +290,6 @@ fn mark_edges(
     }
 }
 
-/// The finest round's edge rule for a part of this material (as the learned pipeline's):
-/// the outermost strong step for sheet-metal shells, the nearest for solid parts.
-fn final_edge(material: Material) -> FinalEdge {
-    match material {
-        Material::Metal => FinalEdge::Outermost,
-        _ => FinalEdge::Nearest,
-    }
-}
-
 /// Measures the part of step `step` in `frame`: its outline aligned from the step's target pose
 /// on the frame's pixels, with the support counted over its own outline samples only.
 #[allow(non_snake_case)]
@@ -324,7 +315,7 @@ pub fn measure_seat(
         .part(&s.part)
         .ok_or_else(|| unseen(format!("part {} is not in the catalog", s.part)))?;
     let outline = PartOutline::new(&part.mesh)
-        .with_final_edge(final_edge(spec.material))
+        .with_final_edge(FinalEdge::for_material(spec.material))
         .with_hole_weight(spec.hole_weight.get());
     let camera = &frame.camera;
     let base_T_ins = k.base_T_insertions[step];

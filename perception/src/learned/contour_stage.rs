@@ -13,24 +13,12 @@ use crate::contour::{
 };
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
-use crate::part::{Material, PartSpec, TriMesh};
+use crate::part::{PartSpec, TriMesh};
 use crate::planar::{ClassSet, PlanarRefiner, best_yaw};
 use crate::symmetry::ambiguity_group;
 
 /// Pixels around the keypoint crop that the outline search may reach.
 const MARGIN: i64 = 8;
-
-/// The finest round's edge rule for a part of this material: sheet-metal shells show their inner
-/// rims just inside the outline, so the outermost strong step is theirs (on the four eval sets,
-/// main shells' seed-style |e_y| 0.09–0.14 → 0.08–0.11 mm); solid parts take the nearest step,
-/// because a shadow's edge can lie just beyond their outline (insert molds lost 0.01 mm with
-/// the outermost one).
-fn final_edge(material: Material) -> FinalEdge {
-    match material {
-        Material::Metal => FinalEdge::Outermost,
-        _ => FinalEdge::Nearest,
-    }
-}
 
 /// One part's outline and its near-symmetries (the poses vision may confuse with the truth).
 struct OutlinedPart {
@@ -71,7 +59,7 @@ impl ContourStage {
             .zip(footprints)
             .map(|((spec, mesh), footprints)| OutlinedPart {
                 outline: PartOutline::new(mesh)
-                    .with_final_edge(final_edge(spec.material))
+                    .with_final_edge(FinalEdge::for_material(spec.material))
                     .with_hole_weight(spec.hole_weight.get()),
                 near: ambiguity_group(&spec.symmetries)
                     .into_iter()
