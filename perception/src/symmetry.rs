@@ -70,6 +70,26 @@ pub fn symmetric_angle(
         .fold(a.angle_to(b), f64::min)
 }
 
+/// The smallest rotation angle between `a` and any twin `b · g · r` of `b`, radians: `g` in
+/// `group`, `r` any turn about one of the part-frame axes `round` about which the part turns
+/// freely ([`crate::part::round_axes`]). Turned freely about `u`, the angle is that between `u`
+/// and where `(b · g)⁻¹ · a` takes it: the remaining swing.
+pub fn symmetric_angle_round(
+    a: &UnitQuaternion<f64>,
+    b: &UnitQuaternion<f64>,
+    group: &[UnitQuaternion<f64>],
+    round: &[Unit<Vector3<f64>>],
+) -> f64 {
+    let identity = [UnitQuaternion::identity()];
+    let swings = identity.iter().chain(group).flat_map(|g| {
+        let relative = (b * g).inverse() * a;
+        round
+            .iter()
+            .map(move |u| (relative * u.into_inner()).angle(u))
+    });
+    swings.fold(symmetric_angle(a, b, group), f64::min)
+}
+
 /// The element `g` of `group` whose twin `b · g` is nearest to `a` (the identity when `group` is
 /// empty or none is nearer than `b` itself).
 pub fn nearest_twin(
@@ -173,9 +193,36 @@ pub fn ambiguity_group(symmetries: &[Symmetry]) -> Vec<UnitQuaternion<f64>> {
 
 #[cfg(test)]
 mod tests {
-    use std::f64::consts::FRAC_PI_2;
+    use std::f64::consts::{FRAC_PI_2, PI};
 
     use super::*;
+
+    #[test]
+    fn a_round_axis_leaves_only_the_swing_away_from_it() {
+        let z = Vector3::z_axis();
+        let truth = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1);
+        // A 48-gon's group: the nearest element is 3.75° away at worst.
+        let group = symmetry_group(&[sym([0.0, 0.0, 1.0], 48), sym([1.0, 0.0, 0.0], 2)]);
+        let yawed = truth * UnitQuaternion::from_axis_angle(&z, 3.75f64.to_radians());
+        assert!((symmetric_angle(&yawed, &truth, &group).to_degrees() - 3.75).abs() < 1e-9);
+        assert!(symmetric_angle_round(&yawed, &truth, &group, &[z]) < 1e-9);
+        // Any turn about the axis, then a 2° tilt square to it: 2° remain.
+        let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 2f64.to_radians());
+        for yaw in [0.0, 0.7, 2.9, -1.3] {
+            let estimate = truth * tilt * UnitQuaternion::from_axis_angle(&z, yaw);
+            let angle = symmetric_angle_round(&estimate, &truth, &group, &[z]);
+            assert!((angle.to_degrees() - 2.0).abs() < 1e-9, "{yaw}: {angle}");
+        }
+        // Upside down is a twin through the group's end-over-end half turn.
+        let flipped = truth * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), PI) * tilt;
+        let angle = symmetric_angle_round(&flipped, &truth, &group, &[z]);
+        assert!((angle.to_degrees() - 2.0).abs() < 1e-9, "{angle}");
+        // Without round axes it is the discrete angle.
+        assert_eq!(
+            symmetric_angle_round(&yawed, &truth, &group, &[]),
+            symmetric_angle(&yawed, &truth, &group)
+        );
+    }
 
     fn sym(axis: [f64; 3], order: u32) -> Symmetry {
         Symmetry {

@@ -4,9 +4,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nalgebra::{Point3, UnitQuaternion};
+use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
 use perception::contour::PartOutline;
-use perception::part::{Catalog, PartRole, StablePose};
+use perception::part::{Catalog, PartRole, ROUND_WITHIN_M, StablePose, round_axes};
 use perception::symmetry::{ambiguity_group, symmetry_group, view_turns};
 use perception::{Camera, Distortion};
 use sim::dataset::{BopDataset, BopImage, BopScene, SceneCamera};
@@ -34,6 +34,9 @@ pub struct PartData {
     /// Group of every declared symmetry, exact or not: an error within the outlier angle of a
     /// near-symmetric equivalent is a symmetry flip.
     pub near_group: Vec<UnitQuaternion<f64>>,
+    /// Axes about which the part is round ([`perception::part::round_axes`]): a turn about one
+    /// is no error.
+    pub round_axes: Vec<Unit<Vector3<f64>>>,
     /// Stable poses, in the order classes refer to.
     pub stable_poses: Vec<StablePose>,
     /// Per stable pose, the turns under which the part looks the same from above
@@ -147,6 +150,7 @@ impl EvalDataset {
                     points: perception::part::sample_surface(&mesh, options.model_points, 1),
                     group: symmetry_group(&spec.symmetries),
                     near_group: ambiguity_group(&spec.symmetries),
+                    round_axes: round_axes(&mesh, &spec.symmetries, ROUND_WITHIN_M),
                     stable_poses: spec.stable_poses.clone(),
                     view_turns: spec
                         .stable_poses

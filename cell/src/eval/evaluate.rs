@@ -8,7 +8,7 @@ use nalgebra::{Isometry3, UnitQuaternion};
 use perception::learned::{InstanceMask, LearnedDetections};
 use perception::metrics::pose_errors;
 use perception::planar::{PlanarConfig, PlanarPose, PlanarRefiner};
-use perception::symmetry::{stable_pose_twins, symmetric_angle};
+use perception::symmetry::{stable_pose_twins, symmetric_angle_round};
 use perception::{Camera, FrameImage};
 use sim::dataset::{BopImage, BopScene, pose_from_bop};
 
@@ -379,7 +379,8 @@ fn evaluate_image(
             };
             let seen = |est: &Isometry3<f64>| seen_truth(truth, turns, est);
             let flip = |est: &Isometry3<f64>| {
-                symmetric_angle(&est.rotation, &seen(est).rotation, &part.near_group).to_degrees()
+                let (group, round) = (&part.near_group, &part.round_axes);
+                symmetric_angle_round(&est.rotation, &seen(est).rotation, group, round).to_degrees()
             };
             // Raw PnP is reported for every estimate, also one the reprojection gate refused
             // (the paper's Table 1 is ungated PnP); refined figures only for accepted poses.
@@ -621,6 +622,7 @@ mod tests {
             points: vec![],
             group: symmetry_group(symmetries),
             near_group: symmetry_group(symmetries),
+            round_axes: vec![],
             stable_poses: poses.clone(),
             view_turns: vec![],
             graspable: vec!["+z".into()],

@@ -139,9 +139,11 @@ pub struct DetectionRecord {
     pub stable_pose: Option<String>,
     /// Stable pose the refiner assigns to the true pose.
     pub true_stable_pose: Option<String>,
-    /// Raw angle error to the nearest near-symmetric equivalent of the truth, degrees.
+    /// Raw angle error to the nearest near-symmetric equivalent of the truth, turns about a
+    /// round axis free ([`perception::part::round_axes`]), degrees.
     pub raw_flip_deg: Option<f64>,
-    /// Refined angle error to the nearest near-symmetric equivalent of the truth, degrees.
+    /// Refined angle error to the nearest near-symmetric equivalent of the truth, turns about a
+    /// round axis free, degrees.
     pub refined_flip_deg: Option<f64>,
     /// Share of the outline that found the frame's edges, when contour alignment set the pose.
     #[serde(default)]

@@ -89,8 +89,9 @@ pub fn alike_stable_poses(
     found
 }
 
-/// The part's surface about its centre of mass, with the points the checks move.
-struct Surface {
+/// The part's surface about a centre (its centre of mass, or the part origin that symmetries
+/// turn about), with the points the checks move.
+pub(super) struct Surface {
     mesh: ParryMesh,
     centre: Vector3<f64>,
     /// Vertices and triangle centroids, relative to the centre of mass.
@@ -102,13 +103,29 @@ struct Surface {
 }
 
 impl Surface {
-    fn new(mesh: &TriMesh, center_of_mass: Point3<f64>) -> Option<Self> {
-        let parry = mesh.to_parry()?;
+    /// The surface of `mesh` about `center_of_mass`, checked at its vertices and triangle
+    /// centroids (`None` for a mesh parry refuses).
+    pub(super) fn new(mesh: &TriMesh, center_of_mass: Point3<f64>) -> Option<Self> {
         let centroids = (0..mesh.triangles.len()).map(|i| {
             let [a, b, c] = mesh.triangle(i);
             Point3::from((a.coords + b.coords + c.coords) / 3.0)
         });
         let all: Vec<Point3<f64>> = mesh.vertices.iter().copied().chain(centroids).collect();
+        Self::checked_at(mesh, center_of_mass, all)
+    }
+
+    /// The surface of `mesh` about `centre`, checked at its vertices alone: the inner walls of
+    /// a mesh of touching bodies have their centroids inside the part, off its outer surface.
+    pub(super) fn at_vertices(mesh: &TriMesh, centre: Point3<f64>) -> Option<Self> {
+        Self::checked_at(mesh, centre, mesh.vertices.clone())
+    }
+
+    fn checked_at(
+        mesh: &TriMesh,
+        center_of_mass: Point3<f64>,
+        all: Vec<Point3<f64>>,
+    ) -> Option<Self> {
+        let parry = mesh.to_parry()?;
         let stride = all.len().div_ceil(MAX_CHECK_POINTS).max(1);
         let sampled: Vec<Point3<f64>> = all.into_iter().step_by(stride).collect();
         let coarse = farthest_point_sample(&sampled, COARSE_POINTS, center_of_mass);
@@ -207,9 +224,14 @@ impl Surface {
         } else {
             best_yaw
         });
-        // Both ways round: the turned surface onto the part, and the part onto the turned one.
-        let there = self.deviation(&self.points, &turn, tolerance)?;
-        let back = self.deviation(&self.points, &turn.inverse(), tolerance)?;
-        Some((there.max(back), turn))
+        Some((self.turned_deviation(&turn, tolerance)?, turn))
+    }
+
+    /// How far the surface turned by `turn` lies from itself, both ways round (the turned
+    /// surface onto the part, and the part onto the turned one), or `None` beyond `limit`.
+    pub(super) fn turned_deviation(&self, turn: &UnitQuaternion<f64>, limit: f64) -> Option<f64> {
+        let there = self.deviation(&self.points, turn, limit)?;
+        let back = self.deviation(&self.points, &turn.inverse(), limit)?;
+        Some(there.max(back))
     }
 }
