@@ -110,3 +110,15 @@ fn a_pair_that_a_declared_symmetry_relates_is_left_out() {
         1
     );
 }
+
+#[test]
+fn a_near_cube_of_two_touching_bodies_is_found_alike_too() {
+    // The near-cube of the first test, exported as two touching halves (each closed): their
+    // shared wall lies inside the part.
+    let half = TriMesh::cuboid(Vector3::new(11.9285, 11.9285, 6.0) * 1e-3);
+    let mut mesh = half.transformed(&nalgebra::Isometry3::translation(0.0, 0.0, -0.003));
+    mesh.append(&half.transformed(&nalgebra::Isometry3::translation(0.0, 0.0, 0.003)));
+    let poses = [pose("+z", [0.0, 0.0, 1.0]), pose("+x", [1.0, 0.0, 0.0])];
+    let found = alike_stable_poses(&mesh, Point3::origin(), &poses, &[], tolerance(&mesh));
+    assert_eq!(found.len(), 1, "{found:?}");
+}

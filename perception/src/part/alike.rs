@@ -24,7 +24,7 @@ const DECLARED_ANGLE_RAD: f64 = 0.05;
 const YAW_STEPS: usize = 720;
 /// Points of the coarse search (farthest-point samples of the surface points checked).
 const COARSE_POINTS: usize = 48;
-/// Most surface points (vertices and triangle centroids) of the final check.
+/// Most surface points (vertices) of the final check.
 const MAX_CHECK_POINTS: usize = 6000;
 
 /// Two stable poses in which a part shows the same shape, turned.
@@ -94,7 +94,7 @@ pub fn alike_stable_poses(
 pub(super) struct Surface {
     mesh: ParryMesh,
     centre: Vector3<f64>,
-    /// Vertices and triangle centroids, relative to the centre of mass.
+    /// Vertices (a spread-out share of them, for a large mesh), relative to the centre.
     points: Vec<Vector3<f64>>,
     /// A spread-out few of `points` for the coarse search.
     coarse: Vec<Vector3<f64>>,
@@ -103,38 +103,21 @@ pub(super) struct Surface {
 }
 
 impl Surface {
-    /// The surface of `mesh` about `center_of_mass`, checked at its vertices and triangle
-    /// centroids (`None` for a mesh parry refuses).
-    pub(super) fn new(mesh: &TriMesh, center_of_mass: Point3<f64>) -> Option<Self> {
-        let centroids = (0..mesh.triangles.len()).map(|i| {
-            let [a, b, c] = mesh.triangle(i);
-            Point3::from((a.coords + b.coords + c.coords) / 3.0)
-        });
-        let all: Vec<Point3<f64>> = mesh.vertices.iter().copied().chain(centroids).collect();
-        Self::checked_at(mesh, center_of_mass, all)
-    }
-
-    /// The surface of `mesh` about `centre`, checked at its vertices alone: the inner walls of
-    /// a mesh of touching bodies have their centroids inside the part, off its outer surface.
-    pub(super) fn at_vertices(mesh: &TriMesh, centre: Point3<f64>) -> Option<Self> {
-        Self::checked_at(mesh, centre, mesh.vertices.clone())
-    }
-
-    fn checked_at(
-        mesh: &TriMesh,
-        center_of_mass: Point3<f64>,
-        all: Vec<Point3<f64>>,
-    ) -> Option<Self> {
+    /// The surface of `mesh` about `centre`, checked at its vertices: not at triangle
+    /// centroids too, since the inner walls of a mesh of touching bodies (a round peg exported as
+    /// a fan of prisms, a pin pressed into a mold) have theirs inside the part, and a turn would
+    /// measure them against the outer surface (`None` for a mesh parry refuses).
+    pub(super) fn new(mesh: &TriMesh, centre: Point3<f64>) -> Option<Self> {
         let parry = mesh.to_parry()?;
-        let stride = all.len().div_ceil(MAX_CHECK_POINTS).max(1);
-        let sampled: Vec<Point3<f64>> = all.into_iter().step_by(stride).collect();
-        let coarse = farthest_point_sample(&sampled, COARSE_POINTS, center_of_mass);
-        let relative = |p: &Point3<f64>| p - center_of_mass;
+        let stride = mesh.vertices.len().div_ceil(MAX_CHECK_POINTS).max(1);
+        let sampled: Vec<Point3<f64>> = mesh.vertices.iter().copied().step_by(stride).collect();
+        let coarse = farthest_point_sample(&sampled, COARSE_POINTS, centre);
+        let relative = |p: &Point3<f64>| p - centre;
         let points: Vec<Vector3<f64>> = sampled.iter().map(relative).collect();
         let radius = points.iter().map(|p| p.norm()).fold(0.0, f64::max);
         Some(Self {
             mesh: parry,
-            centre: center_of_mass.coords,
+            centre: centre.coords,
             points,
             coarse: coarse.iter().map(relative).collect(),
             radius,

@@ -31,7 +31,7 @@ pub fn round_axes(
     if candidates.is_empty() {
         return Vec::new();
     }
-    let Some(surface) = Surface::at_vertices(mesh, Point3::origin()) else {
+    let Some(surface) = Surface::new(mesh, Point3::origin()) else {
         return Vec::new();
     };
     candidates
