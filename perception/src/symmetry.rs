@@ -72,22 +72,43 @@ pub fn symmetric_angle(
 
 /// The smallest rotation angle between `a` and any twin `b · g · r` of `b`, radians: `g` in
 /// `group`, `r` any turn about one of the part-frame axes `round` about which the part turns
-/// freely ([`crate::part::round_axes`]). Turned freely about `u`, the angle is that between `u`
-/// and where `(b · g)⁻¹ · a` takes it: the remaining swing.
+/// freely ([`crate::part::round_axes`]).
 pub fn symmetric_angle_round(
     a: &UnitQuaternion<f64>,
     b: &UnitQuaternion<f64>,
     group: &[UnitQuaternion<f64>],
     round: &[Unit<Vector3<f64>>],
 ) -> f64 {
+    a.angle_to(&(b * nearest_twin_round(a, b, group, round)))
+}
+
+/// The rotation `g · r` whose twin `b · g · r` is nearest to `a`: `g` in `group` (or the
+/// identity), `r` a turn about one of the axes `round` (or none). About axis `u` the nearest
+/// turn is the twist of `(b · g)⁻¹ · a` about `u`, which leaves only its swing away from `u`.
+pub fn nearest_twin_round(
+    a: &UnitQuaternion<f64>,
+    b: &UnitQuaternion<f64>,
+    group: &[UnitQuaternion<f64>],
+    round: &[Unit<Vector3<f64>>],
+) -> UnitQuaternion<f64> {
+    let discrete = nearest_twin(a, b, group);
+    let closeness = |g: &UnitQuaternion<f64>| a.coords.dot(&(b * g).coords).abs();
     let identity = [UnitQuaternion::identity()];
-    let swings = identity.iter().chain(group).flat_map(|g| {
+    let twisted = identity.iter().chain(group).flat_map(|g| {
         let relative = (b * g).inverse() * a;
-        round
-            .iter()
-            .map(move |u| (relative * u.into_inner()).angle(u))
+        round.iter().filter_map(move |u| {
+            let along = relative.imag().dot(u);
+            let twist = nalgebra::Quaternion::from_parts(relative.w, u.into_inner() * along);
+            Some(g * UnitQuaternion::try_new(twist, 1e-12)?)
+        })
     });
-    swings.fold(symmetric_angle(a, b, group), f64::min)
+    twisted.fold(discrete, |best, candidate| {
+        if closeness(&candidate) > closeness(&best) {
+            candidate
+        } else {
+            best
+        }
+    })
 }
 
 /// The element `g` of `group` whose twin `b · g` is nearest to `a` (the identity when `group` is

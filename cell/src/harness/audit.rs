@@ -5,12 +5,13 @@
 //! A part with exact symmetries is judged against the twin of its true pose nearest the
 //! estimate: a square peg seen a quarter turn off is right with no yaw error, a peg standing on
 //! its top end is right when perceived standing on its bottom end (the symmetry maps one stable
-//! pose onto the other).
+//! pose onto the other), and a round peg (a 48-gon: `perception::part::round_axes`) turned about
+//! its axis has no yaw error.
 
-use nalgebra::{Isometry3, UnitQuaternion};
+use nalgebra::{Isometry3, Unit, UnitQuaternion, Vector3};
 use perception::DetectedPart;
-use perception::part::StablePose;
-use perception::symmetry::{nearest_twin, stable_pose_twins, symmetry_group};
+use perception::part::{ROUND_WITHIN_M, StablePose, round_axes};
+use perception::symmetry::{nearest_twin_round, stable_pose_twins, symmetry_group};
 use sim::cell::SimCell;
 use sim::cell::feeder::FeederPart;
 use sim::cell::geometry::PartGeometry;
@@ -86,11 +87,16 @@ pub fn audit(cell: &SimCell, d: &DetectedPart) -> PerceptionAudit {
     } else {
         PerceptionVerdict::Right
     };
-    let group = geometry.map_or_else(Vec::new, |g| symmetry_group(&g.symmetries));
+    let table_error = (verdict != PerceptionVerdict::WrongPart).then(|| {
+        let group = geometry.map_or_else(Vec::new, |g| symmetry_group(&g.symmetries));
+        let round = geometry.map_or_else(Vec::new, |g| {
+            round_axes(&g.mesh, &g.symmetries, ROUND_WITHIN_M)
+        });
+        twin_table_error(&truth.table_T_part, &d.table_T_part, &group, &round)
+    });
     PerceptionAudit {
         verdict,
-        table_error: (verdict != PerceptionVerdict::WrongPart)
-            .then(|| twin_table_error(&truth.table_T_part, &d.table_T_part, &group)),
+        table_error,
     }
 }
 
@@ -107,18 +113,20 @@ pub fn missed(cell: &SimCell, part: &str, detections: &[DetectedPart]) -> usize 
         .count()
 }
 
-/// [`table_error`] against the twin of the truth nearest the estimate (`truth · g` for the
-/// symmetry `g` of `group` that brings it closest): with the identity alone, [`table_error`].
+/// [`table_error`] against the twin of the truth nearest the estimate (`truth · g · r` for the
+/// symmetry `g` of `group` and the turn `r` about an axis of `round` that bring it closest): with
+/// the identity alone, [`table_error`]. A round peg's turn about its axis is no yaw error.
 #[allow(non_snake_case)]
 pub fn twin_table_error(
     truth: &Isometry3<f64>,
     estimate: &Isometry3<f64>,
     group: &[UnitQuaternion<f64>],
+    round: &[Unit<Vector3<f64>>],
 ) -> [f64; 3] {
-    if group.len() < 2 {
+    if group.len() < 2 && round.is_empty() {
         return table_error(truth, estimate);
     }
-    let g = nearest_twin(&estimate.rotation, &truth.rotation, group);
+    let g = nearest_twin_round(&estimate.rotation, &truth.rotation, group, round);
     table_error(&(truth * g), estimate)
 }
 
@@ -211,6 +219,42 @@ mod tests {
         assert_eq!(
             audit(&cell, &detection(&truth.part, far, &pose)).verdict,
             PerceptionVerdict::Phantom
+        );
+    }
+
+    #[test]
+    fn a_round_peg_standing_has_no_yaw_error_whatever_its_turn_and_a_square_one_has() {
+        let pegs = cell_of("nist_pegs_nominal.toml");
+        let (mut round, mut square) = (0, 0);
+        for truth in pegs.feeder_parts() {
+            let up = truth.table_T_part.rotation.inverse() * Vector3::z();
+            if up.z.abs() < 0.99 {
+                continue;
+            }
+            let pose = stable_pose_of(&pegs, &truth.part, &truth.table_T_part).unwrap();
+            // 3°: under half a square's quarter turn, over half a 48-gon's 7.5° facet.
+            let mut d = detection(&truth.part, turned(&truth.table_T_part, 0.05236), &pose);
+            d.truth_instance = Some(truth.instance);
+            let a = audit(&pegs, &d);
+            assert_eq!(a.verdict, PerceptionVerdict::Right, "{}", truth.part);
+            let [dx, dy, yaw] = a.table_error.unwrap();
+            assert!(
+                dx.abs() < 1e-9 && dy.abs() < 1e-9,
+                "{}: {dx} {dy}",
+                truth.part
+            );
+            let is_round = truth.part.starts_with("round_");
+            (round, square) = if is_round {
+                (round + 1, square)
+            } else {
+                (round, square + 1)
+            };
+            let expected = if is_round { 0.0 } else { 3.0 };
+            assert!((yaw - expected).abs() < 1e-3, "{}: {yaw}", truth.part);
+        }
+        assert!(
+            round >= 1 && square >= 1,
+            "{round} round, {square} square pegs standing"
         );
     }
 
