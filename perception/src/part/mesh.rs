@@ -121,6 +121,31 @@ impl TriMesh {
         Self::new(vertices, triangles)
     }
 
+    /// A closed prism of `sides` sides (a cylinder for many) of `diameter` and `height`, standing on
+    /// z = 0: a round part for tests, a distractor for renders.
+    pub fn prism(sides: usize, diameter: f64, height: f64) -> Self {
+        let r = diameter / 2.0;
+        let mut vertices = Vec::with_capacity(2 * sides + 2);
+        for z in [0.0, height] {
+            for k in 0..sides {
+                let a = std::f64::consts::TAU * k as f64 / sides as f64;
+                vertices.push(Point3::new(r * a.cos(), r * a.sin(), z));
+            }
+        }
+        vertices.push(Point3::new(0.0, 0.0, 0.0));
+        vertices.push(Point3::new(0.0, 0.0, height));
+        let (n, bottom, top) = (sides as u32, 2 * sides as u32, 2 * sides as u32 + 1);
+        let mut triangles = Vec::with_capacity(4 * sides);
+        for k in 0..n {
+            let k1 = (k + 1) % n;
+            triangles.push([k, k1, n + k1]);
+            triangles.push([k, n + k1, n + k]);
+            triangles.push([bottom, k1, k]);
+            triangles.push([top, n + k, n + k1]);
+        }
+        Self::new(vertices, triangles)
+    }
+
     /// A mesh from vertices and triangles, merging vertices at bit-identical positions.
     pub fn new(vertices: Vec<Point3<f64>>, triangles: Vec<[u32; 3]>) -> Self {
         let mut mesh = Self {

@@ -54,30 +54,8 @@ mod tests {
 
     /// A prism of `sides` sides around z, `radius` to its corners, 10 mm long, centred.
     fn prism(sides: usize, radius: f64) -> TriMesh {
-        let h = 0.005;
-        let mut vertices = Vec::new();
-        for z in [-h, h] {
-            for k in 0..sides {
-                let a = std::f64::consts::TAU * k as f64 / sides as f64;
-                vertices.push(Point3::new(radius * a.cos(), radius * a.sin(), z));
-            }
-        }
-        vertices.push(Point3::new(0.0, 0.0, -h));
-        vertices.push(Point3::new(0.0, 0.0, h));
-        let n = sides as u32;
-        let (bottom, top) = (2 * n, 2 * n + 1);
-        let mut triangles = Vec::new();
-        for k in 0..n {
-            let j = (k + 1) % n;
-            triangles.push([k, j, n + j]);
-            triangles.push([k, n + j, n + k]);
-            triangles.push([bottom, j, k]);
-            triangles.push([top, n + k, n + j]);
-        }
-        TriMesh {
-            vertices,
-            triangles,
-        }
+        let standing = TriMesh::prism(sides, 2.0 * radius, 0.01);
+        standing.transformed(&nalgebra::Isometry3::translation(0.0, 0.0, -0.005))
     }
 
     fn about_z(order: u32, exact: bool) -> Symmetry {

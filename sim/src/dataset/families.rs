@@ -703,31 +703,6 @@ impl TextureFamily {
     }
 }
 
-/// A closed prism of `sides` sides (a cylinder for many) of `diameter` and `height`, standing on
-/// z = 0.
-fn prism(sides: usize, diameter: f64, height: f64) -> TriMesh {
-    let r = diameter / 2.0;
-    let mut vertices = Vec::with_capacity(2 * sides + 2);
-    for z in [0.0, height] {
-        for k in 0..sides {
-            let a = std::f64::consts::TAU * k as f64 / sides as f64;
-            vertices.push(Point3::new(r * a.cos(), r * a.sin(), z));
-        }
-    }
-    vertices.push(Point3::new(0.0, 0.0, 0.0));
-    vertices.push(Point3::new(0.0, 0.0, height));
-    let (n, bottom, top) = (sides as u32, 2 * sides as u32, 2 * sides as u32 + 1);
-    let mut triangles = Vec::with_capacity(4 * sides);
-    for k in 0..n {
-        let k1 = (k + 1) % n;
-        triangles.push([k, k1, n + k1]);
-        triangles.push([k, n + k1, n + k]);
-        triangles.push([bottom, k1, k]);
-        triangles.push([top, n + k, n + k1]);
-    }
-    TriMesh::new(vertices, triangles)
-}
-
 impl DistractorFamily {
     fn apply(
         &self,
@@ -761,7 +736,7 @@ impl DistractorFamily {
                 rng.random_range(0.3..=1.0)
             };
             let mesh = if cylinder {
-                prism(16, size, height)
+                TriMesh::prism(16, size, height)
             } else {
                 let mut m = TriMesh::cuboid(Vector3::new(size, size * aspect, height));
                 for v in &mut m.vertices {
@@ -1049,7 +1024,7 @@ mod tests {
 
     #[test]
     fn a_prism_is_closed_and_stands_on_the_table() {
-        let m = prism(16, 0.01, 0.004);
+        let m = TriMesh::prism(16, 0.01, 0.004);
         m.check_closed().unwrap();
         let (lo, hi) = m.aabb();
         assert!(lo.z.abs() < 1e-15 && (hi.z - 0.004).abs() < 1e-15);
