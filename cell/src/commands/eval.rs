@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
+use cell::eval::causes::found_as_text;
 use cell::eval::fingers::FingerCheck;
 use cell::eval::picks::{ASSEMBLY_GRADE_DEG, ASSEMBLY_GRADE_MM, Picks};
 use cell::eval::report_html::{EvalMeta, write_eval_report};
@@ -168,10 +169,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     );
     let m = &p.misses;
     println!(
-        "missed {}: {} found as the wrong part, {} with a split or merged mask (IoU < {}), {} \
+        "missed {}: {} found as the wrong part{}, {} with a split or merged mask (IoU < {}), {} \
          under another part's instance, {} with no detection at all",
         p.truths - p.true_positives,
         m.wrong_part,
+        match found_as_text(&p.found_as) {
+            t if t.is_empty() => t,
+            t => format!(" (as {t})"),
+        },
         m.partial,
         options.min_iou,
         m.covered,

@@ -63,6 +63,17 @@ impl MissCause {
     }
 }
 
+/// The parts missed instances were found as (`found_as`, counts by part), most first:
+/// "square_16 × 91, round_8 × 2" (empty for none).
+pub fn found_as_text(found_as: &std::collections::BTreeMap<String, usize>) -> String {
+    let mut by_count: Vec<(&String, &usize)> = found_as.iter().collect();
+    by_count.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
+    let items: Vec<String> = (by_count.iter())
+        .map(|(part, n)| format!("{part} × {n}"))
+        .collect();
+    items.join(", ")
+}
+
 /// Why a missed instance of `part` was missed, from the detection overlapping it most
 /// (its part and IoU), at match threshold `min_iou`.
 pub fn miss_cause(part: &str, closest: Option<(&String, f64)>, min_iou: f64) -> MissCause {
@@ -143,5 +154,26 @@ impl FalsePositiveCauses {
             FalsePositiveCause::Straddling => &mut self.straddling,
             FalsePositiveCause::Nothing => &mut self.nothing,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+
+    #[test]
+    fn the_parts_found_instead_are_listed_most_first() {
+        let found = BTreeMap::from([
+            ("round_8".to_string(), 2),
+            ("square_16".to_string(), 91),
+            ("round_12".to_string(), 2),
+        ]);
+        assert_eq!(
+            found_as_text(&found),
+            "square_16 × 91, round_12 × 2, round_8 × 2"
+        );
+        assert_eq!(found_as_text(&BTreeMap::new()), "");
     }
 }

@@ -11,6 +11,7 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::bop_results;
+use super::causes::found_as_text;
 use super::detection_gallery::{DetectionErrorCrop, DetectionErrorKind};
 use super::gallery::{FailedCrop, GalleryItem};
 use super::picks::Picks;
@@ -558,18 +559,20 @@ fn render(
     h.push_str(
         "</table><p>Recall of touching and isolated instances, and what became of the missed \
          ones.</p><table><tr><th class=l>part</th><th>recall touching</th>\
-         <th>recall isolated</th><th>missed: wrong part</th><th>split or merged</th>\
+         <th>recall isolated</th><th>missed: wrong part</th><th class=l>found as</th>\
+         <th>split or merged</th>\
          <th>under another</th><th>nothing</th></tr>",
     );
     for p in &all {
         let _ = write!(
             h,
-            "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td></tr>",
+            "<tr><td class=l>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=l>{}</td>\
+             <td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&p.part),
             pct(p.recall_touching),
             pct(p.recall_isolated),
             p.misses.wrong_part,
+            escape(&found_as_text(&p.found_as)),
             p.misses.partial,
             p.misses.covered,
             p.misses.nothing,

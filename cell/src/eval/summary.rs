@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use perception::metrics::{ErrorSummary, PoseErrors, Summary, SummaryOptions};
 use serde::{Deserialize, Serialize};
 
-use super::causes::{FalsePositiveCauses, MissCauses, false_positive_cause, miss_cause};
+use super::causes::{FalsePositiveCauses, MissCause, MissCauses, false_positive_cause, miss_cause};
 use super::picks::{Pickable, Picks, is_assembly_grade};
 use super::table1::{Table1Entry, Table1Row};
 use super::{DetectionRecord, EvalOptions, FrameRecord, StageMs};
@@ -68,6 +68,10 @@ pub struct PartSummary {
     /// Why the counted instances that were missed were missed.
     #[serde(default)]
     pub misses: MissCauses,
+    /// The missed instances found as another part ([`MissCauses::wrong_part`]), by that part:
+    /// which parts the detector confuses.
+    #[serde(default)]
+    pub found_as: BTreeMap<String, usize>,
     /// Why the detections matched to nothing are false positives.
     #[serde(default)]
     pub false_positive_causes: FalsePositiveCauses,
@@ -243,6 +247,7 @@ fn part_summary(
     let (mut raw_estimates, mut refined_estimates) = (Vec::new(), Vec::new());
     let (mut not_resting, mut not_resting_posed) = (0, 0);
     let mut misses = MissCauses::default();
+    let mut found_as: BTreeMap<String, usize> = BTreeMap::new();
     let mut fp_causes = FalsePositiveCauses::default();
     let (mut assembly_grade, mut pickable, mut pickable_assembly_grade) = (0, 0, 0);
     let pick_at = options.pick_confidence;
@@ -267,7 +272,11 @@ fn part_summary(
             let closest = t
                 .closest
                 .and_then(|c| f.detections.get(c.detection).map(|d| (&d.part, c.iou)));
-            *misses.slot(miss_cause(&t.part, closest, options.min_iou)) += 1;
+            let cause = miss_cause(&t.part, closest, options.min_iou);
+            *misses.slot(cause) += 1;
+            if let (MissCause::WrongPart, Some((other, _))) = (cause, closest) {
+                *found_as.entry(other.clone()).or_default() += 1;
+            }
         }
         for d in f.detections.iter().filter(|d| mine(&d.part)) {
             detections += 1;
@@ -344,6 +353,7 @@ fn part_summary(
         recall_touching: ratio(recalled_touching, touching),
         recall_isolated: ratio(recalled - recalled_touching, truths - touching),
         misses,
+        found_as,
         false_positive_causes: fp_causes,
         pose_failures,
         pose_failure_kinds: {
@@ -600,7 +610,11 @@ mod tests {
             (1, 2, 1, 1),
             "{m:?}"
         );
+        // The one found as the wrong part was found as "b"; the covered one is not counted.
+        assert_eq!(s.parts[0].found_as, BTreeMap::from([("b".to_string(), 1)]));
+        assert_eq!(s.pooled.found_as, s.parts[0].found_as);
         assert_eq!(s.parts[1].misses, MissCauses::default());
+        assert!(s.parts[1].found_as.is_empty());
     }
 
     #[test]
