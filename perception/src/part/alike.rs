@@ -7,11 +7,9 @@
 //! declare the turn as a symmetry (when it is exact) or change the part.
 
 use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
-use parry3d_f64::math::Vector as DVec3;
-use parry3d_f64::query::PointQuery;
-use parry3d_f64::shape::TriMesh as ParryMesh;
 
-use super::{StablePose, Symmetry, TriMesh, farthest_point_sample};
+use super::turned_surface::Surface;
+use super::{StablePose, Symmetry, TriMesh};
 use crate::symmetry::symmetry_group;
 
 /// Default tolerance of [`alike_stable_poses`], as a share of the part's largest extent: 1 %
@@ -22,10 +20,6 @@ pub const ALIKE_WITHIN_REL: f64 = 0.01;
 const DECLARED_ANGLE_RAD: f64 = 0.05;
 /// Steps of the turn about the second pose's up axis searched for a match (0.5° apart).
 const YAW_STEPS: usize = 720;
-/// Points of the coarse search (farthest-point samples of the surface points checked).
-const COARSE_POINTS: usize = 48;
-/// Most surface points (vertices) of the final check.
-const MAX_CHECK_POINTS: usize = 6000;
 
 /// Two stable poses in which a part shows the same shape, turned.
 #[derive(Debug, Clone, PartialEq)]
@@ -89,71 +83,14 @@ pub fn alike_stable_poses(
     found
 }
 
-/// The part's surface about a centre (its centre of mass, or the part origin that symmetries
-/// turn about), with the points the checks move.
-pub(super) struct Surface {
-    mesh: ParryMesh,
-    centre: Vector3<f64>,
-    /// Vertices (a spread-out share of them, for a large mesh), relative to the centre.
-    points: Vec<Vector3<f64>>,
-    /// A spread-out few of `points` for the coarse search.
-    coarse: Vec<Vector3<f64>>,
-    /// Largest distance of a point from the centre of mass.
-    radius: f64,
-}
-
+/// The likeness search on a part's surface about its centre of mass.
 impl Surface {
-    /// The surface of `mesh` about `centre`, checked at its vertices: not at triangle
-    /// centroids too, since the inner walls of a mesh of touching bodies (a round peg exported as
-    /// a fan of prisms, a pin pressed into a mold) have theirs inside the part, and a turn would
-    /// measure them against the outer surface (`None` for a mesh parry refuses).
-    pub(super) fn new(mesh: &TriMesh, centre: Point3<f64>) -> Option<Self> {
-        let parry = mesh.to_parry()?;
-        let stride = mesh.vertices.len().div_ceil(MAX_CHECK_POINTS).max(1);
-        let sampled: Vec<Point3<f64>> = mesh.vertices.iter().copied().step_by(stride).collect();
-        let coarse = farthest_point_sample(&sampled, COARSE_POINTS, centre);
-        let relative = |p: &Point3<f64>| p - centre;
-        let points: Vec<Vector3<f64>> = sampled.iter().map(relative).collect();
-        let radius = points.iter().map(|p| p.norm()).fold(0.0, f64::max);
-        Some(Self {
-            mesh: parry,
-            centre: centre.coords,
-            points,
-            coarse: coarse.iter().map(relative).collect(),
-            radius,
-        })
-    }
-
     /// How high the centre of mass stands above the table when the part rests with `up` up.
     fn support_height(&self, up: &Vector3<f64>) -> f64 {
         self.points
             .iter()
             .map(|p| -p.dot(up))
             .fold(f64::NEG_INFINITY, f64::max)
-    }
-
-    /// The largest distance from `points` turned by `turn` to the surface, or `None` once one
-    /// is farther than `limit`.
-    fn deviation(
-        &self,
-        points: &[Vector3<f64>],
-        turn: &UnitQuaternion<f64>,
-        limit: f64,
-    ) -> Option<f64> {
-        let mut worst = 0.0f64;
-        for p in points {
-            let q = self.centre + turn * p;
-            let q = DVec3::new(q.x, q.y, q.z);
-            let proj = self
-                .mesh
-                .project_local_point_with_max_dist(q, false, limit)?;
-            let d = (proj.point - q).length();
-            if d > limit {
-                return None;
-            }
-            worst = worst.max(d);
-        }
-        Some(worst)
     }
 
     /// The turn taking `from` to `to` that best maps the surface onto itself, with its
@@ -208,13 +145,5 @@ impl Surface {
             best_yaw
         });
         Some((self.turned_deviation(&turn, tolerance)?, turn))
-    }
-
-    /// How far the surface turned by `turn` lies from itself, both ways round (the turned
-    /// surface onto the part, and the part onto the turned one), or `None` beyond `limit`.
-    pub(super) fn turned_deviation(&self, turn: &UnitQuaternion<f64>, limit: f64) -> Option<f64> {
-        let there = self.deviation(&self.points, turn, limit)?;
-        let back = self.deviation(&self.points, &turn.inverse(), limit)?;
-        Some(there.max(back))
     }
 }

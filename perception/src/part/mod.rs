@@ -17,6 +17,7 @@ mod round;
 mod stable_pose;
 mod step_io;
 mod step_kernel;
+mod turned_surface;
 
 pub use alike::{ALIKE_WITHIN_REL, AlikePoses, alike_stable_poses};
 pub use catalog::{

@@ -5,7 +5,7 @@
 
 use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
 
-use super::alike::Surface;
+use super::turned_surface::Surface;
 use super::{Symmetry, TriMesh};
 
 /// Default tolerance of [`round_axes`], metres: 0.02 mm, a fifth of the 0.1 mm an
