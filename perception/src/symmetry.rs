@@ -99,7 +99,7 @@ pub fn nearest_twin_round(
         round.iter().filter_map(move |u| {
             let along = relative.imag().dot(u);
             let twist = nalgebra::Quaternion::from_parts(relative.w, u.into_inner() * along);
-            Some(g * UnitQuaternion::try_new(twist, 1e-12)?)
+            UnitQuaternion::try_new(twist, 1e-12).map(|t| g * t)
         })
     });
     twisted.fold(discrete, |best, candidate| {

@@ -10,7 +10,7 @@
 
 use nalgebra::{Isometry3, Unit, UnitQuaternion, Vector3};
 use perception::DetectedPart;
-use perception::part::{ROUND_WITHIN_M, StablePose, round_axes};
+use perception::part::StablePose;
 use perception::symmetry::{nearest_twin_round, stable_pose_twins, symmetry_group};
 use sim::cell::SimCell;
 use sim::cell::feeder::FeederPart;
@@ -89,10 +89,8 @@ pub fn audit(cell: &SimCell, d: &DetectedPart) -> PerceptionAudit {
     };
     let table_error = (verdict != PerceptionVerdict::WrongPart).then(|| {
         let group = geometry.map_or_else(Vec::new, |g| symmetry_group(&g.symmetries));
-        let round = geometry.map_or_else(Vec::new, |g| {
-            round_axes(&g.mesh, &g.symmetries, ROUND_WITHIN_M)
-        });
-        twin_table_error(&truth.table_T_part, &d.table_T_part, &group, &round)
+        let round = geometry.map_or(&[][..], |g| &g.round_axes);
+        twin_table_error(&truth.table_T_part, &d.table_T_part, &group, round)
     });
     PerceptionAudit {
         verdict,

@@ -1,7 +1,9 @@
 //! Symmetry axes about which a part is round: a turn symmetry of so high an order (a round peg
 //! modelled as a 48-gon) that turning the part by any angle about its axis moves its surface
 //! less than a tolerance. Pose metrics let such a part turn freely about the axis, as BOP treats
-//! continuous symmetries: neither a camera nor a hole can tell those turns apart.
+//! continuous symmetries: neither a camera nor a hole can tell those turns apart. (Whether a
+//! held part turns freely in a given fit is the insertion's question, `sim`'s
+//! `Mating::turns_freely`, from its cross-section and the step's clearance.)
 
 use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
 

@@ -3,10 +3,11 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use parry3d_f64::shape::SharedShape;
 use perception::part::{
-    Catalog, ConvexPieces, Grasp, StablePose, Symmetry, TriMesh, convex_pieces,
+    Catalog, ConvexPieces, Grasp, ROUND_WITHIN_M, StablePose, Symmetry, TriMesh, convex_pieces,
+    round_axes,
 };
 
 use super::error::CellError;
@@ -35,6 +36,9 @@ pub struct PartGeometry {
     /// Declared rotational symmetries (the catalog's; empty for a bare mesh): the exact ones make
     /// a turned part seat like the part itself.
     pub symmetries: Vec<Symmetry>,
+    /// Axes of those symmetries about which the part is round
+    /// ([`perception::part::round_axes`]): a turn about one is no pose error.
+    pub round_axes: Vec<Unit<Vector3<f64>>>,
 }
 
 impl std::fmt::Debug for PartGeometry {
@@ -68,6 +72,7 @@ impl PartGeometry {
             spec.stable_poses.clone(),
             spec.grasps.clone(),
         )?;
+        geometry.round_axes = round_axes(&geometry.mesh, &spec.symmetries, ROUND_WITHIN_M);
         geometry.symmetries = spec.symmetries.clone();
         Ok(geometry)
     }
@@ -95,6 +100,7 @@ impl PartGeometry {
             stable_poses,
             grasps,
             symmetries: Vec::new(),
+            round_axes: Vec::new(),
         })
     }
 
