@@ -28,7 +28,7 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 catalog="$(realpath -e "$1")" || { echo "train_family: no catalog at $1" >&2; exit 2; }
 cd "$root"
-if [[ -n "${PY:-}" ]]; then py="$PY"; else training/provision.sh; py="$root/training/.venv/bin/python"; fi
+if [[ -n "${PY:-}" ]]; then py="$(realpath -s "$(type -P "$PY")")" || { echo "no Python at PY=$PY" >&2; exit 2; }; else training/provision.sh; py="$root/training/.venv/bin/python"; fi
 name="${2:-$(cd training && "$py" -c 'import catalog, sys; print(catalog.family(sys.argv[1]))' "$catalog")}"
 parts="$(cd training && "$py" -c 'import catalog, sys; print(",".join(catalog.assembled_parts(sys.argv[1])))' "$catalog")"
 DATA="$(realpath -m "${DATA:-training/data/$name}")"

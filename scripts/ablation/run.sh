@@ -28,7 +28,7 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 out="$(realpath -m "$1")"
 cd "$root"
-if [[ -n "${PY:-}" ]]; then py="$PY"; else training/provision.sh >/dev/null; py="$root/training/.venv/bin/python"; fi
+if [[ -n "${PY:-}" ]]; then py="$(realpath -s "$(type -P "$PY")")" || { echo "no Python at PY=$PY" >&2; exit 2; }; else training/provision.sh >/dev/null; py="$root/training/.venv/bin/python"; fi
 if [[ -z "${CELL:-}" ]]; then
     [ -x target/release/cell ] || cargo build --release -q -p cell
     CELL="$root/target/release/cell"
