@@ -193,6 +193,11 @@ def write_manifest(path, name, parts, onnx_file, inputs, outputs, training):
         f"dataset_size = {int(training['dataset_size'])}",
         f'code_commit = "{training["code_commit"]}"',
         f'curve = "{training["curve"]}"',
+    ]
+    if "table_px_per_mm" in training:
+        lo, hi = training["table_px_per_mm"]
+        lines.append(f"table_px_per_mm = [{lo:.4f}, {hi:.4f}]")
+    lines += [
         "",
         "[training.test_metrics]",
     ]

@@ -120,6 +120,26 @@ def load_feeder(root, folder, obj_to_part, limit=None):
     return _parallel(_feeder_frame, items[:limit])
 
 
+def table_px_per_mm(root, folder):
+    """The table's scale over the feeder frames of `folder`, pixels per mm, lowest and highest:
+    the focal length over the camera's distance from the table plane (world z = 0). The
+    segmenter's manifest records it, and the cell shows the nets frames at its middle."""
+    scales = []
+    base = os.path.join(root, folder)
+    for scene in sorted(os.listdir(base)):
+        path = os.path.join(base, scene, "scene_camera.json")
+        if not scene.isdigit() or not os.path.isfile(path):
+            continue
+        with open(path) as f:
+            for cam in json.load(f).values():
+                r = np.asarray(cam["cam_R_w2c"], dtype=np.float64).reshape(3, 3)
+                distance = abs(r[:, 2] @ np.asarray(cam["cam_t_w2c"], dtype=np.float64))
+                scales.append(cam["cam_K"][0] / distance)
+    if not scales:
+        raise FileNotFoundError(f"{base}: no scene_camera.json to read the table's scale from")
+    return min(scales), max(scales)
+
+
 def _feeder_frame(sdir, name, im, cam, gt, obj_to_part):
     """Frame `im` of scene folder `sdir` with its stride-4 targets (see `load_feeder`)."""
     rgb = _png(os.path.join(sdir, "rgb", f"{im:06d}.png"))

@@ -17,7 +17,7 @@ import torch.nn.functional as F
 from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
                     recorded_train_minutes, setup, training_args, write_manifest)
 import catalog
-from data import load_feeder, obj_ids
+from data import load_feeder, obj_ids, table_px_per_mm
 from nets import Segmenter, count_macs
 
 IGNORE = -100
@@ -335,6 +335,7 @@ def main(argv=None):
             "script": "train_segmenter.py",
             "dataset_seed": args.dataset_seed,
             "dataset_size": len(train),
+            "table_px_per_mm": table_px_per_mm(args.train, "train_feeder"),
             "code_commit": code_commit(),
             "curve": curve_name,
             "test_metrics": met,

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use image::{DynamicImage, Rgb, Rgb32FImage, RgbImage};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use perception::learned::{
-    LearnedError, LearnedModels, LearnedPerception, LearnedPipeline, PipelineConfig,
+    InputScale, LearnedError, LearnedModels, LearnedPerception, LearnedPipeline, PipelineConfig,
 };
 use perception::onnx::{OnnxError, Runtime};
 use perception::part::Catalog;
@@ -137,6 +137,62 @@ fn the_fixture_models_load_and_a_frame_runs_through_every_stage() {
     assert_eq!(again.detections.len(), 1);
     let e = again.detections[0].centre;
     assert!((sx as f64..sx as f64 + 40.0).contains(&e[0]), "{e:?}");
+}
+
+#[test]
+fn a_frame_shown_to_the_nets_at_half_its_scale_is_reported_in_sensor_pixels() {
+    let models = LearnedModels::in_dir(&fixture_dir()).unwrap_or_else(|e| panic!("{e}"));
+    let camera = Camera::basler_seed();
+    // The table 1.5 m from the camera: fx / 1500 pixels per mm; the nets see half that.
+    let sensor_px_per_mm = camera.fx / 1500.0;
+    let config = PipelineConfig {
+        input_scale: InputScale::PxPerMm(sensor_px_per_mm / 2.0),
+        ..PipelineConfig::default()
+    };
+    let mut pipeline = LearnedPipeline::with_config(&models, &catalog(), &runtime(), config)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(pipeline.input_px_per_mm(), Some(sensor_px_per_mm / 2.0));
+    let origin = [2600, 1500];
+    let image = FrameImage {
+        pixels: square_image(),
+        origin,
+    };
+    let found = pipeline
+        .detect(&image, &camera, &camera_T_table(), Some([16, 8, 224, 176]))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(found.detections.len(), 1, "{:?}", found.detections);
+    let d = &found.detections[0];
+    // The 40-pixel square is 20 net pixels, 4 whole cells of 8 × 8 sensor pixels and two half
+    // ones: its mask, in sensor pixels, lies on the square grown by at most one cell and
+    // covers at least the whole cells.
+    let (sx, sy) = (origin[0] + 100, origin[1] + 60);
+    let grown = |v: u32, s: u32| (s - 8..s + 48).contains(&v);
+    let mut on_square = 0;
+    for y in d.mask.origin[1]..d.mask.origin[1] + d.mask.height {
+        for x in d.mask.origin[0]..d.mask.origin[0] + d.mask.width {
+            if d.mask.contains(x, y) {
+                assert!(grown(x, sx) && grown(y, sy), "({x}, {y}) is off the square");
+                on_square += usize::from((sx..sx + 40).contains(&x) && (sy..sy + 40).contains(&y));
+            }
+        }
+    }
+    assert!(on_square >= 1024, "{on_square} of the square's 1600 pixels");
+    for (c, s) in d.centre.iter().zip([sx, sy]) {
+        assert!(
+            (f64::from(s)..f64::from(s) + 40.0).contains(c),
+            "{:?}",
+            d.centre
+        );
+    }
+    // The 128-pixel crop of the nets' image covers 256 sensor pixels about the centre.
+    for (o, c) in d.crop_origin.iter().zip(d.centre) {
+        assert!(
+            (*o as f64 - (c - 128.0)).abs() <= 2.0,
+            "{:?} {:?}",
+            d.crop_origin,
+            d.centre
+        );
+    }
 }
 
 #[test]
@@ -412,6 +468,13 @@ fn settings_out_of_range_are_refused_and_named() {
                 ..base
             },
             "max_overfill",
+        ),
+        (
+            PipelineConfig {
+                input_scale: InputScale::PxPerMm(-2.0),
+                ..base
+            },
+            "input_scale",
         ),
         (
             PipelineConfig {

@@ -18,7 +18,9 @@ use cell::eval::{EvalDataset, EvalOptions, evaluate, resolve_split, stable_poses
 use cell::scenario::{DEFAULT_MIN_PICK_CONFIDENCE, Scenario};
 use perception::contour::ContourConfig;
 use perception::estimate::EstimatorConfig;
-use perception::learned::{LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE};
+use perception::learned::{
+    InputScale, LearnedModels, LearnedPipeline, PipelineConfig, STACKING_TOLERANCE,
+};
 use perception::part::Catalog;
 
 /// Arguments of `cell eval`.
@@ -69,6 +71,10 @@ pub struct Args {
     /// Keypoint poses only: skip the contour alignment on the frame's edges (for comparison).
     #[arg(long)]
     pub no_contour: bool,
+    /// The table scale the networks see frames at: `trained` (the middle of the segmenter's
+    /// training range, from its manifest), `sensor` (as captured), or pixels per mm.
+    #[arg(long, default_value = "trained", value_parser = input_scale)]
+    pub input_scale: InputScale,
     /// Keep the poses of parts lying on or under another one (their estimates on the table
     /// overlap), which the pipeline otherwise withdraws (for comparison).
     #[arg(long)]
@@ -76,6 +82,20 @@ pub struct Args {
     /// No progress line.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// An input scale: `sensor`, `trained` or a positive number of pixels per mm.
+fn input_scale(s: &str) -> Result<InputScale, String> {
+    match s {
+        "sensor" => Ok(InputScale::Sensor),
+        "trained" => Ok(InputScale::Trained),
+        _ => match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(InputScale::PxPerMm(v)),
+            _ => Err(format!(
+                "expected `sensor`, `trained` or a positive number of pixels per mm, got {s:?}"
+            )),
+        },
+    }
 }
 
 /// A confidence: a number in [0, 1].
@@ -116,6 +136,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         estimator: EstimatorConfig::with_gate(args.max_rms_px),
         contour: (!args.no_contour).then(ContourConfig::default),
         stacking_tolerance: (!args.no_stacking_check).then_some(STACKING_TOLERANCE),
+        input_scale: args.input_scale,
         ..PipelineConfig::default()
     };
     let pipeline = LearnedPipeline::with_config(&models, &catalog, &runtime, config)

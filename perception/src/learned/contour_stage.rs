@@ -6,7 +6,6 @@ use std::f64::consts::PI;
 
 use nalgebra::{Isometry3, UnitQuaternion};
 
-use super::models::CROP_SIZE;
 use crate::Camera;
 use crate::contour::{
     ContourAligner, ContourConfig, ContourFit, ContourView, FinalEdge, GreyPatch, PartOutline,
@@ -85,9 +84,10 @@ impl ContourStage {
         Self { config, parts }
     }
 
-    /// The outline fits of one detection of part `class`, whose keypoint crop starts at sensor
-    /// pixel `crop_origin`, on the edges of `image` except where `covered` marks another part
-    /// over it (see [`GreyPatch::with_hidden`]); `None` for a part it has no outline of.
+    /// The outline fits of one detection of part `class`, whose keypoint crop covers the sensor
+    /// window `crop` (`[x, y, width, height]`), on the edges of `image` except where `covered`
+    /// marks another part over it (see [`GreyPatch::with_hidden`]); `None` for a part it has no
+    /// outline of.
     #[allow(clippy::too_many_arguments)]
     fn fits<'a>(
         &'a self,
@@ -96,12 +96,10 @@ impl ContourStage {
         estimator: &'a PoseEstimator,
         image: &FrameImage,
         camera: &'a Camera,
-        crop_origin: [i64; 2],
+        crop: [i64; 4],
         covered: impl Fn(i64, i64, &mut [bool]),
     ) -> Option<Fits<'a>> {
         let (outlined, refiner) = (self.parts.get(class)?, estimator.refiner(part)?);
-        // The crop and the margin the outline search may reach.
-        let side = CROP_SIZE as i64 + 2 * MARGIN;
         Some(Fits {
             outlined,
             refiner,
@@ -109,15 +107,20 @@ impl ContourStage {
             patch: GreyPatch::cut(
                 &image.pixels,
                 image.origin,
-                [crop_origin[0] - MARGIN, crop_origin[1] - MARGIN, side, side],
+                // The crop and the margin the outline search may reach.
+                [
+                    crop[0] - MARGIN,
+                    crop[1] - MARGIN,
+                    crop[2] + 2 * MARGIN,
+                    crop[3] + 2 * MARGIN,
+                ],
             )
             .with_hidden(covered),
             aligner: ContourAligner::new(*refiner.camera_T_table(), self.config),
         })
     }
 
-    /// Aligns `estimate` of part `class` (whose keypoint crop starts at sensor pixel
-    /// `crop_origin`) on the edges of `image`, except where `covered` marks another part over
+    /// Aligns `estimate` of part `class` (whose keypoint crop covers the sensor window `crop`) on the edges of `image`, except where `covered` marks another part over
     /// it, in one of the `admitted` stable poses, and weighs its confidence by the fit's
     /// quality; keeps the keypoint pose, with no confidence, when no hypothesis finds enough of
     /// its outline.
@@ -130,12 +133,11 @@ impl ContourStage {
         estimator: &PoseEstimator,
         image: &FrameImage,
         camera: &Camera,
-        crop_origin: [i64; 2],
+        crop: [i64; 4],
         admitted: ClassSet,
         covered: impl Fn(i64, i64, &mut [bool]),
     ) {
-        let Some(fits) = self.fits(class, part, estimator, image, camera, crop_origin, covered)
-        else {
+        let Some(fits) = self.fits(class, part, estimator, image, camera, crop, covered) else {
             return;
         };
         let refiner = fits.refiner;
@@ -226,7 +228,7 @@ impl ContourStage {
         estimator: &PoseEstimator,
         image: &FrameImage,
         camera: &Camera,
-        crop_origin: [i64; 2],
+        crop: [i64; 4],
         centre_px: nalgebra::Point2<f64>,
         px_per_mm: f64,
         visible_mm2: f64,
@@ -249,7 +251,7 @@ impl ContourStage {
         if candidates.is_empty() || refused.rms_px <= RESCUE_MIN_RMS_MM * px_per_mm {
             return None;
         }
-        let fits = self.fits(class, part, estimator, image, camera, crop_origin, covered)?;
+        let fits = self.fits(class, part, estimator, image, camera, crop, covered)?;
         let mut best: Option<(usize, ContourFit)> = None;
         for f in candidates {
             let height = fits.refiner.stable_poses()[f.class].rest_height;

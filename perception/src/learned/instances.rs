@@ -11,6 +11,7 @@
 
 use super::detection::InstanceMask;
 use super::models::SEGMENTER_STRIDE;
+use super::net_view::NetView;
 use super::segmenter::SegmentMap;
 
 /// Grouping settings, in pixels at the image scale `reference_px_per_mm`.
@@ -86,38 +87,46 @@ pub struct Instance {
 }
 
 impl Instance {
-    /// The instance's mask at full resolution (each cell covers 4 × 4 pixels), clipped to a
-    /// region of `valid` `[width, height]` pixels and placed at `offset` (the region's pixel).
-    pub fn mask(&self, map_width: usize, valid: [usize; 2], offset: [u32; 2]) -> InstanceMask {
-        let s = SEGMENTER_STRIDE;
-        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    /// The instance's mask in sensor pixels (each cell covers 4 × 4 net pixels, which `view`
+    /// maps to the sensor), clipped to the region of `valid` `[width, height]` sensor pixels.
+    pub fn mask(&self, map_width: usize, valid: [usize; 2], view: &NetView) -> InstanceMask {
+        let (mut j0, mut i0, mut j1, mut i1) = (usize::MAX, usize::MAX, 0, 0);
         for &c in &self.cells {
             let (i, j) = (c as usize / map_width, c as usize % map_width);
-            x0 = x0.min(s * j);
-            y0 = y0.min(s * i);
-            x1 = x1.max((s * j + s).min(valid[0]));
-            y1 = y1.max((s * i + s).min(valid[1]));
+            (j0, i0, j1, i1) = (j0.min(j), i0.min(i), j1.max(j + 1), i1.max(i + 1));
         }
+        let clip = |a: usize, [lo, hi]: [i64; 2]| [lo.max(0), hi.min(valid[a] as i64)];
+        let [x0, x1] = clip(0, view.cells_to_pixels(0, [j0.min(j1), j1]));
+        let [y0, y1] = clip(1, view.cells_to_pixels(1, [i0.min(i1), i1]));
         if self.cells.is_empty() || x1 <= x0 || y1 <= y0 {
             return InstanceMask {
-                origin: offset,
+                origin: view.region,
                 width: 0,
                 height: 0,
                 bits: Vec::new(),
             };
         }
-        let (w, h) = (x1 - x0, y1 - y0);
-        let mut bits = vec![false; w * h];
+        // The instance's cells over its bounding box of cells.
+        let cw = j1 - j0;
+        let mut mine = vec![false; cw * (i1 - i0)];
         for &c in &self.cells {
             let (i, j) = (c as usize / map_width, c as usize % map_width);
-            for y in s * i..(s * i + s).min(y1) {
-                for x in s * j..(s * j + s).min(x1) {
-                    bits[(y - y0) * w + (x - x0)] = true;
-                }
+            mine[(i - i0) * cw + (j - j0)] = true;
+        }
+        let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
+        let mut bits = vec![false; w * h];
+        for (y, row) in (y0..y1).zip(bits.chunks_mut(w)) {
+            let i = view.cell_of(1, y) - i0 as i64;
+            if !(0..(i1 - i0) as i64).contains(&i) {
+                continue;
+            }
+            for (x, bit) in (x0..x1).zip(row.iter_mut()) {
+                let j = view.cell_of(0, x) - j0 as i64;
+                *bit = (0..cw as i64).contains(&j) && mine[i as usize * cw + j as usize];
             }
         }
         InstanceMask {
-            origin: [offset[0] + x0 as u32, offset[1] + y0 as u32],
+            origin: [view.region[0] + x0 as u32, view.region[1] + y0 as u32],
             width: w as u32,
             height: h as u32,
             bits,
@@ -664,10 +673,28 @@ mod tests {
             cells: vec![0, 1, 3 + 2],
         };
         // Map 3 cells wide; region 10 × 7 pixels: cell (1, 2) is clipped to 2 × 3 pixels.
-        let m = inst.mask(3, [10, 7], [100, 200]);
+        let m = inst.mask(3, [10, 7], &NetView::new([100, 200], [10, 7], 7.0, None));
         assert_eq!((m.origin, m.width, m.height), ([100, 200], 10, 7));
         assert_eq!(m.area(), 32 + 2 * 3);
         assert!(m.contains(100, 200) && m.contains(107, 203) && m.contains(109, 206));
         assert!(!m.contains(100, 204) && !m.contains(110, 206));
+    }
+
+    #[test]
+    fn a_frame_shown_at_half_scale_gives_masks_of_eight_by_eight_pixels_per_cell() {
+        let inst = Instance {
+            part: 0,
+            score: 1.0,
+            centre: [0.0, 0.0],
+            cells: vec![1, 3 + 2],
+        };
+        // 40 × 40 sensor pixels seen as 20 × 20 net pixels: cell (0, 1) is sensor pixels
+        // 8..16 × 0..8, cell (1, 2) 16..24 × 8..16.
+        let view = NetView::new([50, 60], [40, 40], 10.0, Some(5.0));
+        let m = inst.mask(3, [40, 40], &view);
+        assert_eq!((m.origin, m.width, m.height), ([58, 60], 16, 16));
+        assert_eq!(m.area(), 2 * 64);
+        assert!(m.contains(58, 60) && m.contains(65, 67) && m.contains(73, 75));
+        assert!(!m.contains(66, 60) && !m.contains(58, 68));
     }
 }

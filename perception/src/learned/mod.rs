@@ -13,6 +13,7 @@ pub mod image;
 pub mod instances;
 pub mod keypoint_net;
 pub mod models;
+pub mod net_view;
 mod occlusion;
 mod perception;
 mod pipeline;
@@ -24,6 +25,7 @@ pub use error::LearnedError;
 pub use instances::{Instance, InstanceConfig, InstanceGrouper, join_split};
 pub use keypoint_net::KeypointNet;
 pub use models::LearnedModels;
+pub use net_view::{InputScale, NetView};
 pub use perception::LearnedPerception;
 pub use pipeline::{
     LearnedPipeline, MAX_JOINED_FILL, MAX_LEAN, MAX_OVERFILL, PipelineConfig, STACKING_TOLERANCE,

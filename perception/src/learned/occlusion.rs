@@ -2,7 +2,7 @@
 //! outline sample there, because the edge it would find belongs to the part on top (or beside).
 
 use super::instances::Instance;
-use super::models::SEGMENTER_STRIDE;
+use super::net_view::NetView;
 
 /// The instance that owns each segmenter cell of a frame (its buffer reused from frame to
 /// frame).
@@ -10,16 +10,16 @@ use super::models::SEGMENTER_STRIDE;
 pub struct CellOwners {
     width: usize,
     height: usize,
-    /// Sensor pixel of cell (0, 0)'s first pixel.
-    origin: [i64; 2],
+    /// How the map's region lies on the sensor.
+    view: Option<NetView>,
     /// Instance index + 1 per cell, row-major (0: no instance).
     owner: Vec<u32>,
 }
 
 impl CellOwners {
-    /// Sets the owners of the `width` × `height` cells of a segment map whose first pixel is
-    /// sensor pixel `origin` from the frame's `instances`.
-    pub fn set(&mut self, instances: &[Instance], width: usize, height: usize, origin: [u32; 2]) {
+    /// Sets the owners of the `width` × `height` cells of a segment map of the region that
+    /// `view` shows the nets from the frame's `instances`.
+    pub fn set(&mut self, instances: &[Instance], width: usize, height: usize, view: NetView) {
         self.owner.clear();
         self.owner.resize(width * height, 0);
         for (k, inst) in instances.iter().enumerate() {
@@ -30,21 +30,22 @@ impl CellOwners {
             }
         }
         (self.width, self.height) = (width, height);
-        self.origin = origin.map(i64::from);
+        self.view = Some(view);
     }
 
     /// Marks in `row` the pixels of sensor row `y` from column `x` on that lie in a cell of an
     /// instance other than instance `me` (and clears the others).
     pub fn cover_row(&self, me: usize, y: i64, x: i64, row: &mut [bool]) {
         row.fill(false);
-        let s = SEGMENTER_STRIDE as i64;
-        let i = (y - self.origin[1]).div_euclid(s);
+        let Some(view) = self.view else { return };
+        let origin = view.region.map(i64::from);
+        let i = view.cell_of(1, y - origin[1]);
         if !(0..self.height as i64).contains(&i) {
             return;
         }
         let owners = &self.owner[i as usize * self.width..][..self.width];
         for (k, covered) in row.iter_mut().enumerate() {
-            let j = (x + k as i64 - self.origin[0]).div_euclid(s);
+            let j = view.cell_of(0, x + k as i64 - origin[0]);
             if let Some(&o) = usize::try_from(j).ok().and_then(|j| owners.get(j)) {
                 *covered = o != 0 && o as usize != me + 1;
             }
@@ -68,8 +69,9 @@ mod tests {
         };
         let mut owners = CellOwners::default();
         // A frame before, of another size and owners, leaves nothing behind.
-        owners.set(&[inst((0..12).collect())], 6, 2, [0, 0]);
-        owners.set(&[inst(vec![0, 1]), inst(vec![7])], 4, 2, [100, 50]);
+        let at = |region| NetView::new(region, [24, 8], 7.0, None);
+        owners.set(&[inst((0..12).collect())], 6, 2, at([0, 0]));
+        owners.set(&[inst(vec![0, 1]), inst(vec![7])], 4, 2, at([100, 50]));
         let row = |me: usize, y: i64, x: i64, n: usize| {
             let mut out = vec![true; n];
             owners.cover_row(me, y, x, &mut out);

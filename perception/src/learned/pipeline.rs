@@ -14,7 +14,8 @@ use super::detection::{LearnedDetection, LearnedDetections, StageTimes};
 use super::image::Preprocessor;
 use super::instances::{Instance, InstanceConfig, InstanceGrouper, join_split};
 use super::keypoint_net::KeypointNet;
-use super::models::{LearnedModels, SEGMENTER_MULTIPLE, SEGMENTER_STRIDE};
+use super::models::{CROP_SIZE, LearnedModels, SEGMENTER_MULTIPLE, SEGMENTER_STRIDE};
+use super::net_view::{InputScale, NetView};
 use super::occlusion::CellOwners;
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
@@ -57,6 +58,9 @@ pub struct PipelineConfig {
     /// more of the table than this multiple of the part's largest stable-pose footprint
     /// ([`join_split`]); 0 joins none.
     pub max_joined_fill: f64,
+    /// The table scale both nets see a frame at ([`NetView`]); poses, masks and keypoints are
+    /// still reported in sensor pixels, and contour alignment reads the frame as captured.
+    pub input_scale: InputScale,
 }
 
 impl Default for PipelineConfig {
@@ -72,6 +76,7 @@ impl Default for PipelineConfig {
             max_lean: MAX_LEAN,
             max_overfill: MAX_OVERFILL,
             max_joined_fill: MAX_JOINED_FILL,
+            input_scale: InputScale::Trained,
         }
     }
 }
@@ -117,6 +122,8 @@ pub struct LearnedPipeline {
     footprints: Vec<Vec<f64>>,
     /// Each part's largest extent (its mesh's bounding box), metres.
     extents: Vec<f64>,
+    /// The table scale the nets see frames at, pixels per mm (`None`: as captured).
+    input_px_per_mm: Option<f64>,
 }
 
 impl LearnedPipeline {
@@ -173,7 +180,14 @@ impl LearnedPipeline {
                 config.max_joined_fill
             )));
         }
+        if !config.input_scale.is_valid() {
+            return Err(LearnedError::Settings(format!(
+                "input_scale must be a positive number of pixels per mm, got {:?}",
+                config.input_scale
+            )));
+        }
         models.check_catalog(catalog)?;
+        let trained = (models.segmenter.training.as_ref()).and_then(|t| t.table_px_per_mm);
         let segmenter = BatchSession::open(runtime, &models.segmenter.path, config.threads)?;
         let keypoints = BatchSession::open(runtime, &models.keypoints.path, config.threads)?;
         // The files may have changed since `models` was read: check the contract again.
@@ -229,6 +243,7 @@ impl LearnedPipeline {
             stacking,
             footprints,
             extents,
+            input_px_per_mm: config.input_scale.target(trained),
         })
     }
 
@@ -249,7 +264,12 @@ impl LearnedPipeline {
         &self.config
     }
 
-    /// The segmenter's reading of the last frame (diagnostics).
+    /// The table scale the nets see frames at, pixels per mm (`None`: as captured).
+    pub fn input_px_per_mm(&self) -> Option<f64> {
+        self.input_px_per_mm
+    }
+
+    /// The segmenter's reading of the last frame (diagnostics), in the nets' pixels.
     pub fn segment_map(&self) -> &SegmentMap {
         &self.map
     }
@@ -270,19 +290,33 @@ impl LearnedPipeline {
         image.check_on_sensor(camera).map_err(LearnedError::Image)?;
         let roi = roi.unwrap_or([0, 0, image.width(), image.height()]);
         let mut t = start;
+        let px_per_mm = table_px_per_mm(camera, camera_T_table);
+        // Sensor pixel of the region's first pixel.
+        let sensor = [image.origin[0] + roi[0], image.origin[1] + roi[1]];
+        let view = NetView::new(sensor, [roi[2], roi[3]], px_per_mm, self.input_px_per_mm);
+        let resampled = view.resample(&image.pixels, roi)?;
+        // The nets' image and the region in it: the frame's, or the region resampled.
+        let (net_image, net_roi) = match &resampled {
+            Some(r) => (r, [0, 0, r.width(), r.height()]),
+            None => (&image.pixels, roi),
+        };
         let [hp, wp] = self
             .preprocessor
-            .prepare(&image.pixels, roi, SEGMENTER_MULTIPLE)?;
+            .prepare(net_image, net_roi, SEGMENTER_MULTIPLE)?;
         times.preprocess = lap(&mut t);
 
-        let valid = [roi[2] as usize, roi[3] as usize];
-        self.segmenter
-            .run(self.preprocessor.tensor(), [hp, wp], valid, &mut self.map)?;
+        let net_valid = [net_roi[2] as usize, net_roi[3] as usize];
+        self.segmenter.run(
+            self.preprocessor.tensor(),
+            [hp, wp],
+            net_valid,
+            &mut self.map,
+        )?;
         times.segment = lap(&mut t);
 
-        let px_per_mm = table_px_per_mm(camera, camera_T_table);
-        let mut instances = self.grouper.group(&self.map, px_per_mm);
-        let cell_mm2 = (SEGMENTER_STRIDE * SEGMENTER_STRIDE) as f64 / px_per_mm.powi(2);
+        let net_px_per_mm = view.net_px_per_mm(px_per_mm);
+        let mut instances = self.grouper.group(&self.map, net_px_per_mm);
+        let cell_mm2 = (SEGMENTER_STRIDE * SEGMENTER_STRIDE) as f64 / net_px_per_mm.powi(2);
         let max_cells: Vec<usize> = (self.footprints.iter())
             .map(|f| {
                 let largest = f.iter().copied().fold(0.0, f64::max);
@@ -293,21 +327,19 @@ impl LearnedPipeline {
         instances.retain(|i| i.score >= self.config.min_score);
         times.instances = lap(&mut t);
 
-        // Region pixel → image pixel → sensor pixel.
-        let region = [roi[0], roi[1]];
-        let sensor = [image.origin[0] + roi[0], image.origin[1] + roi[1]];
+        // Crops of the nets' image; their origins in the nets' pixels of the region.
         self.batch.clear(self.parts.len());
         let mut origins = Vec::with_capacity(instances.len());
         for inst in &instances {
             let centre = [
-                inst.centre[0] + f64::from(region[0]),
-                inst.centre[1] + f64::from(region[1]),
+                inst.centre[0] + f64::from(net_roi[0]),
+                inst.centre[1] + f64::from(net_roi[1]),
             ];
             let origin = crop_origin(centre);
-            self.batch.push(&image.pixels, roi, origin, inst.part)?;
+            self.batch.push(net_image, net_roi, origin, inst.part)?;
             origins.push([
-                origin[0] + i64::from(image.origin[0]),
-                origin[1] + i64::from(image.origin[1]),
+                origin[0] - i64::from(net_roi[0]),
+                origin[1] - i64::from(net_roi[1]),
             ]);
         }
         times.crops = lap(&mut t);
@@ -331,7 +363,7 @@ impl LearnedPipeline {
         let contour = self.contour.as_ref();
         if contour.is_some() {
             let (w, h) = (self.map.width, self.map.height);
-            self.owners.set(&instances, w, h, sensor);
+            self.owners.set(&instances, w, h, view);
         }
         let owners = &self.owners;
         let (max_lean, max_overfill) = (self.config.max_lean, self.config.max_overfill);
@@ -346,12 +378,12 @@ impl LearnedPipeline {
                 camera,
                 covered: &|y, x, row: &mut [bool]| owners.cover_row(k, y, x, row),
                 px_per_mm,
+                view,
                 max_lean,
                 footprints: &footprints[inst.part],
                 max_overfill,
             };
-            let visible_mm2 =
-                (inst.cells.len() * SEGMENTER_STRIDE.pow(2)) as f64 / px_per_mm.powi(2);
+            let visible_mm2 = inst.cells.len() as f64 * cell_mm2;
             ctx.pose(inst.part, &parts[inst.part], votes, **origin, visible_mm2)
         };
         let threads = self.config.threads.min(jobs.len()).max(1);
@@ -385,21 +417,21 @@ impl LearnedPipeline {
             done.into_iter().map(|(_, p)| p).collect()
         };
         if let Some(check) = &self.stacking {
-            withdraw_stacked(check, &instances, sensor, &self.parts, &mut poses);
+            withdraw_stacked(check, &instances, &view, &self.parts, &mut poses);
         }
         let mut detections = Vec::with_capacity(instances.len());
+        let valid = [roi[2] as usize, roi[3] as usize];
         for ((inst, origin), (keypoints, pose, refused)) in
             instances.iter().zip(&origins).zip(poses)
         {
+            let centre = view.to_sensor(Point2::from(inst.centre));
+            let window = view.sensor_window(*origin, CROP_SIZE);
             detections.push(LearnedDetection {
                 part: self.parts[inst.part].clone(),
                 score: inst.score,
-                mask: inst.mask(self.map.width, valid, sensor),
-                centre: [
-                    inst.centre[0] + f64::from(sensor[0]),
-                    inst.centre[1] + f64::from(sensor[1]),
-                ],
-                crop_origin: *origin,
+                mask: inst.mask(self.map.width, valid, &view),
+                centre: [centre.x, centre.y],
+                crop_origin: [window[0], window[1]],
                 keypoints,
                 pose,
                 refused,
@@ -428,6 +460,8 @@ struct PoseContext<'a> {
     covered: &'a (dyn Fn(i64, i64, &mut [bool]) + Sync),
     /// The image scale on the table, pixels per mm.
     px_per_mm: f64,
+    /// How the nets' pixels map to the sensor's.
+    view: NetView,
     /// [`PipelineConfig::max_lean`].
     max_lean: f64,
     /// The detected part's footprint in each of its stable poses, mm².
@@ -437,9 +471,10 @@ struct PoseContext<'a> {
 }
 
 impl PoseContext<'_> {
-    /// Keypoints → pose estimate → contour alignment for one detection of part `class` whose mask
-    /// covers `visible_mm2` of the table (or, when the keypoints place nothing, its outline alone),
-    /// in a stable pose whose footprint can show that much.
+    /// Keypoints → pose estimate → contour alignment for one detection of part `class` whose
+    /// keypoint crop starts at net pixel `origin` of the region and whose mask covers
+    /// `visible_mm2` of the table (or, when the keypoints place nothing, its outline alone), in a
+    /// stable pose whose footprint can show that much.
     fn pose(
         &self,
         class: usize,
@@ -452,7 +487,9 @@ impl PoseContext<'_> {
             Ok(v) => v,
             Err(e) => return (Vec::new(), Err(format!("voting: {e}")), None),
         };
-        let (keypoints, observations) = sensor_observations(v, origin);
+        let (keypoints, observations) = sensor_observations(v, origin, &self.view);
+        // The crop's window on the sensor, where contour alignment looks for the outline.
+        let window = self.view.sensor_window(origin, CROP_SIZE);
         let footprints = self.footprints;
         let admitted = ClassSet::filter(footprints.len(), |c| {
             visible_mm2 <= self.max_overfill * footprints[c]
@@ -486,7 +523,7 @@ impl PoseContext<'_> {
                         self.estimator,
                         self.image,
                         self.camera,
-                        origin,
+                        window,
                         admitted,
                         self.covered,
                     );
@@ -515,7 +552,7 @@ impl PoseContext<'_> {
                         self.estimator,
                         self.image,
                         self.camera,
-                        origin,
+                        window,
                         centre.position,
                         self.px_per_mm,
                         visible_mm2,
@@ -533,7 +570,7 @@ impl PoseContext<'_> {
 
 /// Withdraws the poses of parts that lie on or under another detected part (their estimates on
 /// the table overlap): each becomes a refused estimate with the reason, which names the other
-/// part and its centre in sensor pixels (`sensor`: the sensor pixel of the instances' origin).
+/// part and its centre in sensor pixels (`view`: where the instances' net pixels lie).
 /// An outline-only pose ([`crate::estimate::ContourRefinement::outline_only`]) is the weaker
 /// witness: it is withdrawn for any overlap, but withdraws no keypoint pose (a part leaning on
 /// others can show an outline that fits a featureless pose on the table).
@@ -541,7 +578,7 @@ impl PoseContext<'_> {
 fn withdraw_stacked(
     check: &StackingCheck,
     instances: &[Instance],
-    sensor: [u32; 2],
+    view: &NetView,
     parts: &[String],
     poses: &mut [PoseOutcome],
 ) {
@@ -563,11 +600,12 @@ fn withdraw_stacked(
     for (k, overlap) in overlaps.into_iter().enumerate() {
         let Some(o) = overlap else { continue };
         let (i, other) = (posed[k], &instances[posed[o.other]]);
+        let centre = view.to_sensor(Point2::from(other.centre));
         let reason = format!(
             "lies on or under the {} at ({:.0}, {:.0}) px: on the table their poses overlap by {:.2} mm",
             parts[other.part],
-            other.centre[0] + f64::from(sensor[0]),
-            other.centre[1] + f64::from(sensor[1]),
+            centre.x,
+            centre.y,
             1e3 * o.depth
         );
         if let Ok(pose) = std::mem::replace(&mut poses[i].1, Err(reason)) {
@@ -576,19 +614,22 @@ fn withdraw_stacked(
     }
 }
 
-/// Votes in crop pixels → the same votes in sensor pixels (crop origin added) and the pose
-/// estimator's observations (keypoint k = vote k, with its covariance).
+/// Votes in crop pixels → the same votes in sensor pixels (the crop's origin, net pixel
+/// `crop_origin` of the region that `view` shows, added, and then mapped to the sensor) and the
+/// pose estimator's observations (keypoint k = vote k, with its covariance).
 pub fn sensor_observations(
     votes: &[KeypointVote],
     crop_origin: [i64; 2],
+    view: &NetView,
 ) -> (Vec<KeypointVote>, Vec<Observation>) {
     let keypoints: Vec<KeypointVote> = votes
         .iter()
         .map(|v| KeypointVote {
-            position: Point2::new(
+            position: view.to_sensor(Point2::new(
                 v.position.x + crop_origin[0] as f64,
                 v.position.y + crop_origin[1] as f64,
-            ),
+            )),
+            covariance: view.covariance_to_sensor(&v.covariance),
             ..*v
         })
         .collect();
@@ -760,7 +801,7 @@ mod tests {
         withdraw_stacked(
             &check,
             &instances,
-            [0, 0],
+            &NetView::new([0, 0], [64, 64], 7.0, None),
             &["insert_mold".into()],
             &mut poses,
         );
@@ -830,7 +871,8 @@ mod tests {
                 );
                 assert!(v.position.x >= 0.0 && v.position.x < CROP_SIZE as f64);
             }
-            let (kps, observations) = sensor_observations(&votes, origin);
+            let sensor_view = NetView::new([0, 0], [camera.width, camera.height], 7.0, None);
+            let (kps, observations) = sensor_observations(&votes, origin, &sensor_view);
             assert!((kps[8].position - sensor[8]).norm() < 0.05);
             let pose = estimator.estimate(name, &camera, &observations).unwrap();
             let err = pose.planar.table_T_part.translation.vector - table_T_part.translation.vector;
@@ -854,6 +896,7 @@ mod tests {
             camera,
             covered: &|_, _, row: &mut [bool]| row.fill(false),
             px_per_mm: 7.0,
+            view: NetView::new([0, 0], [camera.width, camera.height], 7.0, None),
             max_lean: MAX_LEAN,
             footprints,
             max_overfill: MAX_OVERFILL,

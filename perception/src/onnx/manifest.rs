@@ -34,6 +34,11 @@ pub struct Training {
     pub curve: PathBuf,
     /// Test-split metrics by name (e.g. `mask_iou`, `keypoint_px`).
     pub test_metrics: BTreeMap<String, f64>,
+    /// The table's scale in the training frames, pixels per mm, lowest and highest: the net
+    /// learned a part's size in pixels over this range, so the pipeline shows it frames at the
+    /// range's middle ([`crate::learned::InputScale::Trained`]); absent: frames as captured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table_px_per_mm: Option<[f64; 2]>,
 }
 
 /// A model manifest (`<model>.toml` next to `<model>.onnx`).
@@ -119,6 +124,14 @@ impl ModelManifest {
                 ));
             }
         }
+        if let Some([lo, hi]) = manifest.training.as_ref().and_then(|t| t.table_px_per_mm)
+            && !(lo.is_finite() && lo > 0.0 && hi.is_finite() && hi >= lo)
+        {
+            return Err(at(
+                key("table_px_per_mm"),
+                format!("table_px_per_mm must be [lowest, highest] > 0, got [{lo}, {hi}]"),
+            ));
+        }
         if manifest.inputs.is_empty() || manifest.outputs.is_empty() {
             return Err(at(
                 0,
@@ -195,5 +208,21 @@ test_metrics = { mask_iou = 0.97, keypoint_px = 0.8 }
         assert!(e.contains("mask: dimensions must be positive or -1"), "{e}");
         let e = err(TRAINED.replace("dtype = \"f32\"\n[training]", "dtype = \"f16\"\n[training]"));
         assert!(e.contains("mask: dtype \"f16\" is not supported"), "{e}");
+    }
+
+    #[test]
+    fn the_training_scale_range_is_read_and_a_reversed_one_is_located() {
+        let scaled = |range: &str| {
+            TRAINED.replace("curve = ", &format!("table_px_per_mm = {range}\ncurve = "))
+        };
+        let m = ModelManifest::parse(&scaled("[5.6, 7.7]"), Path::new("m.toml")).unwrap();
+        assert_eq!(m.training.unwrap().table_px_per_mm, Some([5.6, 7.7]));
+        let e = ModelManifest::parse(&scaled("[7.7, 5.6]"), Path::new("m.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("m.toml:18:1: table_px_per_mm must be [lowest, highest] > 0"),
+            "{e}"
+        );
     }
 }
