@@ -34,6 +34,7 @@ pub fn pipeline(
     let config = PipelineConfig {
         threads,
         estimator: EstimatorConfig::with_gate(scenario.spec.perception.max_rms_px),
+        input_scale: scenario.spec.perception.input_scale,
         ..PipelineConfig::default()
     };
     Ok(LearnedPipeline::with_config(

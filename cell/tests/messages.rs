@@ -122,6 +122,24 @@ fn a_reprojection_gate_that_is_not_positive_is_refused_at_its_line() {
 }
 
 #[test]
+fn an_input_scale_that_is_no_scale_is_refused_at_its_line() {
+    for bad in ["-1.5", "\"scaled\""] {
+        let t = nominal_text().replace(
+            "mode = \"keypoint-noise\"",
+            &format!("mode = \"keypoint-noise\"\ninput_scale = {bad}"),
+        );
+        let f = Temp::new(&scenarios(), "scale.toml", t.as_bytes());
+        let err = Scenario::load(&f.0).unwrap_err();
+        let p = &err.0[0];
+        assert_eq!(p.line, line_of(&t, "input_scale"), "{bad}: {err}");
+        assert!(
+            p.message.contains("positive number of pixels per mm"),
+            "{bad}: {err}"
+        );
+    }
+}
+
+#[test]
 fn a_camera_that_cannot_see_the_feeder_or_resolve_the_parts_is_refused() {
     let pose = "base_T_camera = { translation = [0.0, -0.45, 1.51], rotation = [3.141592653589793, 0.0, 0.0] }";
     assert!(nominal_text().contains(pose));

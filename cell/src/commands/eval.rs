@@ -73,7 +73,7 @@ pub struct Args {
     pub no_contour: bool,
     /// The table scale the networks see frames at: `trained` (the middle of the segmenter's
     /// training range, from its manifest), `sensor` (as captured), or pixels per mm.
-    #[arg(long, default_value = "trained", value_parser = input_scale)]
+    #[arg(long, default_value = "trained", value_parser = str::parse::<InputScale>)]
     pub input_scale: InputScale,
     /// Keep the poses of parts lying on or under another one (their estimates on the table
     /// overlap), which the pipeline otherwise withdraws (for comparison).
@@ -82,20 +82,6 @@ pub struct Args {
     /// No progress line.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// An input scale: `sensor`, `trained` or a positive number of pixels per mm.
-fn input_scale(s: &str) -> Result<InputScale, String> {
-    match s {
-        "sensor" => Ok(InputScale::Sensor),
-        "trained" => Ok(InputScale::Trained),
-        _ => match s.parse::<f64>() {
-            Ok(v) if v.is_finite() && v > 0.0 => Ok(InputScale::PxPerMm(v)),
-            _ => Err(format!(
-                "expected `sensor`, `trained` or a positive number of pixels per mm, got {s:?}"
-            )),
-        },
-    }
 }
 
 /// A confidence: a number in [0, 1].

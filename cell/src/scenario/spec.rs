@@ -298,6 +298,10 @@ pub struct PerceptionSpec {
     /// follow the keypoint net's measured accuracy.
     #[serde(default = "learned_gate")]
     pub max_rms_px: f64,
+    /// The table scale the learned pipeline's networks see each frame at: `"trained"` (the
+    /// middle of the segmenter's training range), `"sensor"` (as captured) or pixels per mm.
+    #[serde(default = "trained_scale")]
+    pub input_scale: perception::learned::InputScale,
 }
 
 /// The learned pipeline's own default gate.
@@ -305,6 +309,11 @@ fn learned_gate() -> f64 {
     perception::learned::PipelineConfig::default()
         .estimator
         .max_rms_px
+}
+
+/// The learned pipeline's own default input scale.
+fn trained_scale() -> perception::learned::InputScale {
+    perception::learned::PipelineConfig::default().input_scale
 }
 
 fn half() -> f64 {

@@ -6,6 +6,7 @@
 use fast_image_resize::{FilterType, ResizeAlg, ResizeOptions, Resizer};
 use image::DynamicImage;
 use nalgebra::{Matrix2, Point2};
+use serde::{Deserialize, Serialize};
 
 use super::LearnedError;
 use super::models::SEGMENTER_STRIDE;
@@ -13,8 +14,10 @@ use super::models::SEGMENTER_STRIDE;
 /// Frames within this share of the target scale are shown to the nets as captured.
 const SCALE_TOLERANCE: f64 = 0.01;
 
-/// The scale the nets see a frame at.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The scale the nets see a frame at; written `"sensor"`, `"trained"` or a number of pixels per
+/// mm (in a scenario and on the command line).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "ScaleText", into = "ScaleText")]
 pub enum InputScale {
     /// As captured, whatever the camera's distance.
     Sensor,
@@ -41,6 +44,53 @@ impl InputScale {
         match *self {
             Self::PxPerMm(s) => s.is_finite() && s > 0.0,
             _ => true,
+        }
+    }
+}
+
+impl std::str::FromStr for InputScale {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "sensor" => Ok(Self::Sensor),
+            "trained" => Ok(Self::Trained),
+            _ => match s.parse::<f64>() {
+                Ok(v) if Self::PxPerMm(v).is_valid() => Ok(Self::PxPerMm(v)),
+                _ => Err(format!(
+                    "the input scale is \"sensor\", \"trained\" or a positive number of pixels per \
+                     mm, got {s:?}"
+                )),
+            },
+        }
+    }
+}
+
+/// [`InputScale`] as written: a name or a number.
+#[derive(Serialize, Deserialize)]
+#[serde(untagged)]
+enum ScaleText {
+    Name(String),
+    PxPerMm(f64),
+}
+
+impl TryFrom<ScaleText> for InputScale {
+    type Error = String;
+
+    fn try_from(t: ScaleText) -> Result<Self, String> {
+        match t {
+            ScaleText::Name(s) => s.parse(),
+            ScaleText::PxPerMm(v) => v.to_string().parse(),
+        }
+    }
+}
+
+impl From<InputScale> for ScaleText {
+    fn from(s: InputScale) -> Self {
+        match s {
+            InputScale::Sensor => Self::Name("sensor".into()),
+            InputScale::Trained => Self::Name("trained".into()),
+            InputScale::PxPerMm(v) => Self::PxPerMm(v),
         }
     }
 }
@@ -152,6 +202,26 @@ impl NetView {
 mod tests {
     use super::*;
     use image::{GrayImage, Luma};
+
+    #[test]
+    fn an_input_scale_is_a_name_or_a_positive_number() {
+        assert_eq!("trained".parse(), Ok(InputScale::Trained));
+        assert_eq!("sensor".parse(), Ok(InputScale::Sensor));
+        assert_eq!("6.5".parse(), Ok(InputScale::PxPerMm(6.5)));
+        for bad in ["-1", "0", "inf", "scaled"] {
+            let e = bad.parse::<InputScale>().unwrap_err();
+            assert!(e.contains(&format!("got {bad:?}")), "{e}");
+        }
+        #[derive(Deserialize)]
+        struct S {
+            scale: InputScale,
+        }
+        let read = |t: &str| toml::from_str::<S>(t).map(|s| s.scale);
+        assert_eq!(read("scale = 7").unwrap(), InputScale::PxPerMm(7.0));
+        assert_eq!(read("scale = \"sensor\"").unwrap(), InputScale::Sensor);
+        let e = read("scale = -2.0").unwrap_err().to_string();
+        assert!(e.contains("positive number of pixels per mm"), "{e}");
+    }
 
     #[test]
     fn a_frame_near_the_target_scale_is_shown_as_captured() {
