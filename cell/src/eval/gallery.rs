@@ -6,7 +6,7 @@
 use image::{DynamicImage, GenericImageView, Rgb, RgbImage};
 use nalgebra::{Isometry3, Point2};
 use perception::Camera;
-use perception::learned::{InstanceMask, LearnedDetection};
+use perception::learned::{InstanceMask, LearnedDetection, crop_origin};
 use perception::metrics::PoseErrors;
 
 use super::PartData;
@@ -124,7 +124,7 @@ impl<T> GalleryKeeper<T> {
     }
 }
 
-/// The detection's crop of `image`, upscaled, with its mask outline, the part's true outline
+/// The 128-pixel window of `image` about the detection's centre, upscaled, with its mask outline, the part's true outline
 /// and keypoints (`part` at `truth`, projected by `camera`), the outline at `estimate` (the
 /// camera-frame pose, if there is one) and the voted keypoints drawn.
 pub fn draw_crop(
@@ -135,7 +135,9 @@ pub fn draw_crop(
     truth: &Isometry3<f64>,
     estimate: Option<&Isometry3<f64>>,
 ) -> RgbImage {
-    let [ox, oy] = detection.crop_origin;
+    // The frame at sensor resolution about the detection's centre: the keypoint crop itself
+    // when the nets see frames as captured (the crop of a resampled frame spans more pixels).
+    let [ox, oy] = crop_origin(detection.centre);
     let mut out = zoomed_window(image, [ox, oy], |x, y| {
         on_outline(&detection.mask, x, y).then_some(YELLOW)
     });
