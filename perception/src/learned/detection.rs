@@ -91,7 +91,9 @@ pub struct LearnedDetection {
     pub mask: InstanceMask,
     /// Voted centre of the instance, image pixels.
     pub centre: [f64; 2],
-    /// Image pixel of the top-left corner of the keypoint crop (may be negative near borders).
+    /// Image pixel of the top-left corner of the keypoint crop's window (may be negative near
+    /// borders); the window is 128 of the nets' pixels, more image pixels when the pipeline
+    /// resampled the frame to the nets' scale.
     pub crop_origin: [i64; 2],
     /// Voted keypoints in image pixels, in the part's keypoint order (empty when voting failed).
     pub keypoints: Vec<KeypointVote>,

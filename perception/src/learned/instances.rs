@@ -90,21 +90,25 @@ impl Instance {
     /// The instance's mask in sensor pixels (each cell covers 4 × 4 net pixels, which `view`
     /// maps to the sensor), clipped to the region of `valid` `[width, height]` sensor pixels.
     pub fn mask(&self, map_width: usize, valid: [usize; 2], view: &NetView) -> InstanceMask {
+        let empty = || InstanceMask {
+            origin: view.region,
+            width: 0,
+            height: 0,
+            bits: Vec::new(),
+        };
+        if self.cells.is_empty() {
+            return empty();
+        }
         let (mut j0, mut i0, mut j1, mut i1) = (usize::MAX, usize::MAX, 0, 0);
         for &c in &self.cells {
             let (i, j) = (c as usize / map_width, c as usize % map_width);
             (j0, i0, j1, i1) = (j0.min(j), i0.min(i), j1.max(j + 1), i1.max(i + 1));
         }
         let clip = |a: usize, [lo, hi]: [i64; 2]| [lo.max(0), hi.min(valid[a] as i64)];
-        let [x0, x1] = clip(0, view.cells_to_pixels(0, [j0.min(j1), j1]));
-        let [y0, y1] = clip(1, view.cells_to_pixels(1, [i0.min(i1), i1]));
-        if self.cells.is_empty() || x1 <= x0 || y1 <= y0 {
-            return InstanceMask {
-                origin: view.region,
-                width: 0,
-                height: 0,
-                bits: Vec::new(),
-            };
+        let [x0, x1] = clip(0, view.cells_to_pixels(0, [j0, j1]));
+        let [y0, y1] = clip(1, view.cells_to_pixels(1, [i0, i1]));
+        if x1 <= x0 || y1 <= y0 {
+            return empty();
         }
         // The instance's cells over its bounding box of cells.
         let cw = j1 - j0;

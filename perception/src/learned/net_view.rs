@@ -57,13 +57,17 @@ impl std::str::FromStr for InputScale {
             "trained" => Ok(Self::Trained),
             _ => match s.parse::<f64>() {
                 Ok(v) if Self::PxPerMm(v).is_valid() => Ok(Self::PxPerMm(v)),
-                _ => Err(format!(
-                    "the input scale is \"sensor\", \"trained\" or a positive number of pixels per \
-                     mm, got {s:?}"
-                )),
+                _ => Err(not_a_scale(format!("{s:?}"))),
             },
         }
     }
+}
+
+/// What a written input scale must be, and what it was.
+fn not_a_scale(got: impl std::fmt::Display) -> String {
+    format!(
+        "the input scale is \"sensor\", \"trained\" or a positive number of pixels per mm, got {got}"
+    )
 }
 
 /// [`InputScale`] as written: a name or a number.
@@ -80,7 +84,8 @@ impl TryFrom<ScaleText> for InputScale {
     fn try_from(t: ScaleText) -> Result<Self, String> {
         match t {
             ScaleText::Name(s) => s.parse(),
-            ScaleText::PxPerMm(v) => v.to_string().parse(),
+            ScaleText::PxPerMm(v) if Self::PxPerMm(v).is_valid() => Ok(Self::PxPerMm(v)),
+            ScaleText::PxPerMm(v) => Err(not_a_scale(v)),
         }
     }
 }

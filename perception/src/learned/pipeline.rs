@@ -327,9 +327,11 @@ impl LearnedPipeline {
         instances.retain(|i| i.score >= self.config.min_score);
         times.instances = lap(&mut t);
 
-        // Crops of the nets' image; their origins in the nets' pixels of the region.
+        // Crops of the nets' image: their origins in the nets' pixels of the region, and their
+        // windows on the sensor.
         self.batch.clear(self.parts.len());
         let mut origins = Vec::with_capacity(instances.len());
+        let mut windows = Vec::with_capacity(instances.len());
         for inst in &instances {
             let centre = [
                 inst.centre[0] + f64::from(net_roi[0]),
@@ -337,10 +339,12 @@ impl LearnedPipeline {
             ];
             let origin = crop_origin(centre);
             self.batch.push(net_image, net_roi, origin, inst.part)?;
-            origins.push([
+            let origin = [
                 origin[0] - i64::from(net_roi[0]),
                 origin[1] - i64::from(net_roi[1]),
-            ]);
+            ];
+            origins.push(origin);
+            windows.push(view.sensor_window(origin, CROP_SIZE));
         }
         times.crops = lap(&mut t);
 
@@ -371,6 +375,7 @@ impl LearnedPipeline {
         let jobs: Vec<_> = instances.iter().zip(&origins).zip(votes).collect();
         let pose_of = |k: usize| {
             let ((inst, origin), votes) = &jobs[k];
+            let crop = (**origin, windows[k]);
             let ctx = PoseContext {
                 estimator,
                 contour,
@@ -384,7 +389,7 @@ impl LearnedPipeline {
                 max_overfill,
             };
             let visible_mm2 = inst.cells.len() as f64 * cell_mm2;
-            ctx.pose(inst.part, &parts[inst.part], votes, **origin, visible_mm2)
+            ctx.pose(inst.part, &parts[inst.part], votes, crop, visible_mm2)
         };
         let threads = self.config.threads.min(jobs.len()).max(1);
         let mut poses: Vec<PoseOutcome> = if threads <= 1 {
@@ -421,11 +426,10 @@ impl LearnedPipeline {
         }
         let mut detections = Vec::with_capacity(instances.len());
         let valid = [roi[2] as usize, roi[3] as usize];
-        for ((inst, origin), (keypoints, pose, refused)) in
-            instances.iter().zip(&origins).zip(poses)
+        for ((inst, window), (keypoints, pose, refused)) in
+            instances.iter().zip(&windows).zip(poses)
         {
             let centre = view.to_sensor(Point2::from(inst.centre));
-            let window = view.sensor_window(*origin, CROP_SIZE);
             detections.push(LearnedDetection {
                 part: self.parts[inst.part].clone(),
                 score: inst.score,
@@ -472,7 +476,8 @@ struct PoseContext<'a> {
 
 impl PoseContext<'_> {
     /// Keypoints → pose estimate → contour alignment for one detection of part `class` whose
-    /// keypoint crop starts at net pixel `origin` of the region and whose mask covers
+    /// keypoint crop starts at net pixel `crop.0` of the region and covers the sensor window
+    /// `crop.1` (`[x, y, width, height]`), and whose mask covers
     /// `visible_mm2` of the table (or, when the keypoints place nothing, its outline alone), in a
     /// stable pose whose footprint can show that much.
     fn pose(
@@ -480,7 +485,7 @@ impl PoseContext<'_> {
         class: usize,
         part: &str,
         votes: &Result<Vec<KeypointVote>, VoteError>,
-        origin: [i64; 2],
+        (origin, window): ([i64; 2], [i64; 4]),
         visible_mm2: f64,
     ) -> PoseOutcome {
         let v = match votes {
@@ -488,8 +493,6 @@ impl PoseContext<'_> {
             Err(e) => return (Vec::new(), Err(format!("voting: {e}")), None),
         };
         let (keypoints, observations) = sensor_observations(v, origin, &self.view);
-        // The crop's window on the sensor, where contour alignment looks for the outline.
-        let window = self.view.sensor_window(origin, CROP_SIZE);
         let footprints = self.footprints;
         let admitted = ClassSet::filter(footprints.len(), |c| {
             visible_mm2 <= self.max_overfill * footprints[c]
@@ -909,7 +912,7 @@ mod tests {
         camera: &Camera,
         camera_T_part: &Isometry3<f64>,
         part: &PartSpec,
-    ) -> (Vec<KeypointVote>, [i64; 2]) {
+    ) -> (Vec<KeypointVote>, ([i64; 2], [i64; 4])) {
         let sensor = keypoint_pixels(camera, camera_T_part, part);
         let origin = crop_origin([sensor[8].x, sensor[8].y]);
         let votes = sensor
@@ -922,7 +925,8 @@ mod tests {
                 hypotheses: 128,
             })
             .collect();
-        (votes, origin)
+        let side = CROP_SIZE as i64;
+        (votes, (origin, [origin[0], origin[1], side, side]))
     }
 
     /// Each stable pose's footprint of catalog part `name`, mm².
@@ -951,8 +955,8 @@ mod tests {
                 UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 40f64.to_radians()),
             );
         let confidence = |table_T_part: &Isometry3<f64>| {
-            let (votes, origin) = exact_votes(&camera, &(camera_T_table * table_T_part), part);
-            let (_, pose, _) = ctx.pose(2, "top_shell", &Ok(votes), origin, 60.0);
+            let (votes, crop) = exact_votes(&camera, &(camera_T_table * table_T_part), part);
+            let (_, pose, _) = ctx.pose(2, "top_shell", &Ok(votes), crop, 60.0);
             let pose = pose.unwrap();
             (pose.planar.tilt.to_degrees(), pose.confidence)
         };
@@ -987,8 +991,8 @@ mod tests {
         };
         assert!(area("+z") > 2.5 * area("+x"), "{footprints:?}");
         let stable_pose = |visible_mm2: f64| {
-            let (votes, origin) = exact_votes(&camera, &on_side, part);
-            let (_, pose, _) = ctx.pose(0, "main_shell", &Ok(votes), origin, visible_mm2);
+            let (votes, crop) = exact_votes(&camera, &on_side, part);
+            let (_, pose, _) = ctx.pose(0, "main_shell", &Ok(votes), crop, visible_mm2);
             pose.map(|p| p.stable_pose)
         };
         assert_eq!(stable_pose(area("+x")).unwrap(), "+x");
@@ -1003,12 +1007,12 @@ mod tests {
             "{reason}"
         );
         // The refused detection still carries its keypoints' estimate, for evaluation's raw PnP.
-        let (votes, origin) = exact_votes(&camera, &on_side, part);
+        let (votes, crop) = exact_votes(&camera, &on_side, part);
         let (_, _, refused) = ctx.pose(
             0,
             "main_shell",
             &Ok(votes),
-            origin,
+            crop,
             MAX_OVERFILL * largest + 1.0,
         );
         let raw = refused.expect("the keypoints' estimate").pnp.camera_T_part;
