@@ -16,7 +16,9 @@
 
 use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
 use perception::contour::PartOutline;
-use perception::contour::{ContourAligner, ContourConfig, ContourView, FinalEdge, GreyPatch};
+use perception::contour::{
+    ContourAligner, ContourConfig, ContourView, FinalEdge, GreyPatch, Owner,
+};
 use perception::part::{Catalog, StablePose, TriMesh};
 use perception::{Camera, Frame, FrameContent};
 use robots::kinematics::Joints;
@@ -409,9 +411,11 @@ pub fn measure_seat(
             b[1]
         )));
     }
-    let patch = GreyPatch::cut(&image.pixels, image.origin, b).with_hidden(|y, x, row| {
+    let patch = GreyPatch::cut(&image.pixels, image.origin, b).with_owners(|y, x, row| {
         for (i, v) in row.iter_mut().enumerate() {
-            *v = shared.get(x + i as i64, y);
+            if shared.get(x + i as i64, y) {
+                *v = Owner::Other;
+            }
         }
     });
     let view = ContourView {

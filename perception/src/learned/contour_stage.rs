@@ -8,7 +8,8 @@ use nalgebra::{Isometry3, UnitQuaternion};
 
 use crate::Camera;
 use crate::contour::{
-    ContourAligner, ContourConfig, ContourFit, ContourView, FinalEdge, GreyPatch, PartOutline,
+    ContourAligner, ContourConfig, ContourFit, ContourView, FinalEdge, GreyPatch, Owner,
+    PartOutline,
 };
 use crate::estimate::{PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
@@ -86,7 +87,7 @@ impl ContourStage {
 
     /// The outline fits of one detection of part `class`, whose keypoint crop covers the sensor
     /// window `crop` (`[x, y, width, height]`), on the edges of `image` except where `covered`
-    /// marks another part over it (see [`GreyPatch::with_hidden`]); `None` for a part it has no
+    /// marks another part over it (see [`GreyPatch::with_owners`]); `None` for a part it has no
     /// outline of.
     #[allow(clippy::too_many_arguments)]
     fn fits<'a>(
@@ -97,7 +98,7 @@ impl ContourStage {
         image: &FrameImage,
         camera: &'a Camera,
         crop: [i64; 4],
-        covered: impl Fn(i64, i64, &mut [bool]),
+        owners: impl Fn(i64, i64, &mut [Owner]),
     ) -> Option<Fits<'a>> {
         let (outlined, refiner) = (self.parts.get(class)?, estimator.refiner(part)?);
         Some(Fits {
@@ -115,7 +116,7 @@ impl ContourStage {
                     crop[3] + 2 * MARGIN,
                 ],
             )
-            .with_hidden(covered),
+            .with_owners(owners),
             aligner: ContourAligner::new(*refiner.camera_T_table(), self.config),
         })
     }
@@ -135,9 +136,9 @@ impl ContourStage {
         camera: &Camera,
         crop: [i64; 4],
         admitted: ClassSet,
-        covered: impl Fn(i64, i64, &mut [bool]),
+        owners: impl Fn(i64, i64, &mut [Owner]),
     ) {
-        let Some(fits) = self.fits(class, part, estimator, image, camera, crop, covered) else {
+        let Some(fits) = self.fits(class, part, estimator, image, camera, crop, owners) else {
             return;
         };
         let refiner = fits.refiner;
@@ -174,8 +175,9 @@ impl ContourStage {
         }
         let mut best: Option<(usize, ContourFit)> = None;
         // Every hypothesis gets the coarse round; only the best is finished. The keypoint pose
-        // (the first) is replaced only by a hypothesis that beats it by the margin.
-        for (k, (class, start)) in starts.into_iter().enumerate() {
+        // (the first) is replaced only by a hypothesis that beats it by the margin, and by one
+        // in another stable pose only if it also covers the part's mask better by its margin.
+        for (class, start) in starts {
             // A support is at most 1: once the best one is within the margin of it, no other
             // hypothesis can replace it, so the rest need not be screened.
             if best
@@ -187,15 +189,14 @@ impl ContourStage {
             let Some(fit) = fits.screen(class, start) else {
                 continue;
             };
-            let bar = if k == 0 {
-                0.0
-            } else {
-                self.config.switch_margin
+            let replaces = match &best {
+                None => true,
+                Some((c, b)) => {
+                    fit.support > b.support + self.config.switch_margin
+                        && (*c == class || fits.covers_better(class, &fit, *c, b))
+                }
             };
-            if best
-                .as_ref()
-                .is_none_or(|(_, b)| fit.support > b.support + bar)
-            {
+            if replaces {
                 best = Some((class, fit));
             }
         }
@@ -233,7 +234,7 @@ impl ContourStage {
         px_per_mm: f64,
         visible_mm2: f64,
         admitted: ClassSet,
-        covered: impl Fn(i64, i64, &mut [bool]),
+        owners: impl Fn(i64, i64, &mut [Owner]),
     ) -> Option<PoseEstimate> {
         // Keypoints that miss the gate but still fit a pose are the part's (a face-up insert
         // mold with its pins in view): the outline alone cannot tell the two faces apart. A part
@@ -251,7 +252,7 @@ impl ContourStage {
         if candidates.is_empty() || refused.rms_px <= RESCUE_MIN_RMS_MM * px_per_mm {
             return None;
         }
-        let fits = self.fits(class, part, estimator, image, camera, crop, covered)?;
+        let fits = self.fits(class, part, estimator, image, camera, crop, owners)?;
         let mut best: Option<(usize, ContourFit)> = None;
         for f in candidates {
             let height = fits.refiner.stable_poses()[f.class].rest_height;
@@ -309,6 +310,23 @@ impl Fits<'_> {
     /// The coarse round from `start` in stable pose `class` ([`ContourAligner::screen`]).
     fn screen(&self, class: usize, start: (f64, f64, f64)) -> Option<ContourFit> {
         self.aligner.screen(self.view(class), start)
+    }
+
+    /// Whether `fit` in stable pose `class` covers the part's mask better than `other` in stable
+    /// pose `other_class`, by [`ContourConfig::mask_margin`] of intersection over union (yes when
+    /// the frame gives no mask to judge by).
+    fn covers_better(
+        &self,
+        class: usize,
+        fit: &ContourFit,
+        other_class: usize,
+        other: &ContourFit,
+    ) -> bool {
+        let agreement = |class, fit| self.aligner.mask_agreement(self.view(class), fit);
+        match (agreement(class, fit), agreement(other_class, other)) {
+            (Some(a), Some(b)) => a > b + self.aligner.config().mask_margin,
+            _ => true,
+        }
     }
 
     /// The finer rounds of a screened fit in stable pose `class`, with that class.

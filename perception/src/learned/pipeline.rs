@@ -19,7 +19,7 @@ use super::net_view::{InputScale, NetView};
 use super::occlusion::CellOwners;
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
-use crate::contour::ContourConfig;
+use crate::contour::{ContourConfig, Owner};
 use crate::estimate::{EstimateError, EstimatorConfig, Observation, PoseEstimate, PoseEstimator};
 use crate::frame::FrameImage;
 use crate::onnx::{BatchSession, Runtime};
@@ -381,7 +381,7 @@ impl LearnedPipeline {
                 contour,
                 image,
                 camera,
-                covered: &|y, x, row: &mut [bool]| owners.cover_row(k, y, x, row),
+                owners: &|y, x, row: &mut [Owner]| owners.owner_row(k, y, x, row),
                 px_per_mm,
                 view,
                 max_lean,
@@ -454,14 +454,14 @@ type PoseOutcome = (
     Option<PoseEstimate>,
 );
 
-/// What the pose stage of one frame shares between its workers, and where other parts hide
-/// the detection at hand.
+/// What the pose stage of one frame shares between its workers, and which part each pixel shows
+/// as the detection at hand sees it.
 struct PoseContext<'a> {
     estimator: &'a PoseEstimator,
     contour: Option<&'a ContourStage>,
     image: &'a FrameImage,
     camera: &'a Camera,
-    covered: &'a (dyn Fn(i64, i64, &mut [bool]) + Sync),
+    owners: &'a (dyn Fn(i64, i64, &mut [Owner]) + Sync),
     /// The image scale on the table, pixels per mm.
     px_per_mm: f64,
     /// How the nets' pixels map to the sensor's.
@@ -528,7 +528,7 @@ impl PoseContext<'_> {
                         self.camera,
                         window,
                         admitted,
-                        self.covered,
+                        self.owners,
                     );
                 }
                 let keypoint_planar = pose
@@ -560,7 +560,7 @@ impl PoseContext<'_> {
                         self.px_per_mm,
                         visible_mm2,
                         admitted,
-                        self.covered,
+                        self.owners,
                     )
                 {
                     return (keypoints, Ok(rescued), None);
@@ -687,7 +687,7 @@ mod tests {
     use crate::learned::crops::crop_camera;
     use crate::learned::keypoint_net::field_to_crop;
     use crate::learned::models::{CROP_SIZE, FIELD_SIZE};
-    use crate::part::PartSpec;
+    use crate::part::{PartSpec, TriMesh};
     use crate::voting::{VectorField, Voter};
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
     use std::path::Path;
@@ -696,7 +696,15 @@ mod tests {
     /// pose on the table and an estimator with a reprojection gate of `gate_px`.
     #[allow(non_snake_case)]
     fn overhead(gate_px: f64) -> (Catalog, Camera, Isometry3<f64>, PoseEstimator) {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/parts/usbc.toml");
+        overhead_of("usbc.toml", gate_px)
+    }
+
+    /// [`overhead`] for the committed catalog `file`.
+    #[allow(non_snake_case)]
+    fn overhead_of(file: &str, gate_px: f64) -> (Catalog, Camera, Isometry3<f64>, PoseEstimator) {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../scenarios/parts")
+            .join(file);
         let catalog = Catalog::load(&root).unwrap();
         let camera_T_table = Isometry3::from_parts(
             Translation3::new(0.0, 0.0, 1.5),
@@ -897,7 +905,7 @@ mod tests {
             contour: None,
             image,
             camera,
-            covered: &|_, _, row: &mut [bool]| row.fill(false),
+            owners: &|_, _, row: &mut [Owner]| row.fill(Owner::Nobody),
             px_per_mm: 7.0,
             view: NetView::new([0, 0], [camera.width, camera.height], 7.0, None),
             max_lean: MAX_LEAN,
@@ -967,6 +975,126 @@ mod tests {
             tilt > 30.0 && c == 0.0,
             "propped: tilt {tilt}°, confidence {c}"
         );
+    }
+
+    /// `mesh` at `camera_T_part` drawn into `image` (the table grey 128): faces up bright (220),
+    /// the others `side` grey, 4 × 4 samples a pixel, for a convex mesh (its faces towards the
+    /// camera never overlap). Returns the pixels it covers more than half of.
+    #[allow(non_snake_case)]
+    fn draw_convex(
+        image: &mut image::GrayImage,
+        camera: &Camera,
+        camera_T_table: &Isometry3<f64>,
+        camera_T_part: &Isometry3<f64>,
+        mesh: &TriMesh,
+        side: u8,
+    ) -> Vec<(i64, i64)> {
+        let up = camera_T_table.rotation * Vector3::z();
+        let faces: Vec<([Point2<f64>; 3], u8)> = mesh
+            .triangles
+            .iter()
+            .filter_map(|t| {
+                let [a, b, c] = t.map(|i| camera_T_part * mesh.vertices[i as usize]);
+                let normal = (b - a).cross(&(c - a)).normalize();
+                (normal.dot(&a.coords) < 0.0).then(|| {
+                    let shade = if normal.dot(&up) > 0.9 { 220 } else { side };
+                    ([a, b, c].map(|p| camera.project(&p).unwrap()), shade)
+                })
+            })
+            .collect();
+        let (mut lo, mut hi) = (
+            Point2::new(f64::MAX, f64::MAX),
+            Point2::new(f64::MIN, f64::MIN),
+        );
+        for p in faces.iter().flat_map(|(f, _)| f) {
+            (lo.x, lo.y, hi.x, hi.y) = (lo.x.min(p.x), lo.y.min(p.y), hi.x.max(p.x), hi.y.max(p.y));
+        }
+        let inside = |[a, b, c]: &[Point2<f64>; 3], p: Point2<f64>| {
+            let side = |u: Point2<f64>, v: Point2<f64>| (v - u).perp(&(p - u));
+            let (x, y, z) = (side(*a, *b), side(*b, *c), side(*c, *a));
+            (x >= 0.0 && y >= 0.0 && z >= 0.0) || (x <= 0.0 && y <= 0.0 && z <= 0.0)
+        };
+        let mut covered = Vec::new();
+        for v in lo.y.floor() as i64 - 2..=hi.y.ceil() as i64 + 2 {
+            for u in lo.x.floor() as i64 - 2..=hi.x.ceil() as i64 + 2 {
+                let (mut level, mut count) = (0.0, 0);
+                for k in 0..16 {
+                    let p = Point2::new(
+                        u as f64 - 0.375 + 0.25 * (k % 4) as f64,
+                        v as f64 - 0.375 + 0.25 * (k / 4) as f64,
+                    );
+                    let shade = faces.iter().find(|(f, _)| inside(f, p)).map(|(_, s)| *s);
+                    level += f64::from(shade.unwrap_or(128)) / 16.0;
+                    count += usize::from(shade.is_some());
+                }
+                image.put_pixel(u as u32, v as u32, image::Luma([level.round() as u8]));
+                if count > 8 {
+                    covered.push((u, v));
+                }
+            }
+        }
+        covered
+    }
+
+    /// A NIST 12 mm square peg lying (12 × 14 mm seen from above) where the camera looks in at
+    /// 8°, its side face towards the camera as grey as the table, and keypoints that say so:
+    /// the lying outline misses its edge on the table there, while the standing one (12 × 12
+    /// mm of top and 2 mm of side face) ends on the lying peg's top rim and finds every edge. The
+    /// outline alone would stand it up; the part's mask, which holds that side face, keeps it
+    /// lying.
+    #[test]
+    #[allow(non_snake_case)]
+    fn the_mask_keeps_a_lying_square_peg_from_a_standing_outline_that_finds_more_edges() {
+        let (catalog, camera, camera_T_table, estimator) = overhead_of("nist_pegs.toml", 1e4);
+        let part = catalog.part("square_12").unwrap();
+        let mesh = catalog.load_mesh(part).unwrap();
+        // 0.21 m from under the camera, 1.5 m up: tan 8° = 0.14, and 12 mm + 0.14 × 14 mm = 14 mm.
+        let truth = part.stable_pose("-x").unwrap().table_T_part(0.21, 0.0, 0.0);
+        let mut pixels =
+            image::GrayImage::from_pixel(camera.width, camera.height, image::Luma([128]));
+        let camera_T_part = camera_T_table * truth;
+        let mask: std::collections::HashSet<(i64, i64)> = draw_convex(
+            &mut pixels,
+            &camera,
+            &camera_T_table,
+            &camera_T_part,
+            &mesh,
+            128,
+        )
+        .into_iter()
+        .collect();
+        let image = FrameImage::full(image::DynamicImage::ImageLuma8(pixels));
+        let footprints = footprints(&catalog, "square_12");
+        let stage = ContourStage::new(
+            &[part],
+            std::slice::from_ref(&mesh),
+            std::slice::from_ref(&footprints),
+            ContourConfig::default(),
+        );
+        let stable_pose = |owners: &(dyn Fn(i64, i64, &mut [Owner]) + Sync)| {
+            let ctx = PoseContext {
+                contour: Some(&stage),
+                owners,
+                ..keypoints_only(&estimator, &camera, &image, &footprints)
+            };
+            let (votes, crop) = exact_votes(&camera, &camera_T_part, part);
+            let visible_mm2 = mask.len() as f64 / 7.09f64.powi(2);
+            let (_, pose, _) = ctx.pose(0, "square_12", &Ok(votes), crop, visible_mm2);
+            let pose = pose.unwrap();
+            let error = pose.planar.table_T_part.translation.vector - truth.translation.vector;
+            (pose.stable_pose, error.xy().norm())
+        };
+        let (outline_alone, _) = stable_pose(&|_, _, row| row.fill(Owner::Nobody));
+        assert_eq!(outline_alone, "+z", "the outline alone stands it up");
+        let (with_mask, error) = stable_pose(&|y, x, row| {
+            for (k, owner) in row.iter_mut().enumerate() {
+                if mask.contains(&(x + k as i64, y)) {
+                    *owner = Owner::Me;
+                }
+            }
+        });
+        assert_eq!(with_mask, "-x", "the mask keeps it lying");
+        assert!(error < 5e-5, "{:.3} mm off", error * 1e3);
     }
 
     /// A main shell's keypoints that say it lies on its side, in a mask that shows a face-up
