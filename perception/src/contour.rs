@@ -48,7 +48,7 @@ pub struct ContourConfig {
     /// union ([`ContourAligner::mask_agreement`]): two stable poses can both find edges where
     /// one pose's outline ends on the other's inner rim (a square peg standing, its top and one
     /// side face in view, fits the longer top of one lying). On the cell-density eval sets the
-    /// right stable pose went 94.9 → 97.1 % (NIST pegs) and 98.2 → 98.6 % (USB-C); margins of
+    /// right stable pose went 94.9 → 97.1 % (NIST pegs) and 98.2 → 98.7 % (USB-C); margins of
     /// 0.07–0.12 did alike, and 0.2 let the keypoints' wrong stable poses stand on USB-C.
     pub mask_margin: f64,
     /// In the finest round, an outline of [`FinalEdge::Outermost`] takes the outermost step at
