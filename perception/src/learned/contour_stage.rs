@@ -86,9 +86,9 @@ impl ContourStage {
     }
 
     /// The outline fits of one detection of part `class`, whose keypoint crop covers the sensor
-    /// window `crop` (`[x, y, width, height]`), on the edges of `image` except where `covered`
-    /// marks another part over it (see [`GreyPatch::with_owners`]); `None` for a part it has no
-    /// outline of.
+    /// window `crop` (`[x, y, width, height]`), on the edges of `image` except where `owners`
+    /// gives a pixel to another part (see [`GreyPatch::with_owners`]); `None` for a part it has
+    /// no outline of.
     #[allow(clippy::too_many_arguments)]
     fn fits<'a>(
         &'a self,
@@ -121,10 +121,12 @@ impl ContourStage {
         })
     }
 
-    /// Aligns `estimate` of part `class` (whose keypoint crop covers the sensor window `crop`) on the edges of `image`, except where `covered` marks another part over
-    /// it, in one of the `admitted` stable poses, and weighs its confidence by the fit's
-    /// quality; keeps the keypoint pose, with no confidence, when no hypothesis finds enough of
-    /// its outline.
+    /// Aligns `estimate` of part `class` (whose keypoint crop covers the sensor window `crop`)
+    /// on the edges of `image`, except where `owners` gives a pixel to another part, in one of
+    /// the `admitted` stable poses (a hypothesis in another stable pose wins only if it also
+    /// covers the pixels `owners` gives this part better), and weighs its confidence by the
+    /// fit's quality; keeps the keypoint pose, with no confidence, when no hypothesis finds
+    /// enough of its outline.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
         &self,
