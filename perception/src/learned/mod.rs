@@ -14,7 +14,7 @@ pub mod instances;
 pub mod keypoint_net;
 pub mod models;
 pub mod net_view;
-mod occlusion;
+mod owners;
 mod perception;
 mod pipeline;
 pub mod segmenter;

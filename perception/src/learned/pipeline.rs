@@ -16,7 +16,7 @@ use super::instances::{Instance, InstanceConfig, InstanceGrouper, join_split};
 use super::keypoint_net::KeypointNet;
 use super::models::{CROP_SIZE, LearnedModels, SEGMENTER_MULTIPLE, SEGMENTER_STRIDE};
 use super::net_view::{InputScale, NetView};
-use super::occlusion::CellOwners;
+use super::owners::CellOwners;
 use super::segmenter::{SegmentMap, Segmenter};
 use crate::Camera;
 use crate::contour::{ContourConfig, Owner};
