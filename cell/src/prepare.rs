@@ -166,9 +166,11 @@ pub fn prepare_catalog_with(
         path: path.into(),
         source,
     })?;
-    let updated = write_back(&text, &prepared).map_err(|message| PrepareError::Write {
-        path: path.display().to_string(),
-        message,
+    let updated = write_back(&text, &prepared, settings.drop_height).map_err(|message| {
+        PrepareError::Write {
+            path: path.display().to_string(),
+            message,
+        }
     })?;
     sim::fsutil::write_atomic(path, updated.as_bytes()).map_err(|e| PrepareError::Write {
         path: path.display().to_string(),
@@ -185,9 +187,32 @@ fn vec3(v: [f64; 3]) -> Array {
     v.iter().map(|x| round(*x)).collect()
 }
 
-/// The catalog text with each prepared part's computed keys replaced.
-pub fn write_back(text: &str, prepared: &[PreparedPart]) -> Result<String, String> {
+/// The catalog text with each prepared part's computed keys replaced, and the drop height the
+/// stable poses were dropped from recorded (`drop_height`), so the file reproduces its table.
+pub fn write_back(
+    text: &str,
+    prepared: &[PreparedPart],
+    drop_height: f64,
+) -> Result<String, String> {
     let mut doc: DocumentMut = text.parse().map_err(|e| format!("not valid TOML: {e}"))?;
+    if let Some(recorded) = doc.get_mut("drop_height") {
+        let recorded = recorded
+            .as_value_mut()
+            .ok_or("drop_height is not a value")?;
+        let decor = recorded.decor().clone();
+        *recorded = toml_edit::Value::from(drop_height);
+        *recorded.decor_mut() = decor;
+    } else {
+        let mut height = toml_edit::Value::from(drop_height);
+        height.decor_mut().set_prefix(" ");
+        doc.insert("drop_height", Item::Value(height));
+        if let Some(mut key) = doc.key_mut("drop_height") {
+            key.leaf_decor_mut().set_prefix(
+                "# Lowest point above the table when the stable-pose drops released each part, \
+                 metres\n# (written by `cell parts prepare`, whose --drop-height changes it).\n",
+            );
+        }
+    }
     let parts = doc
         .get_mut("part")
         .and_then(Item::as_array_of_tables_mut)

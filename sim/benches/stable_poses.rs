@@ -1,5 +1,6 @@
 //! Stable-pose drops as `cell parts prepare` runs them: 5 000 drops for each of the three USB-C
-//! parts of the committed catalog, on every core rayon has, with the default drop settings.
+//! parts of the committed catalog, on every core rayon has, with the default drop settings and
+//! the catalog's drop height.
 //! Prints wall time, CPU time (user + system, Linux) and each part's share of jittering drops.
 //!
 //! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
@@ -70,7 +71,8 @@ fn main() {
     let mut settings = DropSettings {
         drops,
         ..DropSettings::default()
-    };
+    }
+    .with_catalog(&catalog);
     apply(&mut settings, &args, "");
     if let Some(list) = args.iter().find_map(|a| a.strip_prefix("cylinder=")) {
         for n in list.split(',') {
@@ -83,7 +85,8 @@ fn main() {
         let mut reference = DropSettings {
             drops,
             ..DropSettings::default()
-        };
+        }
+        .with_catalog(&catalog);
         apply(&mut reference, &args, "ref.");
         for (part, mesh) in &parts {
             paired(&part.name, mesh, part.density(), &reference, &settings);

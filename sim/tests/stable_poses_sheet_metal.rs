@@ -94,7 +94,8 @@ fn the_top_shells_shares_stay_within_their_statistical_interval() {
         drops: 1000,
         seed: 9,
         ..DropSettings::default()
-    };
+    }
+    .with_catalog(&catalog);
     let report = stable_poses(&mesh, part.density(), &settings, None);
     assert_eq!(report.unsettled, 0, "{:#?}", report.classes);
     let n = report.drops as f64;

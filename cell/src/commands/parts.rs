@@ -31,9 +31,11 @@ pub struct PrepareArgs {
     /// Seed of the drop orientations (the same seed reproduces the table).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Height of each part's lowest point above the table at release, metres.
-    #[arg(long, default_value_t = DropSettings::default().drop_height)]
-    pub drop_height: f64,
+    /// Height of each part's lowest point above the table at release, metres: how the parts
+    /// arrive on the feeder. Recorded in the catalog (`drop_height`); without this flag the
+    /// catalog's value is used, else 0.03 (the seed's own drops).
+    #[arg(long)]
+    pub drop_height: Option<f64>,
     /// Parts dropped together onto one spot (1: each alone). A crowded feeder settles
     /// differently: parts that come to rest on a neighbour are counted apart.
     #[arg(long, default_value_t = 1)]
@@ -98,23 +100,27 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.drops == 0 {
         anyhow::bail!("--drops must be at least 1");
     }
-    if !(args.drop_height.is_finite() && (0.0..=1.0).contains(&args.drop_height)) {
-        anyhow::bail!(
-            "--drop-height must be between 0 and 1 m, got {}",
-            args.drop_height
-        );
+    if let Some(height) = args.drop_height
+        && !(0.0..=1.0).contains(&height)
+    {
+        anyhow::bail!("--drop-height must be between 0 and 1 m, got {height}");
     }
     if args.crowd == 0 || args.crowd > 1000 {
         anyhow::bail!("--crowd must be between 1 and 1000, got {}", args.crowd);
     }
     let engine = sim::stable_poses::DropEngine::from_name(&args.engine)
         .ok_or_else(|| anyhow::anyhow!("--engine {:?}: expected rapier or mujoco", args.engine))?;
+    let recorded = perception::part::Catalog::load(&args.catalog)?;
     let settings = DropSettings {
         drops: args.drops,
         seed: args.seed,
-        drop_height: args.drop_height,
         crowd: args.crowd,
         ..DropSettings::default()
+    }
+    .with_catalog(&recorded);
+    let settings = DropSettings {
+        drop_height: args.drop_height.unwrap_or(settings.drop_height),
+        ..settings
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} drops ({per_sec}, eta {eta})")?
@@ -127,9 +133,10 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     let elapsed = start.elapsed().as_secs_f64();
     let total: usize = prepared.iter().map(|p| p.report.drops).sum();
     println!(
-        "{}: {} parts, {total} drops in {elapsed:.1} s ({:.0} drops/s, {} threads)",
+        "{}: {} parts, {total} drops from {:.1} mm in {elapsed:.1} s ({:.0} drops/s, {} threads)",
         args.catalog.display(),
         prepared.len(),
+        settings.drop_height * 1e3,
         total as f64 / elapsed,
         rayon::current_num_threads()
     );

@@ -18,6 +18,15 @@ pub struct Catalog {
     /// One line for people.
     #[serde(default)]
     pub description: String,
+    /// Height of each part's lowest point above the table when the stable-pose drops released
+    /// it, metres: how the parts arrive on the feeder, which the table's shares depend on.
+    /// Written by `cell parts prepare`; absent in a catalog never prepared.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "drop_height"
+    )]
+    pub drop_height: Option<f64>,
     /// The parts.
     #[serde(rename = "part")]
     pub parts: Vec<PartSpec>,
@@ -30,6 +39,18 @@ pub struct Catalog {
     /// (line, column) of each part's `mesh` value in the file, by part index.
     #[serde(skip)]
     pub mesh_locations: Vec<(usize, usize)>,
+}
+
+/// A catalog's `drop_height`, refused unless it lies within 0–1 m.
+fn drop_height<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    let height = f64::deserialize(d)?;
+    if (0.0..=1.0).contains(&height) {
+        Ok(Some(height))
+    } else {
+        Err(serde::de::Error::custom(format!(
+            "drop_height must be between 0 and 1 m, got {height}"
+        )))
+    }
 }
 
 /// Where each `[[part]]`'s located keys (`mesh`, `view_symmetries`) are written, read with spans.
@@ -535,6 +556,31 @@ mod tests {
         assert_eq!((line, column), (8, 15), "{message}");
         assert!(message.contains("hole_weight must be"), "{message}");
         assert!(message.contains("0.5"), "{message}");
+    }
+
+    #[test]
+    fn a_drop_height_is_read_and_one_out_of_range_is_located() {
+        let parse = |line: &str| {
+            let text = format!(
+                "name = \"x\"\n{line}\n[[part]]\nname = \"a\"\nmesh = \"a.obj\"\nunit = \"mm\"\nmaterial = \"metal\"\n"
+            );
+            Catalog::parse(&text, Path::new("c.toml"))
+        };
+        assert_eq!(parse("").unwrap().drop_height, None);
+        assert_eq!(parse("drop_height = 0.03").unwrap().drop_height, Some(0.03));
+        match parse("drop_height = -0.01") {
+            Err(PartError::Catalog {
+                line,
+                column,
+                message,
+                ..
+            }) => {
+                assert_eq!((line, column), (2, 15), "{message}");
+                assert!(message.contains("drop_height must be"), "{message}");
+                assert!(message.contains("-0.01"), "{message}");
+            }
+            other => panic!("expected a located error, got {other:?}"),
+        }
     }
 
     #[test]

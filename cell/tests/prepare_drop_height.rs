@@ -1,0 +1,121 @@
+//! `cell parts prepare` records the drop height its stable-pose table was dropped from in the
+//! catalog, so that the file alone reproduces its table: the flag sets it, the catalog's value
+//! is used without the flag, and the default applies to a catalog that never had one.
+
+use std::path::Path;
+use std::process::Command;
+
+/// A 9 × 6 × 3 mm box as OBJ (millimetres).
+fn write_box(path: &Path) {
+    let (x, y, z) = (4.5, 3.0, 1.5);
+    let mut obj = String::new();
+    for i in 0..8 {
+        let s = |bit: usize, v: f64| if i & bit == 0 { -v } else { v };
+        obj += &format!("v {} {} {}\n", s(1, x), s(2, y), s(4, z));
+    }
+    // Each face as two triangles, wound outward (vertex i has bits x = 1, y = 2, z = 4).
+    for [a, b, c, d] in [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ] {
+        obj += &format!(
+            "f {} {} {}\nf {} {} {}\n",
+            a + 1,
+            b + 1,
+            c + 1,
+            a + 1,
+            c + 1,
+            d + 1
+        );
+    }
+    std::fs::write(path, obj).unwrap();
+}
+
+/// `cell parts prepare --drops 32 CATALOG EXTRA...`: its success, stdout and stderr.
+fn prepare(catalog: &Path, extra: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_cell"))
+        .args(["parts", "prepare", "--drops", "32"])
+        .args(extra)
+        .arg(catalog)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn the_catalog_records_the_drop_height_and_the_flag_changes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    write_box(&dir.path().join("box.obj"));
+    let catalog = dir.path().join("c.toml");
+    std::fs::write(
+        &catalog,
+        "name = \"box\"\n[[part]]\nname = \"box\"\nmesh = \"box.obj\"\nunit = \"mm\"\n\
+         material = \"metal\"\n",
+    )
+    .unwrap();
+    let read = || std::fs::read_to_string(&catalog).unwrap();
+
+    // Never prepared: the default height, written before the parts with what it means.
+    let (ok, stdout, stderr) = prepare(&catalog, &[]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("drops from 30.0 mm"), "{stdout}");
+    let text = read();
+    assert!(
+        text.contains("# Lowest point above the table when the stable-pose drops released")
+            && text.contains("\ndrop_height = 0.03\n"),
+        "{text}"
+    );
+    assert!(text.find("drop_height").unwrap() < text.find("[[part]]").unwrap());
+    let loaded = perception::part::Catalog::load(&catalog).unwrap();
+    assert_eq!(loaded.drop_height, Some(0.03));
+    assert!(!loaded.parts[0].stable_poses.is_empty());
+
+    // The flag replaces the recorded value, keeping a comment written beside it.
+    std::fs::write(
+        &catalog,
+        read().replace("drop_height = 0.03\n", "drop_height = 0.03 # our hopper\n"),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = prepare(&catalog, &["--drop-height", "0.02"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("drops from 20.0 mm"), "{stdout}");
+    let text = read();
+    assert!(
+        text.contains("\ndrop_height = 0.02 # our hopper\n"),
+        "{text}"
+    );
+    assert_eq!(text.matches("drop_height =").count(), 1, "{text}");
+
+    // Without the flag the recorded value is used and kept.
+    let (ok, stdout, stderr) = prepare(&catalog, &[]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("drops from 20.0 mm"), "{stdout}");
+    assert!(read().contains("\ndrop_height = 0.02 # our hopper\n"));
+
+    // Out of range, from the flag or from the file: refused, the file untouched.
+    let before = read();
+    let (ok, _, stderr) = prepare(&catalog, &["--drop-height", "2"]);
+    assert!(
+        !ok && stderr.contains("--drop-height must be between 0 and 1 m, got 2"),
+        "{stderr}"
+    );
+    std::fs::write(
+        &catalog,
+        before.replace("drop_height = 0.02", "drop_height = -1.0"),
+    )
+    .unwrap();
+    let (ok, _, stderr) = prepare(&catalog, &[]);
+    assert!(
+        !ok && stderr.contains("c.toml:")
+            && stderr.contains("drop_height must be between 0 and 1 m"),
+        "{stderr}"
+    );
+}
