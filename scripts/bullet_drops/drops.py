@@ -14,7 +14,8 @@ Blender itself (bpy from PyPI) without BlenderProc, whose installer downloads Bl
 - each rest orientation assigned to the nearest stable pose of the prepared catalog (its
   `up_in_part`), and the shares printed beside the catalog's.
 
-`--margin`, `--parts-per-scene`, `--drop-height` and `--com` change one setting at a time, to tell
+`--margin`, `--parts-per-scene`, `--drop-height`, `--substeps`, `--solver-iterations` and `--com`
+change one setting at a time, to tell
 which of BlenderProc's choices moves the shares. Bullet computes a convex hull's inertia from its
 bounding box, whatever the mass distribution; that cannot be changed from Blender.
 
@@ -201,8 +202,8 @@ def scene_drops(mesh_path, scale, args, rng):
     scene.render.fps = FPS
     bpy.ops.rigidbody.world_add()
     world = scene.rigidbody_world
-    world.substeps_per_frame = 10
-    world.solver_iterations = 10
+    world.substeps_per_frame = args.substeps
+    world.solver_iterations = args.solver_iterations
     board()
     part, origin = template(mesh_path, scale, args.com)
     radius = max((mathutils.Vector(v.co)).length for v in part.data.vertices)
@@ -250,12 +251,16 @@ def main():
     parser.add_argument("--drop-height", type=float, default=0.03,
                         help="height of a part's centre of mass above the board at release, metres, plus up to "
                         "1 cm (the seed: 0.03)")
+    parser.add_argument("--substeps", type=int, default=10,
+                        help="physics steps per 1/24 s frame (BlenderProc: 10, so 240 Hz)")
+    parser.add_argument("--solver-iterations", type=int, default=10,
+                        help="constraint solver iterations per step (BlenderProc: 10)")
     parser.add_argument("--com", choices=["volume", "origin"], default="volume",
                         help="centre of mass: the mesh's centre of volume (BlenderProc) or the file's origin")
     parser.add_argument("--out", help="write every drop's up vector and height here (JSON)")
     args = parser.parse_args()
-    if args.scenes < 1 or args.parts_per_scene < 1:
-        fail("--scenes and --parts-per-scene must be at least 1")
+    if min(args.scenes, args.parts_per_scene, args.substeps, args.solver_iterations) < 1:
+        fail("--scenes, --parts-per-scene, --substeps and --solver-iterations must be at least 1")
     part, mesh, scale, catalog_height = load_part(args.catalog, args.part)
     if not mesh.is_file():
         fail(f"{mesh}: no such mesh file")

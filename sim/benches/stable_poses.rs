@@ -6,8 +6,8 @@
 //! `cargo bench -p sim --bench stable_poses` (`-- DROPS` for another count per part, `-- FILE.toml`
 //! for the parts of another catalog, `-- rest_time=S` for another rest time in seconds, `-- solver_iterations=N`,
 //! `-- one_contact_per_point=0` for every triangle's contacts, `-- stop_when_trapped=0` to run
-//! every drop to rest, `-- engine=mujoco` for MuJoCo's
-//! drops).
+//! every drop to rest, `-- drop_height=M`, `-- friction=F`, `-- restitution=R`, `-- engine=mujoco`
+//! for MuJoCo's drops).
 //! One timed run, not criterion's repeats: a run takes tens of seconds.
 //!
 //! `-- paired rest_time=S` drops each part twice, with the default settings (or those changed
@@ -162,6 +162,15 @@ fn apply(settings: &mut DropSettings, args: &[String], prefix: &str) {
     if let Some(v) = value("stop_when_trapped") {
         settings.stop_when_trapped = flag(v);
     }
+    if let Some(h) = value("drop_height") {
+        settings.drop_height = h.parse().expect("drop_height=METRES");
+    }
+    if let Some(f) = value("friction") {
+        settings.friction = f.parse().expect("friction=COEFFICIENT");
+    }
+    if let Some(r) = value("restitution") {
+        settings.restitution = r.parse().expect("restitution=COEFFICIENT");
+    }
 }
 
 /// Every drop's outcome in order, batched as [`stable_poses`] batches them, and the CPU seconds.
@@ -226,7 +235,10 @@ fn paired(name: &str, mesh: &TriMesh, density: f64, a: &DropSettings, b: &DropSe
 /// The settings a paired comparison varies, in words.
 fn describe(s: &DropSettings) -> String {
     format!(
-        "rest {} s, {} iterations, contacts {}, {}",
+        "from {} mm, friction {}, restitution {}, rest {} s, {} iterations, contacts {}, {}",
+        s.drop_height * 1e3,
+        s.friction,
+        s.restitution,
         s.rest_time,
         s.solver_iterations,
         if s.one_contact_per_point {

@@ -111,17 +111,16 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     let engine = sim::stable_poses::DropEngine::from_name(&args.engine)
         .ok_or_else(|| anyhow::anyhow!("--engine {:?}: expected rapier or mujoco", args.engine))?;
     let recorded = perception::part::Catalog::load(&args.catalog)?;
-    let settings = DropSettings {
+    let mut settings = DropSettings {
         drops: args.drops,
         seed: args.seed,
         crowd: args.crowd,
         ..DropSettings::default()
     }
     .with_catalog(&recorded);
-    let settings = DropSettings {
-        drop_height: args.drop_height.unwrap_or(settings.drop_height),
-        ..settings
-    };
+    if let Some(height) = args.drop_height {
+        settings.drop_height = height;
+    }
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} drops ({per_sec}, eta {eta})")?
             .progress_chars("=> "),
