@@ -5,34 +5,13 @@
 use std::path::Path;
 use std::process::Command;
 
+use nalgebra::Vector3;
+use perception::part::{LengthUnit, TriMesh, write_obj};
+
 /// A 9 × 6 × 3 mm box as OBJ (millimetres).
 fn write_box(path: &Path) {
-    let (x, y, z) = (4.5, 3.0, 1.5);
-    let mut obj = String::new();
-    for i in 0..8 {
-        let s = |bit: usize, v: f64| if i & bit == 0 { -v } else { v };
-        obj += &format!("v {} {} {}\n", s(1, x), s(2, y), s(4, z));
-    }
-    // Each face as two triangles, wound outward (vertex i has bits x = 1, y = 2, z = 4).
-    for [a, b, c, d] in [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ] {
-        obj += &format!(
-            "f {} {} {}\nf {} {} {}\n",
-            a + 1,
-            b + 1,
-            c + 1,
-            a + 1,
-            c + 1,
-            d + 1
-        );
-    }
-    std::fs::write(path, obj).unwrap();
+    let block = TriMesh::cuboid(Vector3::new(0.009, 0.006, 0.003));
+    std::fs::write(path, write_obj(&block, LengthUnit::Mm, "a block")).unwrap();
 }
 
 /// `cell parts prepare --drops 32 CATALOG EXTRA...`: its success, stdout and stderr.
