@@ -128,6 +128,9 @@ fn prepare_loaded(
 
 /// Prepares every non-fixture part of the catalog at `path` and rewrites the file atomically.
 ///
+/// The parts drop with `settings` as given, and their drop height is recorded in the file; to
+/// drop from the height the catalog records, pass `settings.with_catalog(&catalog)`.
+///
 /// Every mesh of the catalog (fixtures too) is loaded and checked before the first drop, so a
 /// file that cannot be used fails at once, named with the catalog line that refers to it.
 pub fn prepare_catalog(
