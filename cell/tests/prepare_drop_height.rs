@@ -2,8 +2,9 @@
 //! catalog, so that the file alone reproduces its table: the flag sets it, the catalog's value
 //! is used without the flag, and the default applies to a catalog that never had one.
 
+mod support;
+
 use std::path::Path;
-use std::process::Command;
 
 use nalgebra::Vector3;
 use perception::part::{LengthUnit, TriMesh, write_obj};
@@ -14,14 +15,15 @@ fn write_box(path: &Path) {
     std::fs::write(path, write_obj(&block, LengthUnit::Mm, "a block")).unwrap();
 }
 
-/// `cell parts prepare --drops 32 CATALOG EXTRA...`: its success, stdout and stderr.
+/// `cell parts prepare --drops 32 EXTRA... CATALOG`: its success, stdout and stderr.
 fn prepare(catalog: &Path, extra: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_cell"))
-        .args(["parts", "prepare", "--drops", "32"])
-        .args(extra)
-        .arg(catalog)
-        .output()
-        .unwrap();
+    let catalog = catalog.to_str().unwrap();
+    let args: Vec<&str> = ["parts", "prepare", "--drops", "32"]
+        .into_iter()
+        .chain(extra.iter().copied())
+        .chain([catalog])
+        .collect();
+    let out = support::cell(&args);
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
