@@ -247,7 +247,8 @@ def main():
     parser.add_argument("--parts-per-scene", type=int, default=30, help="parts dropped together (the seed: 30)")
     parser.add_argument("--seed", type=int, default=1, help="seed of positions and orientations")
     parser.add_argument("--margin", type=float, default=0.001,
-                        help="Bullet's collision margin, metres (BlenderProc: 0.001, embedded in the hull)")
+                        help="the parts' collision margin, metres, added around each hull (BlenderProc: "
+                        "0.001; the board keeps 0.001, which only raises its flat top)")
     parser.add_argument("--drop-height", type=float, default=0.03,
                         help="height of a part's centre of mass above the board at release, metres, plus up to "
                         "1 cm (the seed: 0.03)")
