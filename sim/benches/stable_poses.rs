@@ -68,11 +68,14 @@ fn main() {
             (p, mesh)
         })
         .collect();
-    let mut settings = DropSettings {
+    // The catalog's own settings; `NAME=VALUE` arguments change them, `ref.NAME=VALUE` the
+    // reference of a paired run.
+    let base = DropSettings {
         drops,
         ..DropSettings::default()
     }
     .with_catalog(&catalog);
+    let mut settings = base.clone();
     apply(&mut settings, &args, "");
     if let Some(list) = args.iter().find_map(|a| a.strip_prefix("cylinder=")) {
         for n in list.split(',') {
@@ -82,11 +85,7 @@ fn main() {
         return;
     }
     if args.iter().any(|a| a == "paired") {
-        let mut reference = DropSettings {
-            drops,
-            ..DropSettings::default()
-        }
-        .with_catalog(&catalog);
+        let mut reference = base;
         apply(&mut reference, &args, "ref.");
         for (part, mesh) in &parts {
             paired(&part.name, mesh, part.density(), &reference, &settings);
