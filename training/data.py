@@ -97,12 +97,14 @@ def project(K, dist, p_cam):
     return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
 
 
-def load_feeder(root, folder, obj_to_part, limit=None):
+def load_feeder(root, folder, obj_to_part, limit=None, px_per_mm=None):
     """Feeder frames of BOP split folder `folder` (train_feeder / test_feeder).
 
-    Each frame: rgb uint8 [H,W,3]; at stride 4: cls int64 [H/4,W/4] (0 background, 1+part),
-    inst int64 (-1 background, else instance index), offset float32 [2,H/4,W/4] (to the
-    instance centre, px); centres float32 [K,2] (projected part origins), inst_part [K].
+    Each frame: rgb uint8 [H,W,3]; at stride 4: cls int8 [H/4,W/4] (0 background, 1+part),
+    inst int16 (-1 background, else instance index; both narrow, as a thousand frames are held),
+    offset float32 [2,H/4,W/4] (to the instance centre, px); centres float32 [K,2] (projected part origins), inst_part [K].
+    With `px_per_mm`, each frame and its masks are resampled so that the table shows at that
+    scale (what the cell does before the nets see a frame), else they are as rendered.
     Window sides not divisible by 4 are cropped to the multiple (the right/bottom rows)."""
     base = os.path.join(root, folder)
     if not os.path.isdir(base):
@@ -116,7 +118,9 @@ def load_feeder(root, folder, obj_to_part, limit=None):
             cams = json.load(f)
         with open(os.path.join(sdir, "scene_gt.json")) as f:
             gts = json.load(f)
-        items += [(sdir, f"{folder}/{scene}", int(k), cams[k], gts[k], obj_to_part) for k in sorted(cams, key=int)]
+        items += [
+            (sdir, f"{folder}/{scene}", int(k), cams[k], gts[k], obj_to_part, px_per_mm) for k in sorted(cams, key=int)
+        ]
     return _parallel(_feeder_frame, items[:limit])
 
 
@@ -131,26 +135,45 @@ def table_px_per_mm(root, folder):
         if not scene.isdigit() or not os.path.isfile(path):
             continue
         with open(path) as f:
-            for cam in json.load(f).values():
-                r = np.asarray(cam["cam_R_w2c"], dtype=np.float64).reshape(3, 3)
-                distance = abs(r[:, 2] @ np.asarray(cam["cam_t_w2c"], dtype=np.float64))
-                scales.append(cam["cam_K"][0] / distance)
+            scales += [frame_px_per_mm(cam) for cam in json.load(f).values()]
     if not scales:
         raise FileNotFoundError(f"{base}: no scene_camera.json to read the table's scale from")
     return min(scales), max(scales)
 
 
-def _feeder_frame(sdir, name, im, cam, gt, obj_to_part):
+def frame_px_per_mm(cam):
+    """The table's scale in one frame, pixels per mm: the focal length over the camera's distance
+    from the table plane (world z = 0), from the frame's BOP `scene_camera` entry."""
+    r = np.asarray(cam["cam_R_w2c"], dtype=np.float64).reshape(3, 3)
+    distance = abs(r[:, 2] @ np.asarray(cam["cam_t_w2c"], dtype=np.float64))
+    return cam["cam_K"][0] / distance
+
+
+def _resampled(image, size):
+    """`image` (uint8, HxW or HxWx3) resampled to `size` (w, h) with PIL's antialiased triangle
+    filter, the filter the cell resamples its frames with."""
+    return np.asarray(Image.fromarray(image).resize(size, Image.Resampling.BILINEAR))
+
+
+def _feeder_frame(sdir, name, im, cam, gt, obj_to_part, px_per_mm=None):
     """Frame `im` of scene folder `sdir` with its stride-4 targets (see `load_feeder`)."""
     rgb = _png(os.path.join(sdir, "rgb", f"{im:06d}.png"))
+    masks = [_png(os.path.join(sdir, "mask_visib", f"{im:06d}_{k:06d}.png")) for k in range(len(gt))]
+    t = np.asarray([g["cam_t_m2c"] for g in gt], dtype=np.float64)
+    centres = project(cam["cam_K"], cam["dist_coeffs"], t)
+    if px_per_mm is not None:
+        # Pixel centres at integer coordinates: x' = (x + 0.5) * w' / w - 0.5 (and so for y).
+        f = px_per_mm / frame_px_per_mm(cam)
+        h0, w0 = rgb.shape[:2]
+        size = (max(4, round(w0 * f)), max(4, round(h0 * f)))
+        rgb = _resampled(rgb, size)
+        masks = [_resampled(m, size) for m in masks]
+        centres = (centres + 0.5) * np.asarray([size[0] / w0, size[1] / h0]) - 0.5
+    centres = centres.astype(np.float32)
     H, W = rgb.shape[0] // 4 * 4, rgb.shape[1] // 4 * 4
     rgb = rgb[:H, :W]
-    t = np.asarray([g["cam_t_m2c"] for g in gt], dtype=np.float64)
-    centres = project(cam["cam_K"], cam["dist_coeffs"], t).astype(np.float32)
     inst_part = np.asarray([obj_to_part[g["obj_id"]] for g in gt], dtype=np.int64)
-    masks = np.stack(
-        [_png(os.path.join(sdir, "mask_visib", f"{im:06d}_{k:06d}.png"))[:H, :W] > 127 for k in range(len(gt))]
-    )
+    masks = np.stack([m[:H, :W] > 127 for m in masks])
     # Share of each 4x4 cell per instance; background is what is left.
     share = masks.reshape(len(gt), H // 4, 4, W // 4, 4).mean(axis=(2, 4))
     bg = 1.0 - share.sum(axis=0)
@@ -166,8 +189,8 @@ def _feeder_frame(sdir, name, im, cam, gt, obj_to_part):
     offset[1] = np.where(fg, centres[best, 1] - cy, 0)
     return {
         "rgb": rgb,
-        "cls": cls.astype(np.int64),
-        "inst": inst.astype(np.int64),
+        "cls": cls.astype(np.int8),
+        "inst": inst.astype(np.int16),
         "offset": offset,
         "centres": centres,
         "inst_part": inst_part,

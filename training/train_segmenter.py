@@ -68,7 +68,7 @@ def batch_of(frames, idx, size, rng, turn=False):
         cls.append(np.ascontiguousarray(crop[1]))
         off.append(np.ascontiguousarray(crop[2]))
     x = torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2)
-    return x, torch.from_numpy(np.stack(cls)), torch.from_numpy(np.stack(off))
+    return x, torch.from_numpy(np.stack(cls)).long(), torch.from_numpy(np.stack(off))
 
 
 class Batches(torch.utils.data.IterableDataset):
@@ -178,7 +178,7 @@ def evaluate(model, frames, parts, device, max_frames=None):
         h, w = H // 4, W // 4
         pred = logits[0].argmax(0).cpu().numpy()[:h, :w]
         off = offsets[0].cpu().numpy()[:, :h, :w]
-        conf += np.bincount(f["cls"].ravel() * n_cls + pred.ravel(), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
+        conf += np.bincount(f["cls"].ravel().astype(np.int64) * n_cls + pred.ravel(), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
         inst, classes = group(pred, off, logits[0].softmax(0).cpu().numpy()[:, :h, :w])
         gt_ids = [k for k in range(len(f["inst_part"])) if (f["inst"] == k).sum() >= MIN_GT_CELLS]
         n_gt += len(gt_ids)
@@ -215,6 +215,12 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=0, help="processes preparing batches (0: the training process)")
     ap.add_argument("--widths", default=",".join(map(str, Segmenter.WIDTHS)), help="channels at strides 2, 4, 8, 16")
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop by random quarter turns (augmentation)")
+    ap.add_argument(
+        "--fixed-scale",
+        action="store_true",
+        help="resample every frame to the middle of the training frames' table scales, the scale the cell shows "
+        "the net, so that it learns parts' sizes (a 12 mm peg from a 16 mm one); the manifest then records that one scale",
+    )
     args = ap.parse_args(argv)
     if args.size % 16:
         sys.exit(f"--size {args.size} must be a multiple of 16")
@@ -223,8 +229,14 @@ def main(argv=None):
     t0 = time.time()
     parts = catalog.assembled_parts(args.catalog)
     mapping = obj_ids(args.train, parts)
-    train = load_feeder(args.train, "train_feeder", mapping, args.limit)
-    test = load_feeder(args.test, "test_feeder", mapping, args.limit)
+    scales = table_px_per_mm(args.train, "train_feeder")
+    shown = None
+    if args.fixed_scale:
+        shown = float(np.sqrt(scales[0] * scales[1]))
+        scales = (shown, shown)
+        print(f"frames resampled to {shown:.4f} px/mm", flush=True)
+    train = load_feeder(args.train, "train_feeder", mapping, args.limit, px_per_mm=shown)
+    test = load_feeder(args.test, "test_feeder", mapping, args.limit, px_per_mm=shown)
     print(f"loaded {len(train)} train / {len(test)} test feeder frames in {time.time() - t0:.0f} s", flush=True)
 
     model = Segmenter(len(parts), tuple(int(w) for w in args.widths.split(","))).to(device)
@@ -335,7 +347,7 @@ def main(argv=None):
             "script": "train_segmenter.py",
             "dataset_seed": args.dataset_seed,
             "dataset_size": len(train),
-            "table_px_per_mm": table_px_per_mm(args.train, "train_feeder"),
+            "table_px_per_mm": scales,
             "code_commit": code_commit(),
             "curve": curve_name,
             "test_metrics": met,

@@ -53,8 +53,9 @@ fn smoke(py: &Path, catalog: &Path, dir: &Path) {
             "0",
             "--test-overviews",
             "0",
+            // Two frames, from two camera heights: `--fixed-scale` must make their range one scale.
             "--train-feeder",
-            "1",
+            "2",
             "--test-feeder",
             "1",
             "--quiet",
