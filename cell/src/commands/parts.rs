@@ -100,10 +100,9 @@ fn prepare(args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if args.drops == 0 {
         anyhow::bail!("--drops must be at least 1");
     }
-    if let Some(height) = args.drop_height
-        && !(0.0..=1.0).contains(&height)
-    {
-        anyhow::bail!("--drop-height must be between 0 and 1 m, got {height}");
+    if let Some(height) = args.drop_height {
+        perception::part::checked_drop_height(height)
+            .map_err(|why| anyhow::anyhow!("--drop-height {why}"))?;
     }
     if args.crowd == 0 || args.crowd > 1000 {
         anyhow::bail!("--crowd must be between 1 and 1000, got {}", args.crowd);

@@ -41,16 +41,27 @@ pub struct Catalog {
     pub mesh_locations: Vec<(usize, usize)>,
 }
 
-/// A catalog's `drop_height`, refused unless it lies within 0–1 m.
-fn drop_height<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
-    let height = f64::deserialize(d)?;
-    if (0.0..=1.0).contains(&height) {
-        Ok(Some(height))
+/// The drop heights a catalog or `cell parts prepare --drop-height` may give, metres.
+const DROP_HEIGHT_RANGE: std::ops::RangeInclusive<f64> = 0.0..=1.0;
+
+/// `height` if it is a drop height a catalog may record (0–1 m), else what is wrong with it.
+pub fn checked_drop_height(height: f64) -> Result<f64, String> {
+    if DROP_HEIGHT_RANGE.contains(&height) {
+        Ok(height)
     } else {
-        Err(serde::de::Error::custom(format!(
-            "drop_height must be between 0 and 1 m, got {height}"
-        )))
+        Err(format!(
+            "must be between {} and {} m, got {height}",
+            DROP_HEIGHT_RANGE.start(),
+            DROP_HEIGHT_RANGE.end()
+        ))
     }
+}
+
+/// A catalog's `drop_height`, refused unless [`checked_drop_height`] accepts it.
+fn drop_height<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    checked_drop_height(f64::deserialize(d)?)
+        .map(Some)
+        .map_err(|why| serde::de::Error::custom(format!("drop_height {why}")))
 }
 
 /// Where each `[[part]]`'s located keys (`mesh`, `view_symmetries`) are written, read with spans.

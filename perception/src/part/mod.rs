@@ -22,7 +22,7 @@ mod turned_surface;
 pub use alike::{ALIKE_WITHIN_REL, AlikePoses, alike_stable_poses};
 pub use catalog::{
     Catalog, Grasp, HoleWeight, MAX_CHORDAL_TOLERANCE_M, MIN_CHORDAL_TOLERANCE_M, Material,
-    PartRole, PartSpec, Symmetry, ViewSymmetry, line_column,
+    PartRole, PartSpec, Symmetry, ViewSymmetry, checked_drop_height, line_column,
 };
 pub use error::{MeshAt, PartError};
 pub use hull::{EXACT_HULL_MAX_POINTS, HULL_JITTER_REL, convex_hull, convex_hull_shape};
