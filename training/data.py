@@ -102,7 +102,8 @@ def load_feeder(root, folder, obj_to_part, limit=None, px_per_mm=None):
 
     Each frame: rgb uint8 [H,W,3]; at stride 4: cls int8 [H/4,W/4] (0 background, 1+part),
     inst int16 (-1 background, else instance index; both narrow, as a thousand frames are held),
-    offset float32 [2,H/4,W/4] (to the instance centre, px); centres float32 [K,2] (projected part origins), inst_part [K].
+    offset float32 [2,H/4,W/4] (to the instance centre, px); centres float32 [K,2] (projected
+    part origins), inst_part [K].
     With `px_per_mm`, each frame and its masks are resampled so that the table shows at that
     scale (what the cell does before the nets see a frame), else they are as rendered.
     Window sides not divisible by 4 are cropped to the multiple (the right/bottom rows)."""

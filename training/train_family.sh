@@ -2,6 +2,7 @@
 # A part family's learned cell in one command: datasets of the catalog (fixed seeds) -> the
 # segmenter and the keypoint net trained side by side -> ONNX + manifests in
 # scenarios/models/NAME -> `cell eval` on the test feeder frames and at a cell's feeder density.
+# The segmenter sees every frame at one table scale (--fixed-scale), the scale the cell shows it.
 # Uses the GPU when torch sees one, and needs none. See docs/guides/perception.md (A new part family).
 #
 # Usage: training/train_family.sh CATALOG [NAME]
@@ -74,7 +75,7 @@ runs="$DATA/runs"
 mkdir -p "$runs"
 train() { (cd training && "$py" "$@" --train "$DATA/train" --test "$DATA/test" --catalog "$catalog" \
     --dataset-seed 1 --threads "$threads" --max-minutes "$MINUTES" --out "$OUT"); }
-train train_segmenter.py --steps 100000 --batch "$seg_batch" --workers "$seg_workers" --eval-every 500 \
+train train_segmenter.py --steps 100000 --batch "$seg_batch" --workers "$seg_workers" --eval-every 500 --fixed-scale \
     --checkpoint "$runs/segmenter.pt" "${seg_init[@]}" > "$runs/segmenter.log" 2>&1 &
 seg=$!
 train train_keypoints.py --epochs 1000 --eval-every 5 --batch "$kp_batch" \
