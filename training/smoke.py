@@ -34,6 +34,12 @@ def main():
         lo, hi = tomllib.load(f)["training"]["table_px_per_mm"]
     if lo != hi:
         sys.exit(f"smoke: --fixed-scale recorded the scales [{lo}, {hi}], want one")
+    # Re-exported without the flag, those weights are still evaluated at the scale they learned.
+    again = os.path.join(out, "fixed_scale_again")
+    train_segmenter.main(seg + ["--out", again, "--eval-only", os.path.join(fixed, "segmenter.pt")])
+    with open(os.path.join(again, "segmenter.toml"), "rb") as f:
+        if (got := tomllib.load(f)["training"]["table_px_per_mm"]) != [lo, hi]:
+            sys.exit(f"smoke: --eval-only of weights trained at {lo} px/mm recorded {got}")
     for f in ("keypoints.onnx", "keypoints.toml", "keypoints_curve.csv", "segmenter.onnx", "segmenter.toml", "segmenter_curve.csv"):
         if not os.path.isfile(os.path.join(out, f)):
             sys.exit(f"smoke: {f} was not written to {out}")

@@ -206,6 +206,16 @@ def evaluate(model, frames, parts, device, max_frames=None):
     return m
 
 
+def trained_scale(path):
+    """The one table scale (px/mm) the segmenter weights in `path` were trained at with
+    `--fixed-scale`, as the `.pt` beside a model records it; None for a bare checkpoint, weights
+    trained at the rendered scales, or no path."""
+    if not path:
+        return None
+    state = torch.load(path, map_location="cpu")
+    return state.get("px_per_mm") if "state_dict" in state else None
+
+
 def main(argv=None):
     ap = training_args(__doc__, "{split}_feeder/", "segmenter", "frames per split")
     ap.add_argument("--steps", type=int, default=2000)
@@ -219,7 +229,8 @@ def main(argv=None):
         "--fixed-scale",
         action="store_true",
         help="resample every frame to the middle of the training frames' table scales, the scale the cell shows "
-        "the net, so that it learns parts' sizes (a 12 mm peg from a 16 mm one); the manifest then records that one scale",
+        "the net, so that it learns parts' sizes (a 12 mm peg from a 16 mm one); the manifest and the .pt beside the "
+        "model then record that one scale, and --eval-only of those weights evaluates at it",
     )
     args = ap.parse_args(argv)
     if args.size % 16:
@@ -230,9 +241,16 @@ def main(argv=None):
     parts = catalog.assembled_parts(args.catalog)
     mapping = obj_ids(args.train, parts)
     scales = table_px_per_mm(args.train, "train_feeder")
-    shown = None
-    if args.fixed_scale:
-        shown = float(np.sqrt(scales[0] * scales[1]))
+    shown = float(np.sqrt(scales[0] * scales[1])) if args.fixed_scale else None
+    trained = trained_scale(args.eval_only or args.init)
+    if args.eval_only and trained is not None:
+        # Weights learned at one scale are evaluated (and their manifest written) at that scale,
+        # whichever training set or flag the re-export names.
+        shown = trained
+    elif trained is not None and shown is None:
+        print(f"note: {args.init} was trained at one scale ({trained:.4f} px/mm); this cycle trains "
+              "at the rendered scales (add --fixed-scale to keep one)", flush=True)
+    if shown is not None:
         scales = (shown, shown)
         print(f"frames resampled to {shown:.4f} px/mm", flush=True)
     train = load_feeder(args.train, "train_feeder", mapping, args.limit, px_per_mm=shown)
@@ -312,7 +330,7 @@ def main(argv=None):
         torch.save(model.state_dict(), args.checkpoint)
     # The torch weights travel with the ONNX file: scripts/seed_compare runs them in eager mode.
     torch.save(
-        {"widths": list(model.widths), "parts": parts, "state_dict": model.cpu().state_dict()},
+        {"widths": list(model.widths), "parts": parts, "px_per_mm": shown, "state_dict": model.cpu().state_dict()},
         os.path.join(args.out, "segmenter.pt"),
     )
     model.to(device)
