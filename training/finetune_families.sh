@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# A further training cycle of the USB-C pair on frames with the randomisation families (issue 45):
+# the pair in FROM fine-tuned on 2 CPU cores, as the committed pair's latest cycle was made
+# (2026-11-30). Datasets (fixed seeds; the families set holds the plain set's scenes in other
+# looks) -> the segmenter and the keypoint net side by side on the families set, one thread each
+# -> the segmenter again on the families and plain frames together, at half the learning rate,
+# so that it keeps our renderer's plain look -> ONNX + manifests in OUT -> `cell eval` on the
+# committed Blender Cycles sets and on our own test and cell-density frames. Uses the GPU when
+# torch sees one, and needs none. See training/README.md (The committed models).
+#
+# Usage: training/finetune_families.sh FROM
+#   FROM  a folder with the pair's segmenter.pt and keypoints.pt to start from (for the committed
+#         pair's cycle: `git show 73fdd80:scenarios/models/usbc/segmenter.pt` and keypoints.pt)
+# Environment (defaults in brackets):
+#   FAMILIES      `cell dataset --families` of the families set [all]
+#   MINUTES       budget of each net on the families set [60]; MIX_MINUTES the segmenter's
+#                 further cycle on both sets [30]
+#   TRAIN_CROPS (per part) [4000], TRAIN_FEEDER [1600], TEST_CROPS [300], TEST_FEEDER [100]
+#   DATA, OUT     dataset folder [training/data], model folder [scenarios/models/usbc]
+#   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
+#   PY            a Python with torch [training/.venv/bin/python, provisioned if missing]
+set -euo pipefail
+[ $# -eq 1 ] || { sed -n '2,22p' "$0" >&2; exit 2; }
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+from="$(realpath -e "$1")" || { echo "finetune_families: no folder at $1" >&2; exit 2; }
+for net in segmenter keypoints; do
+    [ -f "$from/$net.pt" ] || { echo "finetune_families: $from has no $net.pt" >&2; exit 2; }
+done
+cd "$root"
+FAMILIES="${FAMILIES:-all}"
+MINUTES="${MINUTES:-60}"
+MIX_MINUTES="${MIX_MINUTES:-30}"
+TRAIN_CROPS="${TRAIN_CROPS:-4000}"
+TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
+TEST_CROPS="${TEST_CROPS:-300}"
+TEST_FEEDER="${TEST_FEEDER:-100}"
+DATA="$(realpath -m "${DATA:-training/data}")"
+OUT="$(realpath -m "${OUT:-scenarios/models/usbc}")"
+read -r -a cell <<< "${CELL:-cargo run --release -q -p cell --}"
+if [[ -z "${PY:-}" ]]; then
+    training/provision.sh
+    PY="$root/training/.venv/bin/python"
+fi
+runs="$root/training/runs/finetune_families"
+mkdir -p "$DATA" "$OUT" "$runs"
+
+echo "== datasets, $(date +%T)"
+sets=(--train-overviews 0 --test-overviews 0 --quiet)
+"${cell[@]}" dataset --out "$DATA/usbc_families" --seed 1 --families "$FAMILIES" --train-crops "$TRAIN_CROPS" \
+    --test-crops 0 --train-feeder "$TRAIN_FEEDER" "${sets[@]}"
+"${cell[@]}" dataset --out "$DATA/usbc_train" --seed 1 --train-crops 0 --test-crops 0 \
+    --train-feeder "$TRAIN_FEEDER" "${sets[@]}"
+"${cell[@]}" dataset --out "$DATA/usbc_test" --seed 2 --train-crops 0 --test-crops "$TEST_CROPS" \
+    --test-feeder "$TEST_FEEDER" "${sets[@]}"
+"${cell[@]}" dataset --out "$DATA/cell_feeder" --seed 4 --train-crops 0 --test-crops 0 --test-feeder 100 \
+    --camera-distance 1.51 --feeder-drop-half 0.035 "${sets[@]}"
+# Both sets' feeder frames in one dataset root (the trainer reads every scene folder under it).
+mix="$DATA/usbc_families_and_plain"
+rm -rf "$mix"
+mkdir -p "$mix/train_feeder"
+cp "$DATA/usbc_families/camera.json" "$mix/"
+ln -s "$DATA/usbc_families/models" "$mix/models"
+for look in families train; do
+    for scene in "$DATA/usbc_$look/train_feeder"/*/; do
+        ln -s "$scene" "$mix/train_feeder/${look}_$(basename "$scene")"
+    done
+done
+
+echo "== segmenter and keypoint net side by side on the families set, $MINUTES min each, $(date +%T)"
+common=(--test "$DATA/usbc_test" --dataset-seed 1)
+pushd training > /dev/null
+"$PY" train_segmenter.py "${common[@]}" --threads 1 --train "$DATA/usbc_families" --out "$runs/segmenter" \
+    --steps 1000000 --lr 1e-3 --max-minutes "$MINUTES" --eval-every 500 --init "$from/segmenter.pt" \
+    > "$runs/segmenter.log" 2>&1 &
+seg=$!
+"$PY" train_keypoints.py "${common[@]}" --threads 1 --train "$DATA/usbc_families" --out "$OUT" \
+    --epochs 100000 --lr 1e-3 --max-minutes "$MINUTES" --init "$from/keypoints.pt" \
+    > "$runs/keypoints.log" 2>&1 &
+kp=$!
+status=0
+wait "$seg" || { status=1; echo "segmenter failed:"; tail -20 "$runs/segmenter.log"; }
+wait "$kp" || { status=1; echo "keypoint net failed:"; tail -20 "$runs/keypoints.log"; }
+[[ "$status" == 0 ]] || exit "$status"
+
+echo "== segmenter on the families and plain frames, $MIX_MINUTES min, $(date +%T)"
+"$PY" train_segmenter.py "${common[@]}" --threads 2 --train "$mix" --out "$OUT" \
+    --steps 1000000 --lr 5e-4 --max-minutes "$MIX_MINUTES" --eval-every 500 \
+    --init "$runs/segmenter/segmenter.pt" > "$runs/segmenter_mix.log" 2>&1 \
+    || { echo "segmenter failed:"; tail -20 "$runs/segmenter_mix.log"; exit 1; }
+cp "$runs/segmenter/segmenter_curve.csv" "$OUT/segmenter_curve_families.csv"
+popd > /dev/null
+
+echo "== cell eval, $(date +%T)"
+for look in soft hard; do
+    "${cell[@]}" eval "cell/tests/fixtures/cycles/$look" --models "$OUT" --max-rms-px 12 \
+        --out "$DATA/eval_cycles_$look" --quiet
+done
+"${cell[@]}" eval "$DATA/usbc_test" --split test_feeder --models "$OUT" --out "$DATA/eval" --max-rms-px 12 --quiet
+"${cell[@]}" eval "$DATA/cell_feeder" --models "$OUT" --out "$DATA/eval_cell_feeder" --max-rms-px 12 --quiet
+echo "== done, $(date +%T)"
