@@ -54,16 +54,18 @@ sets=(--train-overviews 0 --test-overviews 0 --quiet)
     --test-feeder "$TEST_FEEDER" "${sets[@]}"
 "${cell[@]}" dataset --out "$DATA/cell_feeder" --seed 4 --train-crops 0 --test-crops 0 --test-feeder 100 \
     --camera-distance 1.51 --feeder-drop-half 0.035 "${sets[@]}"
-# Both sets' feeder frames in one dataset root (the trainer reads every scene folder under it).
+# Both sets' feeder frames in one dataset root: the trainer reads every numbered scene folder
+# under train_feeder/, and maps object ids by the crops' labels.
 mix="$DATA/usbc_families_and_plain"
 rm -rf "$mix"
 mkdir -p "$mix/train_feeder"
 cp "$DATA/usbc_families/camera.json" "$mix/"
 ln -s "$DATA/usbc_families/models" "$mix/models"
-for look in families train; do
-    for scene in "$DATA/usbc_$look/train_feeder"/*/; do
-        ln -s "$scene" "$mix/train_feeder/${look}_$(basename "$scene")"
-    done
+ln -s "$DATA/usbc_families/crops" "$mix/crops"
+n=0
+for scene in "$DATA"/usbc_families/train_feeder/*/ "$DATA"/usbc_train/train_feeder/*/; do
+    ln -s "$scene" "$mix/train_feeder/$(printf %06d "$n")"
+    n=$((n + 1))
 done
 
 echo "== segmenter and keypoint net side by side on the families set, $MINUTES min each, $(date +%T)"
