@@ -1,22 +1,23 @@
 #!/usr/bin/env bash
 # A further training cycle of the USB-C pair on frames with the randomisation families (issue 45):
-# the pair in FROM fine-tuned on 2 CPU cores, as the committed pair's latest cycle was made
-# (2026-11-30). Datasets (fixed seeds; the families set holds the plain set's scenes in other
+# the pair in FROM fine-tuned on 2 CPU cores, as the candidate pair in
+# scenarios/models/usbc_families was made (2026-11-30). Datasets (fixed seeds; the families set holds the plain set's scenes in other
 # looks) -> the segmenter and the keypoint net side by side on the families set, one thread each
 # -> the segmenter again on the families and plain frames together, at half the learning rate,
 # so that it keeps our renderer's plain look -> ONNX + manifests in OUT -> `cell eval` on the
 # committed Blender Cycles sets and on our own test and cell-density frames. Uses the GPU when
-# torch sees one, and needs none. See training/README.md (The committed models).
+# torch sees one, and needs none. See training/README.md and docs/reference/cycles.md.
 #
 # Usage: training/finetune_families.sh FROM
-#   FROM  a folder with the pair's segmenter.pt and keypoints.pt to start from (for the committed
-#         pair's cycle: `git show 73fdd80:scenarios/models/usbc/segmenter.pt` and keypoints.pt)
+#   FROM  a folder with the pair's segmenter.pt and keypoints.pt to start from (the candidate
+#         started from scenarios/models/usbc as of commit 73fdd80)
 # Environment (defaults in brackets):
 #   FAMILIES      `cell dataset --families` of the families set [all]
 #   MINUTES       budget of each net on the families set [60]; MIX_MINUTES the segmenter's
 #                 further cycle on both sets [30]
 #   TRAIN_CROPS (per part) [4000], TRAIN_FEEDER [1600], TEST_CROPS [300], TEST_FEEDER [100]
-#   DATA, OUT     dataset folder [training/data], model folder [scenarios/models/usbc]
+#   DATA, OUT     dataset folder [training/data], model folder [scenarios/models/usbc_families];
+#                 the scenarios' pair is replaced only by naming its folder here
 #   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
 #   PY            a Python with torch [training/.venv/bin/python, provisioned if missing]
 set -euo pipefail
@@ -35,7 +36,7 @@ TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
 TEST_CROPS="${TEST_CROPS:-300}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
 DATA="$(realpath -m "${DATA:-training/data}")"
-OUT="$(realpath -m "${OUT:-scenarios/models/usbc}")"
+OUT="$(realpath -m "${OUT:-scenarios/models/usbc_families}")"
 read -r -a cell <<< "${CELL:-cargo run --release -q -p cell --}"
 if [[ -z "${PY:-}" ]]; then
     training/provision.sh
