@@ -29,7 +29,9 @@ import zlib
 import numpy as np
 
 BPY_VERSION = "4.5.15"
-LOOKS = ("soft", "hard")
+# "window" and "dim" are held-out looks (2026-11-30): written before any render or evaluation
+# under them, never trained on and never tuned after, so they measure how far the nets carry.
+LOOKS = ("soft", "hard", "window", "dim")
 # The instance-id render's pixels per camera pixel (along each axis), at least.
 ID_DENSITY = 6
 
@@ -346,7 +348,8 @@ def mesh_object(bpy, name, verts, faces, mats, face_mat=None):
 
 def look_lights(bpy, look, rng):
     """The look's lights and world, drawn from rng (deterministic per frame). Returns the sensor
-    settings the look applies after rendering (blur sigma px, read noise, shot noise)."""
+    settings the look applies after rendering: blur sigma px, read noise, shot noise, and
+    optionally "tint" (white-balance gains per channel) and "expose" (the metered level)."""
     world = bpy.context.scene.world
     world.use_nodes = True
     bg = world.node_tree.nodes["Background"]
@@ -362,6 +365,32 @@ def look_lights(bpy, look, rng):
             a = phi + i * rng.uniform(0.6, 1.0) * math.pi
             add_area(bpy, f"panel{i}", (r * math.cos(a), r * math.sin(a), h), size, power)
         return {"blur": 0.0, "read": 0.0, "shot": 0.0}
+    if look == "window":
+        # Daylight through one large window low at the side, a warm room and a small warm ceiling
+        # lamp; the camera's white balance left uncorrected, mild blur and noise.
+        warm = rng.uniform(0.35, 0.5)
+        bg.inputs["Color"].default_value = (warm, warm * 0.9, warm * 0.75, 1.0)
+        bg.inputs["Strength"].default_value = 1.0
+        phi = rng.uniform(0, 2 * math.pi)
+        r, h = rng.uniform(1.2, 1.6), rng.uniform(0.6, 1.0)
+        add_area(bpy, "window", (r * math.cos(phi), r * math.sin(phi), h), 1.2, rng.uniform(800.0, 1500.0),
+                 color=(0.8, 0.9, 1.0))
+        a = phi + rng.uniform(0.5, 1.5) * math.pi
+        add_area(bpy, "lamp", (0.4 * math.cos(a), 0.4 * math.sin(a), 1.4), 0.3, rng.uniform(100.0, 200.0),
+                 color=(1.0, 0.75, 0.5))
+        tint = (rng.uniform(0.92, 1.08), 1.0, rng.uniform(0.9, 1.1))
+        return {"blur": rng.uniform(0.3, 0.7), "read": rng.uniform(0.004, 0.008),
+                "shot": rng.uniform(0.0005, 0.001), "tint": tint}
+    if look == "dim":
+        # One overhead panel in a dark room, underexposed at a high gain: strong noise and a
+        # slightly defocused lens.
+        grey = rng.uniform(0.08, 0.15)
+        bg.inputs["Color"].default_value = (grey, grey, grey, 1.0)
+        bg.inputs["Strength"].default_value = 1.0
+        phi, r = rng.uniform(0, 2 * math.pi), rng.uniform(0.2, 0.5)
+        add_area(bpy, "panel", (r * math.cos(phi), r * math.sin(phi), 2.0), 0.5, rng.uniform(150.0, 300.0))
+        return {"blur": rng.uniform(1.4, 2.0), "read": rng.uniform(0.015, 0.025),
+                "shot": rng.uniform(0.003, 0.005), "expose": rng.uniform(0.5, 0.7)}
     # Hard: one small key light low and off-axis (40–55° from the vertical), a dim room.
     bg.inputs["Color"].default_value = (0.03, 0.03, 0.03, 1.0)
     bg.inputs["Strength"].default_value = 1.0
@@ -373,11 +402,12 @@ def look_lights(bpy, look, rng):
     return {"blur": rng.uniform(0.8, 1.3), "read": rng.uniform(0.006, 0.012), "shot": rng.uniform(0.001, 0.002)}
 
 
-def add_area(bpy, name, pos, size, power):
+def add_area(bpy, name, pos, size, power, color=(1.0, 1.0, 1.0)):
     """A square area light at pos (table frame, m) facing the board centre."""
     light = bpy.data.lights.new(name, type="AREA")
     light.size = size
     light.energy = power
+    light.color = color
     ob = bpy.data.objects.new(name, light)
     bpy.context.scene.collection.objects.link(ob)
     ob.location = pos
@@ -719,7 +749,8 @@ def render_frame(bpy, mathutils, args, scene, mats, board_mat, models, materials
     # pixels below 0.9 of full scale.
     part_px = lin[ids > 0].max(axis=1)
     level = np.quantile(part_px, 0.995) if part_px.size else 1.0
-    lin = lin * (0.9 / max(level, 1e-6))
+    lin = lin * (sensor.get("expose", 0.9) / max(level, 1e-6))
+    lin = lin * np.asarray(sensor.get("tint", (1.0, 1.0, 1.0)))
     lin = gaussian_blur(lin, sensor["blur"])
     if sensor["read"] > 0 or sensor["shot"] > 0:
         sd = np.sqrt(sensor["read"] ** 2 + sensor["shot"] * np.maximum(lin, 0))

@@ -2,7 +2,7 @@
 # Re-render a `cell dataset` BOP feeder split with Blender Cycles (issue 45): provisions the bpy
 # venv (venv.sh), writes the board's print with `cell board`, and runs render.py, which refuses a
 # set whose instance masks do not line up with the source's mask_visib.
-# Usage: scripts/cycles_render/run.sh SOURCE OUT [render.py options: --look soft|hard --frames N
+# Usage: scripts/cycles_render/run.sh SOURCE OUT [render.py options: --look soft|hard|window|dim --frames N
 #        --samples S --seed K --scale F --min-iou T --threads N]
 #   e.g. cell dataset --out D --seed 2 --train-crops 0 --test-crops 0 --train-overviews 0 \
 #          --test-overviews 0 --test-feeder 30
