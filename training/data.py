@@ -76,6 +76,16 @@ def load_crops(root, split, parts, limit=None):
     }
 
 
+def load_crop_sets(roots, split, parts, limit=None):
+    """`load_crops` of each root in `roots` (`--train A:B`: two looks of a part's crops, say),
+    concatenated in that order."""
+    sets = [load_crops(r, split, parts, limit) for r in roots]
+    out = {"poses": [p for s in sets for p in s["poses"]], "names": list(parts)}
+    for key in ("rgb", "mask", "keypoints", "part"):
+        out[key] = np.concatenate([s[key] for s in sets])
+    return out
+
+
 def mask_cells(mask, stride):
     """Downsamples boolean masks [..., H, W] to cells of `stride` px: true where at least half
     of the cell's pixels are set."""

@@ -23,7 +23,8 @@ def main():
     common = ["--train", data, "--test", data, "--dataset-seed", "0", "--limit", "1"]
     if len(sys.argv) == 4:
         common += ["--catalog", sys.argv[3]]
-    train_keypoints.main(common + ["--out", out, "--epochs", "2", "--batch", "2"])
+    # Symmetric parts are scored against the nearer of two twins (a no-op for other parts).
+    train_keypoints.main(common + ["--out", out, "--epochs", "2", "--batch", "2", "--twins", "2"])
     seg = common + ["--steps", "2", "--batch", "2", "--size", "64", "--eval-every", "1"]
     train_segmenter.main(seg + ["--out", out])
     # Frames resampled to one scale: the manifest records that scale as both ends of the range

@@ -75,6 +75,18 @@ def canonical(kps, coef, angle):
     return kps[torch.arange(len(j), device=kps.device), j]
 
 
+def nearest_twins(kps, coef, angle, k):
+    """The labels [B, k, 9, 2] of the `k` twins nearest the identity after a camera roll by
+    `angle` [B] rad, the canonical one first. A part with fewer than `k` twins repeats its
+    canonical label, so a loss that takes the best of the `k` reads only real twins."""
+    c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
+    score = coef[..., 0] * c + coef[..., 1] * s + coef[..., 2]
+    top, j = score.topk(min(k, score.shape[1]), dim=1)
+    j = torch.where(top > -1e8, j, j[:, :1])
+    rows = torch.arange(len(j), device=kps.device)[:, None]
+    return kps[rows, j]
+
+
 def canonicalise(data, kp3d, groups):
     """Relabels the crops of `data` with their canonical twin at no roll, and keeps the tables
     (data["twin_kp"], data["twin_coef"]) for rolled crops. Returns the largest difference of the

@@ -3,6 +3,7 @@ crops of `cell dataset`, evaluates it on the test crops (mask IoU, keypoint erro
 voting), exports keypoints.onnx and writes keypoints.toml + keypoints_curve.csv.
 
 Usage: python train_keypoints.py --train DATA_TRAIN --test DATA_TEST --out scenarios/models/usbc
+--train may name several roots, separated by ':' (one part's crops in two looks, say).
 """
 
 import os
@@ -17,7 +18,7 @@ from common import (Curve, check_export, code_commit, export_onnx, jitter, load_
                     recorded_train_minutes, setup, training_args, write_manifest)
 import catalog
 import symmetry
-from data import flipped_keypoints, load_crops, mask_cells
+from data import flipped_keypoints, load_crop_sets, load_crops, mask_cells
 from nets import N_KEYPOINTS, KeypointNet, count_macs
 
 GRID = 64  # output cells per side (stride 2 on 128 px)
@@ -81,11 +82,22 @@ def rotate(x, mask, kp, angle):
     return x, m[:, 0] >= 0.5, kp
 
 
+def rotate_twins(x, mask, kps, angle):
+    """`rotate` with K labels a crop, kps [B, K, 9, 2]."""
+    x, mask, flat = rotate(x, mask, kps.flatten(1, 2), angle)
+    return x, mask, flat.unflatten(1, (kps.shape[1], N_KEYPOINTS))
+
+
 def losses(mask_logit, vectors, mask_t, vec_t):
-    """PVNet loss: BCE on the mask + smooth-L1 on the vectors inside the true mask (1:1)."""
+    """PVNet loss: BCE on the mask + smooth-L1 on the vectors inside the true mask (1:1).
+    `vec_t` [B, 18, 64, 64] is one label per crop; [B, K, 18, 64, 64] gives K equally right
+    labels (a symmetric part's twins), and each crop is scored against the one it fits best."""
     l_mask = F.binary_cross_entropy_with_logits(mask_logit, mask_t)
     w = mask_t
-    l_vec = F.smooth_l1_loss(vectors * w, vec_t * w, reduction="sum") / (w.sum() * 2 * N_KEYPOINTS + 1.0)
+    if vec_t.dim() == 4:
+        vec_t = vec_t[:, None]
+    per = F.smooth_l1_loss((vectors * w)[:, None].expand_as(vec_t), vec_t * w[:, None], reduction="none")
+    l_vec = per.sum((2, 3, 4)).min(dim=1).values.sum() / (w.sum() * 2 * N_KEYPOINTS + 1.0)
     return l_mask, l_vec
 
 
@@ -172,6 +184,15 @@ def evaluate(model, data, device, voting=False):
             turned = errs_t.mean(1) < errs_f.mean(1)
             metrics["flip_fraction"] = float(turned.mean())
             metrics["keypoint_px_median_up_to_flip"] = float(np.median(np.where(turned[:, None], errs_t, errs_f)))
+        if "twin_kp" in data:
+            # A symmetric part's pose is right in any twin: the error to the nearest one.
+            twins = data["twin_kp"].numpy()
+            real = data["twin_coef"].numpy()[..., 2] > -1e8
+            errs_any = np.stack([np.linalg.norm(votes[i][None] - twins[i], axis=2) for i in range(len(v))])
+            errs_any = np.where(np.isfinite(errs_any) & real[:, :, None], errs_any, 1e3)
+            best = np.median(errs_any, axis=2).argmin(1)
+            errs_any = errs_any[np.arange(len(v)), best]
+            metrics["keypoint_px_median_nearest_twin"] = float(np.median(errs_any))
         for p, name in enumerate(data["names"]):
             sel_p = data["part"] == p
             metrics[f"keypoint_px_median_{name}"] = float(np.median(errs_f[sel_p]))
@@ -204,12 +225,18 @@ def main(argv=None):
     ap.add_argument("--rotate", type=int, default=1, help="1: turn each training crop about its centre (augmentation)")
     ap.add_argument("--widths", default=",".join(map(str, KeypointNet.WIDTHS)), help="channels at strides 2, 4, 8, 16, 32")
     ap.add_argument("--eval-every", type=int, default=1, help="epochs between test evaluations")
+    ap.add_argument("--twins", type=int, default=1,
+                    help="symmetric parts: score each crop against the best of its K twins nearest the "
+                         "canonical one (1: the canonical label alone)")
     args = ap.parse_args(argv)
+    if args.twins < 1:
+        sys.exit(f"--twins {args.twins}: want at least 1")
 
     device = setup(args.seed, args.threads)
     t0 = time.time()
     parts = catalog.assembled_parts(args.catalog)
-    train = load_crops(args.train, "train", parts, args.limit)
+    # Several training roots, separated like PATH entries, are read as one set.
+    train = load_crop_sets(args.train.split(os.pathsep), "train", parts, args.limit)
     test = load_crops(args.test, "test", parts, args.limit)
     print(f"loaded {len(train['part'])} train / {len(test['part'])} test crops in {time.time() - t0:.0f} s", flush=True)
     kp3d = catalog.keypoints(args.catalog, parts)
@@ -270,10 +297,15 @@ def main(argv=None):
                 if "twin_kp" in train:
                     # The twin to label a rolled crop with depends on the roll.
                     a = angle.to(device)
-                    kp = symmetry.canonical(train["twin_kp"][idx], train["twin_coef"][idx], a)
-                x, mask, kp = rotate(x, mask, kp, angle)
+                    kp = symmetry.nearest_twins(train["twin_kp"][idx], train["twin_coef"][idx], a, args.twins)
+                    x, mask, kp = rotate_twins(x, mask, kp, angle)
+                else:
+                    x, mask, kp = rotate(x, mask, kp, angle)
             mask_t = F.avg_pool2d(mask[:, None].float(), 2).ge(0.5).float()
-            vec_t = vector_targets(kp, cx, cy)
+            if kp.dim() == 4:  # K twins a crop
+                vec_t = vector_targets(kp.flatten(0, 1), cx, cy).unflatten(0, kp.shape[:2])
+            else:
+                vec_t = vector_targets(kp, cx, cy)
             m, v = model(x)
             l_mask, l_vec = losses(m, v, mask_t, vec_t)
             loss = l_mask + l_vec

@@ -128,6 +128,31 @@ fn smoke_trains_and_exports_both_networks() {
     smoke(&py, &repo().join("scenarios/parts/usbc.toml"), dir.path());
 }
 
+/// Parts with exact symmetries (the NIST pegs) are labelled by their twins: the keypoint net trains
+/// against the nearer of two and reports its error to the nearest twin.
+#[test]
+fn smoke_trains_a_symmetric_catalog() {
+    let Some(py) = python_with_torch() else {
+        println!("skipped: torch not present");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    smoke(
+        &py,
+        &repo().join("scenarios/parts/nist_pegs.toml"),
+        dir.path(),
+    );
+    let m = ModelManifest::load(&dir.path().join("models/keypoints.toml")).unwrap();
+    let metrics = m
+        .training
+        .expect("trained models carry provenance")
+        .test_metrics;
+    assert!(
+        metrics.contains_key("keypoint_px_median_nearest_twin"),
+        "{metrics:?}"
+    );
+}
+
 /// The trainers take the parts from the catalog: a product of two parts gets nets with two
 /// one-hot planes and three segmenter classes, which the cell accepts for that catalog.
 #[test]
