@@ -1,27 +1,28 @@
 #!/usr/bin/env bash
 # A further training cycle of the USB-C pair on frames with the randomisation families (issue 45):
-# the pair in FROM fine-tuned on 2 CPU cores, as the candidate pair in
-# scenarios/models/usbc_families was made (2026-11-30). Datasets (fixed seeds; the families set holds the plain set's scenes in other
+# the pair in FROM fine-tuned on 2 CPU cores, as the committed pair in scenarios/models/usbc was
+# made (2026-11-30, from the pair of commit 73fdd80). Datasets (fixed seeds; the families set holds the plain set's scenes in other
 # looks) -> the segmenter and the keypoint net side by side on the families set, one thread each
 # -> the segmenter again on the families and plain frames together, at half the learning rate,
-# so that it keeps our renderer's plain look -> ONNX + manifests in OUT -> `cell eval` on the
+# so that it keeps our renderer's plain look -> the keypoint net likewise on the families and
+# plain crops -> ONNX + manifests in OUT -> `cell eval` on the
 # committed Blender Cycles sets and on our own test and cell-density frames. Uses the GPU when
 # torch sees one, and needs none. See training/README.md and docs/reference/cycles.md.
 #
 # Usage: training/finetune_families.sh FROM
-#   FROM  a folder with the pair's segmenter.pt and keypoints.pt to start from (the candidate
-#         started from scenarios/models/usbc as of commit 73fdd80)
+#   FROM  a folder with the pair's segmenter.pt and keypoints.pt to start from (the committed
+#         pair started from scenarios/models/usbc as of commit 73fdd80)
 # Environment (defaults in brackets):
 #   FAMILIES      `cell dataset --families` of the families set [all]
-#   MINUTES       budget of each net on the families set [60]; MIX_MINUTES the segmenter's
-#                 further cycle on both sets [30]
+#   MINUTES       budget of each net on the families set [60]; MIX_MINUTES each net's further
+#                 cycle on both looks [30]
 #   TRAIN_CROPS (per part) [4000], TRAIN_FEEDER [1600], TEST_CROPS [300], TEST_FEEDER [100]
-#   DATA, OUT     dataset folder [training/data], model folder [scenarios/models/usbc_families];
-#                 the scenarios' pair is replaced only by naming its folder here
+#   DATA, OUT     dataset folder [training/data], model folder [scenarios/models/usbc_next];
+#                 the scenarios' pair (scenarios/models/usbc) is replaced only by naming it here
 #   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
 #   PY            a Python with torch [training/.venv/bin/python, provisioned if missing]
 set -euo pipefail
-[ $# -eq 1 ] || { sed -n '2,22p' "$0" >&2; exit 2; }
+[ $# -eq 1 ] || { sed -n '2,23p' "$0" >&2; exit 2; }
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 from="$(realpath -e "$1")" || { echo "finetune_families: no folder at $1" >&2; exit 2; }
 for net in segmenter keypoints; do
@@ -36,7 +37,7 @@ TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
 TEST_CROPS="${TEST_CROPS:-300}"
 TEST_FEEDER="${TEST_FEEDER:-100}"
 DATA="$(realpath -m "${DATA:-training/data}")"
-OUT="$(realpath -m "${OUT:-scenarios/models/usbc_families}")"
+OUT="$(realpath -m "${OUT:-scenarios/models/usbc_next}")"
 read -r -a cell <<< "${CELL:-cargo run --release -q -p cell --}"
 if [[ -z "${PY:-}" ]]; then
     training/provision.sh
@@ -51,6 +52,8 @@ sets=(--train-overviews 0 --test-overviews 0 --quiet)
     --test-crops 0 --train-feeder "$TRAIN_FEEDER" "${sets[@]}"
 "${cell[@]}" dataset --out "$DATA/usbc_train" --seed 1 --train-crops 0 --test-crops 0 \
     --train-feeder "$TRAIN_FEEDER" "${sets[@]}"
+"${cell[@]}" dataset --out "$DATA/usbc_plain_crops" --seed 1 --train-crops "$TRAIN_CROPS" --test-crops 0 \
+    --posed-crops 0.3 "${sets[@]}"
 "${cell[@]}" dataset --out "$DATA/usbc_test" --seed 2 --train-crops 0 --test-crops "$TEST_CROPS" \
     --test-feeder "$TEST_FEEDER" "${sets[@]}"
 "${cell[@]}" dataset --out "$DATA/cell_feeder" --seed 4 --train-crops 0 --test-crops 0 --test-feeder 100 \
@@ -76,7 +79,7 @@ pushd training > /dev/null
     --steps 1000000 --lr 1e-3 --max-minutes "$MINUTES" --eval-every 500 --init "$from/segmenter.pt" \
     > "$runs/segmenter.log" 2>&1 &
 seg=$!
-"$PY" train_keypoints.py "${common[@]}" --threads 1 --train "$DATA/usbc_families" --out "$OUT" \
+"$PY" train_keypoints.py "${common[@]}" --threads 1 --train "$DATA/usbc_families" --out "$runs/keypoints" \
     --epochs 100000 --lr 1e-3 --max-minutes "$MINUTES" --init "$from/keypoints.pt" \
     > "$runs/keypoints.log" 2>&1 &
 kp=$!
@@ -91,6 +94,13 @@ echo "== segmenter on the families and plain frames, $MIX_MINUTES min, $(date +%
     --init "$runs/segmenter/segmenter.pt" > "$runs/segmenter_mix.log" 2>&1 \
     || { echo "segmenter failed:"; tail -20 "$runs/segmenter_mix.log"; exit 1; }
 cp "$runs/segmenter/segmenter_curve.csv" "$OUT/segmenter_curve_families.csv"
+
+echo "== keypoint net on the families and plain crops, $MIX_MINUTES min, $(date +%T)"
+"$PY" train_keypoints.py "${common[@]}" --threads 2 --train "$DATA/usbc_families:$DATA/usbc_plain_crops" \
+    --out "$OUT" --epochs 100000 --lr 5e-4 --max-minutes "$MIX_MINUTES" \
+    --init "$runs/keypoints/keypoints.pt" > "$runs/keypoints_mix.log" 2>&1 \
+    || { echo "keypoint net failed:"; tail -20 "$runs/keypoints_mix.log"; exit 1; }
+cp "$runs/keypoints/keypoints_curve.csv" "$OUT/keypoints_curve_families.csv"
 popd > /dev/null
 
 echo "== cell eval, $(date +%T)"
