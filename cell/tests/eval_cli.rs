@@ -137,18 +137,49 @@ fn cell_eval_on_a_rendered_feeder_split() {
     );
     let html = std::fs::read_to_string(out.join("eval.html")).unwrap();
     assert!(html.contains("Table 1") && html.contains("By stable pose") && html.contains("Picks"));
-    // The gallery holds the 4 worst posed crops (resting or not), the ⌈4 / 3⌉ = 2 worst
-    // detections without a pose and the ⌈4 / 2⌉ = 2 most visible misses and highest-scoring
-    // false positives, as far as there are such (no instance of these frames is ignored).
+    // The gallery holds the 4 worst posed crops by MSSD (resting or not) and the ⌈4 / 3⌉ = 2
+    // resting parts in the right stable pose worst placed in the plane (one picture for a
+    // detection in both), the 2 worst detections without a pose and the ⌈4 / 2⌉ = 2 most
+    // visible misses and highest-scoring false positives, as far as there are such (no
+    // instance of these frames is ignored).
     assert_eq!(p["ignored"].as_u64(), Some(0), "{p}");
     let count = |key: &str| p[key].as_u64().unwrap() as usize;
     let posed = count("poses") + count("not_resting_posed");
     let unposed = count("pose_failures");
     let (missed, false_positives) = (count("truths") - count("true_positives"), fp as usize);
+    let outlier_deg = json["meta"]["options"]["outlier_deg"].as_f64().unwrap();
+    let (mut by_mssd, mut in_plane) = (Vec::new(), Vec::new());
+    for (i, frame) in json["frames"].as_array().unwrap().iter().enumerate() {
+        for (k, d) in frame["detections"].as_array().unwrap().iter().enumerate() {
+            let (Some(e), Some(t)) = (
+                d.get("refined").filter(|e| !e.is_null()),
+                d["truth"].as_u64(),
+            ) else {
+                continue;
+            };
+            let f = |key: &str| e[key].as_f64().unwrap();
+            by_mssd.push((f("mssd_mm"), (i, k)));
+            if frame["truths"][t as usize]["resting"] == true
+                && d["stable_pose"] == d["true_stable_pose"]
+                && f("angle_deg") <= outlier_deg
+            {
+                in_plane.push((f("x_mm").hypot(f("y_mm")), (i, k)));
+            }
+        }
+    }
+    let worst = |mut v: Vec<(f64, (usize, usize))>, n: usize| {
+        v.sort_by(|a, b| b.0.total_cmp(&a.0));
+        v.into_iter().take(n).map(|(_, at)| at).collect::<Vec<_>>()
+    };
+    let mut pictured = worst(by_mssd, 4);
+    pictured.extend(worst(in_plane, 2));
+    pictured.sort();
+    pictured.dedup();
+    assert!(pictured.len() >= posed.min(4), "{p}");
     let gallery: Vec<_> = std::fs::read_dir(out.join("gallery")).unwrap().collect();
     assert_eq!(
         gallery.len(),
-        posed.min(4) + unposed.min(2) + missed.min(2) + false_positives.min(2),
+        pictured.len() + unposed.min(2) + missed.min(2) + false_positives.min(2),
         "{p}"
     );
     assert!(posed >= 1, "no pose passes the gate: {p}");
