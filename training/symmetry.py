@@ -69,10 +69,7 @@ def twin_tables(data, kp3d, groups):
 def canonical(kps, coef, angle):
     """The labels [B, 9, 2] of the twin nearest the identity after a camera roll by `angle` [B]
     rad, from the tables of twin_tables (torch tensors on one device)."""
-    c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
-    score = coef[..., 0] * c + coef[..., 1] * s + coef[..., 2]
-    j = score.argmax(dim=1)
-    return kps[torch.arange(len(j), device=kps.device), j]
+    return nearest_twins(kps, coef, angle, 1)[:, 0]
 
 
 def nearest_twins(kps, coef, angle, k):

@@ -32,12 +32,13 @@ def cell_centres(device):
 
 
 def vector_targets(kp, cx, cy):
-    """Unit vectors [B, 18, 64, 64] from every cell centre to each keypoint (x, y per keypoint)."""
-    dx = kp[:, :, 0, None, None] - cx
-    dy = kp[:, :, 1, None, None] - cy
+    """Unit vectors [..., 18, 64, 64] from every cell centre to each keypoint (x, y per keypoint)
+    of labels kp [..., 9, 2] (one label a crop, [B, 9, 2], or K, [B, K, 9, 2])."""
+    dx = kp[..., 0, None, None] - cx
+    dy = kp[..., 1, None, None] - cy
     n = torch.sqrt(dx * dx + dy * dy).clamp_min(1e-6)
-    v = torch.stack([dx / n, dy / n], dim=2)  # B, 9, 2, 64, 64
-    return v.reshape(kp.shape[0], 2 * N_KEYPOINTS, GRID, GRID)
+    v = torch.stack([dx / n, dy / n], dim=-3)  # ..., 9, 2, 64, 64
+    return v.reshape(*kp.shape[:-2], 2 * N_KEYPOINTS, GRID, GRID)
 
 
 def make_input(rgb_u8, part, n_parts, device, augment=False, gen=None):
@@ -65,7 +66,7 @@ def roll_angles(b, gen, exact_share=0.5):
 def rotate(x, mask, kp, angle):
     """In-plane rotation about the crop centre (a camera roll) by `angle` [B] rad: images x
     [B, C, 128, 128] (reflected at the corners), target masks [B, 128, 128] and keypoints
-    [B, 9, 2] in crop px. The data already spans every yaw; turning each crop again gives the
+    [B, ..., 2] in crop px (one label a crop, [B, 9, 2], or K, [B, K, 9, 2]). The data already spans every yaw; turning each crop again gives the
     net new appearances of the same labels, which is what the small set lacks."""
     b = x.shape[0]
     c, s = torch.cos(angle), torch.sin(angle)
@@ -77,15 +78,10 @@ def rotate(x, mask, kp, angle):
     m = F.grid_sample(mask[:, None].float(), grid, mode="bilinear", padding_mode="zeros", align_corners=False)
     centre = (x.shape[-1] - 1) / 2
     d = kp - centre
-    c, s = c.to(kp.device)[:, None], s.to(kp.device)[:, None]
+    per_crop = (b,) + (1,) * (kp.dim() - 2)
+    c, s = c.to(kp.device).view(per_crop), s.to(kp.device).view(per_crop)
     kp = torch.stack([centre + c * d[..., 0] - s * d[..., 1], centre + s * d[..., 0] + c * d[..., 1]], dim=-1)
     return x, m[:, 0] >= 0.5, kp
-
-
-def rotate_twins(x, mask, kps, angle):
-    """`rotate` with K labels a crop, kps [B, K, 9, 2]."""
-    x, mask, flat = rotate(x, mask, kps.flatten(1, 2), angle)
-    return x, mask, flat.unflatten(1, (kps.shape[1], N_KEYPOINTS))
 
 
 def losses(mask_logit, vectors, mask_t, vec_t):
@@ -298,14 +294,9 @@ def main(argv=None):
                     # The twin to label a rolled crop with depends on the roll.
                     a = angle.to(device)
                     kp = symmetry.nearest_twins(train["twin_kp"][idx], train["twin_coef"][idx], a, args.twins)
-                    x, mask, kp = rotate_twins(x, mask, kp, angle)
-                else:
-                    x, mask, kp = rotate(x, mask, kp, angle)
+                x, mask, kp = rotate(x, mask, kp, angle)
             mask_t = F.avg_pool2d(mask[:, None].float(), 2).ge(0.5).float()
-            if kp.dim() == 4:  # K twins a crop
-                vec_t = vector_targets(kp.flatten(0, 1), cx, cy).unflatten(0, kp.shape[:2])
-            else:
-                vec_t = vector_targets(kp, cx, cy)
+            vec_t = vector_targets(kp, cx, cy)
             m, v = model(x)
             l_mask, l_vec = losses(m, v, mask_t, vec_t)
             loss = l_mask + l_vec
