@@ -86,6 +86,12 @@ def load_crop_sets(roots, split, parts, limit=None):
     return out
 
 
+def load_feeder_sets(roots, folder, parts, limit=None, px_per_mm=None):
+    """`load_feeder` of each root in `roots` (`--train A:B`: two looks of the feeder frames), each
+    with its own object-id map, concatenated in that order."""
+    return [f for r in roots for f in load_feeder(r, folder, obj_ids(r, parts), limit, px_per_mm)]
+
+
 def mask_cells(mask, stride):
     """Downsamples boolean masks [..., H, W] to cells of `stride` px: true where at least half
     of the cell's pixels are set."""

@@ -58,20 +58,6 @@ sets=(--train-overviews 0 --test-overviews 0 --quiet)
     --test-feeder "$TEST_FEEDER" "${sets[@]}"
 "${cell[@]}" dataset --out "$DATA/cell_feeder" --seed 4 --train-crops 0 --test-crops 0 --test-feeder 100 \
     --camera-distance 1.51 --feeder-drop-half 0.035 "${sets[@]}"
-# Both sets' feeder frames in one dataset root: the trainer reads every numbered scene folder
-# under train_feeder/, and maps object ids by the crops' labels.
-mix="$DATA/usbc_families_and_plain"
-rm -rf "$mix"
-mkdir -p "$mix/train_feeder"
-cp "$DATA/usbc_families/camera.json" "$mix/"
-ln -s "$DATA/usbc_families/models" "$mix/models"
-ln -s "$DATA/usbc_families/crops" "$mix/crops"
-n=0
-for scene in "$DATA"/usbc_families/train_feeder/*/ "$DATA"/usbc_train/train_feeder/*/; do
-    ln -s "$scene" "$mix/train_feeder/$(printf %06d "$n")"
-    n=$((n + 1))
-done
-
 echo "== segmenter and keypoint net side by side on the families set, $MINUTES min each, $(date +%T)"
 common=(--test "$DATA/usbc_test" --dataset-seed 1)
 pushd training > /dev/null
@@ -89,7 +75,7 @@ wait "$kp" || { status=1; echo "keypoint net failed:"; tail -20 "$runs/keypoints
 [[ "$status" == 0 ]] || exit "$status"
 
 echo "== segmenter on the families and plain frames, $MIX_MINUTES min, $(date +%T)"
-"$PY" train_segmenter.py "${common[@]}" --threads 2 --train "$mix" --out "$OUT" \
+"$PY" train_segmenter.py "${common[@]}" --threads 2 --train "$DATA/usbc_families:$DATA/usbc_train" --out "$OUT" \
     --steps 1000000 --lr 5e-4 --max-minutes "$MIX_MINUTES" --eval-every 500 \
     --init "$runs/segmenter/segmenter.pt" > "$runs/segmenter_mix.log" 2>&1 \
     || { echo "segmenter failed:"; tail -20 "$runs/segmenter_mix.log"; exit 1; }

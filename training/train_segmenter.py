@@ -17,7 +17,7 @@ import torch.nn.functional as F
 from common import (Curve, check_export, code_commit, export_onnx, jitter, load_start, progress_lr,
                     recorded_train_minutes, setup, training_args, write_manifest)
 import catalog
-from data import load_feeder, obj_ids, table_px_per_mm
+from data import load_feeder, load_feeder_sets, obj_ids, table_px_per_mm
 from nets import Segmenter, count_macs
 
 IGNORE = -100
@@ -239,8 +239,10 @@ def main(argv=None):
     device = setup(args.seed, args.threads)
     t0 = time.time()
     parts = catalog.assembled_parts(args.catalog)
-    mapping = obj_ids(args.train, parts)
-    scales = table_px_per_mm(args.train, "train_feeder")
+    # Several training roots, separated like PATH entries, are read as one set.
+    roots = args.train.split(os.pathsep)
+    lows, highs = zip(*(table_px_per_mm(r, "train_feeder") for r in roots))
+    scales = (min(lows), max(highs))
     shown = float(np.sqrt(scales[0] * scales[1])) if args.fixed_scale else None
     trained = trained_scale(args.eval_only or args.init)
     if args.eval_only and trained is not None:
@@ -253,8 +255,8 @@ def main(argv=None):
     if shown is not None:
         scales = (shown, shown)
         print(f"frames resampled to {shown:.4f} px/mm", flush=True)
-    train = load_feeder(args.train, "train_feeder", mapping, args.limit, px_per_mm=shown)
-    test = load_feeder(args.test, "test_feeder", mapping, args.limit, px_per_mm=shown)
+    train = load_feeder_sets(roots, "train_feeder", parts, args.limit, px_per_mm=shown)
+    test = load_feeder(args.test, "test_feeder", obj_ids(args.test, parts), args.limit, px_per_mm=shown)
     print(f"loaded {len(train)} train / {len(test)} test feeder frames in {time.time() - t0:.0f} s", flush=True)
 
     model = Segmenter(len(parts), tuple(int(w) for w in args.widths.split(","))).to(device)
