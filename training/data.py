@@ -44,8 +44,9 @@ def _crop(d, name, stem):
     return rgb, mask, kp, pose
 
 
-def _parallel(fn, items):
-    """`fn` over `items` in order, on a thread pool (PNG decoding releases the GIL)."""
+def parallel(fn, items):
+    """`fn` over `items` (argument tuples) in order, on a thread pool (PNG decoding and large NumPy
+    operations release the GIL)."""
     with ThreadPoolExecutor(max_workers=min(16, os.cpu_count() or 1)) as pool:
         return list(pool.map(lambda a: fn(*a), items))
 
@@ -65,7 +66,7 @@ def load_crops(root, split, parts, limit=None):
             stems = stems[:limit]
         items += [(d, name, stem) for stem in stems]
         indices += [p] * len(stems)
-    rgbs, masks, kps, poses = zip(*_parallel(_crop, items))
+    rgbs, masks, kps, poses = zip(*parallel(_crop, items))
     return {
         "poses": list(poses),
         "rgb": np.stack(rgbs),
@@ -138,7 +139,7 @@ def load_feeder(root, folder, obj_to_part, limit=None, px_per_mm=None):
         items += [
             (sdir, f"{folder}/{scene}", int(k), cams[k], gts[k], obj_to_part, px_per_mm) for k in sorted(cams, key=int)
         ]
-    return _parallel(_feeder_frame, items[:limit])
+    return parallel(_feeder_frame, items[:limit])
 
 
 def table_px_per_mm(root, folder):

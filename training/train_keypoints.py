@@ -18,7 +18,7 @@ from common import (Curve, check_export, code_commit, export_onnx, jitter, load_
                     recorded_train_minutes, setup, training_args, write_manifest)
 import catalog
 import symmetry
-from data import flipped_keypoints, load_crop_sets, load_crops, mask_cells
+from data import flipped_keypoints, load_crop_sets, load_crops, mask_cells, parallel
 from nets import N_KEYPOINTS, KeypointNet, count_macs
 
 GRID = 64  # output cells per side (stride 2 on 128 px)
@@ -165,7 +165,8 @@ def evaluate(model, data, device, voting=False):
     sel = np.broadcast_to(gt[:, None], ang.shape)
     metrics["vector_angle_mean_deg"] = float(ang[sel].mean())
     if voting:
-        votes = [vote(pred[i], v[i], np.random.default_rng(i)) for i in range(len(v))]
+        # One generator a crop: the votes are the same on any number of threads.
+        votes = parallel(vote, [(pred[i], v[i], np.random.default_rng(i)) for i in range(len(v))])
         errs = np.stack([np.linalg.norm(votes[i] - data["keypoints"][i], axis=1) for i in range(len(v))])
         ok = np.isfinite(errs)
         errs_f = np.where(ok, errs, 1e3)  # a failed vote counts as a large error in the median
