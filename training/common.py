@@ -20,8 +20,9 @@ def training_args(doc, data, model, limit_what):
     learning rate, time budget, load limit, seed, checkpoint, threads, starting weights and
     evaluation-only runs."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--train", required=True, help=f"dataset root with {data.format(split='train')}; several, "
-                    f"separated by '{os.pathsep}', are read as one set (two looks of the same scenes, say)")
+    ap.add_argument("--train", required=True, type=lambda s: s.split(os.pathsep),
+                    help=f"dataset root with {data.format(split='train')}; several, separated by "
+                    f"'{os.pathsep}', are read as one set (two looks of the same scenes, say)")
     ap.add_argument("--test", required=True, help=f"dataset root with {data.format(split='test')}")
     ap.add_argument("--out", required=True, help=f"folder for {model}.onnx/.toml/_curve.csv")
     ap.add_argument("--dataset-seed", type=int, required=True, help="seed of the training set")

@@ -142,20 +142,23 @@ def load_feeder(root, folder, obj_to_part, limit=None, px_per_mm=None):
     return parallel(_feeder_frame, items[:limit])
 
 
-def table_px_per_mm(root, folder):
-    """The table's scale over the feeder frames of `folder`, pixels per mm, lowest and highest:
-    the focal length over the camera's distance from the table plane (world z = 0). The
-    segmenter's manifest records it, and the cell shows the nets frames at its middle."""
+def table_px_per_mm(roots, folder):
+    """The table's scale over the feeder frames of `folder` in every root of `roots`, pixels per
+    mm, lowest and highest: the focal length over the camera's distance from the table plane
+    (world z = 0). The segmenter's manifest records it, and the cell shows the nets frames at its
+    middle."""
     scales = []
-    base = os.path.join(root, folder)
-    for scene in sorted(os.listdir(base)):
-        path = os.path.join(base, scene, "scene_camera.json")
-        if not scene.isdigit() or not os.path.isfile(path):
-            continue
-        with open(path) as f:
-            scales += [frame_px_per_mm(cam) for cam in json.load(f).values()]
-    if not scales:
-        raise FileNotFoundError(f"{base}: no scene_camera.json to read the table's scale from")
+    for root in roots:
+        base = os.path.join(root, folder)
+        found = len(scales)
+        for scene in sorted(os.listdir(base)):
+            path = os.path.join(base, scene, "scene_camera.json")
+            if not scene.isdigit() or not os.path.isfile(path):
+                continue
+            with open(path) as f:
+                scales += [frame_px_per_mm(cam) for cam in json.load(f).values()]
+        if len(scales) == found:
+            raise FileNotFoundError(f"{base}: no scene_camera.json to read the table's scale from")
     return min(scales), max(scales)
 
 

@@ -66,8 +66,9 @@ def roll_angles(b, gen, exact_share=0.5):
 def rotate(x, mask, kp, angle):
     """In-plane rotation about the crop centre (a camera roll) by `angle` [B] rad: images x
     [B, C, 128, 128] (reflected at the corners), target masks [B, 128, 128] and keypoints
-    [B, ..., 2] in crop px (one label a crop, [B, 9, 2], or K, [B, K, 9, 2]). The data already spans every yaw; turning each crop again gives the
-    net new appearances of the same labels, which is what the small set lacks."""
+    [B, ..., 2] in crop px (one label a crop, [B, 9, 2], or K, [B, K, 9, 2]). The data already
+    spans every yaw; turning each crop again gives the net new appearances of the same labels,
+    which is what the small set lacks."""
     b = x.shape[0]
     c, s = torch.cos(angle), torch.sin(angle)
     # Output pixel p samples the input at centre + R(-angle) (p - centre); normalised coordinates
@@ -232,8 +233,7 @@ def main(argv=None):
     device = setup(args.seed, args.threads)
     t0 = time.time()
     parts = catalog.assembled_parts(args.catalog)
-    # Several training roots, separated like PATH entries, are read as one set.
-    train = load_crop_sets(args.train.split(os.pathsep), "train", parts, args.limit)
+    train = load_crop_sets(args.train, "train", parts, args.limit)
     test = load_crops(args.test, "test", parts, args.limit)
     print(f"loaded {len(train['part'])} train / {len(test['part'])} test crops in {time.time() - t0:.0f} s", flush=True)
     kp3d = catalog.keypoints(args.catalog, parts)

@@ -239,10 +239,7 @@ def main(argv=None):
     device = setup(args.seed, args.threads)
     t0 = time.time()
     parts = catalog.assembled_parts(args.catalog)
-    # Several training roots, separated like PATH entries, are read as one set.
-    roots = args.train.split(os.pathsep)
-    lows, highs = zip(*(table_px_per_mm(r, "train_feeder") for r in roots))
-    scales = (min(lows), max(highs))
+    scales = table_px_per_mm(args.train, "train_feeder")
     shown = float(np.sqrt(scales[0] * scales[1])) if args.fixed_scale else None
     trained = trained_scale(args.eval_only or args.init)
     if args.eval_only and trained is not None:
@@ -255,7 +252,7 @@ def main(argv=None):
     if shown is not None:
         scales = (shown, shown)
         print(f"frames resampled to {shown:.4f} px/mm", flush=True)
-    train = load_feeder_sets(roots, "train_feeder", parts, args.limit, px_per_mm=shown)
+    train = load_feeder_sets(args.train, "train_feeder", parts, args.limit, px_per_mm=shown)
     test = load_feeder(args.test, "test_feeder", obj_ids(args.test, parts), args.limit, px_per_mm=shown)
     print(f"loaded {len(train)} train / {len(test)} test feeder frames in {time.time() - t0:.0f} s", flush=True)
 
