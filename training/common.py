@@ -33,6 +33,12 @@ def training_args(doc, data, model, limit_what):
     ap.add_argument("--checkpoint", help="also save the torch weights here")
     ap.add_argument("--threads", type=int, default=2, help="CPU threads for torch")
     ap.add_argument("--init", metavar="CHECKPOINT", help="start from these weights (a further training cycle)")
+    ap.add_argument(
+        "--pretrained",
+        metavar="CHECKPOINT",
+        help="start from another part family's weights (the .pt beside its model): every layer is copied, and "
+        "the rows or planes of each new part start from the mean of the source's parts",
+    )
     ap.add_argument("--eval-only", metavar="CHECKPOINT", help="skip training: evaluate and export these weights")
     ap.add_argument(
         "--catalog", default="../scenarios/parts/usbc.toml", help="part catalog: the parts (and keypoints) the net handles"
@@ -41,11 +47,51 @@ def training_args(doc, data, model, limit_what):
 
 
 def load_start(model, args, device):
-    """Loads `--eval-only` or `--init` weights (either form `state_dict_in` reads) into `model`,
-    if either is given."""
-    start = args.eval_only or args.init
-    if start:
-        model.load_state_dict(state_dict_in(start, device))
+    """Loads `--eval-only`, `--init` or `--pretrained` weights into `model`, if one is given."""
+    given = [o for o in ("eval_only", "init", "pretrained") if getattr(args, o)]
+    if len(given) > 1:
+        sys.exit("give one of --" + ", --".join(o.replace("_", "-") for o in given))
+    if args.pretrained:
+        transferred = transfer(model, args.pretrained, device)
+        print(f"started from {args.pretrained}: {transferred}", flush=True)
+    elif given:
+        model.load_state_dict(state_dict_in(getattr(args, given[0]), device))
+
+
+def transfer(model, path, device="cpu"):
+    """Copies another part family's weights in `path` into `model` (same widths, any parts).
+
+    The tensors the net's `PART_SLOTS` names hold one slice per part along an axis, from a
+    first slot; their other slices are copied, and each of `model`'s parts starts from the mean
+    of the source's part slices (the net has learned what "a part" looks like, not which one).
+    Returns what was copied, for the log."""
+    state = torch.load(path, map_location=device)
+    if "state_dict" not in state or "parts" not in state:
+        sys.exit(f"--pretrained {path}: not the .pt a trainer writes beside a model (no parts recorded)")
+    source, own = state["state_dict"], model.state_dict()
+    if source.keys() != own.keys():
+        sys.exit(f"--pretrained {path}: a different net ({len(source)} tensors, this one has {len(own)})")
+    slots, n_parts = type(model).PART_SLOTS, model.n_parts
+    for key, target in own.items():
+        src = source[key]
+        if key in slots:
+            axis, first = slots[key]
+            kept = src.shape[:axis] + src.shape[axis + 1:] == target.shape[:axis] + target.shape[axis + 1:]
+            n_src = src.shape[axis] - (target.shape[axis] - n_parts)
+            if not kept or n_src < 1:
+                sys.exit(f"--pretrained {path}: {key} is {tuple(src.shape)}, this net's {tuple(target.shape)}")
+            parts = src.narrow(axis, first, n_src)
+            mean = parts.mean(axis, keepdim=True).expand_as(target.narrow(axis, first, n_parts))
+            tail = target.shape[axis] - first - n_parts
+            new = torch.cat([src.narrow(axis, 0, first), mean, src.narrow(axis, first + n_src, tail)], axis)
+        elif src.shape != target.shape:
+            sys.exit(f"--pretrained {path}: {key} is {tuple(src.shape)}, this net's {tuple(target.shape)} "
+                     "(other widths: give --widths of the source)")
+        else:
+            new = src
+        own[key] = new.to(target.dtype)
+    model.load_state_dict(own)
+    return f"{len(own)} tensors, parts {', '.join(state['parts'])} -> {n_parts} parts"
 
 
 def state_dict_in(path, device="cpu"):

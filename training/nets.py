@@ -77,6 +77,9 @@ class KeypointNet(nn.Module):
     WIDTHS = (16, 24, 48, 64, 96)
     """Channels at strides 2, 4, 8, 16, 32 of the committed net (the trainer's default)."""
 
+    PART_SLOTS = {"s2.0.weight": (1, 3)}
+    """Tensors with one slice per part, as (axis, first slot): the first conv's part planes."""
+
     def __init__(self, n_parts, w=WIDTHS):
         super().__init__()
         self.n_parts = n_parts
@@ -128,6 +131,9 @@ class Segmenter(nn.Module):
 
     WIDTHS = (12, 16, 48, 96)
     """Channels at strides 2, 4, 8, 16 of the committed net (the trainer's default)."""
+
+    PART_SLOTS = {"head.weight": (0, 1), "head.bias": (0, 1)}
+    """Tensors with one slice per part, as (axis, first slot): the head's class rows."""
 
     def __init__(self, n_parts, w=WIDTHS):
         super().__init__()

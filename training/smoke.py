@@ -12,8 +12,40 @@ import os
 import sys
 import tomllib
 
+import torch
+
+import catalog
 import train_keypoints
 import train_segmenter
+from common import transfer
+from nets import KeypointNet, Segmenter
+
+PRETRAINED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenarios", "models", "usbc")
+"""Another family's committed nets, the start `--pretrained` is checked from."""
+
+
+def check_transfer(n_parts):
+    """Both committed USB-C nets go into nets for `n_parts` parts: every weight copied exactly,
+    but each new part's planes or rows, which are the mean of the source's parts'."""
+    for net, name in ((KeypointNet, "keypoints"), (Segmenter, "segmenter")):
+        path = os.path.join(PRETRAINED, f"{name}.pt")
+        model = net(n_parts)
+        transfer(model, path)
+        saved = torch.load(path, map_location="cpu")
+        source, n_source = saved["state_dict"], len(saved["parts"])
+        for key, got in model.state_dict().items():
+            src = source[key]
+            if key in net.PART_SLOTS:
+                axis, first = net.PART_SLOTS[key]
+                mean = src.narrow(axis, first, n_source).mean(axis, keepdim=True)
+                tail = src.shape[axis] - first - n_source
+                ok = (torch.equal(got.narrow(axis, 0, first), src.narrow(axis, 0, first))
+                      and torch.equal(got.narrow(axis, first + n_parts, tail), src.narrow(axis, first + n_source, tail))
+                      and all(torch.allclose(got.narrow(axis, first + i, 1), mean) for i in range(n_parts)))
+            else:
+                ok = torch.equal(got, src)
+            if not ok:
+                sys.exit(f"smoke: --pretrained did not carry {name}'s {key} over")
 
 
 def main():
@@ -25,8 +57,14 @@ def main():
         common += ["--catalog", sys.argv[3]]
     # Symmetric parts are scored against the nearer of two twins (a no-op for other parts).
     train_keypoints.main(common + ["--out", out, "--epochs", "2", "--batch", "2", "--twins", "2"])
+    # Another family's nets as the start, whatever this catalog's parts.
+    check_transfer(len(catalog.assembled_parts(sys.argv[3] if len(sys.argv) == 4 else "../scenarios/parts/usbc.toml")))
+    train_keypoints.main(common + ["--out", os.path.join(out, "pretrained"), "--epochs", "1", "--batch", "2",
+                                   "--pretrained", os.path.join(PRETRAINED, "keypoints.pt")])
     seg = common + ["--steps", "2", "--batch", "2", "--size", "64", "--eval-every", "1"]
     train_segmenter.main(seg + ["--out", out])
+    train_segmenter.main(seg + ["--out", os.path.join(out, "pretrained"), "--pretrained",
+                                os.path.join(PRETRAINED, "segmenter.pt")])
     # Frames resampled to one scale: the manifest records that scale as both ends of the range
     # (as rendered, two frames from two camera heights give two).
     fixed = os.path.join(out, "fixed_scale")

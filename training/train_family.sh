@@ -18,6 +18,8 @@
 #                 more of them want more room (a pile is slow to drop and unlike a shaken feeder)
 #   INIT          a folder with segmenter.pt and keypoints.pt to start both nets from (a further
 #                 training cycle, or a changed catalog of the same family) [none: from scratch]
+#   PRETRAINED    a folder with another part family's segmenter.pt and keypoints.pt to start both
+#                 nets from (their layers copied, each new part's from the mean of its parts)
 #   SCENARIO      a scenario of the family for `cell eval`'s finger-room check [none: not checked]
 #   DATA, OUT     dataset folder [training/data/NAME], model folder [scenarios/models/NAME]
 #   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
@@ -25,7 +27,7 @@
 # Every stage's wall time is printed and appended to OUT/train_family.log. The datasets resume if
 # interrupted; a second run with the same settings reuses them.
 set -euo pipefail
-[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,25p' "$0" >&2; exit 2; }
+[ $# -ge 1 ] && [ $# -le 2 ] || { sed -n '2,28p' "$0" >&2; exit 2; }
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 catalog="$(realpath -e "$1")" || { echo "train_family: no catalog at $1" >&2; exit 2; }
 cd "$root"
@@ -50,18 +52,21 @@ CELL_FEEDER="${CELL_FEEDER:-100}"
 heap=()
 [ -n "${FEEDER_DROP_HALF:-}" ] && heap=(--feeder-drop-half "$FEEDER_DROP_HALF")
 seg_init=(); kp_init=()
-if [ -n "${INIT:-}" ]; then
+[ -n "${INIT:-}" ] && [ -n "${PRETRAINED:-}" ] && { echo "train_family: give INIT or PRETRAINED, not both" >&2; exit 2; }
+start="${INIT:-${PRETRAINED:-}}"
+if [ -n "$start" ]; then
+    flag=--init; var=INIT; [ -n "${PRETRAINED:-}" ] && { flag=--pretrained; var=PRETRAINED; }
     for net in segmenter keypoints; do
-        [ -f "$INIT/$net.pt" ] || { echo "train_family: INIT=$INIT has no $net.pt" >&2; exit 2; }
+        [ -f "$start/$net.pt" ] || { echo "train_family: $var=$start has no $net.pt" >&2; exit 2; }
     done
-    seg_init=(--init "$(realpath "$INIT/segmenter.pt")"); kp_init=(--init "$(realpath "$INIT/keypoints.pt")")
+    seg_init=("$flag" "$(realpath "$start/segmenter.pt")"); kp_init=("$flag" "$(realpath "$start/keypoints.pt")")
 fi
 mkdir -p "$DATA" "$OUT"
 log="$OUT/train_family.log"
 t_all=$(date +%s)
 stage() { echo "== $1 ($(date -u +%H:%M:%S))"; t_stage=$(date +%s); }
 done_stage() { local s=$(( $(date +%s) - t_stage )); echo "   $1: ${s} s" | tee -a "$log"; }
-echo "$(date -u +%FT%TZ) $name from $catalog (parts $parts; gpu $gpu; $MINUTES min per net${INIT:+; from $INIT})" >> "$log"
+echo "$(date -u +%FT%TZ) $name from $catalog (parts $parts; gpu $gpu; $MINUTES min per net${start:+; from $start})" >> "$log"
 
 stage "datasets of $parts (train seed 1, test seed 2, cell density seed 4)"
 "${cell[@]}" dataset --catalog "$catalog" --out "$DATA/train" --seed 1 --train-crops "$TRAIN_CROPS" \
