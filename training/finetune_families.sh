@@ -7,22 +7,24 @@
 # so that it keeps our renderer's plain look -> the keypoint net likewise on the families and
 # plain crops -> ONNX + manifests in OUT -> `cell eval` on the
 # committed Blender Cycles sets and on our own test and cell-density frames. Uses the GPU when
-# torch sees one, and needs none. See training/README.md and docs/reference/cycles.md.
+# torch sees one (then the two nets also share it in the second stage, and the sizes fit one
+# 15-minute lease of a GPU machine with 16 cores), and needs none. See training/README.md and
+# docs/reference/cycles.md.
 #
 # Usage: training/finetune_families.sh FROM
 #   FROM  a folder with the pair's segmenter.pt and keypoints.pt to start from (the committed
 #         pair started from scenarios/models/usbc as of commit 73fdd80)
 # Environment (defaults in brackets):
 #   FAMILIES      `cell dataset --families` of the families set [all]
-#   MINUTES       budget of each net on the families set [60]; MIX_MINUTES each net's further
-#                 cycle on both looks [30]
+#   MINUTES       budget of each net on the families set [60] [GPU: 4]; MIX_MINUTES each net's
+#                 further cycle on both looks [30, one net after the other] [GPU: 2, side by side]
 #   TRAIN_CROPS (per part) [4000], TRAIN_FEEDER [1600], TEST_CROPS [300], TEST_FEEDER [100]
 #   DATA, OUT     dataset folder [training/data], model folder [scenarios/models/usbc_next];
 #                 the scenarios' pair (scenarios/models/usbc) is replaced only by naming it here
 #   CELL          the cell command ["cargo run --release -q -p cell --"], e.g. a prebuilt binary
 #   PY            a Python with torch [training/.venv/bin/python, provisioned if missing]
 set -euo pipefail
-[ $# -eq 1 ] || { sed -n '2,23p' "$0" >&2; exit 2; }
+[ $# -eq 1 ] || { sed -n '2,25p' "$0" >&2; exit 2; }
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 from="$(realpath -e "$1")" || { echo "finetune_families: no folder at $1" >&2; exit 2; }
 for net in segmenter keypoints; do
@@ -30,8 +32,6 @@ for net in segmenter keypoints; do
 done
 cd "$root"
 FAMILIES="${FAMILIES:-all}"
-MINUTES="${MINUTES:-60}"
-MIX_MINUTES="${MIX_MINUTES:-30}"
 TRAIN_CROPS="${TRAIN_CROPS:-4000}"
 TRAIN_FEEDER="${TRAIN_FEEDER:-1600}"
 TEST_CROPS="${TEST_CROPS:-300}"
@@ -42,6 +42,15 @@ read -r -a cell <<< "${CELL:-cargo run --release -q -p cell --}"
 if [[ -z "${PY:-}" ]]; then
     training/provision.sh
     PY="$root/training/.venv/bin/python"
+fi
+if "$PY" -c 'import torch, sys; sys.exit(0 if torch.cuda.is_available() else 1)'; then
+    # The batches of train_family.sh's GPU run (scenarios/models/nist_pegs/README.md). The USB-C
+    # datasets cost less than the NIST pegs' (frames about an eighth, crops under half).
+    gpu=1; MINUTES="${MINUTES:-4}"; MIX_MINUTES="${MIX_MINUTES:-2}"
+    threads=4; mix_threads=4; kp_batch=128; seg_batch=32; seg_workers=8
+else
+    gpu=0; MINUTES="${MINUTES:-60}"; MIX_MINUTES="${MIX_MINUTES:-30}"
+    threads=1; mix_threads=2; kp_batch=32; seg_batch=8; seg_workers=0
 fi
 runs="$root/training/runs/finetune_families"
 mkdir -p "$DATA" "$OUT" "$runs"
@@ -60,32 +69,40 @@ sets=(--train-overviews 0 --test-overviews 0 --quiet)
     --camera-distance 1.51 --feeder-drop-half 0.035 "${sets[@]}"
 echo "== segmenter and keypoint net side by side on the families set, $MINUTES min each, $(date +%T)"
 common=(--test "$DATA/usbc_test" --dataset-seed 1)
+seg_args=(--steps 1000000 --batch "$seg_batch" --workers "$seg_workers" --eval-every 500)
+kp_args=(--epochs 100000 --batch "$kp_batch")
+# Each net's run: NAME LOG ARGS...; fails with the log's tail.
+net() {
+    local name="$1" log="$2"; shift 2
+    "$PY" "train_$name.py" "${common[@]}" "$@" > "$log" 2>&1 || { echo "$name failed:"; tail -20 "$log"; return 1; }
+}
 pushd training > /dev/null
-"$PY" train_segmenter.py "${common[@]}" --threads 1 --train "$DATA/usbc_families" --out "$runs/segmenter" \
-    --steps 1000000 --lr 1e-3 --max-minutes "$MINUTES" --eval-every 500 --init "$from/segmenter.pt" \
-    > "$runs/segmenter.log" 2>&1 &
+net segmenter "$runs/segmenter.log" "${seg_args[@]}" --threads "$threads" --train "$DATA/usbc_families" \
+    --out "$runs/segmenter" --lr 1e-3 --max-minutes "$MINUTES" --init "$from/segmenter.pt" &
 seg=$!
-"$PY" train_keypoints.py "${common[@]}" --threads 1 --train "$DATA/usbc_families" --out "$runs/keypoints" \
-    --epochs 100000 --lr 1e-3 --max-minutes "$MINUTES" --init "$from/keypoints.pt" \
-    > "$runs/keypoints.log" 2>&1 &
+net keypoints "$runs/keypoints.log" "${kp_args[@]}" --threads "$threads" --train "$DATA/usbc_families" \
+    --out "$runs/keypoints" --lr 1e-3 --max-minutes "$MINUTES" --init "$from/keypoints.pt" &
 kp=$!
 status=0
-wait "$seg" || { status=1; echo "segmenter failed:"; tail -20 "$runs/segmenter.log"; }
-wait "$kp" || { status=1; echo "keypoint net failed:"; tail -20 "$runs/keypoints.log"; }
+wait "$seg" || status=1
+wait "$kp" || status=1
 [[ "$status" == 0 ]] || exit "$status"
 
-echo "== segmenter on the families and plain frames, $MIX_MINUTES min, $(date +%T)"
-"$PY" train_segmenter.py "${common[@]}" --threads 2 --train "$DATA/usbc_families:$DATA/usbc_train" --out "$OUT" \
-    --steps 1000000 --lr 5e-4 --max-minutes "$MIX_MINUTES" --eval-every 500 \
-    --init "$runs/segmenter/segmenter.pt" > "$runs/segmenter_mix.log" 2>&1 \
-    || { echo "segmenter failed:"; tail -20 "$runs/segmenter_mix.log"; exit 1; }
+echo "== both nets on the families and our plain look, $MIX_MINUTES min each, $(date +%T)"
+mix_segmenter() {
+    net segmenter "$runs/segmenter_mix.log" "${seg_args[@]}" --threads "$mix_threads" \
+        --train "$DATA/usbc_families:$DATA/usbc_train" --out "$OUT" --lr 5e-4 --max-minutes "$MIX_MINUTES" \
+        --init "$runs/segmenter/segmenter.pt"
+}
+# On a GPU the two nets share it; on CPU one runs after the other, each on both cores.
+seg=
+if [[ "$gpu" == 1 ]]; then mix_segmenter & seg=$!; else mix_segmenter || exit 1; fi
+net keypoints "$runs/keypoints_mix.log" "${kp_args[@]}" --threads "$mix_threads" \
+    --train "$DATA/usbc_families:$DATA/usbc_plain_crops" --out "$OUT" --lr 5e-4 --max-minutes "$MIX_MINUTES" \
+    --init "$runs/keypoints/keypoints.pt" || status=1
+[[ -z "$seg" ]] || wait "$seg" || status=1
+[[ "$status" == 0 ]] || exit "$status"
 cp "$runs/segmenter/segmenter_curve.csv" "$OUT/segmenter_curve_families.csv"
-
-echo "== keypoint net on the families and plain crops, $MIX_MINUTES min, $(date +%T)"
-"$PY" train_keypoints.py "${common[@]}" --threads 2 --train "$DATA/usbc_families:$DATA/usbc_plain_crops" \
-    --out "$OUT" --epochs 100000 --lr 5e-4 --max-minutes "$MIX_MINUTES" \
-    --init "$runs/keypoints/keypoints.pt" > "$runs/keypoints_mix.log" 2>&1 \
-    || { echo "keypoint net failed:"; tail -20 "$runs/keypoints_mix.log"; exit 1; }
 cp "$runs/keypoints/keypoints_curve.csv" "$OUT/keypoints_curve_families.csv"
 popd > /dev/null
 
