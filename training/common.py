@@ -76,9 +76,9 @@ def transfer(model, path, device="cpu"):
         src = source[key]
         if key in slots:
             axis, first = slots[key]
-            kept = src.shape[:axis] + src.shape[axis + 1:] == target.shape[:axis] + target.shape[axis + 1:]
+            same_elsewhere = src.shape[:axis] + src.shape[axis + 1:] == target.shape[:axis] + target.shape[axis + 1:]
             n_src = src.shape[axis] - (target.shape[axis] - n_parts)
-            if not kept or n_src < 1:
+            if not same_elsewhere or n_src < 1:
                 sys.exit(f"--pretrained {path}: {key} is {tuple(src.shape)}, this net's {tuple(target.shape)}")
             parts = src.narrow(axis, first, n_src)
             mean = parts.mean(axis, keepdim=True).expand_as(target.narrow(axis, first, n_parts))

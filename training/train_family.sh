@@ -51,7 +51,7 @@ TEST_FEEDER="${TEST_FEEDER:-100}"
 CELL_FEEDER="${CELL_FEEDER:-100}"
 heap=()
 [ -n "${FEEDER_DROP_HALF:-}" ] && heap=(--feeder-drop-half "$FEEDER_DROP_HALF")
-seg_init=(); kp_init=()
+seg_start=(); kp_start=()
 [ -n "${INIT:-}" ] && [ -n "${PRETRAINED:-}" ] && { echo "train_family: give INIT or PRETRAINED, not both" >&2; exit 2; }
 start="${INIT:-${PRETRAINED:-}}"
 if [ -n "$start" ]; then
@@ -59,7 +59,7 @@ if [ -n "$start" ]; then
     for net in segmenter keypoints; do
         [ -f "$start/$net.pt" ] || { echo "train_family: $var=$start has no $net.pt" >&2; exit 2; }
     done
-    seg_init=("$flag" "$(realpath "$start/segmenter.pt")"); kp_init=("$flag" "$(realpath "$start/keypoints.pt")")
+    seg_start=("$flag" "$(realpath "$start/segmenter.pt")"); kp_start=("$flag" "$(realpath "$start/keypoints.pt")")
 fi
 mkdir -p "$DATA" "$OUT"
 log="$OUT/train_family.log"
@@ -83,10 +83,10 @@ mkdir -p "$runs"
 train() { (cd training && "$py" "$@" --train "$DATA/train" --test "$DATA/test" --catalog "$catalog" \
     --dataset-seed 1 --threads "$threads" --max-minutes "$MINUTES" --out "$OUT"); }
 train train_segmenter.py --steps 100000 --batch "$seg_batch" --workers "$seg_workers" --eval-every 500 --fixed-scale \
-    --checkpoint "$runs/segmenter.pt" "${seg_init[@]}" > "$runs/segmenter.log" 2>&1 &
+    --checkpoint "$runs/segmenter.pt" "${seg_start[@]}" > "$runs/segmenter.log" 2>&1 &
 seg=$!
 train train_keypoints.py --epochs 1000 --eval-every 5 --batch "$kp_batch" \
-    --checkpoint "$runs/keypoints.pt" "${kp_init[@]}" > "$runs/keypoints.log" 2>&1 &
+    --checkpoint "$runs/keypoints.pt" "${kp_start[@]}" > "$runs/keypoints.log" 2>&1 &
 kp=$!
 fail=0
 wait "$seg" || { echo "segmenter training failed: $runs/segmenter.log" >&2; tail -5 "$runs/segmenter.log" >&2; fail=1; }
