@@ -388,8 +388,8 @@ fn run_trial(
         planar.as_ref().map(|p| p.camera_T_part),
         fit.as_ref().map(|p| p.camera_T_part),
     ];
-    let errors =
-        estimates.map(|e| e.map(|e| pose_errors(cam, &part.keypoints, &part.group, &truth, &e)));
+    let errors = estimates
+        .map(|e| e.map(|e| pose_errors(cam, &part.keypoints, &part.group, &[], &truth, &e)));
     Trial {
         part: part.name.clone(),
         distance_m: distance,

@@ -390,6 +390,7 @@ fn evaluate_image(
                     &camera,
                     &part.points,
                     &part.group,
+                    &part.round_axes,
                     &seen(raw),
                     raw,
                 ));
@@ -398,7 +399,14 @@ fn evaluate_image(
             if let (Ok(pose), Some(raw_e)) = (&det.pose, rec.raw) {
                 let refined = &pose.planar.camera_T_part;
                 let truth = &seen(refined);
-                let refined_e = pose_errors(&camera, &part.points, &part.group, truth, refined);
+                let refined_e = pose_errors(
+                    &camera,
+                    &part.points,
+                    &part.group,
+                    &part.round_axes,
+                    truth,
+                    refined,
+                );
                 rec.refined_flip_deg = Some(flip(refined));
                 rec.refined = Some(refined_e);
                 if let Some(c) = &pose.contour {
@@ -407,6 +415,7 @@ fn evaluate_image(
                         &camera,
                         &part.points,
                         &part.group,
+                        &part.round_axes,
                         &seen(&c.keypoint_planar.camera_T_part),
                         &c.keypoint_planar.camera_T_part,
                     ));
@@ -435,7 +444,7 @@ fn evaluate_image(
                     galleries.worst.offer(refined_e.mssd_mm, item);
                     if counted.resting
                         && rec.true_stable_pose.as_ref() == Some(&pose.stable_pose)
-                        && refined_e.angle_deg <= options.outlier_deg
+                        && refined_e.sym_angle_deg <= options.outlier_deg
                     {
                         galleries
                             .misplaced

@@ -133,7 +133,7 @@ pub fn write_eval_report(
             "Rotation error: share of matched estimates below e_θ",
             "e_θ (deg)",
             30.0,
-            (|e: &perception::metrics::PoseErrors| e.angle_deg)
+            (|e: &perception::metrics::PoseErrors| e.sym_angle_deg)
                 as fn(&perception::metrics::PoseErrors) -> f64,
         ),
         (
@@ -482,7 +482,9 @@ fn render(
     let _ = write!(
         h,
         "<h2>Table 1: pose error in the camera frame</h2><p>Mean ± σ of the absolute error per \
-         axis (z is depth) and of the geodesic angle θ, over matched estimates. The seed drops \
+         axis (z is depth) and of the geodesic angle θ to the nearest exact twin (a part with \
+         symmetries is right in any of its twin poses; the seed's parts have none), over matched \
+         estimates. The seed drops \
          estimates with θ &gt; {}° from every statistic (\"seed-style\"); we count them (\"out\") \
          and also give the statistics over all estimates. The average row is the seed's: the \
          mean of the parts' means and σs.</p><table><tr><th class=l>part</th>\
@@ -643,10 +645,10 @@ fn render(
             "<tr><td class=l>{}</td><td>{} / {}</td><td>{} / {}</td><td>{} / {}</td>\
              <td>{} / {}</td></tr>",
             escape(&p.part),
-            num(p.raw.all.angle_deg.p50, 2),
-            num(p.raw.all.angle_deg.p95, 2),
-            num(p.refined.all.angle_deg.p50, 2),
-            num(p.refined.all.angle_deg.p95, 2),
+            num(p.raw.all.sym_angle_deg.p50, 2),
+            num(p.raw.all.sym_angle_deg.p95, 2),
+            num(p.refined.all.sym_angle_deg.p50, 2),
+            num(p.refined.all.sym_angle_deg.p95, 2),
             pct(p.raw.ar_mssd),
             pct(p.refined.ar_mssd),
             pct(p.raw.ar_mspd),
@@ -839,11 +841,11 @@ fn gallery_figures(h: &mut String, items: &[(String, &GalleryItem)]) {
             item.detection,
             item.iou,
             item.refined.mssd_mm,
-            item.refined.angle_deg,
+            item.refined.sym_angle_deg,
             item.refined.x_mm,
             item.refined.y_mm,
             item.refined.z_mm,
-            item.raw.angle_deg,
+            item.raw.sym_angle_deg,
             item.raw.x_mm,
             item.raw.y_mm,
             item.raw.z_mm,

@@ -201,7 +201,7 @@ fn pose_stats(
         .iter()
         .map(|e| (e.errors, e.flip))
         .filter(|(e, flip)| {
-            e.angle_deg > options.outlier_deg && flip.is_some_and(|f| f <= options.outlier_deg)
+            e.sym_angle_deg > options.outlier_deg && flip.is_some_and(|f| f <= options.outlier_deg)
         })
         .count();
     let mssd_recall: Vec<f64> = MSSD_FRACTIONS

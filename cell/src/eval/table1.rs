@@ -1,5 +1,6 @@
 //! The seed's Table 1: mean ± σ of |e_x|, |e_y|, |e_z| in mm and e_θ in degrees, raw PnP and
-//! after planar refinement, with outliers (θ > 10°) counted and reported; statistics both over
+//! after planar refinement, with outliers (θ > 10°, θ to the nearest exact twin of a symmetric
+//! part) counted and reported; statistics both over
 //! all estimates and seed-style without the outliers. The compact text table with the seed's
 //! numbers beside ours is in `table1_text`.
 
@@ -49,7 +50,7 @@ pub struct Table1Row {
     pub y_mm: [f64; 2],
     /// |e_z| mean, σ (mm).
     pub z_mm: [f64; 2],
-    /// e_θ mean, σ (deg).
+    /// e_θ mean, σ (deg), to the nearest exact twin (the geodesic angle for the seed's parts).
     pub angle_deg: [f64; 2],
 }
 
@@ -58,12 +59,12 @@ impl Table1Row {
     pub fn of(s: &ErrorSummary) -> Self {
         let ms = |x: &Summary| [x.mean, x.std];
         Self {
-            n: s.angle_deg.count,
+            n: s.sym_angle_deg.count,
             outliers: s.outliers,
             x_mm: ms(&s.x_mm),
             y_mm: ms(&s.y_mm),
             z_mm: ms(&s.z_mm),
-            angle_deg: ms(&s.angle_deg),
+            angle_deg: ms(&s.sym_angle_deg),
         }
     }
 

@@ -20,7 +20,7 @@ pub fn text_table(summary: &EvalSummary) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Table 1: |error| in the camera frame, mean ± σ; \"seed-style\" drops θ > 10° (counted in \"out\")"
+        "Table 1: |error| in the camera frame, mean ± σ, θ to the nearest exact twin; \"seed-style\" drops θ > 10° (counted in \"out\")"
     );
     let _ = writeln!(
         s,
