@@ -55,6 +55,9 @@ pub struct ContourConfig {
     /// least this share of the strongest within reach (0.3–0.6 all helped main shells on the
     /// four eval sets; 0.45 helped the most).
     pub outermost_share: f32,
+    /// A screened fit that finds less than this share of its outline is screened again from
+    /// starts around it ([`ContourAligner::screen_around`]).
+    pub ring_below: f64,
 }
 
 impl Default for ContourConfig {
@@ -70,6 +73,7 @@ impl Default for ContourConfig {
             switch_margin: 0.05,
             mask_margin: 0.1,
             outermost_share: 0.45,
+            ring_below: 0.9,
         }
     }
 }
@@ -659,24 +663,63 @@ impl ContourAligner {
         (mine > 0).then(|| both as f64 / either as f64)
     }
 
+    /// Screens the part in `view` again from starts around a screened `fit` ([`RING_STARTS`]
+    /// directions at each of [`RING_REACHES`] coarse reaches on the table, in its yaw) and
+    /// returns the one that finds the most of its outline; `None` when none fits. For a fit
+    /// that finds too little of its outline ([`ContourConfig::ring_below`]) because part of it
+    /// lay beyond the coarse reach from the start: a peg on its side whose keypoints sit a
+    /// millimetre along its axis fits its long sides and never sees its ends.
+    #[allow(non_snake_case)]
+    pub fn screen_around(&self, view: ContourView<'_>, fit: &ContourFit) -> Option<ContourFit> {
+        let at = |x: f64, y: f64| {
+            view.camera
+                .project(&(self.camera_T_table * Point3::new(x, y, 0.0)))
+                .ok()
+        };
+        // The table's scale there, from a millimetre's image.
+        let px_per_m = (at(fit.x + 1e-3, fit.y)? - at(fit.x, fit.y)?).norm() * 1e3;
+        if !(px_per_m.is_finite() && px_per_m > 0.0) {
+            return None;
+        }
+        let reach_m = self.config.search_px[0] / px_per_m;
+        // The starts are the fit moved a few pixels: one outline, found at the fit, serves all.
+        let centre = Vector3::new(fit.x, fit.y, fit.yaw);
+        let points = view.outline.outline(
+            view.camera,
+            &self.pose(&view, &centre),
+            self.config.spacing_px,
+            false,
+        );
+        RING_REACHES
+            .iter()
+            .flat_map(|r| {
+                (0..RING_STARTS).map(move |k| {
+                    let a = std::f64::consts::TAU * k as f64 / RING_STARTS as f64;
+                    centre + Vector3::new(a.cos(), a.sin(), 0.0) * (r * reach_m)
+                })
+            })
+            .filter_map(|start| {
+                let q = self.descend(&view, &points, start, 0, true)?;
+                self.supported(&view, q)
+            })
+            .max_by(|a, b| a.support.total_cmp(&b.support))
+    }
+
+    /// `camera_T_part` of the part in `view` at table (x, y, yaw) `q`.
+    #[allow(non_snake_case)]
+    fn pose(&self, view: &ContourView<'_>, q: &Vector3<f64>) -> Isometry3<f64> {
+        self.camera_T_table * view.stable.table_T_part(q.x, q.y, q.z)
+    }
+
     /// Gauss–Newton rounds `which` of the configured search reaches, then the fit's support. In
     /// the finest (last configured) round the outline's [`FinalEdge`] rule picks the steps.
-    #[allow(non_snake_case)]
     fn rounds(
         &self,
         view: ContourView<'_>,
         start: (f64, f64, f64),
         which: std::ops::Range<usize>,
     ) -> Option<ContourFit> {
-        let ContourView {
-            outline,
-            stable,
-            camera,
-            patch,
-        } = view;
         let mut q = Vector3::new(start.0, start.1, start.2);
-        let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
-        let pose = |q: &Vector3<f64>| self.camera_T_table * stable.table_T_part(q.x, q.y, q.z);
         let finest = self.config.search_px.len() - 1;
         // Screening starts from keypoint poses pixels off, where the edges of the parts covering
         // this one would rank its hypotheses, so it fits only the samples in sight. The later
@@ -684,76 +727,114 @@ impl ContourAligner {
         // part's own too, and fit every sample (skipping them there lost accuracy).
         let screening = which == (0..1);
         for round in which {
-            let reach = self.config.search_px[round];
-            let (share, rule) = match outline.final_edge {
-                FinalEdge::Outermost if round == finest => {
-                    (self.config.outermost_share, FinalEdge::Outermost)
-                }
-                _ => (self.config.edge_share, FinalEdge::Nearest),
-            };
             // The outline is re-found once per round; within a round its points move with the pose.
             // Holes are told apart only where they weigh more: in the finest round.
-            let holes = round == finest && outline.hole_weight != 1.0;
-            let points = outline.outline(camera, &pose(&q), self.config.spacing_px, holes);
-            for _ in 0..self.config.iterations {
-                let table_T_part = stable.table_T_part(q.x, q.y, q.z);
-                let (mut h, mut g) = (Matrix3::zeros(), Vector3::zeros());
-                let mut used = 0;
-                for p in &points {
-                    // d(table point)/d(x, y, yaw): the yaw turns it about the vertical through (x, y).
-                    let t = table_T_part * p.part;
-                    let d_table =
-                        Matrix3::new(1.0, 0.0, -(t.y - q.y), 0.0, 1.0, t.x - q.x, 0.0, 0.0, 0.0);
-                    let Ok((pixel, d_pixel)) =
-                        camera.project_with_jacobian(&(self.camera_T_table * t))
-                    else {
-                        continue;
-                    };
-                    if screening && patch.is_hidden(pixel) {
-                        continue;
-                    }
-                    // A hole's edge is a single clean step: the nearest one, weighed more.
-                    let (share, rule, weight) = if p.hole {
-                        (
-                            self.config.edge_share,
-                            FinalEdge::Nearest,
-                            outline.hole_weight,
-                        )
-                    } else {
-                        (share, rule, 1.0)
-                    };
-                    let Some((offset, contrast)) =
-                        patch.edge_along(pixel, p.normal, reach, share, rule)
-                    else {
-                        continue;
-                    };
-                    if contrast < self.config.min_contrast {
-                        continue;
-                    }
-                    let j = (p.normal.transpose() * d_pixel * camera_r_table * d_table).transpose();
-                    // Residual: signed distance from the predicted outline to the edge.
-                    let r = -offset;
-                    let w = huber_weight(r, self.config.huber_px) * weight;
-                    h += j * j.transpose() * w;
-                    g += j * (r * w);
-                    used += 1;
+            let holes = round == finest && view.outline.hole_weight != 1.0;
+            let points = view.outline.outline(
+                view.camera,
+                &self.pose(&view, &q),
+                self.config.spacing_px,
+                holes,
+            );
+            q = self.descend(&view, &points, q, round, screening)?;
+        }
+        self.supported(&view, q)
+    }
+
+    /// One round's Gauss–Newton iterations of the outline `points` (found once, moving with the
+    /// pose) from table (x, y, yaw) `q` onto the edges within the round's reach; with
+    /// `screening`, on the samples in sight only. `None` when too few samples find edges.
+    #[allow(non_snake_case)]
+    fn descend(
+        &self,
+        view: &ContourView<'_>,
+        points: &[OutlinePoint],
+        mut q: Vector3<f64>,
+        round: usize,
+        screening: bool,
+    ) -> Option<Vector3<f64>> {
+        let ContourView {
+            outline,
+            stable,
+            camera,
+            patch,
+        } = *view;
+        let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
+        let reach = self.config.search_px[round];
+        let (share, rule) = match outline.final_edge {
+            FinalEdge::Outermost if round == self.config.search_px.len() - 1 => {
+                (self.config.outermost_share, FinalEdge::Outermost)
+            }
+            _ => (self.config.edge_share, FinalEdge::Nearest),
+        };
+        for _ in 0..self.config.iterations {
+            let table_T_part = stable.table_T_part(q.x, q.y, q.z);
+            let (mut h, mut g) = (Matrix3::zeros(), Vector3::zeros());
+            let mut used = 0;
+            for p in points {
+                // d(table point)/d(x, y, yaw): the yaw turns it about the vertical through (x, y).
+                let t = table_T_part * p.part;
+                let d_table =
+                    Matrix3::new(1.0, 0.0, -(t.y - q.y), 0.0, 1.0, t.x - q.x, 0.0, 0.0, 0.0);
+                let Ok((pixel, d_pixel)) = camera.project_with_jacobian(&(self.camera_T_table * t))
+                else {
+                    continue;
+                };
+                if screening && patch.is_hidden(pixel) {
+                    continue;
                 }
-                if used < 12 {
-                    return None;
+                // A hole's edge is a single clean step: the nearest one, weighed more.
+                let (share, rule, weight) = if p.hole {
+                    (
+                        self.config.edge_share,
+                        FinalEdge::Nearest,
+                        outline.hole_weight,
+                    )
+                } else {
+                    (share, rule, 1.0)
+                };
+                let Some((offset, contrast)) =
+                    patch.edge_along(pixel, p.normal, reach, share, rule)
+                else {
+                    continue;
+                };
+                if contrast < self.config.min_contrast {
+                    continue;
                 }
-                let step = h.try_inverse()? * -g;
-                q += step;
-                if step.xy().norm() < 1e-8 && step.z.abs() < 1e-6 {
-                    break;
-                }
+                let j = (p.normal.transpose() * d_pixel * camera_r_table * d_table).transpose();
+                // Residual: signed distance from the predicted outline to the edge.
+                let r = -offset;
+                let w = huber_weight(r, self.config.huber_px) * weight;
+                h += j * j.transpose() * w;
+                g += j * (r * w);
+                used += 1;
+            }
+            if used < 12 {
+                return None;
+            }
+            let step = h.try_inverse()? * -g;
+            q += step;
+            if step.xy().norm() < 1e-8 && step.z.abs() < 1e-6 {
+                break;
             }
         }
-        let mut points = outline.outline(camera, &pose(&q), self.config.spacing_px, false);
+        Some(q)
+    }
+
+    /// The fit at table (x, y, yaw) `q` with its support: the share of its outline samples in
+    /// sight whose strongest step within a pixel is an edge. `None` when none is in sight.
+    fn supported(&self, view: &ContourView<'_>, q: Vector3<f64>) -> Option<ContourFit> {
+        let patch = view.patch;
+        let mut points = view.outline.outline(
+            view.camera,
+            &self.pose(view, &q),
+            self.config.spacing_px,
+            false,
+        );
         points.retain(|p| !patch.is_hidden(p.pixel));
         if points.is_empty() {
             return None;
         }
-        // Support: the strongest step within a pixel of each sample in sight is an edge.
         let hits = points
             .iter()
             .filter_map(|p| patch.edge_along(p.pixel, p.normal, 1.0, 1.0, FinalEdge::Nearest))
@@ -767,6 +848,13 @@ impl ContourAligner {
         })
     }
 }
+
+/// Directions of [`ContourAligner::screen_around`]'s starts.
+pub const RING_STARTS: usize = 8;
+
+/// Radii of [`ContourAligner::screen_around`]'s starts, in coarse reaches
+/// ([`ContourConfig::search_px`]'s first).
+pub const RING_REACHES: [f64; 2] = [1.0, 2.0];
 
 fn huber_weight(r: f64, k: f64) -> f64 {
     if r.abs() <= k { 1.0 } else { k / r.abs() }
@@ -1000,6 +1088,44 @@ mod tests {
         // A half-turn of a box is the same box; a quarter turn is not.
         let turned = aligner.align(view, (x, y, yaw + 1.4));
         assert!(turned.is_none_or(|f| f.support < 0.6), "{turned:?}");
+    }
+
+    #[test]
+    #[allow(non_snake_case)]
+    fn a_start_whose_ends_lie_beyond_the_coarse_reach_is_found_from_starts_around_it() {
+        let (x, y, yaw) = (0.002, -0.001, 0.3);
+        let (outline, stable, camera, camera_T_table, patch) = scene(x, y, yaw);
+        let aligner = ContourAligner::new(camera_T_table, ContourConfig::default());
+        let view = ContourView {
+            outline: &outline,
+            stable: &stable,
+            camera: &camera,
+            patch: &patch,
+        };
+        // 1.2 mm along the box's 9 mm side (8.5 px; the coarse reach is 6 px) and 0.1 mm
+        // across: the long sides are found, the ends are not.
+        let (along, across) = (1.2e-3, 1e-4);
+        let start = (
+            x + along * yaw.cos() - across * yaw.sin(),
+            y + along * yaw.sin() + across * yaw.cos(),
+            yaw,
+        );
+        let screened = aligner
+            .screen(view, start)
+            .expect("the long sides are found");
+        assert!(
+            screened.support < aligner.config().ring_below,
+            "support {}",
+            screened.support
+        );
+        let around = aligner
+            .screen_around(view, &screened)
+            .expect("a start near the truth");
+        assert!(around.support > 0.95, "support {}", around.support);
+        let fit = aligner.finish(view, &around).expect("finished");
+        let (err_px, err_deg) = fit_error(&fit, (x, y, yaw), &camera);
+        assert!(err_px < 0.01, "position off by {err_px:.4} px");
+        assert!(err_deg < 0.01, "yaw off by {err_deg:.4}°");
     }
 
     #[test]

@@ -202,6 +202,13 @@ impl ContourStage {
                 best = Some((class, fit));
             }
         }
+        if let Some((class, screened)) = &best
+            && screened.support < self.config.ring_below
+            && let Some(fit) = fits.screen_around(*class, screened)
+            && fit.support > screened.support + self.config.switch_margin
+        {
+            best = Some((*class, fit));
+        }
         match best.and_then(|(class, screened)| fits.finish(class, &screened)) {
             Some((class, fit)) if fit.support >= self.config.min_support => {
                 let quality = fit.quality(self.config.min_support);
@@ -312,6 +319,12 @@ impl Fits<'_> {
     /// The coarse round from `start` in stable pose `class` ([`ContourAligner::screen`]).
     fn screen(&self, class: usize, start: (f64, f64, f64)) -> Option<ContourFit> {
         self.aligner.screen(self.view(class), start)
+    }
+
+    /// The best screening from starts around `screened` in stable pose `class`
+    /// ([`ContourAligner::screen_around`]).
+    fn screen_around(&self, class: usize, screened: &ContourFit) -> Option<ContourFit> {
+        self.aligner.screen_around(self.view(class), screened)
     }
 
     /// Whether `fit` in stable pose `class` covers the part's mask better than `other` in stable
