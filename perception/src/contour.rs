@@ -690,19 +690,25 @@ impl ContourAligner {
             self.config.spacing_px,
             false,
         );
-        RING_REACHES
-            .iter()
-            .flat_map(|r| {
-                (0..RING_STARTS).map(move |k| {
-                    let a = std::f64::consts::TAU * k as f64 / RING_STARTS as f64;
-                    centre + Vector3::new(a.cos(), a.sin(), 0.0) * (r * reach_m)
-                })
+        let starts = RING_REACHES.iter().flat_map(|r| {
+            (0..RING_STARTS).map(move |k| {
+                let a = std::f64::consts::TAU * k as f64 / RING_STARTS as f64;
+                centre + Vector3::new(a.cos(), a.sin(), 0.0) * (r * reach_m)
             })
-            .filter_map(|start| {
-                let q = self.descend(&view, &points, start, 0, true)?;
-                self.supported(&view, q)
-            })
-            .max_by(|a, b| a.support.total_cmp(&b.support))
+        });
+        let mut best: Option<ContourFit> = None;
+        for start in starts {
+            let Some(fit) = self
+                .descend(&view, &points, start, 0, true)
+                .and_then(|q| self.supported(&view, q))
+            else {
+                continue;
+            };
+            if best.as_ref().is_none_or(|b| fit.support > b.support) {
+                best = Some(fit);
+            }
+        }
+        best
     }
 
     /// `camera_T_part` of the part in `view` at table (x, y, yaw) `q`.
