@@ -696,19 +696,19 @@ impl ContourAligner {
                 centre + Vector3::new(a.cos(), a.sin(), 0.0) * (r * reach_m)
             })
         });
-        let mut best: Option<ContourFit> = None;
-        for start in starts {
-            let Some(fit) = self
-                .descend(&view, &points, start, 0, true)
-                .and_then(|q| self.supported(&view, q))
-            else {
-                continue;
-            };
-            if best.as_ref().is_none_or(|b| fit.support > b.support) {
-                best = Some(fit);
-            }
-        }
-        best
+        starts
+            .filter_map(|start| {
+                let q = self.descend(&view, &points, start, 0, true)?;
+                self.supported(&view, q)
+            })
+            // The nearest start of those that find the most (the first of equals).
+            .reduce(|best, fit| {
+                if fit.support > best.support {
+                    fit
+                } else {
+                    best
+                }
+            })
     }
 
     /// `camera_T_part` of the part in `view` at table (x, y, yaw) `q`.
