@@ -4,7 +4,7 @@
 //! The simulator renders through [`Camera::project`] and perception inverts it with
 //! [`Camera::unproject`] and [`Camera::pixel_ray`], so the two cannot disagree.
 
-use nalgebra::{Matrix2, Matrix2x3, Matrix3, Point2, Point3, Unit, Vector2, Vector3};
+use nalgebra::{Isometry3, Matrix2, Matrix2x3, Matrix3, Point2, Point3, Unit, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Why a camera operation could not produce a result.
@@ -164,6 +164,15 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// The image scale on the table at `camera_T_table`, pixels per mm: the focal length over
+    /// the table plane's distance from the camera.
+    #[allow(non_snake_case)]
+    pub fn table_px_per_mm(&self, camera_T_table: &Isometry3<f64>) -> f64 {
+        let normal = camera_T_table.rotation * Vector3::z();
+        let distance_mm = 1000.0 * normal.dot(&camera_T_table.translation.vector).abs();
+        self.fx / distance_mm.max(1.0)
+    }
+
     /// A camera from intrinsics, checked: focal lengths and size positive, everything finite.
     pub fn new(
         fx: f64,

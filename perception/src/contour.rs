@@ -671,17 +671,8 @@ impl ContourAligner {
     /// millimetre along its axis fits its long sides and never sees its ends.
     #[allow(non_snake_case)]
     pub fn screen_around(&self, view: ContourView<'_>, fit: &ContourFit) -> Option<ContourFit> {
-        let at = |x: f64, y: f64| {
-            view.camera
-                .project(&(self.camera_T_table * Point3::new(x, y, 0.0)))
-                .ok()
-        };
-        // The table's scale there, from a millimetre's image.
-        let px_per_m = (at(fit.x + 1e-3, fit.y)? - at(fit.x, fit.y)?).norm() * 1e3;
-        if !(px_per_m.is_finite() && px_per_m > 0.0) {
-            return None;
-        }
-        let reach_m = self.config.search_px[0] / px_per_m;
+        let reach_m =
+            self.config.search_px[0] / view.camera.table_px_per_mm(&self.camera_T_table) * 1e-3;
         // The starts are the fit moved a few pixels: one outline, found at the fit, serves all.
         let centre = Vector3::new(fit.x, fit.y, fit.yaw);
         let points = view.outline.outline(

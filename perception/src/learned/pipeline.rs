@@ -290,7 +290,7 @@ impl LearnedPipeline {
         image.check_on_sensor(camera).map_err(LearnedError::Image)?;
         let roi = roi.unwrap_or([0, 0, image.width(), image.height()]);
         let mut t = start;
-        let px_per_mm = table_px_per_mm(camera, camera_T_table);
+        let px_per_mm = camera.table_px_per_mm(camera_T_table);
         // Sensor pixel of the region's first pixel.
         let sensor = [image.origin[0] + roi[0], image.origin[1] + roi[1]];
         let view = NetView::new(sensor, [roi[2], roi[3]], px_per_mm, self.input_px_per_mm);
@@ -646,15 +646,6 @@ pub fn sensor_observations(
         })
         .collect();
     (keypoints, observations)
-}
-
-/// The image scale on the table, pixels per mm: the focal length over the table plane's
-/// distance from the camera.
-#[allow(non_snake_case)]
-fn table_px_per_mm(camera: &Camera, camera_T_table: &Isometry3<f64>) -> f64 {
-    let normal = camera_T_table.rotation * nalgebra::Vector3::z();
-    let distance_mm = 1000.0 * normal.dot(&camera_T_table.translation.vector).abs();
-    camera.fx / distance_mm.max(1.0)
 }
 
 /// The pose estimator for the table at `camera_T_table`, rebuilt only when it moves.
