@@ -116,7 +116,8 @@ impl ContourStage {
                     crop[3] + 2 * MARGIN,
                 ],
             )
-            .with_owners(owners),
+            .with_owners(owners)
+            .with_mask_outside(self.config.mask_outside_px),
             aligner: ContourAligner::new(*refiner.camera_T_table(), self.config),
         })
     }
