@@ -576,28 +576,34 @@ impl GreyPatch {
             *step = (w[1] - w[0]).abs();
         }
         let steps = &*steps;
-        // The steps the segmentation lets be the outline, and the strongest of them.
-        let mut admitted = [true; 2 * MAX_REACH + 1];
-        if read_mask && self.mask_outside_px.is_some() {
-            for (k, ok) in admitted[..steps.len()].iter_mut().enumerate() {
-                *ok = self.outside_agrees(pixel + normal * (k as f64 - n as f64), normal);
-            }
-        }
-        let bar = share
-            * steps
-                .iter()
-                .zip(admitted)
-                .filter_map(|(s, ok)| ok.then_some(*s))
-                .fold(0f32, f32::max);
+        // Whether the segmentation lets step `k` be the outline, read only where it matters.
+        let read_mask = read_mask && self.mask_outside_px.is_some();
+        let admits = |k: usize| {
+            !read_mask || self.outside_agrees(pixel + normal * (k as f64 - n as f64), normal)
+        };
+        // The strongest step it admits: the strongest of all, unless that one is ruled out.
+        let (strongest, top) = steps
+            .iter()
+            .enumerate()
+            .fold((0, 0f32), |m, (k, &s)| if s > m.1 { (k, s) } else { m });
+        let top = if admits(strongest) {
+            top
+        } else {
+            (0..steps.len())
+                .filter(|&k| admits(k))
+                .map(|k| steps[k])
+                .fold(0f32, f32::max)
+        };
+        let bar = share * top;
         // The step nearest the predicted outline among the admitted peaks at least `bar` strong.
         let (k, &best) = steps
             .iter()
             .enumerate()
             .filter(|(k, s)| {
-                admitted[*k]
-                    && **s >= bar
+                **s >= bar
                     && (*k == 0 || steps[k - 1] <= **s)
                     && (k + 1 == steps.len() || steps[k + 1] <= **s)
+                    && admits(*k)
             })
             .min_by(|a, b| match rule {
                 FinalEdge::Nearest => {
