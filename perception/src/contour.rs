@@ -285,9 +285,9 @@ struct OutlinePoint {
     open: bool,
 }
 
-/// How far outside an outline sample the silhouette must be clear for the segmentation's
-/// sides to be read there ([`GreyPatch::with_mask_sides`]), pixels: three segmenter cells at
-/// the nets' scale.
+/// How far outside an outline sample the silhouette must be clear for the segmentation to be
+/// read there ([`GreyPatch::with_mask_outside`]), pixels: three segmenter cells at the nets'
+/// scale.
 const OPEN_PX: f64 = 12.0;
 
 /// The projected part as a binary mask on the pixel grid (pixel centres at integers).
