@@ -25,8 +25,17 @@ pub struct ContourConfig {
     pub spacing_px: f64,
     /// Smallest intensity step (0–1 grey levels per pixel) that counts as an edge.
     pub min_contrast: f32,
-    /// Huber threshold of the residuals, pixels.
+    /// Huber threshold of the residuals in the coarser rounds, pixels.
     pub huber_px: f64,
+    /// Scale of the finest round's Cauchy weights, pixels: a residual r weighs
+    /// 1 / (1 + (r / scale)²) there instead of Huber's, so once the outline sits within a pixel,
+    /// a sample that took a step a pixel or more off (a face edge, a shadow, a neighbour)
+    /// barely pulls. At the cells' densities, assembly-grade NIST pegs 71.0 → 75.1 % and USB-C
+    /// 84.5 → 86.8 %, refined x / y 0.078 / 0.075 → 0.073 / 0.071 mm and 0.044 / 0.041 →
+    /// 0.041 / 0.037 mm (0.5 px: 77.0 % and 87.0 %, but one fewer of 54 on the hard-light
+    /// Cycles set, at the 0.1 mm edge). Redescending in every round, it let more NIST fits end
+    /// in a wrong turn (36 → 41 more than 10° off), started pixels off.
+    pub final_cauchy_px: f64,
     /// Gauss–Newton iterations per round.
     pub iterations: usize,
     /// Each outline sample takes the step nearest its predicted position among those at least
@@ -71,6 +80,7 @@ impl Default for ContourConfig {
             spacing_px: 2.0,
             min_contrast: 0.02,
             huber_px: 0.75,
+            final_cauchy_px: 0.75,
             iterations: 4,
             edge_share: 0.6,
             min_support: 0.5,
@@ -831,10 +841,9 @@ impl ContourAligner {
         } = *view;
         let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
         let reach = self.config.search_px[round];
+        let finest = round == self.config.search_px.len() - 1;
         let (share, rule) = match outline.final_edge {
-            FinalEdge::Outermost if round == self.config.search_px.len() - 1 => {
-                (self.config.outermost_share, FinalEdge::Outermost)
-            }
+            FinalEdge::Outermost if finest => (self.config.outermost_share, FinalEdge::Outermost),
             _ => (self.config.edge_share, FinalEdge::Nearest),
         };
         // The mask's outside is read for outlines that take the nearest step, where the
@@ -877,7 +886,12 @@ impl ContourAligner {
                 let j = (p.normal.transpose() * d_pixel * camera_r_table * d_table).transpose();
                 // Residual: signed distance from the predicted outline to the edge.
                 let r = -offset;
-                let w = huber_weight(r, self.config.huber_px) * weight;
+                let w = weight
+                    * if finest {
+                        cauchy_weight(r, self.config.final_cauchy_px)
+                    } else {
+                        huber_weight(r, self.config.huber_px)
+                    };
                 h += j * j.transpose() * w;
                 g += j * (r * w);
                 used += 1;
@@ -935,6 +949,10 @@ pub const RING_REACHES: [f64; 2] = [1.0, 2.0];
 
 fn huber_weight(r: f64, k: f64) -> f64 {
     if r.abs() <= k { 1.0 } else { k / r.abs() }
+}
+
+fn cauchy_weight(r: f64, scale: f64) -> f64 {
+    1.0 / (1.0 + (r / scale).powi(2))
 }
 
 #[cfg(test)]
@@ -1165,6 +1183,54 @@ mod tests {
         // A half-turn of a box is the same box; a quarter turn is not.
         let turned = aligner.align(view, (x, y, yaw + 1.4));
         assert!(turned.is_none_or(|f| f.support < 0.6), "{turned:?}");
+    }
+
+    #[test]
+    fn a_glare_beside_part_of_the_outline_barely_pulls_the_finest_round() {
+        // The box of `scene` with a glare as bright as the part, 1.5 px wide, along the half of
+        // its +y side at +x: there the step lies 1.5 px outside the outline, and also turns the
+        // fit. Equal weights (a Cauchy scale far above any residual) let those samples pull it
+        // 0.39 px and 0.87°; the default scale (0.75 px) 0.25 px and 0.62°, a quarter-pixel
+        // scale 0.07 px and 0.15° (measured).
+        let (x, y, yaw) = (0.002, -0.001, 0.3);
+        let shade = |d: f64, p: Point2<f64>| {
+            let glare = d > -1.5 && p.y > 2.5e-3 && p.x > 0.0;
+            if d >= 0.0 || glare { 200 } else { 40 }
+        };
+        let (outline, stable, camera, camera_T_table, patch) = scene_shaded(x, y, yaw, None, shade);
+        let view = ContourView {
+            outline: &outline,
+            stable: &stable,
+            camera: &camera,
+            patch: &patch,
+        };
+        let start = (x + 1e-4, y - 1e-4, yaw + 1f64.to_radians());
+        let fit = |final_cauchy_px: f64| {
+            let config = ContourConfig {
+                final_cauchy_px,
+                ..ContourConfig::default()
+            };
+            let fit = ContourAligner::new(camera_T_table, config)
+                .align(view, start)
+                .expect("the box is found");
+            fit_error(&fit, (x, y, yaw), &camera)
+        };
+        let (plain_px, plain_deg) = fit(1e9);
+        let (weighted_px, weighted_deg) = fit(ContourConfig::default().final_cauchy_px);
+        let (tight_px, tight_deg) = fit(0.25);
+        assert!(
+            plain_px > 0.3,
+            "the glare pulls the plain fit by {plain_px:.3} px"
+        );
+        assert!(
+            weighted_px < 0.7 * plain_px && weighted_deg < 0.75 * plain_deg,
+            "the default weights gain too little: {plain_px:.3} → {weighted_px:.3} px, \
+             {plain_deg:.3} → {weighted_deg:.3}°"
+        );
+        assert!(
+            tight_px < 0.1 && tight_deg < 0.25,
+            "a quarter-pixel scale leaves {tight_px:.3} px, {tight_deg:.3}°"
+        );
     }
 
     #[test]
@@ -1496,12 +1562,13 @@ mod tests {
             fit_error(&fit, (x, y, yaw), &camera)
         };
         // Weighed 20 times, the window's 9 mm of edge still share the fit with 28 mm of outer
-        // outline, which keeps a twentieth or so of the band's pull (measured: 0.51 px and 0.34°
-        // plain, 0.09 px and 0.08° weighed).
+        // outline, which keeps a twentieth or so of the band's pull (measured: 0.25 px and 0.15°
+        // plain, 0.04 px and 0.02° weighed; 0.51 px and 0.34°, 0.09 px and 0.08° before the
+        // finest round's Cauchy weights).
         let (plain_px, plain_deg) = fit(1.0);
         let (weighted_px, weighted_deg) = fit(20.0);
         assert!(
-            plain_px > 0.3,
+            plain_px > 0.2,
             "the shadow pulls the plain fit by {plain_px:.3} px"
         );
         assert!(
