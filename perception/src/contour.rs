@@ -947,10 +947,12 @@ pub const RING_STARTS: usize = 8;
 /// ([`ContourConfig::search_px`]'s first).
 pub const RING_REACHES: [f64; 2] = [1.0, 2.0];
 
+/// Huber's weight of residual `r` at threshold `k`: full within it, a constant pull beyond.
 fn huber_weight(r: f64, k: f64) -> f64 {
     if r.abs() <= k { 1.0 } else { k / r.abs() }
 }
 
+/// Cauchy's weight of residual `r` at `scale`: a pull that fades once past it.
 fn cauchy_weight(r: f64, scale: f64) -> f64 {
     1.0 / (1.0 + (r / scale).powi(2))
 }
@@ -1186,7 +1188,7 @@ mod tests {
     }
 
     #[test]
-    fn a_glare_beside_part_of_the_outline_barely_pulls_the_finest_round() {
+    fn a_glare_beside_part_of_the_outline_pulls_the_finest_round_less() {
         // The box of `scene` with a glare as bright as the part, 1.5 px wide, along the half of
         // its +y side at +x: there the step lies 1.5 px outside the outline, and also turns the
         // fit. Equal weights (a Cauchy scale far above any residual) let those samples pull it
