@@ -1188,6 +1188,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(non_snake_case)]
     fn a_glare_beside_part_of_the_outline_pulls_the_finest_round_less() {
         // The box of `scene` with a glare as bright as the part, 1.5 px wide, along the half of
         // its +y side at +x: there the step lies 1.5 px outside the outline, and also turns the
