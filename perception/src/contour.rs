@@ -93,6 +93,24 @@ impl Default for ContourConfig {
     }
 }
 
+impl ContourConfig {
+    /// Whether `round` is the finest (last configured) one: where the outline's [`FinalEdge`]
+    /// rule, hole weights and Cauchy weights apply.
+    fn is_finest(&self, round: usize) -> bool {
+        round + 1 == self.search_px.len()
+    }
+
+    /// The weight of a sample `r` pixels from its edge in `round`: Huber's in the coarser
+    /// rounds, Cauchy's in the finest ([`Self::final_cauchy_px`]).
+    fn residual_weight(&self, round: usize, r: f64) -> f64 {
+        if self.is_finest(round) {
+            cauchy_weight(r, self.final_cauchy_px)
+        } else {
+            huber_weight(r, self.huber_px)
+        }
+    }
+}
+
 /// Which intensity step an outline sample takes in the fit's finest round, once the outline
 /// sits within a pixel or two of the part's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -800,7 +818,6 @@ impl ContourAligner {
         which: std::ops::Range<usize>,
     ) -> Option<ContourFit> {
         let mut q = Vector3::new(start.0, start.1, start.2);
-        let finest = self.config.search_px.len() - 1;
         // Screening starts from keypoint poses pixels off, where the edges of the parts covering
         // this one would rank its hypotheses, so it fits only the samples in sight. The later
         // rounds start within a pixel or two, where a touching neighbour's edge is mostly this
@@ -809,7 +826,7 @@ impl ContourAligner {
         for round in which {
             // The outline is re-found once per round; within a round its points move with the pose.
             // Holes are told apart only where they weigh more: in the finest round.
-            let holes = round == finest && view.outline.hole_weight != 1.0;
+            let holes = self.config.is_finest(round) && view.outline.hole_weight != 1.0;
             let points = view.outline.outline(
                 view.camera,
                 &self.pose(&view, &q),
@@ -841,9 +858,10 @@ impl ContourAligner {
         } = *view;
         let camera_r_table = *self.camera_T_table.rotation.to_rotation_matrix().matrix();
         let reach = self.config.search_px[round];
-        let finest = round == self.config.search_px.len() - 1;
         let (share, rule) = match outline.final_edge {
-            FinalEdge::Outermost if finest => (self.config.outermost_share, FinalEdge::Outermost),
+            FinalEdge::Outermost if self.config.is_finest(round) => {
+                (self.config.outermost_share, FinalEdge::Outermost)
+            }
             _ => (self.config.edge_share, FinalEdge::Nearest),
         };
         // The mask's outside is read for outlines that take the nearest step, where the
@@ -886,12 +904,7 @@ impl ContourAligner {
                 let j = (p.normal.transpose() * d_pixel * camera_r_table * d_table).transpose();
                 // Residual: signed distance from the predicted outline to the edge.
                 let r = -offset;
-                let w = weight
-                    * if finest {
-                        cauchy_weight(r, self.config.final_cauchy_px)
-                    } else {
-                        huber_weight(r, self.config.huber_px)
-                    };
+                let w = weight * self.config.residual_weight(round, r);
                 h += j * j.transpose() * w;
                 g += j * (r * w);
                 used += 1;
